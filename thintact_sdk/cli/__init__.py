@@ -1,0 +1,1 @@
+"""The ``thintact`` command line."""

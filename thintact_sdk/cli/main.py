@@ -1,0 +1,72 @@
+"""Entry point of the ``thintact`` command.
+
+Subcommands come from every module of :mod:`thintact_sdk.cli.commands` (each defines
+``register(subparsers)`` and sets ``func`` on its parser) and from plugins' CLI
+components. Errors a user can act on print one line and exit with status 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import pkgutil
+import sys
+from collections.abc import Sequence
+
+from thintact_sdk import __version__
+from thintact_sdk.errors import ThinTactError
+
+EXIT_USAGE = 2
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse parser whose errors are one line and exit status 2 (argparse's default)."""
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The full parser with every built-in and plugin subcommand."""
+    parser = _Parser(
+        prog="thintact",
+        description="ThinTact SDK: lensless vision-based tactile sensors.",
+    )
+    parser.add_argument("--version", action="version", version=f"thintact-sdk {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    import thintact_sdk.cli.commands as pkg
+
+    for mod_info in sorted(pkgutil.iter_modules(pkg.__path__), key=lambda m: m.name):
+        if mod_info.name.startswith("_"):
+            continue
+        mod = importlib.import_module(f"{pkg.__name__}.{mod_info.name}")
+        register = getattr(mod, "register", None)
+        if register is not None:
+            register(sub)
+    try:
+        from thintact_sdk.plugin_manager import get_registry
+
+        for comp in get_registry().components("cli_command").values():
+            comp.factory(sub)
+    except ThinTactError:
+        pass
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the CLI; returns the exit status (0 ok, 2 bad input or device fault)."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "func", None):
+        parser.print_help()
+        return EXIT_USAGE
+    try:
+        rc = args.func(args)
+    except ThinTactError as err:
+        print(f"thintact: error: {err}", file=sys.stderr)
+        return EXIT_USAGE
+    except KeyboardInterrupt:
+        print("thintact: interrupted", file=sys.stderr)
+        return 130
+    return int(rc or 0)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

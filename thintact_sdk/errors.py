@@ -1,0 +1,51 @@
+"""Exception types of the ThinTact SDK.
+
+Every error a user can act on derives from :class:`ThinTactError`; the CLI turns
+these into a one-line message and exit status 2 instead of a traceback.
+"""
+
+from __future__ import annotations
+
+
+class ThinTactError(Exception):
+    """Base class of all SDK errors."""
+
+
+class ProfileError(ThinTactError):
+    """A device profile is missing, unreadable or fails validation."""
+
+
+class PluginError(ThinTactError):
+    """A plugin is unknown, failed to load or does not provide what was asked."""
+
+
+class RecordingError(ThinTactError):
+    """A recording directory is missing, truncated or malformed."""
+
+
+class CalibrationError(ThinTactError):
+    """A calibration bundle is missing, inconsistent or a solve failed."""
+
+
+class DeviceError(ThinTactError):
+    """A hardware device (camera, light controller, display) reported a fault."""
+
+
+class DeviceNotFoundError(DeviceError):
+    """The requested device is not present (unplugged, wrong index or path)."""
+
+
+class DeviceLostError(DeviceError):
+    """A device vanished while it was in use (unplugged mid-stream, port closed)."""
+
+
+class DeviceTimeoutError(DeviceError):
+    """A device did not answer within the allotted time."""
+
+
+class ProtocolError(DeviceError):
+    """A device answered with something that does not follow its protocol."""
+
+
+class UnsupportedFeatureError(DeviceError):
+    """The device lacks a feature the profile asks for (e.g. exposure on a virtual camera)."""

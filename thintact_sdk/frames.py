@@ -1,0 +1,108 @@
+"""Frame types flowing through the SDK: raw → measurement → (scene) → tactile.
+
+Array conventions: images are ``rows × cols × channels`` numpy arrays, channel order
+R, G, B. Times are nanoseconds (monotonic host clock unless stated otherwise).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+
+@dataclass
+class RawFrame:
+    """One frame as the camera delivers it, before Bayer binning.
+
+    Attributes
+    ----------
+    data
+        ``H × W`` (Bayer mosaic or mono) or ``H × W × C`` array, integer DN.
+    timestamp_ns
+        Host monotonic time at which the frame was received.
+    frame_id
+        The camera's frame counter (gaps mean dropped frames).
+    pixel_format
+        GenICam-style pixel format name, e.g. ``"BayerRG12"``, ``"Mono8"``, ``"RGB8"``.
+    exposure_us, gain_db
+        Exposure time and analogue gain when the frame was taken (``None`` if unknown).
+    device_timestamp_ns
+        The device's own timestamp when it reports one.
+    meta
+        Anything else the backend knows (e.g. ``{"dropped_before": 2}``).
+    """
+
+    data: np.ndarray
+    timestamp_ns: int
+    frame_id: int
+    pixel_format: str = "BayerRG12"
+    exposure_us: float | None = None
+    gain_db: float | None = None
+    device_timestamp_ns: int | None = None
+    meta: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass
+class Measurement:
+    """A binned measurement image (paper §IV: R, mean of the two G, B).
+
+    Attributes
+    ----------
+    data
+        ``R × S × 3`` float32, digital numbers with the black level *not* removed
+        (as in recordings, CONTRACTS §3).
+    black_level_dn
+        Black level of the sensor in DN.
+    timestamp_ns, frame_id, exposure_us
+        Copied from the raw frame.
+    """
+
+    data: np.ndarray
+    black_level_dn: float
+    timestamp_ns: int = 0
+    frame_id: int = 0
+    exposure_us: float | None = None
+    meta: dict[str, Any] = field(default_factory=dict)
+
+    def signal(self) -> np.ndarray:
+        """``R × S × 3`` float32 signal in DN above black level."""
+        return self.data.astype(np.float32) - np.float32(self.black_level_dn)
+
+
+@dataclass
+class TactileFrame:
+    """What robot programs read: the reconstructed image and the contact interpretation.
+
+    Attributes
+    ----------
+    image
+        ``N × M × 3`` float32 reconstructed scene, display units (≈ [0, 1]).
+    depth_mm
+        ``N × M`` float32 indentation depth in mm (positive into the elastomer).
+    marker_positions_mm
+        ``K × 2`` float32 current marker centres (x, y) in mm, NaN where lost.
+    marker_displacements_mm
+        ``K × 2`` float32 displacement of each marker from the reference frame in mm.
+    contact
+        True when any pixel is deeper than the profile's contact threshold.
+    contact_area_mm2
+        Area of the contact region in mm².
+    shear_direction_rad
+        Direction of the mean marker displacement (atan2(y, x)), NaN without shear.
+    timestamp_ns, frame_id
+        Of the raw frame this was computed from.
+    """
+
+    image: np.ndarray
+    depth_mm: np.ndarray
+    marker_positions_mm: np.ndarray
+    marker_displacements_mm: np.ndarray
+    contact: bool
+    contact_area_mm2: float
+    timestamp_ns: int
+    frame_id: int
+    shear_direction_rad: float = float("nan")
+    latency_ms: float | None = None
+    meta: dict[str, Any] = field(default_factory=dict)

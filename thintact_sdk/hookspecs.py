@@ -1,0 +1,89 @@
+"""pluggy hook specifications: what a ThinTact plugin can provide.
+
+A plugin is any importable module or object registered under the entry-point group
+``thintact`` that implements some of these hooks (decorated with
+:data:`thintact_sdk.hookimpl`). Each hook returns a list of :class:`Component`.
+
+Factory conventions (what ``Component.factory`` is called with):
+
+========================  =====================================================
+hook                      factory signature
+========================  =====================================================
+thintact_cameras          ``factory(profile: Profile, settings: dict) -> Camera``
+thintact_light_controllers ``factory(port: str | None, settings: dict) -> LightController``
+thintact_masks            ``factory() -> MaskDesigner``
+thintact_decoders         ``factory(profile: Profile, settings: dict) -> Decoder``
+thintact_displays         ``factory(profile: Profile, settings: dict) -> Display``
+thintact_cli_commands     ``factory(subparsers) -> None`` (adds argparse subcommands)
+========================  =====================================================
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import pluggy
+
+PROJECT = "thintact"
+hookspec = pluggy.HookspecMarker(PROJECT)
+hookimpl = pluggy.HookimplMarker(PROJECT)
+
+KINDS = ("camera", "light_controller", "mask", "decoder", "display", "cli_command")
+
+
+@dataclass
+class Component:
+    """One thing a plugin provides.
+
+    Attributes
+    ----------
+    name
+        Unique name within its kind, used in profiles (``camera.plugin: genicam``).
+    factory
+        Callable building the component (signature per kind, see module docstring).
+    description
+        One line shown by ``thintact plugins``.
+    plugin
+        Name of the providing plugin (filled in by the plugin manager).
+    """
+
+    name: str
+    factory: Callable[..., Any]
+    description: str = ""
+    plugin: str = ""
+
+
+class ThinTactSpec:
+    """The hooks. Every hook returns a list of :class:`Component`."""
+
+    @hookspec
+    def thintact_cameras(self) -> list[Component]:
+        """Camera backends."""
+        return []
+
+    @hookspec
+    def thintact_light_controllers(self) -> list[Component]:
+        """LED controllers."""
+        return []
+
+    @hookspec
+    def thintact_masks(self) -> list[Component]:
+        """Mask designs."""
+        return []
+
+    @hookspec
+    def thintact_decoders(self) -> list[Component]:
+        """Reconstruction algorithms."""
+        return []
+
+    @hookspec
+    def thintact_displays(self) -> list[Component]:
+        """Displays for the calibration wizard."""
+        return []
+
+    @hookspec
+    def thintact_cli_commands(self) -> list[Component]:
+        """Extra ``thintact`` subcommands."""
+        return []

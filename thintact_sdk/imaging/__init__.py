@@ -1,0 +1,1 @@
+"""Lensless imaging: forward simulation, T2S system matrices, reconstruction, metrics."""

@@ -1,0 +1,136 @@
+"""Discovers plugins from the ``thintact`` entry-point group and indexes what they provide.
+
+A plugin that fails to import (or whose hooks raise) is recorded with its error and
+skipped; the others still load. ``thintact plugins`` prints the result.
+"""
+
+from __future__ import annotations
+
+import importlib.metadata as md
+import traceback
+from dataclasses import dataclass, field
+from typing import Any
+
+import pluggy
+
+from thintact_sdk.errors import PluginError
+from thintact_sdk.hookspecs import KINDS, PROJECT, Component, ThinTactSpec
+
+ENTRY_POINT_GROUP = "thintact"
+
+_HOOK_OF_KIND = {
+    "camera": "thintact_cameras",
+    "light_controller": "thintact_light_controllers",
+    "mask": "thintact_masks",
+    "decoder": "thintact_decoders",
+    "display": "thintact_displays",
+    "cli_command": "thintact_cli_commands",
+}
+
+
+@dataclass
+class PluginInfo:
+    """A discovered plugin: where it came from, and what it provides or why it failed."""
+
+    name: str
+    module: str
+    distribution: str | None
+    version: str | None
+    error: str | None = None
+    provides: dict[str, list[str]] = field(default_factory=dict)
+
+
+class PluginRegistry:
+    """All plugins found, and their components indexed by kind and name."""
+
+    def __init__(self) -> None:
+        self.pm = pluggy.PluginManager(PROJECT)
+        self.pm.add_hookspecs(ThinTactSpec)
+        self.plugins: dict[str, PluginInfo] = {}
+        self._components: dict[str, dict[str, Component]] = {k: {} for k in KINDS}
+
+    # -- loading -----------------------------------------------------------------------
+    def load_entry_points(self, group: str = ENTRY_POINT_GROUP) -> None:
+        """Import every entry point in ``group``; failures are recorded, not raised."""
+        for ep in sorted(md.entry_points(group=group), key=lambda e: e.name):
+            if ep.name in self.plugins:
+                continue
+            dist = getattr(ep, "dist", None)
+            info = PluginInfo(
+                name=ep.name,
+                module=ep.value,
+                distribution=dist.metadata["Name"] if dist is not None else None,
+                version=dist.version if dist is not None else None,
+            )
+            self.plugins[ep.name] = info
+            try:
+                obj = ep.load()
+            except Exception as err:  # noqa: BLE001 - any import failure is reported
+                info.error = f"{type(err).__name__}: {err}"
+                info.traceback = traceback.format_exc()  # type: ignore[attr-defined]
+                continue
+            self.register(obj, ep.name, info)
+
+    def register(self, obj: Any, name: str, info: PluginInfo | None = None) -> None:
+        """Register an already-imported plugin object (module or instance)."""
+        if info is None:
+            info = PluginInfo(name=name, module=getattr(obj, "__name__", repr(obj)), distribution=None, version=None)
+            self.plugins[name] = info
+        try:
+            self.pm.register(obj, name=name)
+        except Exception as err:  # noqa: BLE001
+            info.error = f"{type(err).__name__}: {err}"
+            return
+        for kind, hook_name in _HOOK_OF_KIND.items():
+            impls = [i for i in getattr(self.pm.hook, hook_name).get_hookimpls() if i.plugin_name == name]
+            for impl in impls:
+                try:
+                    comps = impl.function() or []
+                except Exception as err:  # noqa: BLE001
+                    info.error = f"{hook_name} raised {type(err).__name__}: {err}"
+                    continue
+                for comp in comps:
+                    comp.plugin = name
+                    existing = self._components[kind].get(comp.name)
+                    if existing is not None and existing.plugin != name:
+                        info.error = (
+                            f"{kind} {comp.name!r} already provided by plugin {existing.plugin!r}; "
+                            "ignored"
+                        )
+                        continue
+                    self._components[kind][comp.name] = comp
+                    info.provides.setdefault(kind, []).append(comp.name)
+
+    # -- queries -----------------------------------------------------------------------
+    def components(self, kind: str) -> dict[str, Component]:
+        """All components of ``kind`` (one of :data:`thintact_sdk.hookspecs.KINDS`)."""
+        if kind not in self._components:
+            raise PluginError(f"unknown component kind {kind!r}; kinds: {', '.join(KINDS)}")
+        return dict(self._components[kind])
+
+    def get(self, kind: str, name: str) -> Component:
+        """The component ``name`` of ``kind``; raises PluginError naming the alternatives."""
+        comps = self.components(kind)
+        if name in comps:
+            return comps[name]
+        failed = [f"{p.name} ({p.error})" for p in self.plugins.values() if p.error]
+        hint = f"; plugins that failed to load: {', '.join(failed)}" if failed else ""
+        known = ", ".join(sorted(comps)) or "(none installed)"
+        raise PluginError(f"no {kind.replace('_', ' ')} plugin named {name!r}; available: {known}{hint}")
+
+    def create(self, kind: str, name: str, *args: Any, **kwargs: Any) -> Any:
+        """Build component ``name`` of ``kind`` with its factory."""
+        return self.get(kind, name).factory(*args, **kwargs)
+
+
+_REGISTRY: PluginRegistry | None = None
+
+
+def get_registry(reload: bool = False) -> PluginRegistry:
+    """The process-wide registry, loading entry points on first use."""
+    global _REGISTRY
+    if _REGISTRY is None or reload:
+        reg = PluginRegistry()
+        reg.load_entry_points()
+        _REGISTRY = reg
+    return _REGISTRY
