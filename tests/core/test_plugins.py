@@ -25,6 +25,8 @@ THIRD_PARTY = {
         [project.entry-points.thintact]
         acme = "acme_thintact_camera"
         broken = "acme_broken_plugin"
+        [tool.setuptools]
+        packages = ["acme_thintact_camera", "acme_broken_plugin"]
     """,
     "acme_thintact_camera/__init__.py": """
         import time
@@ -89,7 +91,7 @@ def test_third_party_plugin_installed_with_pip_is_discovered_and_used(tmp_path: 
         p.write_text(textwrap.dedent(text))
     target = tmp_path / "site"
     subprocess.run(
-        [sys.executable, "-m", "pip", "install", "-q", "--no-deps", "--no-build-isolation",
+        [sys.executable, "-m", "pip", "install", "-q", "--no-deps",
          "--target", str(target), str(src)],
         check=True, capture_output=True, text=True, timeout=240,
     )
