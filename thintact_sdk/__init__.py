@@ -9,6 +9,28 @@ Robot programs::
 
 from __future__ import annotations
 
+import os as _os
+
+
+def _tune_openblas() -> None:
+    """numpy's bundled OpenBLAS does not recognise some AVX-512 CPUs and falls back to a
+    slow kernel; name the core type before numpy loads (never overriding the user)."""
+    if "OPENBLAS_CORETYPE" in _os.environ or "numpy" in __import__("sys").modules:
+        return
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8") as f:
+            for line in f:
+                if line.startswith("flags"):
+                    flags = line.split()
+                    if "avx512f" in flags and "avx512bw" in flags and "avx512vl" in flags:
+                        _os.environ["OPENBLAS_CORETYPE"] = "SkylakeX"
+                    return
+    except OSError:
+        return
+
+
+_tune_openblas()
+
 from typing import TYPE_CHECKING, Any
 
 from thintact_sdk.errors import ThinTactError

@@ -1,0 +1,22 @@
+"""``thintact bench NAME``: benchmarks discovered from :mod:`thintact_sdk.benchmarks`."""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import pkgutil
+
+import thintact_sdk.benchmarks as benchmarks
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("bench", help="run a benchmark and print its figures")
+    bsub = p.add_subparsers(dest="bench_name", metavar="NAME", required=True)
+    for info in sorted(pkgutil.iter_modules(benchmarks.__path__), key=lambda m: m.name):
+        if info.name.startswith("_"):
+            continue
+        mod = importlib.import_module(f"{benchmarks.__name__}.{info.name}")
+        doc = (mod.__doc__ or info.name).strip().splitlines()[0]
+        bp = bsub.add_parser(info.name, help=doc, description=mod.__doc__)
+        mod.add_arguments(bp)
+        bp.set_defaults(func=mod.run)
