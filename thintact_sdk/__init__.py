@@ -31,11 +31,11 @@ def _tune_openblas() -> None:
 
 _tune_openblas()
 
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any  # noqa: E402
 
-from thintact_sdk.errors import ThinTactError
-from thintact_sdk.hookspecs import Component, hookimpl
-from thintact_sdk.profile import Profile, load_profile
+from thintact_sdk.errors import ThinTactError  # noqa: E402
+from thintact_sdk.hookspecs import Component, hookimpl  # noqa: E402
+from thintact_sdk.profile import Profile, load_profile  # noqa: E402
 
 __version__ = "0.1.0"
 

@@ -34,14 +34,14 @@ class TikhonovSolver:
         up, sp, vpt = np.linalg.svd(np.asarray(Pc, np.float64), full_matrices=False)
         uq, sq, vqt = np.linalg.svd(np.asarray(Qc, np.float64), full_matrices=False)
         self.tau = float(tau)
-        self.left = (sp[:, None] * up.T).astype(dtype)  # Σ_P U_Pᵀ : k_P × R
-        self.right = (uq * sq[None, :]).astype(dtype)  # U_Q Σ_Q : S × k_Q
+        self.left: np.ndarray = (sp[:, None] * up.T).astype(dtype)  # Σ_P U_Pᵀ : k_P × R
+        self.right: np.ndarray = (uq * sq[None, :]).astype(dtype)  # U_Q Σ_Q : S × k_Q
         denom = np.outer(sp**2, sq**2) + self.tau
         if np.any(denom == 0):
             raise ValueError("tau = 0 with a singular system matrix: use tau > 0")
-        self.inv_denom = (1.0 / denom).astype(dtype)  # k_P × k_Q
-        self.vp = vpt.T.astype(dtype)  # N × k_P
-        self.vqt = vqt.astype(dtype)  # k_Q × M
+        self.inv_denom: np.ndarray = (1.0 / denom).astype(dtype)  # k_P × k_Q
+        self.vp: np.ndarray = vpt.T.astype(dtype)  # N × k_P
+        self.vqt: np.ndarray = vqt.astype(dtype)  # k_Q × M
         self.singular_values_p = sp
         self.singular_values_q = sq
 
