@@ -1,0 +1,252 @@
+"""Raw camera frames → measurements: the one path every camera goes through.
+
+Every consumer of camera frames (the ``Sensor`` robot API, ``thintact record``, the
+calibration wizard) turns :class:`~thintact_sdk.frames.RawFrame` objects into
+:class:`~thintact_sdk.frames.Measurement` objects here, so Bayer binning
+(:func:`thintact_sdk.bayer.bin_bayer`) and the black level are applied one way only.
+
+Typical use::
+
+    from thintact_sdk.capture import open_camera, to_measurement
+    with open_camera(profile) as cam:
+        m = to_measurement(cam.read(), profile)     # R × S × 3 float32 DN
+
+:class:`FrameGapCounter` keeps count of dropped frames from gaps in the camera's frame ids.
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from thintact_sdk.bayer import bin_bayer, pattern_from_pixel_format
+from thintact_sdk.errors import DeviceError, ProfileError
+from thintact_sdk.frames import Measurement, RawFrame
+from thintact_sdk.interfaces import Camera
+from thintact_sdk.plugin_manager import PluginRegistry, get_registry
+from thintact_sdk.profile import Profile
+
+__all__ = [
+    "DroppedFramesWarning",
+    "FrameGapCounter",
+    "binning_pattern",
+    "create_camera",
+    "open_camera",
+    "read_measurement",
+    "to_measurement",
+]
+
+
+class DroppedFramesWarning(UserWarning):
+    """Issued when gaps in the camera's frame ids show that frames were lost."""
+
+
+def binning_pattern(raw: RawFrame, profile: Profile) -> str:
+    """The CFA layout used to bin ``raw``.
+
+    Parameters
+    ----------
+    raw
+        The frame; its ``pixel_format`` wins when it names a Bayer layout (``BayerRG12`` →
+        ``RGGB``), since the camera knows its own readout (ROI offsets can change it).
+    profile
+        Supplies ``camera.bayer_pattern`` for mono-coded mosaics (a raw mosaic delivered as
+        ``Mono8``/``Mono16``) and ``none`` for already binned RGB frames.
+
+    Returns
+    -------
+    str
+        ``RGGB``, ``BGGR``, ``GRBG``, ``GBRG`` or ``none`` (``H × W × 3`` pass-through).
+    """
+    if raw.data.ndim == 3:
+        return "none"
+    from_format = pattern_from_pixel_format(raw.pixel_format)
+    if from_format is not None:
+        return from_format
+    declared = profile.camera.bayer_pattern if profile.camera is not None else "RGGB"
+    if declared == "none":
+        raise DeviceError(
+            f"the camera delivers a 2-D {raw.pixel_format} frame but profile {profile.name!r} "
+            "declares camera.bayer_pattern 'none' (an already binned RGB frame); set the CFA "
+            "layout (RGGB, BGGR, GRBG, GBRG)"
+        )
+    return declared
+
+
+def to_measurement(
+    raw: RawFrame, profile: Profile, out: np.ndarray | None = None
+) -> Measurement:
+    """Bin one raw frame into a measurement with the profile's black level.
+
+    Parameters
+    ----------
+    raw
+        ``2R × 2S`` Bayer mosaic (integer DN), or ``R × S × 3`` (or ``× 4``, alpha dropped)
+        RGB frame that is passed through unbinned.
+    profile
+        Supplies the expected sensor size ``R × S``, the CFA layout
+        (``camera.bayer_pattern``) and ``noise.black_level_dn``.
+    out
+        Optional preallocated ``R × S × 3`` float32 array for the binned data.
+
+    Returns
+    -------
+    Measurement
+        ``data`` ``R × S × 3`` float32 DN with the black level *not* removed; timestamps,
+        frame id and exposure copied from ``raw``; ``meta`` holds the raw frame's meta plus
+        ``pixel_format``, ``gain_db`` and ``device_timestamp_ns``.
+
+    Raises
+    ------
+    DeviceError
+        When the frame's size does not give the profile's sensor size after binning.
+    """
+    data = raw.data
+    if data.ndim == 3 and data.shape[2] == 4:
+        data = data[..., :3]
+    pattern = binning_pattern(raw, profile)
+    try:
+        binned = bin_bayer(data, pattern, out=out if pattern != "none" else None)
+    except ValueError as err:
+        raise DeviceError(f"cannot bin the {raw.pixel_format} frame {raw.frame_id}: {err}") from None
+    if pattern == "none" and out is not None:
+        out[...] = binned
+        binned = out
+    expected = (profile.sensor.rows, profile.sensor.cols)
+    if binned.shape[:2] != expected:
+        need = f"{2 * expected[0]}×{2 * expected[1]} mosaic" if pattern != "none" else (
+            f"{expected[0]}×{expected[1]}×3 RGB frame"
+        )
+        raise DeviceError(
+            f"the camera delivers {data.shape[0]}×{data.shape[1]} {raw.pixel_format} frames, "
+            f"binned to {binned.shape[0]}×{binned.shape[1]}, but profile {profile.name!r} "
+            f"expects a {expected[0]}×{expected[1]} measurement (a {need}); set the camera's "
+            "Width/Height (ROI) or fix sensor.rows/cols"
+        )
+    meta: dict[str, Any] = dict(raw.meta)
+    meta.update(
+        pixel_format=raw.pixel_format,
+        gain_db=raw.gain_db,
+        device_timestamp_ns=raw.device_timestamp_ns,
+        bayer_pattern=pattern,
+    )
+    return Measurement(
+        data=binned,
+        black_level_dn=float(profile.noise.black_level_dn),
+        timestamp_ns=int(raw.timestamp_ns),
+        frame_id=int(raw.frame_id),
+        exposure_us=raw.exposure_us,
+        meta=meta,
+    )
+
+
+def create_camera(
+    profile: Profile,
+    registry: PluginRegistry | None = None,
+    settings: dict[str, Any] | None = None,
+) -> Camera:
+    """Build (not open) the camera named by ``profile.camera.plugin``.
+
+    Parameters
+    ----------
+    profile
+        Its ``camera`` section names the plugin and holds the settings.
+    registry
+        Plugin registry to use; the process-wide one by default.
+    settings
+        Overrides merged over ``profile.camera.settings``.
+
+    Raises
+    ------
+    ProfileError
+        When the profile has no ``camera`` section.
+    PluginError
+        When no camera plugin of that name is installed.
+    """
+    if profile.camera is None:
+        raise ProfileError(
+            f"profile {profile.name!r} has no 'camera' section; add camera.plugin "
+            "(virtual, genicam, uvc or replay) and its settings"
+        )
+    reg = registry if registry is not None else get_registry()
+    merged = dict(profile.camera.settings)
+    if settings:
+        merged.update(settings)
+    camera = reg.create("camera", profile.camera.plugin, profile, merged)
+    if not isinstance(camera, Camera):
+        raise DeviceError(
+            f"camera plugin {profile.camera.plugin!r} returned {type(camera).__name__}, "
+            "not a thintact_sdk.interfaces.Camera"
+        )
+    return camera
+
+
+def open_camera(
+    profile: Profile,
+    registry: PluginRegistry | None = None,
+    settings: dict[str, Any] | None = None,
+) -> Camera:
+    """Build and open the profile's camera (see :func:`create_camera`); close it when done.
+
+    The returned camera is open and usable as a context manager (``with open_camera(p) as c``).
+    """
+    camera = create_camera(profile, registry, settings)
+    camera.open()
+    return camera
+
+
+def read_measurement(camera: Camera, profile: Profile, timeout_s: float = 2.0) -> Measurement:
+    """Read one frame from an opened ``camera`` and bin it (:func:`to_measurement`).
+
+    Raises
+    ------
+    DeviceTimeoutError, DeviceLostError
+        As raised by the camera's ``read``.
+    """
+    return to_measurement(camera.read(timeout_s=timeout_s), profile)
+
+
+@dataclass
+class FrameGapCounter:
+    """Counts frames lost between consecutive frame ids.
+
+    Feed every frame's id to :meth:`update`; it returns how many frames went missing just
+    before this one. A frame id that does not increase (a camera restart or counter
+    wrap-around) resets the reference without counting a drop.
+
+    Attributes
+    ----------
+    dropped
+        Total frames lost so far.
+    gaps
+        ``(frame_id, missing_before)`` for every gap seen.
+    warn
+        Issue a :class:`DroppedFramesWarning` at each gap.
+    """
+
+    dropped: int = 0
+    gaps: list[tuple[int, int]] = field(default_factory=list)
+    warn: bool = False
+    last_id: int | None = None
+    frames: int = 0
+
+    def update(self, frame_id: int) -> int:
+        """Register ``frame_id``; returns the number of frames missing just before it."""
+        missing = 0
+        if self.last_id is not None and frame_id > self.last_id + 1:
+            missing = frame_id - self.last_id - 1
+            self.dropped += missing
+            self.gaps.append((frame_id, missing))
+            if self.warn:
+                warnings.warn(
+                    f"{missing} frame(s) dropped before frame id {frame_id} "
+                    f"({self.dropped} in total)",
+                    DroppedFramesWarning,
+                    stacklevel=2,
+                )
+        self.last_id = frame_id
+        self.frames += 1
+        return missing
