@@ -1,0 +1,189 @@
+"""Calibration bundles: ``calibrations/<device>/<YYYYmmddTHHMMSS>/``.
+
+A bundle directory holds
+
+``calibration.json``
+    ``{"format": "thintact-calibration/1", "profile", "profile_hash", "software_version",
+    "created", "tau", "exposure_us", "metrics": {...}, "source": "wizard|recording|simulator"}``
+``system_matrices.npz``
+    :class:`~thintact_sdk.imaging.t2s.SystemMatrices` (DN above black per display unit).
+``filter.npz``
+    :class:`~thintact_sdk.imaging.recon_filter.JointFilter` (Φf, Φs: ``C × R × S`` each).
+``report.html``
+    optional, written by whoever made the bundle.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from thintact_sdk.errors import CalibrationError
+from thintact_sdk.imaging.recon_filter import JointFilter
+from thintact_sdk.imaging.t2s import SystemMatrices
+
+if TYPE_CHECKING:
+    from thintact_sdk.profile import Profile
+
+CALIBRATION_FORMAT = "thintact-calibration/1"
+META_FILE = "calibration.json"
+MATRICES_FILE = "system_matrices.npz"
+FILTER_FILE = "filter.npz"
+REPORT_FILE = "report.html"
+SOURCES = ("wizard", "recording", "simulator")
+TIMESTAMP_FORMAT = "%Y%m%dT%H%M%S"
+
+
+def timestamp_name(when: datetime | None = None) -> str:
+    """Directory name of a new bundle: UTC ``YYYYmmddTHHMMSS``."""
+    return (when or datetime.now(UTC)).strftime(TIMESTAMP_FORMAT)
+
+
+@dataclass
+class CalibrationBundle:
+    """System matrices, trained joint filter and metadata of one calibration.
+
+    Attributes
+    ----------
+    system_matrices
+        The T2S matrices.
+    filter
+        The trained joint filter (``None`` only for a bundle used by filter-free decoders).
+    meta
+        The contents of ``calibration.json``.
+    path
+        The directory it was loaded from / saved to, if any.
+    """
+
+    system_matrices: SystemMatrices
+    filter: JointFilter | None
+    meta: dict[str, Any] = field(default_factory=dict)
+    path: Path | None = None
+
+    @classmethod
+    def create(
+        cls,
+        profile: Profile,
+        system_matrices: SystemMatrices,
+        joint_filter: JointFilter | None,
+        *,
+        tau: float,
+        source: str,
+        exposure_us: float | None = None,
+        metrics: dict[str, Any] | None = None,
+        **extra: Any,
+    ) -> CalibrationBundle:
+        """A new bundle for ``profile`` with the ``calibration.json`` fields filled in.
+
+        Parameters
+        ----------
+        tau
+            Tikhonov weight τ the decoder should use (DN² units of the system matrices).
+        source
+            ``"wizard"``, ``"recording"`` or ``"simulator"``.
+        exposure_us
+            Camera exposure (us) the matrices were measured at.
+        metrics
+            Validation figures (e.g. ``{"psnr_db": {...}, "ssim": {...}}``).
+        """
+        import thintact_sdk
+
+        if source not in SOURCES:
+            raise CalibrationError(f"source must be one of {', '.join(SOURCES)}, got {source!r}")
+        meta: dict[str, Any] = {
+            "format": CALIBRATION_FORMAT,
+            "profile": profile.name,
+            "profile_hash": profile.content_hash(),
+            "software_version": thintact_sdk.__version__,
+            "created": datetime.now(UTC).isoformat(timespec="seconds"),
+            "tau": float(tau),
+            "exposure_us": None if exposure_us is None else float(exposure_us),
+            "metrics": dict(metrics or {}),
+            "source": source,
+            **extra,
+        }
+        return cls(system_matrices, joint_filter, meta)
+
+    # -- convenience -------------------------------------------------------------------
+    @property
+    def tau(self) -> float:
+        """Tikhonov weight τ stored in the bundle."""
+        return float(self.meta.get("tau", 0.0))
+
+    def matches_profile(self, profile: Profile) -> bool:
+        """Whether the bundle was made for this profile's physics (``profile_hash`` equal)."""
+        return self.meta.get("profile_hash") == profile.content_hash()
+
+    def check_shapes(self, profile: Profile) -> None:
+        """Raise CalibrationError unless the matrices fit the profile's sensor and scene grids."""
+        sm = self.system_matrices
+        want_sensor = (profile.sensor.rows, profile.sensor.cols)
+        want_scene = (profile.scene.rows, profile.scene.cols)
+        if sm.sensor_shape != want_sensor or sm.scene_shape != want_scene:
+            raise CalibrationError(
+                f"calibration {self.path or ''} is for sensor {sm.sensor_shape} / scene "
+                f"{sm.scene_shape}, but profile {profile.name!r} has sensor {want_sensor} / "
+                f"scene {want_scene}"
+            )
+
+    # -- persistence -------------------------------------------------------------------
+    def save(self, directory: str | os.PathLike[str]) -> Path:
+        """Write the bundle into ``directory`` (created); returns it."""
+        d = Path(directory)
+        d.mkdir(parents=True, exist_ok=True)
+        meta = {"format": CALIBRATION_FORMAT, **self.meta}
+        self.system_matrices.save(d / MATRICES_FILE)
+        if self.filter is not None:
+            self.filter.save(d / FILTER_FILE)
+        (d / META_FILE).write_text(json.dumps(meta, indent=1) + "\n", encoding="utf-8")
+        self.path = d
+        return d
+
+    @classmethod
+    def load(cls, directory: str | os.PathLike[str]) -> CalibrationBundle:
+        """Read a bundle directory; raises CalibrationError naming what is missing or wrong."""
+        d = Path(directory)
+        if not d.is_dir():
+            raise CalibrationError(f"calibration bundle not found: {d}")
+        meta_path = d / META_FILE
+        if not meta_path.is_file():
+            raise CalibrationError(f"{d} is not a calibration bundle: no {META_FILE}")
+        try:
+            meta = json.loads(meta_path.read_text(encoding="utf-8"))
+        except (OSError, json.JSONDecodeError) as err:
+            raise CalibrationError(f"cannot read {meta_path}: {err}") from None
+        if not isinstance(meta, dict) or meta.get("format") != CALIBRATION_FORMAT:
+            got = meta.get("format") if isinstance(meta, dict) else type(meta).__name__
+            raise CalibrationError(f"{meta_path}: format {got!r}, expected {CALIBRATION_FORMAT!r}")
+        sm = SystemMatrices.load(d / MATRICES_FILE)
+        jf = JointFilter.load(d / FILTER_FILE) if (d / FILTER_FILE).is_file() else None
+        if jf is not None and (jf.sensor_shape != sm.sensor_shape or jf.channels != sm.channels):
+            raise CalibrationError(
+                f"{d}: filter is {jf.channels}×{jf.sensor_shape} but system matrices are "
+                f"{sm.channels}×{sm.sensor_shape}"
+            )
+        return cls(sm, jf, meta, d)
+
+
+def find_latest(device_dir: str | os.PathLike[str]) -> Path:
+    """The newest bundle (by its ``YYYYmmddTHHMMSS`` name) under ``device_dir``.
+
+    Raises
+    ------
+    CalibrationError
+        When ``device_dir`` holds no bundle.
+    """
+    d = Path(device_dir)
+    candidates = sorted(
+        p for p in (d.iterdir() if d.is_dir() else []) if p.is_dir() and (p / META_FILE).is_file()
+    )
+    if not candidates:
+        raise CalibrationError(
+            f"no calibration bundle under {d}; run the calibration wizard or "
+            "tools/make_virtual_calibration.py"
+        )
+    return candidates[-1]
