@@ -1,0 +1,252 @@
+"""``replay``: a camera that plays a ``thintact-recording/1`` directory.
+
+Each recorded measurement (``R × S × 3`` raw DN) is delivered as a ``2R × 2S`` Bayer mosaic
+built with :func:`thintact_sdk.bayer.mosaic_from_rgb` in the profile's CFA layout, so
+:func:`thintact_sdk.capture.to_measurement` gives the recorded measurement back exactly
+(profile ``bayer_pattern: none`` delivers the ``R × S × 3`` frame itself). Frames recorded
+with ``--raw`` are delivered as the camera gave them, unless ``settings.raw`` is false.
+
+Settings
+--------
+path
+    The recording directory (relative paths are relative to the profile file). Required.
+rate
+    ``"recorded"`` (default): frames are delivered at their recorded times (``timestamp_ns``
+    in the manifest; ``fps`` when the recording has none), divided by ``speed``.
+    ``"fast"``: as fast as they are read.
+speed
+    Playback speed factor for ``rate: recorded`` (default 1.0).
+fps
+    Rate used when the recording holds no timestamps (default 0: as fast as possible).
+loop
+    Start again after the last frame (default false). Frame ids keep increasing.
+raw
+    Use kept raw mosaics when present (default true).
+scenes
+    Put each frame's ground-truth scene, when recorded, into ``meta["scene"]`` (default true).
+
+End of recording
+----------------
+Without ``loop``, :meth:`ReplayCamera.read` raises :class:`EndOfRecording` (a
+``DeviceError``) after the last frame; iterating over the camera (``for raw in cam``)
+stops there instead.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from thintact_replay.rawframes import RAW_FIELD, load_raw_data
+from thintact_sdk.bayer import mosaic_from_rgb
+from thintact_sdk.errors import DeviceError, DeviceTimeoutError, ProfileError, RecordingError
+from thintact_sdk.frames import RawFrame
+from thintact_sdk.interfaces import Camera, CameraCapabilities
+from thintact_sdk.profile import Profile
+from thintact_sdk.recording import Recording
+
+
+class EndOfRecording(DeviceError):
+    """The replayed recording has no more frames (and ``loop`` is off)."""
+
+
+def _check_frame_files(rec: Recording) -> None:
+    """Raise RecordingError naming the first frame whose measurement is missing or truncated."""
+    for i, fr in enumerate(rec.frames):
+        names = [fr.measurement]
+        raw = fr.extra.get(RAW_FIELD)
+        if isinstance(raw, str):
+            names.append(raw)
+        for rel in names:
+            path = rec.root / rel
+            problem = None
+            if not path.is_file():
+                problem = "is missing"
+            elif path.suffix.lower() == ".npy":
+                try:
+                    np.load(path, mmap_mode="r", allow_pickle=False)
+                except (ValueError, OSError, EOFError) as err:
+                    problem = f"is truncated or not a .npy file ({err})"
+            if problem:
+                raise RecordingError(
+                    f"recording {rec.root} is damaged: frame {i} file {rel} {problem}; "
+                    f"frames 0..{i - 1} are intact" if i else
+                    f"recording {rec.root} is damaged: frame 0 file {rel} {problem}"
+                )
+
+
+class ReplayCamera(Camera):
+    """Plays a recording through the :class:`~thintact_sdk.interfaces.Camera` API."""
+
+    name = "replay"
+
+    def __init__(self, profile: Profile, settings: dict[str, Any]) -> None:
+        path = settings.get("path")
+        if not path:
+            raise ProfileError(
+                "replay camera needs camera.settings.path: the recording directory to play"
+            )
+        self.profile = profile
+        self.path: Path = profile.resolve_path(str(path))
+        self.rate = str(settings.get("rate", "recorded"))
+        if self.rate not in ("recorded", "fast"):
+            raise ProfileError(f"camera.settings.rate must be 'recorded' or 'fast', not {self.rate!r}")
+        self.speed = float(settings.get("speed", 1.0))
+        if self.speed <= 0:
+            raise ProfileError("camera.settings.speed must be > 0")
+        self.fps = float(settings.get("fps", 0.0))
+        self.loop = bool(settings.get("loop", False))
+        self.use_raw = bool(settings.get("raw", True))
+        self.with_scenes = bool(settings.get("scenes", True))
+        self.pattern = profile.camera.bayer_pattern if profile.camera is not None else "RGGB"
+        self._rec: Recording | None = None
+        self._times_ns: list[int] = []
+        self._ids: list[int] = []
+        self._index = 0
+        self._loops = 0
+        self._t0 = 0.0
+        self._is_open = False
+
+    # -- lifecycle --------------------------------------------------------------------
+    def open(self) -> None:
+        """Open and check the recording: every frame's files present and complete."""
+        rec = Recording(self.path, profile=self.profile)
+        if len(rec) == 0:
+            raise RecordingError(f"recording {self.path} has no frames")
+        _check_frame_files(rec)
+        self._rec = rec
+        self._times_ns = self._schedule(rec)
+        self._ids = [int(fr.extra.get("frame_id", i)) for i, fr in enumerate(rec.frames)]
+        self._index = 0
+        self._loops = 0
+        self._t0 = time.monotonic()
+        self._is_open = True
+
+    def close(self) -> None:
+        self._rec = None
+        self._is_open = False
+
+    def _schedule(self, rec: Recording) -> list[int]:
+        """Delivery time of each frame after the first, ns (before ``speed``)."""
+        stamps = [fr.extra.get("timestamp_ns") for fr in rec.frames]
+        if all(isinstance(t, int) for t in stamps):
+            t0 = int(stamps[0])  # type: ignore[arg-type]
+            return [int(t) - t0 for t in stamps]  # type: ignore[arg-type]
+        if self.fps > 0:
+            return [int(round(i * 1e9 / self.fps)) for i in range(len(rec))]
+        return [0] * len(rec)
+
+    # -- Camera API ---------------------------------------------------------------------
+    def __len__(self) -> int:
+        return len(self._recording())
+
+    def _recording(self) -> Recording:
+        if self._rec is None:
+            raise DeviceError("replay camera is not open; call open() or use it in a with block")
+        return self._rec
+
+    def capabilities(self) -> CameraCapabilities:
+        rec = self._recording()
+        raw = self._frame_data(0)[0]
+        fps = None
+        if len(rec) > 1 and self._times_ns[-1] > 0:
+            fps = (len(rec) - 1) * 1e9 / self._times_ns[-1]
+        return CameraCapabilities(
+            width=int(raw.shape[1]),
+            height=int(raw.shape[0]),
+            pixel_formats=[self._frame_data(0)[1]],
+            pixel_format=self._frame_data(0)[1],
+            fps=fps,
+            missing=["ExposureTime", "Gain"],
+        )
+
+    def _frame_data(self, i: int) -> tuple[np.ndarray, str]:
+        rec = self._recording()
+        fr = rec.frames[i]
+        if self.use_raw and isinstance(fr.extra.get(RAW_FIELD), str):
+            return load_raw_data(rec.root, fr.extra)
+        meas = rec.measurement(i)
+        if meas.ndim == 2:
+            meas = meas[..., None]
+        if meas.shape[2] != 3:
+            raise RecordingError(
+                f"{fr.measurement}: {meas.shape[2]} channels; replay needs R, G, B measurements"
+            )
+        suffix = "16" if meas.dtype == np.uint16 else "8" if meas.dtype == np.uint8 else "32f"
+        if self.pattern == "none":
+            return np.ascontiguousarray(meas), f"RGB{suffix}"
+        fmt = {"RGGB": "BayerRG", "BGGR": "BayerBG", "GRBG": "BayerGR", "GBRG": "BayerGB"}
+        return mosaic_from_rgb(meas, self.pattern), f"{fmt[self.pattern]}{suffix}"
+
+    def read(self, timeout_s: float = 2.0) -> RawFrame:
+        """The next recorded frame, at its recorded time (``rate: recorded``) or at once.
+
+        Raises
+        ------
+        EndOfRecording
+            After the last frame when ``loop`` is off.
+        DeviceTimeoutError
+            When the next frame is due later than ``timeout_s`` from now.
+        RecordingError
+            When a frame's file cannot be read.
+        """
+        rec = self._recording()
+        n = len(rec)
+        if self._index >= n:
+            if not self.loop:
+                raise EndOfRecording(
+                    f"recording {self.path} ended after {n} frames "
+                    "(set camera.settings.loop: true to play it again)"
+                )
+            self._index = 0
+            self._loops += 1
+        i = self._index
+        if self.rate == "recorded":
+            period_ns = self._times_ns[-1] / (n - 1) if n > 1 else 0.0
+            cycle_ns = self._times_ns[-1] + period_ns
+            due = self._t0 + (self._loops * cycle_ns + self._times_ns[i]) / 1e9 / self.speed
+            wait = due - time.monotonic()
+            if wait > timeout_s:
+                time.sleep(max(timeout_s, 0.0))
+                raise DeviceTimeoutError(
+                    f"replay: frame {i} is due in {wait:.2f} s, beyond the read timeout "
+                    f"of {timeout_s:.2f} s"
+                )
+            if wait > 0:
+                time.sleep(wait)
+        data, pixel_format = self._frame_data(i)
+        fr = rec.frames[i]
+        span = self._ids[-1] - self._ids[0] + 1
+        meta: dict[str, Any] = {"index": i, "loop": self._loops, "source": str(self.path)}
+        if fr.label is not None:
+            meta["label"] = fr.label
+        if "timestamp_ns" in fr.extra:
+            meta["recorded_timestamp_ns"] = fr.extra["timestamp_ns"]
+        if self.with_scenes and fr.scene is not None:
+            meta["scene"] = rec.scene(i)
+        dev_ts = fr.extra.get("device_timestamp_ns")
+        exposure = fr.extra.get("exposure_us")
+        gain = fr.extra.get("gain_db")
+        self._index += 1
+        return RawFrame(
+            data=data,
+            timestamp_ns=time.monotonic_ns(),
+            frame_id=self._ids[i] + self._loops * span,
+            pixel_format=pixel_format,
+            exposure_us=float(exposure) if exposure is not None else None,
+            gain_db=float(gain) if gain is not None else None,
+            device_timestamp_ns=int(dev_ts) if dev_ts is not None else None,
+            meta=meta,
+        )
+
+    def __iter__(self) -> Iterator[RawFrame]:
+        """Every remaining frame (forever with ``loop``); ends at the end of the recording."""
+        while True:
+            try:
+                yield self.read(timeout_s=float("inf"))
+            except EndOfRecording:
+                return
