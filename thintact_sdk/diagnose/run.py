@@ -1,0 +1,272 @@
+"""The diagnosis pipeline: baseline → locate → name and fit effects → unexplained structure."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from thintact_sdk.diagnose.candidates import CANDIDATES, STRAY_TERMS
+from thintact_sdk.diagnose.data import DiagnosisData
+from thintact_sdk.diagnose.locate import Location, locate
+from thintact_sdk.diagnose.model import (
+    DiagnosisModel,
+    Evaluation,
+    SimulateFn,
+    Values,
+    default_simulate,
+)
+from thintact_sdk.diagnose.select import Round, Selection, select_effects
+from thintact_sdk.diagnose.stats import (
+    FitStats,
+    VarianceFn,
+    default_variance_fn,
+    fit_stats,
+    normalised_residual,
+    valid_pixels,
+)
+from thintact_sdk.diagnose.structure import Structure, find_structure
+from thintact_sdk.diagnose.words import describe_effect, tell_apart
+from thintact_sdk.profile import Profile
+
+
+@dataclass
+class DiagnoseOptions:
+    """Knobs of :func:`diagnose` (defaults are the CLI's).
+
+    Attributes
+    ----------
+    sys_frac
+        Systematic-error allowance (relative model error) used in fitting and decisions.
+    margin
+        Δχ² added to the BIC penalty k·ln(n) before an effect is accepted.
+    amp_floor
+        Minimum rms change of the prediction (fraction of the rms signal) for an effect.
+    max_effects
+        At most this many effects are accepted.
+    time_budget_s
+        Wall-clock budget; selection stops when it is spent.
+    candidates
+        Effect names to consider (default: every CONTRACTS §5 effect the simulator knows,
+        minus those the profile already models).
+    """
+
+    sys_frac: float = 1e-3
+    margin: float = 25.0
+    amp_floor: float = 2e-3
+    max_effects: int = 4
+    time_budget_s: float = 100.0
+    candidates: list[str] | None = None
+
+
+@dataclass
+class ModelView:
+    """A prediction with its contract statistics, for the report and the figures."""
+
+    pred_dn: np.ndarray
+    variance_dn2: np.ndarray
+    valid: np.ndarray
+    stats: FitStats
+
+
+@dataclass
+class Diagnosis:
+    """Everything :func:`diagnose` found (``report`` is CONTRACTS §6 ``report.json``)."""
+
+    data: DiagnosisData
+    report: dict[str, Any]
+    fitted_profile: Profile
+    baseline_pred_dn: np.ndarray
+    final_pred_dn: np.ndarray
+    baseline_location: Location
+    final_location: Location
+    structure: Structure
+    selection: Selection
+    history: list[tuple[str, float, float]]  # (model, rms_dn, chi2_per_dof)
+    timing_s: dict[str, float] = field(default_factory=dict)
+
+
+def known_candidates(profile: Profile) -> list[str]:
+    """Effects the diagnosis can try: the vocabulary the simulator implements, minus those
+    already in the profile's physics."""
+    try:
+        from thintact_sdk.physics import EFFECTS
+
+        known = set(EFFECTS)
+    except ImportError:
+        known = {n for n, c in CANDIDATES.items() if c.domain != "optical"}
+    return [n for n in CANDIDATES if n in known and n not in profile.physics]
+
+
+def contract_params(name: str, vec: np.ndarray, model: DiagnosisModel, beta: np.ndarray) -> dict[str, Any]:
+    """Contract parameters of an accepted effect (stray light: mean DN from the fitted
+    polynomial, plus the polynomial itself)."""
+    if name != "stray_light":
+        return CANDIDATES[name].to_params(vec, model.profile)
+    coef = beta[:, 1 : 1 + len(STRAY_TERMS)]
+    surf = np.tensordot(coef, model.stray_basis, axes=1)  # C × R × S
+    out = CANDIDATES[name].to_params(coef.ravel(), model.profile)
+    out["mean_dn"] = [round(float(x), 3) for x in surf.mean(axis=(1, 2))]
+    return out
+
+
+def profile_params(name: str, params: dict[str, Any]) -> dict[str, Any]:
+    """Only the parameters the simulator's effect accepts (for ``fitted_profile.json``)."""
+    try:
+        from thintact_sdk.physics import EFFECTS
+    except ImportError:
+        return params
+    spec = EFFECTS.get(name)
+    if spec is None:
+        return params
+    return {k: v for k, v in params.items() if k in spec.params}
+
+
+def _view(model: DiagnosisModel, data: DiagnosisData, pred: np.ndarray, values: Values) -> ModelView:
+    var = model.variance(pred)
+    lev = float(values["saturation"][0]) if "saturation" in values else None
+    valid = valid_pixels(data.measured_dn, pred, data.profile.noise, lev)
+    return ModelView(pred, var, valid, fit_stats(data.measured_dn, pred, var, valid))
+
+
+def _locate(view: ModelView, data: DiagnosisData, black: float) -> Location:
+    resid = data.measured_dn - view.pred_dn
+    z = normalised_residual(data.measured_dn, view.pred_dn, view.variance_dn2, view.valid)
+    return locate(
+        z, view.valid, view.pred_dn - black, resid, view.variance_dn2,
+        data.profile.sensor.pixel_pitch_um, data.labels, list(data.profile.sensor.channels),
+    )
+
+
+def _structure(view: ModelView, data: DiagnosisData, black: float) -> Structure:
+    resid = data.measured_dn - view.pred_dn
+    z = normalised_residual(data.measured_dn, view.pred_dn, view.variance_dn2, view.valid)
+    return find_structure(resid, view.pred_dn - black, view.variance_dn2, view.valid, z)
+
+
+def _frame_hint(data: DiagnosisData, model: DiagnosisModel, a: Evaluation, b: Evaluation) -> str:
+    d = (a.pred_dn - b.pred_dn) ** 2 * model.weights
+    per = np.sqrt(d.mean(axis=(1, 2, 3)))
+    i = int(np.argmax(per))
+    rms = float(np.sqrt(np.mean((a.pred_dn[i] - b.pred_dn[i]) ** 2)))
+    return (
+        f"in this recording their predictions differ most on frame '{data.labels[i]}' "
+        f"({rms:.2f} DN rms), so more frames like it would help."
+    )
+
+
+def diagnose(
+    data: DiagnosisData,
+    simulate: SimulateFn | None = None,
+    variance_fn: VarianceFn | None = None,
+    options: DiagnoseOptions | None = None,
+    progress: Callable[[str], None] | None = None,
+) -> Diagnosis:
+    """Diagnose a recording (CONTRACTS §6): see the package docstring."""
+    opt = options or DiagnoseOptions()
+    t_start = time.perf_counter()
+    deadline = t_start + opt.time_budget_s
+    say = progress or (lambda _m: None)
+    sim = simulate or default_simulate
+    var_fn = variance_fn or default_variance_fn()
+    prof = data.profile
+    black = float(prof.noise.black_level_dn)
+    model = DiagnosisModel(data, sim, var_fn, sys_frac=opt.sys_frac)
+    base_values: Values = {
+        n: CANDIDATES[n].from_params(prof.physics[n], prof)
+        for n in prof.physics
+        if n in CANDIDATES and CANDIDATES[n].domain != "optical"
+    }
+    cands = opt.candidates if opt.candidates is not None else known_candidates(prof)
+    timing: dict[str, float] = {}
+
+    model.set_reference(None)
+    ev0 = model.evaluate(base_values)
+    model.set_reference(ev0.pred_dn)
+    ev0 = model.evaluate(base_values)
+    base = _view(model, data, ev0.pred_dn, base_values)
+    loc0 = _locate(base, data, black)
+    timing["baseline_s"] = time.perf_counter() - t_start
+    say(f"baseline: rms {base.stats.rms_dn:.2f} DN, χ²/dof {base.stats.chi2_per_dof:.3f}")
+
+    sel = select_effects(
+        model, cands, base_values, max_effects=opt.max_effects, margin=opt.margin,
+        amp_floor=opt.amp_floor, deadline=deadline, progress=say,
+    )
+    final = _view(model, data, sel.evaluation.pred_dn, sel.values)
+    struct = _structure(final, data, black)
+    if struct.significant and time.perf_counter() < deadline - 0.25 * opt.time_budget_s:
+        # a local defect biases the effect fits: fit again without its pixels
+        say("local defect found: refitting the effects without it")
+        model2 = DiagnosisModel(data, sim, var_fn, sys_frac=opt.sys_frac, exclude=struct.mask)
+        model2.cache = model.cache
+        sel = select_effects(
+            model2, cands, base_values, max_effects=opt.max_effects, margin=opt.margin,
+            amp_floor=opt.amp_floor, deadline=deadline, progress=say,
+        )
+        model = model2
+        final = _view(model, data, sel.evaluation.pred_dn, sel.values)
+        struct = _structure(final, data, black)
+    timing["selection_s"] = time.perf_counter() - t_start - timing["baseline_s"]
+    loc1 = _locate(final, data, black)
+
+    history = [("baseline", base.stats.rms_dn, base.stats.chi2_per_dof)]
+    findings = []
+    phys = dict(prof.physics)
+    for rnd in sel.rounds:
+        findings.append(_finding(rnd, model, data, prof, sel))
+        history.append((f"+ {rnd.name}", findings[-1]["rms_dn_after"], findings[-1]["chi2_per_dof_after"]))
+        phys[rnd.name] = profile_params(rnd.name, findings[-1]["params"])
+    if sel.rounds:
+        # the last round's model is the final model; its numbers are the final ones
+        findings[-1]["rms_dn_after"] = round(final.stats.rms_dn, 4)
+        findings[-1]["chi2_per_dof_after"] = round(final.stats.chi2_per_dof, 4)
+    fitted = prof.with_physics(phys)
+    report: dict[str, Any] = {
+        "noise_rms_dn": round(base.stats.noise_rms_dn, 4),
+        "baseline": {"rms_dn": round(base.stats.rms_dn, 4), "chi2_per_dof": round(base.stats.chi2_per_dof, 4)},
+        "located": {"summary": loc0.summary, "hotspots": [h.to_json() for h in loc0.hotspots]},
+        "findings": findings,
+        "final": {"rms_dn": round(final.stats.rms_dn, 4), "chi2_per_dof": round(final.stats.chi2_per_dof, 4)},
+        "unexplained": {
+            "significant": bool(struct.significant),
+            "summary": struct.summary,
+            "hotspots": [h.to_json() for h in struct.hotspots],
+        },
+    }
+    timing["total_s"] = time.perf_counter() - t_start
+    timing["simulations"] = float(model.n_sim)
+    return Diagnosis(
+        data, report, fitted, ev0.pred_dn, sel.evaluation.pred_dn, loc0, loc1, struct, sel, history, timing
+    )
+
+
+def _finding(rnd: Round, model: DiagnosisModel, data: DiagnosisData, prof: Profile, sel: Selection) -> dict[str, Any]:
+    params = contract_params(rnd.name, rnd.vector, model, rnd.evaluation.beta)
+    vals_after = {k: v for k, v in sel.values.items()}
+    view = _view(model, data, rnd.evaluation.pred_dn, vals_after)
+    ev_txt = (
+        f"{describe_effect(rnd.name, params, prof)} Adding it lowers χ² by {rnd.dchi2:.0f} "
+        f"(with a {model.sys_frac:.1%} systematic allowance), above the {rnd.threshold:.0f} that "
+        f"{rnd.k} parameter(s) must earn (BIC k·ln n + margin); it changes the prediction by "
+        f"{rnd.amplitude_dn:.2f} DN rms."
+    )
+    alts = []
+    for a in rnd.alternatives:
+        assert a.evaluation is not None
+        alts.append(a.name)
+        ev_txt += (
+            f" {a.name} explains the recording about as well (Δχ² {a.dchi2:.0f}). "
+            + tell_apart(rnd.name, a.name, _frame_hint(data, model, rnd.evaluation, a.evaluation))
+        )
+    return {
+        "effect": rnd.name,
+        "params": params,
+        "rms_dn_after": round(view.stats.rms_dn, 4),
+        "chi2_per_dof_after": round(view.stats.chi2_per_dof, 4),
+        "evidence": ev_txt,
+        "alternatives": alts,
+    }
