@@ -1,0 +1,18 @@
+"""Photometric stereo on real GelSight ball presses (../shared/data, Taxim pack)."""
+
+from __future__ import annotations
+
+import pytest
+
+from thintact_sdk.tactile.gelsight_eval import evaluate_gelsight
+
+
+def test_lut_from_real_presses_predicts_held_out_slopes(shared_dir):
+    pack = shared_dir / "data" / "taxim_gelsight_ball_small" / "dataPack_small.npz"
+    if not pack.is_file():
+        pytest.skip(f"{pack} missing")
+    ev = evaluate_gelsight(pack)
+    assert set(ev.train).isdisjoint(ev.test) and len(ev.test) >= 20
+    # measured 2026-11: slope RMS 0.34 against 0.88 for "flat" (bins 24, even/odd split)
+    assert ev.grad_rms < 0.5 * ev.grad_rms_zero
+    assert ev.depth_rms_mm < 0.5 * ev.depth_peak_mm

@@ -1,0 +1,95 @@
+"""Tactile pipeline: membrane simulation, photometric stereo, Poisson depth, markers.
+
+Two calls cover most programs::
+
+    from thintact_sdk import tactile
+    press = tactile.simulate_press(profile, tactile.Sphere(2.0), depth_mm=0.5)   # scene + truth
+    interp = tactile.TactileInterpreter(profile, tactile.scene_level_lut(profile))
+    interp.set_reference(tactile.TactileSimulator.for_profile(profile).flat().scene)
+    frame = interp.interpret(press.scene)                                       # TactileFrame
+
+See ``docs/tactile.md``.
+"""
+
+from thintact_sdk.tactile.calibration import (
+    CALIBRATION_BALL_RADIUS_MM,
+    BallPress,
+    ball_slopes,
+    calibrate_from_presses,
+    find_press_circle,
+    random_ball_presses,
+    scene_level_lut,
+)
+from thintact_sdk.tactile.grid import TactileParams, pixel_grid_mm
+from thintact_sdk.tactile.indenters import (
+    INDENTERS,
+    ChamferedPrism,
+    CubeEdge,
+    Cylinder,
+    Indenter,
+    Sphere,
+    Text,
+    Texture,
+    make_indenter,
+)
+from thintact_sdk.tactile.interpreter import TactileInterpreter, fill_masked
+from thintact_sdk.tactile.lighting import LED, PhongShading, default_leds
+from thintact_sdk.tactile.markers import (
+    MarkerDetection,
+    MarkerTracker,
+    detect_markers,
+    marker_lattice_mm,
+    mean_shear,
+)
+from thintact_sdk.tactile.photometric import PhotometricLUT, calibrate_lut
+from thintact_sdk.tactile.poisson import integrate_gradients
+from thintact_sdk.tactile.simulate import TactileScene, TactileSimulator, simulate_press
+from thintact_sdk.tactile.store import (
+    calibrations_root,
+    device_lut_path,
+    find_lut,
+    load_device_lut,
+    save_device_lut,
+)
+
+__all__ = [
+    "CALIBRATION_BALL_RADIUS_MM",
+    "INDENTERS",
+    "LED",
+    "BallPress",
+    "ChamferedPrism",
+    "CubeEdge",
+    "Cylinder",
+    "Indenter",
+    "MarkerDetection",
+    "MarkerTracker",
+    "PhongShading",
+    "PhotometricLUT",
+    "Sphere",
+    "TactileInterpreter",
+    "TactileParams",
+    "TactileScene",
+    "TactileSimulator",
+    "Text",
+    "Texture",
+    "ball_slopes",
+    "calibrate_from_presses",
+    "calibrate_lut",
+    "calibrations_root",
+    "default_leds",
+    "detect_markers",
+    "device_lut_path",
+    "fill_masked",
+    "find_lut",
+    "find_press_circle",
+    "integrate_gradients",
+    "load_device_lut",
+    "make_indenter",
+    "marker_lattice_mm",
+    "mean_shear",
+    "pixel_grid_mm",
+    "random_ball_presses",
+    "save_device_lut",
+    "scene_level_lut",
+    "simulate_press",
+]

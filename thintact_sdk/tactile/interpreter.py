@@ -1,0 +1,164 @@
+"""Reconstructed membrane image → :class:`~thintact_sdk.frames.TactileFrame`.
+
+Per frame: detect the markers (and mask them out), subtract the no-contact background,
+map colour changes to slopes with the LUT, fill the masked pixels from their
+neighbours, integrate the slopes to depth (Poisson), threshold it for contact, and track
+the markers against the reference frame.
+"""
+
+from __future__ import annotations
+
+import time
+
+import cv2
+import numpy as np
+
+from thintact_sdk.frames import TactileFrame
+from thintact_sdk.profile import Profile
+from thintact_sdk.tactile.grid import TactileParams
+from thintact_sdk.tactile.markers import MarkerTracker, detect_markers, mean_shear
+from thintact_sdk.tactile.photometric import PhotometricLUT
+from thintact_sdk.tactile.poisson import integrate_gradients
+
+
+def fill_masked(values: np.ndarray, mask: np.ndarray, sigma_px: float) -> np.ndarray:
+    """Replace masked pixels by the Gaussian-weighted mean of unmasked neighbours.
+
+    Parameters
+    ----------
+    values
+        ``N × M`` or ``N × M × C`` float array.
+    mask
+        ``N × M`` bool, True where ``values`` is not to be trusted.
+    sigma_px
+        Gaussian width in pixels (about a marker's diameter).
+    """
+    if not mask.any():
+        return values
+    keep = (~mask).astype(np.float32)
+    v = np.ascontiguousarray(values, np.float32)
+    num = cv2.GaussianBlur(v * (keep[..., None] if v.ndim == 3 else keep), (0, 0), sigma_px)
+    den = cv2.GaussianBlur(keep, (0, 0), sigma_px)
+    if v.ndim == 3:
+        den = den[..., None]
+    filled = num / np.maximum(den, 1e-6)
+    out = v.copy()
+    out[mask] = filled[mask]
+    return out
+
+
+class TactileInterpreter:
+    """Turns reconstructed images of one sensor into tactile frames.
+
+    Parameters
+    ----------
+    profile
+        Supplies the scene grid, pixel size, contact threshold and marker geometry.
+    lut
+        Photometric-stereo table; without one the depth is all zeros and
+        ``frame.meta["depth"] == "no LUT"``.
+    marker_threshold
+        Relative darkness that starts a marker (see
+        :func:`thintact_sdk.tactile.markers.detect_markers`).
+    min_contact_area_mm2
+        Smallest region above the contact threshold that counts as contact.
+
+    The first image interpreted becomes the reference (no-contact) frame unless
+    :meth:`set_reference` is called first.
+    """
+
+    def __init__(
+        self,
+        profile: Profile,
+        lut: PhotometricLUT | None = None,
+        marker_threshold: float = 0.3,
+        min_contact_area_mm2: float = 0.1,
+    ) -> None:
+        self.params = TactileParams.from_profile(profile)
+        self.lut = lut
+        self.marker_threshold = marker_threshold
+        self.min_contact_area_mm2 = min_contact_area_mm2
+        self.tracker = MarkerTracker(max_step_mm=0.45 * self.params.marker_pitch_mm)
+        self.background: np.ndarray | None = None
+        self.reference_markers_mm = np.zeros((0, 2))
+
+    @property
+    def has_reference(self) -> bool:
+        return self.background is not None
+
+    def set_reference(self, image: np.ndarray) -> None:
+        """Use ``image`` (``N × M × 3``, no contact) as background and marker reference."""
+        img = self._check(image)
+        det = detect_markers(img, self.params, self.marker_threshold)
+        sigma = max(1.0, self.params.marker_diameter_mm / self.params.mm_per_px)
+        self.background = fill_masked(img, det.mask, sigma)
+        self.reference_markers_mm = det.positions_mm
+        self.tracker.reset(det.positions_mm)
+
+    def _check(self, image: np.ndarray) -> np.ndarray:
+        img = np.asarray(image, np.float32)
+        want = (self.params.rows, self.params.cols, 3)
+        if img.shape != want:
+            from thintact_sdk.errors import ThinTactError
+
+            raise ThinTactError(
+                f"tactile interpreter expects {want[0]}×{want[1]}×3 images (the profile's scene "
+                f"grid), got {'×'.join(map(str, img.shape))}"
+            )
+        return img
+
+    def depth_from_image(
+        self, image: np.ndarray, marker_mask: np.ndarray | None = None
+    ) -> np.ndarray:
+        """Depth map (``N × M`` float32 mm, ≥ 0) of one image against the reference."""
+        img = self._check(image)
+        if self.background is None:
+            raise RuntimeError("set_reference() before depth_from_image()")
+        if self.lut is None:
+            return np.zeros(img.shape[:2], np.float32)
+        gx, gy = self.lut.lookup(img - self.background)
+        if marker_mask is not None and marker_mask.any():
+            sigma = max(1.0, self.params.marker_diameter_mm / self.params.mm_per_px)
+            g = fill_masked(np.stack([gx, gy], axis=2), marker_mask, sigma)
+            gx, gy = g[..., 0], g[..., 1]
+        depth = integrate_gradients(gx, gy, self.params.mm_per_px)
+        return np.clip(depth, 0.0, None)
+
+    def contact(self, depth_mm: np.ndarray) -> tuple[bool, float, np.ndarray]:
+        """``(contact, area_mm2, mask)`` from a depth map and the contact threshold."""
+        mask = depth_mm > self.params.contact_threshold_mm
+        area = float(mask.sum()) * self.params.mm_per_px**2
+        return area >= self.min_contact_area_mm2, area, mask
+
+    def interpret(
+        self, image: np.ndarray, timestamp_ns: int = 0, frame_id: int = 0
+    ) -> TactileFrame:
+        """Interpret one reconstructed image (``N × M × 3`` display units)."""
+        t0 = time.perf_counter()
+        img = self._check(image)
+        if self.background is None:
+            self.set_reference(img)
+        det = detect_markers(img, self.params, self.marker_threshold)
+        depth = self.depth_from_image(img, det.mask)
+        contact, area, _ = self.contact(depth)
+        pos, disp = self.tracker.update(det.positions_mm)
+        _, direction = mean_shear(disp)
+        meta: dict[str, object] = {
+            "markers_detected": int(len(det.positions_mm)),
+            "markers_tracked": int(np.isfinite(pos[:, 0]).sum()) if len(pos) else 0,
+            "interpret_ms": (time.perf_counter() - t0) * 1e3,
+        }
+        if self.lut is None:
+            meta["depth"] = "no LUT"
+        return TactileFrame(
+            image=img,
+            depth_mm=depth,
+            marker_positions_mm=pos,
+            marker_displacements_mm=disp,
+            contact=contact,
+            contact_area_mm2=area,
+            timestamp_ns=int(timestamp_ns),
+            frame_id=int(frame_id),
+            shear_direction_rad=direction,
+            meta=meta,
+        )

@@ -1,0 +1,183 @@
+"""Photometric stereo with a look-up table: colour change → surface slope (paper §III-E).
+
+The feature of a pixel is its colour minus the no-contact background at that pixel
+(``I − I₀``, three numbers, display units). The table is a regular 3-D grid over the
+feature range seen during calibration; each node holds the mean slopes (∂d/∂x, ∂d/∂y)
+of the calibration pixels splatted onto it with trilinear weights, nodes without samples
+take the value of the nearest node with samples, and look-ups interpolate trilinearly.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from scipy.ndimage import distance_transform_edt
+
+from thintact_sdk.errors import CalibrationError
+
+LUT_FORMAT = "thintact-tactile-lut/1"
+
+
+@dataclass
+class PhotometricLUT:
+    """Colour-change → slope table.
+
+    Attributes
+    ----------
+    lo, hi
+        ``(3,)`` float64 feature range covered by the grid (display units).
+    table
+        ``B × B × B × 2`` float32 slopes (∂d/∂x, ∂d/∂y) at the grid nodes (mm per mm).
+    counts
+        ``B × B × B`` float32 calibration weight that fell on each node.
+    meta
+        Provenance (profile, source, ball radius, number of presses, metrics, ...).
+    """
+
+    lo: np.ndarray
+    hi: np.ndarray
+    table: np.ndarray
+    counts: np.ndarray
+    meta: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def bins(self) -> int:
+        """Nodes per colour axis B."""
+        return int(self.table.shape[0])
+
+    def _coords(self, features: np.ndarray) -> np.ndarray:
+        f = np.asarray(features, np.float32).reshape(-1, 3)
+        scale = (self.bins - 1) / np.maximum(self.hi - self.lo, 1e-9)
+        t = (f - self.lo.astype(np.float32)) * scale.astype(np.float32)
+        return np.clip(t, 0.0, self.bins - 1 - 1e-4)
+
+    def lookup(self, features: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Slopes for colour changes.
+
+        Parameters
+        ----------
+        features
+            ``... × 3`` colour minus background (display units).
+
+        Returns
+        -------
+        (grad_x, grad_y)
+            Arrays shaped like ``features[..., 0]``, float32 mm per mm.
+        """
+        shape = np.shape(features)[:-1]
+        t = self._coords(features)
+        i0 = t.astype(np.int32)
+        fr = t - i0
+        b = self.bins
+        flat = self.table.reshape(b * b * b, 2)
+        out = np.zeros((t.shape[0], 2), np.float32)
+        for dr in (0, 1):
+            wr = fr[:, 0] if dr else 1.0 - fr[:, 0]
+            for dg in (0, 1):
+                wg = fr[:, 1] if dg else 1.0 - fr[:, 1]
+                for db in (0, 1):
+                    wb = fr[:, 2] if db else 1.0 - fr[:, 2]
+                    idx = ((i0[:, 0] + dr) * b + (i0[:, 1] + dg)) * b + (i0[:, 2] + db)
+                    out += (wr * wg * wb)[:, None] * flat[idx]
+        return out[:, 0].reshape(shape), out[:, 1].reshape(shape)
+
+    def save(self, path: str | Path) -> Path:
+        """Write ``path`` (``.npz``) and its metadata beside it (``.json``)."""
+        p = Path(path)
+        p.parent.mkdir(parents=True, exist_ok=True)
+        np.savez_compressed(p, lo=self.lo, hi=self.hi, table=self.table, counts=self.counts)
+        meta = {"format": LUT_FORMAT, "bins": self.bins, **self.meta}
+        p.with_suffix(".json").write_text(json.dumps(meta, indent=1, default=str) + "\n")
+        return p
+
+    @classmethod
+    def load(cls, path: str | Path) -> PhotometricLUT:
+        """Read a table written by :meth:`save`; raises CalibrationError if unusable."""
+        p = Path(path)
+        if not p.is_file():
+            raise CalibrationError(f"tactile LUT not found: {p}")
+        try:
+            with np.load(p, allow_pickle=False) as z:
+                lo, hi, table, counts = z["lo"], z["hi"], z["table"], z["counts"]
+        except (OSError, KeyError, ValueError) as err:
+            raise CalibrationError(f"cannot read tactile LUT {p}: {err}") from None
+        meta: dict[str, Any] = {}
+        mp = p.with_suffix(".json")
+        if mp.is_file():
+            meta = json.loads(mp.read_text())
+            if meta.get("format") != LUT_FORMAT:
+                raise CalibrationError(
+                    f"{mp}: format {meta.get('format')!r}, this SDK reads {LUT_FORMAT!r}"
+                )
+        if table.ndim != 4 or table.shape[3] != 2 or len(set(table.shape[:3])) != 1:
+            raise CalibrationError(f"{p}: table shape {table.shape} is not B×B×B×2")
+        return cls(lo, hi, table.astype(np.float32), counts.astype(np.float32), meta)
+
+
+def calibrate_lut(
+    features: list[np.ndarray],
+    grad_x: list[np.ndarray],
+    grad_y: list[np.ndarray],
+    valid: list[np.ndarray],
+    bins: int = 32,
+    margin: float = 0.05,
+    meta: dict[str, Any] | None = None,
+) -> PhotometricLUT:
+    """Build a LUT from calibration images with known slopes.
+
+    Parameters
+    ----------
+    features
+        Per image, ``N × M × 3`` colour minus background (display units).
+    grad_x, grad_y
+        Per image, ``N × M`` known slopes ∂d/∂x, ∂d/∂y (mm per mm).
+    valid
+        Per image, ``N × M`` bool: pixels whose slopes are trusted (markers and unsure
+        rims excluded).
+    bins
+        Nodes per colour axis.
+    margin
+        Fraction of the feature range added on each side of the grid.
+    """
+    f = np.concatenate([np.asarray(a, np.float64)[m] for a, m in zip(features, valid, strict=True)])
+    gx = np.concatenate([np.asarray(a, np.float64)[m] for a, m in zip(grad_x, valid, strict=True)])
+    gy = np.concatenate([np.asarray(a, np.float64)[m] for a, m in zip(grad_y, valid, strict=True)])
+    if len(f) < 100:
+        raise CalibrationError(
+            f"only {len(f)} calibration pixels; press the ball harder or use more presses"
+        )
+    lo, hi = np.percentile(f, 0.05, axis=0), np.percentile(f, 99.95, axis=0)
+    span = np.maximum(hi - lo, 1e-3)
+    lo, hi = lo - margin * span, hi + margin * span
+    lut = PhotometricLUT(
+        lo, hi, np.zeros((bins,) * 3 + (2,), np.float32), np.zeros((bins,) * 3, np.float32)
+    )
+    t = lut._coords(f).astype(np.float64)
+    i0 = t.astype(np.int64)
+    fr = t - i0
+    acc = np.zeros((bins**3, 3))
+    for dr in (0, 1):
+        wr = fr[:, 0] if dr else 1.0 - fr[:, 0]
+        for dg in (0, 1):
+            wg = fr[:, 1] if dg else 1.0 - fr[:, 1]
+            for db in (0, 1):
+                wb = fr[:, 2] if db else 1.0 - fr[:, 2]
+                w = wr * wg * wb
+                idx = ((i0[:, 0] + dr) * bins + (i0[:, 1] + dg)) * bins + (i0[:, 2] + db)
+                np.add.at(acc, idx, np.stack([w, w * gx, w * gy], axis=1))
+    nodes = acc.reshape(bins, bins, bins, 3)
+    weight = nodes[..., 0]
+    filled = weight > 1e-3
+    table = np.zeros((bins, bins, bins, 2))
+    table[filled] = nodes[filled][:, 1:] / weight[filled][:, None]
+    _, nearest = distance_transform_edt(~filled, return_indices=True)
+    table = table[nearest[0], nearest[1], nearest[2]]
+    lut.table = table.astype(np.float32)
+    lut.counts = weight.astype(np.float32)
+    lut.meta = dict(meta or {})
+    lut.meta.setdefault("calibration_pixels", int(len(f)))
+    return lut
