@@ -1,0 +1,31 @@
+"""ThinTact GenICam camera backend (plugin ``genicam``), through harvesters and GenTL.
+
+Camera component ``genicam``: ``factory(profile, settings)`` →
+:class:`thintact_genicam.camera.GenICamCamera` (settings documented there and in
+docs/cameras.md). :mod:`thintact_genicam.producers` finds producers and lists devices.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from thintact_genicam.camera import GenICamCamera, GenICamSettingWarning
+from thintact_sdk import Component, hookimpl
+from thintact_sdk.profile import Profile
+
+__all__ = ["GenICamCamera", "GenICamSettingWarning"]
+
+
+def _create(profile: Profile, settings: dict[str, Any] | None = None) -> GenICamCamera:
+    return GenICamCamera(profile, settings or {})
+
+
+@hookimpl
+def thintact_cameras() -> list[Component]:
+    return [
+        Component(
+            "genicam",
+            _create,
+            "GenICam/GenTL camera via harvesters (settings.cti names the vendor's producer)",
+        )
+    ]
