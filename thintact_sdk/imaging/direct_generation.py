@@ -1,0 +1,262 @@
+"""Direct generation of the T2S system matrices from the mask vector φ (paper §III-C-2).
+
+The paper builds ``Pc`` (and ``Qc``) by an affine map of φ: along the centre line of the
+striped area (scene point straight above the sensor pixel) the slope is
+``k_c = δ_scene / δ_sensor``; the stripes (loci of one mask cell) run with slope
+``k_stripe = −d·δ_scene / (z·δ_sensor)``; along the centre line the matrix reads an
+effective length ``l_mask = R·δ_sensor`` of the vector; and the striped area fades out at
+its boundary, approximated with a sigmoid of width ``d_stripe``.
+
+This module derives exactly that picture from the ray geometry of CONTRACTS §4, one axis
+at a time. The ray from scene coordinate ``y_n`` to sensor coordinate ``y_r`` crosses the
+mask at ``m = (z·y_r + d·y_n) / H``: an affine function of the two indices whose level
+lines are the stripes (slope ``k_stripe``) and whose diagonal ``y_r = y_n`` is the centre
+line (slope ``k_c``). Each matrix entry averages φ over the mask footprint of the sensor
+pixel (width ``z·p/H``) and the scene pixel (width ``d·q/H``), a trapezoid, exactly; cells
+outside the K-cell mask read 0 (closed). The fade is the paper's sigmoid of the offset
+``|y_r − y_n|`` in sensor pixels with full width at half maximum ``d_stripe_px``.
+
+Units: the returned matrices are relative irradiance per display unit per scene pixel,
+scaled so that a white scene (all ones) seen through a fully open mask gives 1 at the
+sensor centre, i.e. ``2·(Po·1)[centre]·(Qo·1)[centre] = 1``; multiply by the white level
+in DN to obtain DN above black. ``Po X Qoᵀ + Pc X Qcᵀ`` is then the measurement through
+the mask ``M = (1·1ᵀ + φ_rows φᵀ)/2``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from thintact_sdk.profile import Profile
+
+#: Line-source falloff of the baseline physics, (1 + (Δ/H)²)^(-3/2), has its half maximum
+#: at Δ = 0.766·H; the stripe FWHM for d_stripe_scale = 1 is therefore 2·0.766·H.
+_HALF_MAX_OVER_H = math.sqrt(2.0 ** (2.0 / 3.0) - 1.0)
+
+#: Default multiplier of the physical FWHM, tuned against the exact baseline physics
+#: (golden baseline irradiance, CONTRACTS §4: 0.2 % (mini) and 0.7 % (wide) relative RMS
+#: after one gain per channel; see docs/masks.md).
+DEFAULT_D_STRIPE_SCALE = 0.84
+
+#: Softness of the sigmoid (its scale parameter) as a fraction of d_stripe; 0.225 matches
+#: the slope of the line-source falloff at its half maximum.
+SIGMOID_SOFTNESS = 0.225
+
+
+@dataclass(frozen=True)
+class StripeParameters:
+    """The paper's parameters of the striped area of one system matrix.
+
+    Attributes
+    ----------
+    k_c
+        Slope of the centre line, sensor rows per scene row (``δ_scene / δ_sensor``).
+    k_stripe
+        Slope of the stripes, sensor rows per scene row (``−d·δ_scene / (z·δ_sensor)``).
+    l_mask_um
+        Effective length of φ read along the centre line, um (``R·δ_sensor``).
+    d_stripe_px
+        Full width at half maximum of the striped area, sensor pixels.
+    """
+
+    k_c: float
+    k_stripe: float
+    l_mask_um: float
+    d_stripe_px: float
+
+
+@dataclass(frozen=True)
+class AxisGeometry:
+    """One axis (y for ``P``, x for ``Q``) of a separable lensless device.
+
+    Attributes
+    ----------
+    n_sensor
+        Sensor pixels along the axis (R or S).
+    sensor_pitch_um
+        Sensor pixel pitch p, um.
+    n_scene
+        Scene pixels along the axis (N or M).
+    scene_pitch_um
+        Scene pixel pitch q, um.
+    feature_um
+        Mask cell side δ, um.
+    K
+        Number of mask cells along the axis.
+    z_mm
+        Scene-to-mask distance, mm.
+    d_mm
+        Mask-to-sensor distance, mm.
+    """
+
+    n_sensor: int
+    sensor_pitch_um: float
+    n_scene: int
+    scene_pitch_um: float
+    feature_um: float
+    K: int  # noqa: N815 - the paper's symbol
+    z_mm: float
+    d_mm: float
+
+    @classmethod
+    def rows_of(cls, profile: Profile, K: int | None = None) -> AxisGeometry:  # noqa: N803
+        """The y axis of ``profile`` (rows: ``P``, R × N); ``K`` overrides the mask length."""
+        return cls(profile.sensor.rows, profile.sensor.pixel_pitch_um, profile.scene.rows,
+                   profile.scene.pixel_pitch_um, profile.mask.feature_um,
+                   profile.mask.K if K is None else int(K),
+                   profile.geometry.scene_to_mask_mm, profile.geometry.mask_to_sensor_mm)
+
+    @classmethod
+    def cols_of(cls, profile: Profile, K: int | None = None) -> AxisGeometry:  # noqa: N803
+        """The x axis of ``profile`` (columns: ``Q``, S × M); ``K`` overrides the mask length."""
+        return cls(profile.sensor.cols, profile.sensor.pixel_pitch_um, profile.scene.cols,
+                   profile.scene.pixel_pitch_um, profile.mask.feature_um,
+                   profile.mask.K if K is None else int(K),
+                   profile.geometry.scene_to_mask_mm, profile.geometry.mask_to_sensor_mm)
+
+    @property
+    def h_mm(self) -> float:
+        """H = z + d, mm."""
+        return self.z_mm + self.d_mm
+
+    def stripe_parameters(self, d_stripe_px: float | None = None) -> StripeParameters:
+        """The paper's k_c, k_stripe, l_mask and d_stripe for this axis."""
+        k_c = self.scene_pitch_um / self.sensor_pitch_um
+        return StripeParameters(
+            k_c=k_c,
+            k_stripe=-self.d_mm * k_c / self.z_mm,
+            l_mask_um=self.n_sensor * self.sensor_pitch_um,
+            d_stripe_px=self.default_d_stripe_px() if d_stripe_px is None else float(d_stripe_px),
+        )
+
+    def default_d_stripe_px(self) -> float:
+        """FWHM of the striped area in sensor pixels: ``2·0.766·H / p`` × the tuned scale."""
+        return DEFAULT_D_STRIPE_SCALE * 2.0 * _HALF_MAX_OVER_H * self.h_mm * 1e3 / self.sensor_pitch_um
+
+
+def _centred(n: int, pitch_um: float) -> np.ndarray:
+    """Pixel-centre coordinates (um) of ``n`` pixels centred on the axis (CONTRACTS §1)."""
+    return (np.arange(n, dtype=np.float64) - (n - 1) / 2.0) * pitch_um
+
+
+def _ramp2(t: np.ndarray) -> np.ndarray:
+    return 0.5 * np.square(np.maximum(t, 0.0))
+
+
+def _trapezoid_cdf(x: np.ndarray, a: float, b: float) -> np.ndarray:
+    """CDF at ``x`` of the sum of two centred uniform variables of widths ``a`` and ``b``."""
+    s, t = (a + b) / 2.0, abs(a - b) / 2.0
+    return (_ramp2(x + s) - _ramp2(x + t) - _ramp2(x - t) + _ramp2(x - s)) / (a * b)
+
+
+class DirectGenerator:
+    """Precomputed affine map φ → system matrix for one axis.
+
+    The coding matrix is ``A ∘ fade ∘ Σ_l w_l · φ[j0 + l]`` (shape ``n_sensor × n_scene``),
+    with the cell index ``j0`` and the exact footprint weights ``w_l`` fixed by the geometry,
+    so a new φ costs one gather and a weighted sum.
+
+    Parameters
+    ----------
+    axis
+        The axis geometry.
+    d_stripe_px
+        FWHM of the striped area, sensor pixels (default :meth:`AxisGeometry.default_d_stripe_px`).
+    """
+
+    def __init__(self, axis: AxisGeometry, d_stripe_px: float | None = None) -> None:
+        self.axis = axis
+        self.stripe = axis.stripe_parameters(d_stripe_px)
+        if not self.stripe.d_stripe_px > 0:
+            raise ValueError(f"d_stripe_px must be > 0, got {self.stripe.d_stripe_px}")
+        z_um, d_um = axis.z_mm * 1e3, axis.d_mm * 1e3
+        h_um = z_um + d_um
+        y_sensor = _centred(axis.n_sensor, axis.sensor_pitch_um)[:, None]
+        y_scene = _centred(axis.n_scene, axis.scene_pitch_um)[None, :]
+        m_um = (z_um * y_sensor + d_um * y_scene) / h_um  # where the ray crosses the mask
+        a_um = z_um * axis.sensor_pitch_um / h_um  # footprint of the sensor pixel on the mask
+        b_um = d_um * axis.scene_pitch_um / h_um  # footprint of the scene pixel on the mask
+        half_um = (a_um + b_um) / 2.0
+        delta = axis.feature_um
+        lo_cell = np.floor((m_um - half_um) / delta + axis.K / 2.0).astype(np.int64)
+        n_cells = int(math.ceil(2.0 * half_um / delta)) + 1
+        weights = np.empty((n_cells, axis.n_sensor, axis.n_scene))
+        for ell in range(n_cells):
+            left_um = (lo_cell + ell - axis.K / 2.0) * delta - m_um
+            weights[ell] = (_trapezoid_cdf(left_um + delta, a_um, b_um)
+                            - _trapezoid_cdf(left_um, a_um, b_um))
+        # φ is padded with closed cells so that every index lands inside the padded vector
+        self._pad = int(max(0, -lo_cell.min(), lo_cell.max() + n_cells - axis.K)) + 1
+        self._index = (lo_cell[None] + np.arange(n_cells)[:, None, None] + self._pad)
+        self._weights = weights
+        offset_px = (y_sensor - y_scene) / axis.sensor_pitch_um
+        half_px = self.stripe.d_stripe_px / 2.0
+        soft_px = SIGMOID_SOFTNESS * self.stripe.d_stripe_px
+        self.fade = 0.5 * (1.0 + np.tanh((half_px - np.abs(offset_px)) / (2.0 * soft_px)))
+        # amplitude: Σ_n fade at the sensor centre (y = 0) makes the white open response 1
+        centre_fade = 0.5 * (1.0 + np.tanh((half_px - np.abs(y_scene[0] / axis.sensor_pitch_um))
+                                           / (2.0 * soft_px)))
+        self.amplitude = 1.0 / (math.sqrt(2.0) * float(centre_fade.sum()))
+        self._scaled_fade = self.amplitude * self.fade
+
+    def _padded(self, phi: np.ndarray) -> np.ndarray:
+        phi = np.asarray(phi, dtype=np.float64)
+        if phi.shape[-1] != self.axis.K:
+            raise ValueError(f"phi has {phi.shape[-1]} entries, the mask has K={self.axis.K}")
+        pad = [(0, 0)] * (phi.ndim - 1) + [(self._pad, self._pad)]
+        return np.pad(phi, pad)
+
+    def coding(self, phi: np.ndarray) -> np.ndarray:
+        """Coding matrix (``Pc`` or ``Qc``), ``n_sensor × n_scene``, from φ (``(K,)`` ±1)."""
+        padded = self._padded(phi)
+        acc = self._weights[0] * padded[self._index[0]]
+        for ell in range(1, self._weights.shape[0]):
+            acc += self._weights[ell] * padded[self._index[ell]]
+        acc *= self._scaled_fade
+        return acc
+
+    def open(self) -> np.ndarray:
+        """Open matrix (``Po`` or ``Qo``), ``n_sensor × n_scene``: φ ≡ 1 on the K cells."""
+        return self.coding(np.ones(self.axis.K))
+
+
+def direct_system_matrices(
+    phi: np.ndarray, profile: Profile, d_stripe_px: float | None = None,
+    phi_rows: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The paper's direct generation of ``Po, Qo, Pc, Qc`` from the mask vector φ.
+
+    Parameters
+    ----------
+    phi
+        ``(K,)`` entries ±1 along x (columns); also used along y unless ``phi_rows`` is given
+        (the paper's φ1 = φ2 = φ). K may differ from the profile's own mask (the mask is
+        centred on the axis either way).
+    profile
+        Device profile: sensor and scene grids, mask feature size, distances z and d.
+    d_stripe_px
+        FWHM of the striped area in sensor pixels, the same on both axes; ``None`` uses the
+        physical default ``2·0.766·H / p`` (times :data:`DEFAULT_D_STRIPE_SCALE`).
+    phi_rows
+        ``(K,)`` ±1 along y (rows), default ``phi``.
+
+    Returns
+    -------
+    Po, Qo, Pc, Qc
+        ``R × N``, ``S × M``, ``R × N``, ``S × M`` float64 in relative irradiance per display
+        unit (a white scene through a fully open mask gives 1 at the sensor centre).
+    """
+    phi_arr = np.asarray(phi)
+    rows_phi = phi_arr if phi_rows is None else np.asarray(phi_rows)
+    for name, vec in (("phi", phi_arr), ("phi_rows", rows_phi)):
+        if vec.ndim != 1 or vec.shape != phi_arr.shape or vec.size == 0:
+            raise ValueError(f"{name} must be a non-empty (K,) vector, got shape {vec.shape}")
+        if not np.all(np.abs(vec) == 1):
+            raise ValueError(f"{name} entries must be +1 or -1")
+    k = int(phi_arr.shape[0])
+    gen_p = DirectGenerator(AxisGeometry.rows_of(profile, k), d_stripe_px)
+    gen_q = DirectGenerator(AxisGeometry.cols_of(profile, k), d_stripe_px)
+    return gen_p.open(), gen_q.open(), gen_p.coding(rows_phi), gen_q.coding(phi_arr)
