@@ -1,0 +1,377 @@
+"""The robot API: one :class:`Sensor` per ThinTact finger.
+
+::
+
+    import thintact_sdk as thintact
+    with thintact.open("virtual-finger") as finger:
+        frame = finger.read()                      # TactileFrame
+        for frame in finger.stream(max_frames=100):
+            if frame.contact: ...
+
+A sensor builds everything from its profile through the plugin registry: the camera
+(``profile.camera``), the LED controller (``profile.light``, optional), the decoder
+(``profile.decoder``) and the tactile interpreter with the device's LUT
+(``calibrations/<device>/tactile/lut.npz``, see :mod:`thintact_sdk.tactile.store`). It
+works the same on the virtual sensor, on recordings (``replay``) and on real cameras.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from thintact_sdk.capture import FrameGapCounter, create_camera, to_measurement
+from thintact_sdk.errors import CalibrationError, DeviceError, ProfileError
+from thintact_sdk.frames import Measurement, RawFrame, TactileFrame
+from thintact_sdk.interfaces import Camera, Decoder, LightController
+from thintact_sdk.plugin_manager import PluginRegistry, get_registry
+from thintact_sdk.profile import Profile
+from thintact_sdk.tactile.interpreter import TactileInterpreter
+from thintact_sdk.tactile.photometric import PhotometricLUT
+from thintact_sdk.tactile.store import device_lut_path, load_device_lut
+
+VIRTUAL_CAMERAS = ("virtual",)
+
+
+@dataclass
+class StreamStats:
+    """Frame accounting of :meth:`Sensor.stream`.
+
+    Attributes
+    ----------
+    captured
+        Raw frames the capture thread received.
+    camera_dropped
+        Frames the camera lost before delivering (gaps in its frame ids).
+    skipped
+        Raw frames replaced by a newer one before the processing thread got to them.
+    processed
+        Tactile frames computed.
+    consumer_dropped
+        Tactile frames replaced by a newer one before the consumer took them.
+    delivered
+        Tactile frames handed to the consumer.
+    """
+
+    captured: int = 0
+    camera_dropped: int = 0
+    skipped: int = 0
+    processed: int = 0
+    consumer_dropped: int = 0
+    delivered: int = 0
+
+
+class _Latest:
+    """A one-item mailbox: put() replaces the item, get() waits for one newer than seen."""
+
+    def __init__(self) -> None:
+        self._cond = threading.Condition()
+        self._item: Any = None
+        self._seq = 0
+        self._taken = 0
+
+    def put(self, item: Any) -> bool:
+        """Store ``item``; True when it replaced one nobody took."""
+        with self._cond:
+            replaced = self._seq > self._taken
+            self._item = item
+            self._seq += 1
+            self._cond.notify_all()
+            return replaced
+
+    def get(self, timeout_s: float, stop: threading.Event) -> Any:
+        """The newest item not yet taken; None on timeout or when ``stop`` is set."""
+        deadline = time.monotonic() + timeout_s
+        with self._cond:
+            while self._seq == self._taken:
+                left = deadline - time.monotonic()
+                if left <= 0 or stop.is_set():
+                    return None
+                self._cond.wait(min(left, 0.05))
+            self._taken = self._seq
+            return self._item
+
+    def wake(self) -> None:
+        with self._cond:
+            self._cond.notify_all()
+
+
+class Sensor:
+    """A ThinTact sensor opened from a profile.
+
+    Parameters
+    ----------
+    profile
+        The device profile.
+    camera_settings
+        Overrides merged over ``profile.camera.settings`` (e.g. ``{"slot": "left"}`` to give
+        each virtual finger its own scene slot).
+    lut
+        Photometric-stereo table; default: the device's stored LUT, or for a virtual camera
+        without one, a LUT calibrated on the tactile simulator's scenes.
+    decoder
+        A ready :class:`~thintact_sdk.interfaces.Decoder`; default: built from
+        ``profile.decoder``.
+    registry
+        Plugin registry (default: the process-wide one).
+    read_timeout_s
+        How long a read waits for the camera.
+    """
+
+    def __init__(
+        self,
+        profile: Profile,
+        camera_settings: dict[str, Any] | None = None,
+        lut: PhotometricLUT | None = None,
+        decoder: Decoder | None = None,
+        registry: PluginRegistry | None = None,
+        read_timeout_s: float = 2.0,
+    ) -> None:
+        self.profile = profile
+        self.camera_settings = dict(camera_settings or {})
+        self.read_timeout_s = read_timeout_s
+        self._registry = registry
+        self._lut = lut
+        self._decoder = decoder
+        self.camera: Camera | None = None
+        self.light: LightController | None = None
+        self._interpreter: TactileInterpreter | None = None
+        self._io_lock = threading.Lock()
+        self._stop = threading.Event()
+        self._threads: list[threading.Thread] = []
+        self._stream_error: BaseException | None = None
+        self.stats = StreamStats()
+        self.gaps = FrameGapCounter()
+
+    # -- life cycle ------------------------------------------------------------------
+    @property
+    def registry(self) -> PluginRegistry:
+        return self._registry if self._registry is not None else get_registry()
+
+    @property
+    def is_open(self) -> bool:
+        return self.camera is not None
+
+    def open(self) -> Sensor:
+        """Open the camera and, if the profile has one, the LED controller."""
+        if self.camera is not None:
+            return self
+        camera = create_camera(self.profile, self.registry, self.camera_settings)
+        camera.open()
+        self.camera = camera
+        try:
+            if self.profile.light is not None:
+                cfg = self.profile.light
+                light = self.registry.create("light_controller", cfg.plugin, cfg.port, cfg.settings)
+                light.open()
+                self.light = light
+                if cfg.intensities is not None:
+                    light.set_all(list(cfg.intensities))
+        except BaseException:
+            self.close()
+            raise
+        return self
+
+    def close(self) -> None:
+        """Stop streaming and release the camera and LED controller. Safe to call twice."""
+        self._stop_threads()
+        cam, self.camera = self.camera, None
+        light, self.light = self.light, None
+        if cam is not None:
+            cam.close()
+        if light is not None:
+            light.close()
+
+    def __enter__(self) -> Sensor:
+        return self.open()
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        state = "open" if self.is_open else "closed"
+        return f"<Sensor {self.profile.name!r} ({state})>"
+
+    # -- pipeline pieces -------------------------------------------------------------
+    @property
+    def decoder(self) -> Decoder:
+        """The decoder of ``profile.decoder`` (built on first use)."""
+        if self._decoder is None:
+            cfg = self.profile.decoder
+            if cfg is None:
+                raise ProfileError(
+                    f"profile {self.profile.name!r} has no 'decoder' section; add decoder.plugin "
+                    "(thintact-noniterative) and a calibration"
+                )
+            self._decoder = self.registry.create("decoder", cfg.plugin, self.profile, cfg.settings)
+        return self._decoder
+
+    @property
+    def lut(self) -> PhotometricLUT:
+        """The photometric-stereo LUT in use (loaded or built on first use)."""
+        if self._lut is None:
+            self._lut = load_device_lut(self.profile)
+        if self._lut is None:
+            cam = self.profile.camera.plugin if self.profile.camera is not None else None
+            if cam not in VIRTUAL_CAMERAS:
+                raise CalibrationError(
+                    f"no tactile LUT for device {self.profile.name!r} (looked for "
+                    f"{device_lut_path(self.profile)}); run `thintact calibrate-tactile "
+                    f"--profile {self.profile.name}` with a ball press"
+                )
+            from thintact_sdk.tactile.calibration import scene_level_lut
+
+            self._lut = scene_level_lut(self.profile)
+        return self._lut
+
+    @property
+    def interpreter(self) -> TactileInterpreter:
+        """The tactile interpreter (reference frame, marker tracker) of this sensor."""
+        if self._interpreter is None:
+            self._interpreter = TactileInterpreter(self.profile, self.lut)
+        return self._interpreter
+
+    def reset_reference(self) -> None:
+        """Make the next frame the no-contact reference (background and markers)."""
+        self._interpreter = None
+
+    def _camera(self) -> Camera:
+        if self.camera is None:
+            raise DeviceError(f"sensor {self.profile.name!r} is not open; call open() first")
+        return self.camera
+
+    # -- reading ---------------------------------------------------------------------
+    def read_raw(self) -> RawFrame:
+        """The next raw frame from the camera."""
+        if self._threads:
+            raise DeviceError("the sensor is streaming: read frames from stream()")
+        with self._io_lock:
+            raw = self._camera().read(timeout_s=self.read_timeout_s)
+        self.gaps.update(raw.frame_id)
+        return raw
+
+    def read_measurement(self) -> Measurement:
+        """The next frame binned to ``R × S × 3`` DN (black level not removed)."""
+        return to_measurement(self.read_raw(), self.profile)
+
+    def reconstruct(self, measurement: Measurement) -> np.ndarray:
+        """Decode a measurement into the ``N × M × 3`` float32 scene (display units)."""
+        return np.asarray(self.decoder.decode(measurement.signal()), np.float32)
+
+    def read_image(self) -> np.ndarray:
+        """The next reconstructed membrane image, ``N × M × 3`` float32."""
+        return self.reconstruct(self.read_measurement())
+
+    def process(self, raw: RawFrame) -> TactileFrame:
+        """Raw frame → tactile frame (bin, decode, interpret); sets ``latency_ms``."""
+        t0 = time.perf_counter()
+        m = to_measurement(raw, self.profile)
+        image = self.reconstruct(m)
+        frame = self.interpreter.interpret(image, raw.timestamp_ns, raw.frame_id)
+        frame.latency_ms = (time.perf_counter() - t0) * 1e3
+        if "scene" in raw.meta:
+            frame.meta["scene"] = raw.meta["scene"]
+        return frame
+
+    def read(self) -> TactileFrame:
+        """The next tactile frame (the first one read becomes the no-contact reference)."""
+        return self.process(self.read_raw())
+
+    # -- streaming -------------------------------------------------------------------
+    def stream(
+        self, max_frames: int | None = None, timeout_s: float | None = None
+    ) -> Iterator[TactileFrame]:
+        """Tactile frames as they come, newest first: a slow consumer never gets a backlog.
+
+        A capture thread reads the camera continuously and a processing thread turns the
+        newest raw frame into a tactile frame; each ``next()`` returns the newest tactile
+        frame not yet returned. Frames skipped on the way are counted in :attr:`stats`.
+
+        Parameters
+        ----------
+        max_frames
+            Stop after this many frames (default: until the generator is closed).
+        timeout_s
+            Longest wait for a frame before raising DeviceTimeoutError (default:
+            ``read_timeout_s``).
+        """
+        from thintact_sdk.errors import DeviceTimeoutError
+
+        wait = self.read_timeout_s if timeout_s is None else timeout_s
+        self._start_threads()
+        try:
+            n = 0
+            while max_frames is None or n < max_frames:
+                frame = self._frames.get(wait, self._stop)
+                if self._stream_error is not None:
+                    raise self._stream_error
+                if frame is None:
+                    raise DeviceTimeoutError(
+                        f"no tactile frame from {self.profile.name!r} within {wait:.1f} s"
+                    )
+                self.stats.delivered += 1
+                n += 1
+                yield frame
+        finally:
+            self._stop_threads()
+
+    def _start_threads(self) -> None:
+        if self._threads:
+            raise DeviceError("the sensor is already streaming")
+        self._camera()
+        self._stop.clear()
+        self._stream_error = None
+        self._raws = _Latest()
+        self._frames = _Latest()
+        self.stats = StreamStats()
+        self._threads = [
+            threading.Thread(target=self._capture_loop, name=f"{self.profile.name}-capture",
+                             daemon=True),
+            threading.Thread(target=self._process_loop, name=f"{self.profile.name}-process",
+                             daemon=True),
+        ]
+        for t in self._threads:
+            t.start()
+
+    def _stop_threads(self) -> None:
+        if not self._threads:
+            return
+        self._stop.set()
+        self._raws.wake()
+        self._frames.wake()
+        for t in self._threads:
+            t.join(timeout=5.0)
+        self._threads = []
+
+    def _capture_loop(self) -> None:
+        cam = self._camera()
+        try:
+            while not self._stop.is_set():
+                with self._io_lock:
+                    raw = cam.read(timeout_s=self.read_timeout_s)
+                self.stats.captured += 1
+                self.stats.camera_dropped += self.gaps.update(raw.frame_id)
+                if self._raws.put(raw):
+                    self.stats.skipped += 1
+        except BaseException as err:  # noqa: BLE001 - handed to the consumer
+            self._stream_error = err
+            self._stop.set()
+
+    def _process_loop(self) -> None:
+        try:
+            while not self._stop.is_set():
+                raw = self._raws.get(0.1, self._stop)
+                if raw is None:
+                    continue
+                frame = self.process(raw)
+                self.stats.processed += 1
+                if self._frames.put(frame):
+                    self.stats.consumer_dropped += 1
+        except BaseException as err:  # noqa: BLE001 - handed to the consumer
+            self._stream_error = err
+            self._stop.set()
