@@ -18,7 +18,7 @@ def _tune_openblas() -> None:
     if "OPENBLAS_CORETYPE" in _os.environ or "numpy" in __import__("sys").modules:
         return
     try:
-        with open("/proc/cpuinfo", encoding="utf-8") as f:
+        with __import__("builtins").open("/proc/cpuinfo", encoding="utf-8") as f:
             for line in f:
                 if line.startswith("flags"):
                     flags = line.split()
