@@ -1,0 +1,30 @@
+"""ThinTact UVC camera backend (plugin ``uvc``): V4L2 cameras, video files, image sequences.
+
+Camera component ``uvc``: ``factory(profile, settings)`` →
+:class:`thintact_uvc.camera.UvcCamera` (settings documented there and in docs/cameras.md).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from thintact_sdk import Component, hookimpl
+from thintact_sdk.profile import Profile
+from thintact_uvc.camera import EndOfVideo, UvcCamera, UvcSettingWarning
+
+__all__ = ["EndOfVideo", "UvcCamera", "UvcSettingWarning"]
+
+
+def _create(profile: Profile, settings: dict[str, Any] | None = None) -> UvcCamera:
+    return UvcCamera(profile, settings or {})
+
+
+@hookimpl
+def thintact_cameras() -> list[Component]:
+    return [
+        Component(
+            "uvc",
+            _create,
+            "UVC/V4L2 camera, lossless video file or image sequence via OpenCV",
+        )
+    ]
