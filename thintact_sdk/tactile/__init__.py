@@ -45,6 +45,7 @@ from thintact_sdk.tactile.photometric import PhotometricLUT, calibrate_lut
 from thintact_sdk.tactile.poisson import integrate_gradients
 from thintact_sdk.tactile.simulate import TactileScene, TactileSimulator, simulate_press
 from thintact_sdk.tactile.store import (
+    calibration_roots,
     calibrations_root,
     device_lut_path,
     find_lut,
@@ -75,6 +76,7 @@ __all__ = [
     "ball_slopes",
     "calibrate_from_presses",
     "calibrate_lut",
+    "calibration_roots",
     "calibrations_root",
     "default_leds",
     "detect_markers",

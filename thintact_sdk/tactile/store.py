@@ -1,8 +1,10 @@
 """Where a device's tactile LUT lives: ``calibrations/<device>/tactile/lut.npz`` (+ ``.json``).
 
-The calibrations root is ``$THINTACT_CALIBRATIONS`` when set, else ``./calibrations`` when
-that directory exists in the working directory, else the ``calibrations/`` directory of the
-source checkout the SDK runs from.
+Same roots as the decoders' calibration bundles: the first directory of
+``$THINTACT_CALIBRATION_PATH`` (``os.pathsep``-separated) when set, else ``./calibrations``
+when that directory exists in the working directory, else the ``calibrations/`` directory
+of the source checkout the SDK runs from. A LUT is looked up in all of them, in that order,
+and written to the first.
 """
 
 from __future__ import annotations
@@ -16,15 +18,19 @@ from thintact_sdk.tactile.photometric import PhotometricLUT
 LUT_NAME = "lut.npz"
 
 
-def calibrations_root() -> Path:
-    """The directory holding ``<device>/`` calibration folders."""
-    env = os.environ.get("THINTACT_CALIBRATIONS")
-    if env:
-        return Path(env).expanduser()
+def calibration_roots() -> list[Path]:
+    """Directories searched for ``<device>/`` calibration folders, in order."""
+    env = [Path(d).expanduser() for d in os.environ.get("THINTACT_CALIBRATION_PATH", "").split(
+        os.pathsep) if d]
     cwd = Path.cwd() / "calibrations"
-    if cwd.is_dir():
-        return cwd
-    return Path(__file__).resolve().parents[2] / "calibrations"
+    repo = Path(__file__).resolve().parents[2] / "calibrations"
+    roots = env + ([cwd] if cwd.is_dir() else []) + [repo]
+    return list(dict.fromkeys(roots))
+
+
+def calibrations_root() -> Path:
+    """The directory new calibrations are written to (first of :func:`calibration_roots`)."""
+    return calibration_roots()[0]
 
 
 def device_lut_path(profile: Profile, root: Path | None = None) -> Path:
@@ -34,12 +40,16 @@ def device_lut_path(profile: Profile, root: Path | None = None) -> Path:
 
 def find_lut(profile: Profile, root: Path | None = None) -> Path | None:
     """The LUT file for ``profile``: ``tactile.lut`` (relative to the profile file) if set,
-    else the device's calibrations folder; None when neither exists."""
+    else the device's folder under ``root`` or the first of :func:`calibration_roots` that
+    has one; None when there is none."""
     if profile.tactile is not None and profile.tactile.lut:
         p = profile.resolve_path(profile.tactile.lut)
         return p if p.is_file() else None
-    p = device_lut_path(profile, root)
-    return p if p.is_file() else None
+    for r in [root] if root is not None else calibration_roots():
+        p = device_lut_path(profile, r)
+        if p.is_file():
+            return p
+    return None
 
 
 def save_device_lut(lut: PhotometricLUT, profile: Profile, root: Path | None = None) -> Path:
