@@ -49,3 +49,7 @@ class ProtocolError(DeviceError):
 
 class UnsupportedFeatureError(DeviceError):
     """The device lacks a feature the profile asks for (e.g. exposure on a virtual camera)."""
+
+
+class EndOfStreamError(DeviceError):
+    """A finite frame source (a replayed recording, a video file) has no more frames."""

@@ -27,8 +27,8 @@ scenes
 
 End of recording
 ----------------
-Without ``loop``, :meth:`ReplayCamera.read` raises :class:`EndOfRecording` (a
-``DeviceError``) after the last frame; iterating over the camera (``for raw in cam``)
+Without ``loop``, :meth:`ReplayCamera.read` raises :class:`EndOfRecording` (an
+``thintact_sdk.errors.EndOfStreamError``) after the last frame; iterating over the camera (``for raw in cam``)
 stops there instead.
 """
 
@@ -43,14 +43,20 @@ import numpy as np
 
 from thintact_replay.rawframes import RAW_FIELD, load_raw_data
 from thintact_sdk.bayer import mosaic_from_rgb
-from thintact_sdk.errors import DeviceError, DeviceTimeoutError, ProfileError, RecordingError
+from thintact_sdk.errors import (
+    DeviceError,
+    DeviceTimeoutError,
+    EndOfStreamError,
+    ProfileError,
+    RecordingError,
+)
 from thintact_sdk.frames import RawFrame
 from thintact_sdk.interfaces import Camera, CameraCapabilities
 from thintact_sdk.profile import Profile
 from thintact_sdk.recording import Recording
 
 
-class EndOfRecording(DeviceError):
+class EndOfRecording(EndOfStreamError):
     """The replayed recording has no more frames (and ``loop`` is off)."""
 
 

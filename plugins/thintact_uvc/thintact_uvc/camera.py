@@ -43,6 +43,7 @@ from thintact_sdk.errors import (
     DeviceLostError,
     DeviceNotFoundError,
     DeviceTimeoutError,
+    EndOfStreamError,
     ProfileError,
     RecordingError,
     UnsupportedFeatureError,
@@ -68,7 +69,7 @@ def _gray_codec(cap: Any) -> bool:
     return tag in (b"Y800", b"GREY", b"Y8  ") or tag.startswith(b"Y1")
 
 
-class EndOfVideo(DeviceError):
+class EndOfVideo(EndOfStreamError):
     """A video file or image sequence has no more frames (and ``loop`` is off)."""
 
 
