@@ -1,0 +1,446 @@
+"""The ThinTact forward simulator: scene (display values) → sensor signal.
+
+Stages, in order (CONTRACTS §4 baseline plus the effects of ``profile.physics``, §5):
+
+1. scene effects (``display_gamma``, ``scene_blur``) on the ``N × M × C`` display values;
+2. the imaging kernel: box integration over every sensor pixel's and every scene pixel's
+   square of ``cos^q θ/H² · T(m)`` (kernel effects: ``diffraction``,
+   ``pixel_angular_response``, ``refraction``, ``mask_misalignment``, ``mask_leakage``,
+   ``geometry``). Separable physics uses ``Y_c = Σ_k P_k X_c Q_kᵀ``
+   (:mod:`~thintact_sdk.imaging.sim_separable`); a rotated mask or refraction uses the direct
+   path (:mod:`~thintact_sdk.imaging.sim_direct`);
+3. linear signal effects (``sensor_blur``, ``color_crosstalk``, ``veiling_glare``);
+4. **the gain enters here**: ``L = gain_dn_per_unit[c] · signal`` (DN above black);
+5. DN effects (``stray_light``, ``sensor_gamma``, ``saturation``).
+
+Units: the kernel output is the pixel-averaged irradiance per unit scene radiance
+(dimensionless, an unbounded open aperture would give π); it is the same for every frame
+of a profile. :meth:`Simulator.forward` returns stage 1-3 in these units, with the DN
+effects (if any) applied at :meth:`Simulator.reference_gain` and divided back out;
+:meth:`Simulator.predict_dn` takes the per-channel gain explicitly and returns DN.
+"""
+
+from __future__ import annotations
+
+from collections import OrderedDict
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from thintact_sdk.errors import ThinTactError
+from thintact_sdk.imaging.sim_axis import AxisGrid, mask_cell_edges_mm
+from thintact_sdk.imaging.sim_radiometry import SeparableExpansion
+from thintact_sdk.imaging.sim_separable import SeparableKernel, SeparableTerm, axis_term_matrices
+from thintact_sdk.interfaces import ImagingModel
+from thintact_sdk.physics import (
+    color_crosstalk,
+    diffraction,
+    display_gamma,
+    geometry,
+    mask_leakage,
+    pixel_angular_response,
+    resolve_physics,
+    saturation,
+    scene_blur,
+    sensor_blur,
+    sensor_gamma,
+    stray_light,
+    veiling_glare,
+)
+from thintact_sdk.profile import Profile
+
+WHITE_FRACTION = 0.6
+"""Default DN level of the brightest all-white pixel, as a fraction of (saturation - black)."""
+
+
+@dataclass(frozen=True)
+class KernelParams:
+    """Everything the imaging kernel depends on (the cache key)."""
+
+    rows: int
+    cols: int
+    pitch_um: float
+    scene_rows: int
+    scene_cols: int
+    scene_pitch_um: float
+    feature_um: float
+    phi: tuple[int, ...]
+    phi_rows: tuple[int, ...]
+    z_mm: float
+    d_mm: float
+    q: float
+    leakage: float
+    wavelengths_nm: tuple[float, ...] | None
+    angle_deg: float
+    dx_um: float
+    dy_um: float
+    n_scene_side: float
+    channels: int
+    n_sub: int
+    rank_tol: float
+
+    @property
+    def separable(self) -> bool:
+        """True unless the mask is rotated or the scene side refracts."""
+        return self.angle_deg == 0.0 and self.n_scene_side == 1.0
+
+    def grid_x(self) -> AxisGrid:
+        return AxisGrid(self.cols, self.pitch_um * 1e-3, self.scene_cols, self.scene_pitch_um * 1e-3)
+
+    def grid_y(self) -> AxisGrid:
+        return AxisGrid(self.rows, self.pitch_um * 1e-3, self.scene_rows, self.scene_pitch_um * 1e-3)
+
+
+_KERNEL_CACHE: OrderedDict[KernelParams, Any] = OrderedDict()
+_CACHE_SIZE = 4
+
+
+def clear_kernel_cache() -> None:
+    """Forget every cached kernel (frees memory)."""
+    _KERNEL_CACHE.clear()
+
+
+def kernel_params(profile: Profile, physics: dict[str, dict[str, Any]],
+                  n_sub: int = 4, rank_tol: float = 1e-7) -> KernelParams:
+    """The kernel parameters of a profile with resolved physics."""
+    g = physics.get("geometry", {})
+    z, d = geometry.distances_mm(profile.geometry.scene_to_mask_mm,
+                                 profile.geometry.mask_to_sensor_mm,
+                                 g.get("scene_to_mask_mm"), g.get("mask_to_sensor_mm"))
+    mis = physics.get("mask_misalignment", {})
+    diff = physics.get("diffraction")
+    return KernelParams(
+        rows=profile.sensor.rows, cols=profile.sensor.cols,
+        pitch_um=profile.sensor.pixel_pitch_um,
+        scene_rows=profile.scene.rows, scene_cols=profile.scene.cols,
+        scene_pitch_um=profile.scene.pixel_pitch_um,
+        feature_um=profile.mask.feature_um,
+        phi=tuple(profile.mask.phi), phi_rows=tuple(profile.mask.rows_vector),
+        z_mm=z, d_mm=d,
+        q=pixel_angular_response.radiometric_exponent(
+            physics.get("pixel_angular_response", {}).get("exponent", 0.0)),
+        leakage=physics.get("mask_leakage", {}).get("transmittance", 0.0),
+        wavelengths_nm=None if diff is None else tuple(diff["wavelength_nm"]),
+        angle_deg=mis.get("angle_deg", 0.0), dx_um=mis.get("dx_um", 0.0),
+        dy_um=mis.get("dy_um", 0.0),
+        n_scene_side=physics.get("refraction", {}).get("n_scene_side", 1.0),
+        channels=len(profile.sensor.channels), n_sub=n_sub, rank_tol=rank_tol,
+    )
+
+
+def _expansion(kp: KernelParams) -> SeparableExpansion:
+    h = kp.z_mm + kp.d_mm
+    margin = 2 * max(kp.pitch_um, kp.scene_pitch_um) * 1e-3
+    return SeparableExpansion.build(
+        h, kp.q, kp.grid_x().max_offset_mm() + margin, kp.grid_y().max_offset_mm() + margin,
+        rel_tol=kp.rank_tol,
+    )
+
+
+def _crossing_range_mm(grid: AxisGrid, alpha: float, beta: float) -> tuple[float, float]:
+    half = alpha * grid.n_sensor * grid.sensor_pitch_mm / 2 + beta * grid.n_scene * grid.scene_pitch_mm / 2
+    return -half, half
+
+
+def build_separable_kernel(kp: KernelParams) -> SeparableKernel:
+    """Build the ``P_k``, ``Q_k`` of every channel for separable physics."""
+    if not kp.separable:
+        raise ThinTactError("internal: separable kernel requested for non-separable physics")
+    h = kp.z_mm + kp.d_mm
+    alpha, beta = kp.z_mm / h, kp.d_mm / h
+    exp = _expansion(kp)
+    gx, gy = kp.grid_x(), kp.grid_y()
+    k = len(kp.phi)
+    feature_mm = kp.feature_um * 1e-3
+    edges_x = mask_cell_edges_mm(k, feature_mm) + kp.dx_um * 1e-3
+    edges_y = mask_cell_edges_mm(k, feature_mm) + kp.dy_um * 1e-3
+    phi_x = np.asarray(kp.phi, float)
+    phi_y = np.asarray(kp.phi_rows, float)
+    info = {"rank": float(exp.rank), "radiometric_rel_error": exp.rel_error}
+    if kp.wavelengths_nm is None:
+        c_o, c_c = mask_leakage.intensity_coefficients(kp.leakage)
+        mx = axis_term_matrices(gx, alpha, beta, edges_x, np.stack([np.ones(k), phi_x]),
+                                exp.fx, exp.dfx, exp.d2fx, kp.n_sub)
+        my = axis_term_matrices(gy, alpha, beta, edges_y, np.stack([np.ones(k), phi_y]),
+                                exp.gy, exp.dgy, exp.d2gy, kp.n_sub)
+        terms = []
+        for part, v, coef in (("open", 0, c_o), ("coding", 1, c_c)):
+            if coef == 0:
+                continue
+            for ll in range(exp.rank):
+                terms.append(SeparableTerm(coef * my[v, ll], mx[v, ll], part))
+        return SeparableKernel([terms] * kp.channels, info)
+    a_o, a_c = mask_leakage.amplitude_coefficients(kp.leakage)
+    by_wavelength: dict[float, list[SeparableTerm]] = {}
+    per_channel = []
+    for ch in range(kp.channels):
+        lam = kp.wavelengths_nm[min(ch, len(kp.wavelengths_nm) - 1)]
+        if lam not in by_wavelength:
+            mats = []
+            for grid, edges, phi, fac, dfac, d2fac in (
+                    (gx, edges_x, phi_x, exp.fx, exp.dfx, exp.d2fx),
+                    (gy, edges_y, phi_y, exp.gy, exp.dgy, exp.d2gy)):
+                lo, hi = _crossing_range_mm(grid, alpha, beta)
+                pad = 4 * grid.sensor_pitch_mm + 4 * grid.scene_pitch_mm
+                fe, fv = diffraction.axis_intensity_profiles(
+                    edges, phi, lo - pad, hi + pad, lam, kp.z_mm, kp.d_mm)
+                mats.append(axis_term_matrices(grid, alpha, beta, fe, fv, fac, dfac, d2fac, kp.n_sub))
+            mx, my = mats
+            coefs = (("open", 0, a_o**2), ("open", 1, a_c**2),
+                     ("coding", 2, 2 * a_o * a_c), ("coding", 3, -2 * a_o * a_c))
+            terms = []
+            for part, v, coef in coefs:
+                if coef == 0:
+                    continue
+                for ll in range(exp.rank):
+                    terms.append(SeparableTerm(coef * my[v, ll], mx[v, ll], part))
+            by_wavelength[lam] = terms
+        per_channel.append(by_wavelength[lam])
+    return SeparableKernel(per_channel, info)
+
+
+def get_kernel(kp: KernelParams) -> Any:
+    """The (cached) kernel for these parameters: separable or direct."""
+    if kp in _KERNEL_CACHE:
+        _KERNEL_CACHE.move_to_end(kp)
+        return _KERNEL_CACHE[kp]
+    if kp.separable:
+        kern: Any = build_separable_kernel(kp)
+    else:
+        from thintact_sdk.imaging.sim_direct import build_direct_kernel
+
+        kern = build_direct_kernel(kp)
+    _KERNEL_CACHE[kp] = kern
+    while len(_KERNEL_CACHE) > _CACHE_SIZE:
+        _KERNEL_CACHE.popitem(last=False)
+    return kern
+
+
+class Simulator(ImagingModel):
+    """Forward model of a ThinTact device with the effects listed in ``profile.physics``.
+
+    Parameters
+    ----------
+    profile
+        The device profile.
+    n_sub
+        Sub-intervals per pixel for the first-moment correction of the smooth factor.
+    rank_tol
+        Relative truncation of the separable expansion of the radiometric factor.
+
+    Notes
+    -----
+    Kernels are cached by their parameters (module-level, a few entries), so building a
+    ``Simulator`` for a profile whose physics only changes post-kernel effects is cheap.
+    """
+
+    def __init__(self, profile: Profile, *, n_sub: int = 4, rank_tol: float = 1e-7) -> None:
+        self.profile = profile
+        self.physics = resolve_physics(profile.physics)
+        if "diffraction" in self.physics and not (
+            self.physics.get("mask_misalignment", {}).get("angle_deg", 0.0) == 0.0
+            and self.physics.get("refraction", {}).get("n_scene_side", 1.0) == 1.0
+        ):
+            raise ThinTactError(
+                "physics: diffraction cannot be combined with a rotated mask or refraction "
+                "(the simulator's diffraction model needs a separable, straight-ray kernel)"
+            )
+        self.kernel_params = kernel_params(profile, self.physics, n_sub, rank_tol)
+        self._kernel: Any = None
+        self._ref_gain: float | None = None
+
+    # -- kernel ---------------------------------------------------------------------------
+    @property
+    def kernel(self) -> Any:
+        """The imaging kernel (built on first use, shared through the cache)."""
+        if self._kernel is None:
+            self._kernel = get_kernel(self.kernel_params)
+        return self._kernel
+
+    @property
+    def separable(self) -> bool:
+        """True when the imaging kernel is a sum of separable terms."""
+        return self.kernel_params.separable
+
+    @property
+    def n_channels(self) -> int:
+        return self.kernel_params.channels
+
+    def _check(self, scenes: np.ndarray) -> np.ndarray:
+        x = np.asarray(scenes, dtype=float)
+        want = (self.profile.scene.rows, self.profile.scene.cols, self.n_channels)
+        if x.ndim != 4 or x.shape[1:] != want:
+            raise ThinTactError(
+                f"scenes must be F × {want[0]} × {want[1]} × {want[2]} for profile "
+                f"{self.profile.name!r}, got shape {tuple(x.shape)}"
+            )
+        return x
+
+    # -- stages ---------------------------------------------------------------------------
+    def _scene_stage(self, x: np.ndarray) -> np.ndarray:
+        ph = self.physics
+        if "display_gamma" in ph:
+            x = display_gamma.apply(x, ph["display_gamma"]["gamma"])
+        if "scene_blur" in ph:
+            x = scene_blur.apply(x, ph["scene_blur"]["sigma_um"], self.profile.scene.pixel_pitch_um)
+        return x
+
+    def _signal_stage(self, y: np.ndarray) -> np.ndarray:
+        ph = self.physics
+        if "sensor_blur" in ph:
+            y = sensor_blur.apply(y, ph["sensor_blur"]["sigma_um"], self.profile.sensor.pixel_pitch_um)
+        if "color_crosstalk" in ph:
+            y = color_crosstalk.apply(y, ph["color_crosstalk"]["matrix"])
+        if "veiling_glare" in ph:
+            y = veiling_glare.apply(y, ph["veiling_glare"]["fraction"])
+        return y
+
+    def _dn_stage(self, signal_dn: np.ndarray) -> np.ndarray:
+        ph = self.physics
+        nz = self.profile.noise
+        if "stray_light" in ph:
+            signal_dn = stray_light.apply(signal_dn, ph["stray_light"]["mean_dn"])
+        if "sensor_gamma" in ph:
+            signal_dn = sensor_gamma.apply(signal_dn, ph["sensor_gamma"]["gamma"],
+                                           nz.saturation_dn - nz.black_level_dn)
+        if "saturation" in ph:
+            signal_dn = saturation.apply(signal_dn, ph["saturation"]["level_dn"], nz.black_level_dn)
+        return signal_dn
+
+    @property
+    def has_dn_effects(self) -> bool:
+        return any(e in self.physics for e in ("stray_light", "sensor_gamma", "saturation"))
+
+    def linear_batch(self, scenes: np.ndarray) -> np.ndarray:
+        """Stages 1-3: ``F × N × M × C`` → ``F × R × S × C`` linear signal (simulator units)."""
+        x = self._scene_stage(self._check(scenes))
+        return self._signal_stage(self.kernel.apply(x))
+
+    # -- public API -----------------------------------------------------------------------
+    def reference_gain(self, white_level_dn: float | None = None) -> float:
+        """DN per simulator unit that puts the brightest pixel of the all-white scene
+        (linear signal, stages 1-3, any channel) at ``white_level_dn`` DN above black
+        (default 0.6·(saturation - black))."""
+        nz = self.profile.noise
+        level = WHITE_FRACTION * (nz.saturation_dn - nz.black_level_dn) if white_level_dn is None \
+            else float(white_level_dn)
+        if self._ref_gain is None:
+            white = np.ones((1, self.profile.scene.rows, self.profile.scene.cols, self.n_channels))
+            self._ref_gain = float(np.max(self.linear_batch(white)))
+        if self._ref_gain <= 0:
+            raise ThinTactError("the all-white scene gives no signal: check the mask and geometry")
+        return level / self._ref_gain
+
+    def forward_batch(self, scenes: np.ndarray) -> np.ndarray:
+        """``F × N × M × C`` scenes → ``F × R × S × C`` float64 signal (simulator units).
+
+        DN-defined effects are applied at :meth:`reference_gain` and converted back to units.
+        """
+        y = self.linear_batch(scenes)
+        if not self.has_dn_effects:
+            return y
+        g = self.reference_gain()
+        return self._dn_stage(y * g) / g
+
+    def forward(self, scene: np.ndarray) -> np.ndarray:
+        """``N × M × C`` scene → ``R × S × C`` float64 signal (simulator units)."""
+        return self.forward_batch(np.asarray(scene)[None])[0]
+
+    def predict_signal_dn(self, scenes: np.ndarray, gain_dn_per_unit: Any) -> np.ndarray:
+        """Expected signal in DN above black, every effect applied, before noise and before
+        clipping to the declared saturation.
+
+        Parameters
+        ----------
+        scenes
+            ``F × N × M × C`` (or ``N × M × C``) display values.
+        gain_dn_per_unit
+            ``(C,)`` or scalar: DN per simulator unit (stage 4).
+        """
+        x = np.asarray(scenes)
+        single = x.ndim == 3
+        y = self.linear_batch(x[None] if single else x)
+        g = np.broadcast_to(np.asarray(gain_dn_per_unit, float), (self.n_channels,))
+        out = self._dn_stage(y * g)
+        return out[0] if single else out
+
+    def predict_dn(self, scenes: np.ndarray, gain_dn_per_unit: Any) -> np.ndarray:
+        """Expected (noiseless) DN, black level included, clipped to ``[0, saturation_dn]``."""
+        nz = self.profile.noise
+        s = self.predict_signal_dn(scenes, gain_dn_per_unit)
+        return np.clip(s + nz.black_level_dn, 0.0, nz.saturation_dn)
+
+    def separable_terms(self, channel: int) -> list[tuple[np.ndarray, np.ndarray]]:
+        """``[(P: R × N, Q: S × M)]`` with ``forward(X)[..., c] = Σ_k P_k X_c Q_kᵀ``.
+
+        Raises
+        ------
+        ThinTactError
+            When the physics is not separable per channel (rotated mask, refraction, colour
+            crosstalk, display gamma, DN-defined effects).
+        """
+        o, c = self.open_coding_terms(channel)
+        return o + c
+
+    def open_coding_terms(
+        self, channel: int
+    ) -> tuple[list[tuple[np.ndarray, np.ndarray]], list[tuple[np.ndarray, np.ndarray]]]:
+        """The separable expansion split into the all-open half (T = 1/2) and the coding
+        half (φφᵀ/2); with diffraction the squared-field terms are "open" and the
+        aperture-coding cross terms "coding" (the split they tend to as λ → 0)."""
+        blockers = [e for e in ("color_crosstalk", "display_gamma", "stray_light",
+                                "sensor_gamma", "saturation") if e in self.physics]
+        if not self.separable or blockers:
+            why = "a rotated mask or refraction" if not self.separable else ", ".join(blockers)
+            raise ThinTactError(f"the physics of {self.profile.name!r} is not separable ({why})")
+        if not 0 <= channel < self.n_channels:
+            raise ThinTactError(f"channel {channel} out of range 0..{self.n_channels - 1}")
+        left, right = self._linear_operators()
+        open_t: list[tuple[np.ndarray, np.ndarray]] = []
+        coding_t: list[tuple[np.ndarray, np.ndarray]] = []
+        glare = self.physics.get("veiling_glare", {}).get("fraction", 0.0)
+        for t in self.kernel.terms[channel]:
+            p, q = t.P, t.Q
+            if left is not None:
+                p = left[0] @ p @ left[1]
+                q = right[0] @ q @ right[1]
+            dest = open_t if t.part == "open" else coding_t
+            dest.append((p, q))
+            if glare:
+                r, s = p.shape[0], q.shape[0]
+                dest.append((glare / r * np.ones((r, r)) @ p, 1.0 / s * np.ones((s, s)) @ q))
+        return open_t, coding_t
+
+    def _linear_operators(self) -> tuple[Any, Any]:
+        """Blur matrices ``((B_rows, G_rows), (B_cols, G_cols))`` for scene and sensor blur."""
+        ph = self.physics
+        if "scene_blur" not in ph and "sensor_blur" not in ph:
+            return None, None
+        from scipy.ndimage import gaussian_filter1d
+
+        def blur_matrix(n: int, sigma_px: float) -> np.ndarray:
+            if sigma_px <= 0:
+                return np.eye(n)
+            return gaussian_filter1d(np.eye(n), sigma_px, axis=0, mode="reflect")
+
+        s_sc = ph.get("scene_blur", {}).get("sigma_um", 0.0) / self.profile.scene.pixel_pitch_um
+        s_se = ph.get("sensor_blur", {}).get("sigma_um", 0.0) / self.profile.sensor.pixel_pitch_um
+        kp = self.kernel_params
+        return (
+            (blur_matrix(kp.rows, s_se), blur_matrix(kp.scene_rows, s_sc)),
+            (blur_matrix(kp.cols, s_se), blur_matrix(kp.scene_cols, s_sc)),
+        )
+
+    def info(self) -> dict[str, float]:
+        """Figures about the kernel (rank of the radiometric expansion and its error)."""
+        return dict(getattr(self.kernel, "info", {}))
+
+
+def white_level_gain(sim: Simulator, fraction: float = WHITE_FRACTION) -> float:
+    """Gain (DN per unit) putting the all-white maximum at ``fraction·(saturation - black)``."""
+    nz = sim.profile.noise
+    return sim.reference_gain(fraction * (nz.saturation_dn - nz.black_level_dn))
+
+
+__all__ = ["KernelParams", "Simulator", "WHITE_FRACTION", "clear_kernel_cache", "white_level_gain"]

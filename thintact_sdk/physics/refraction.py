@@ -1,0 +1,67 @@
+"""``refraction``: the scene-to-mask gap (thickness z) has index ``n``; the mask-to-sensor
+gap (d) is air. A ray reaching the sensor at angle θ (air) travels at θ' in the medium
+with ``sin θ = n sin θ'``; its lateral run is ``ρ(θ) = d·tan θ + z·tan θ'`` and it crosses
+the mask at ``m = u + (s - u)·d·tan θ / ρ``.
+
+Irradiance (radiance conserved as ``L/n²`` across the interface, Fresnel losses ignored):
+``dE = (L/n²)·cos θ·dΩ``, ``dΩ/dA_s = sin θ / (ρ·dρ/dθ)``, so the factor is
+``cos^(1+p) θ · sin θ / (n²·ρ·dρ/dθ)`` (``p`` the pixel angular exponent); for ``n = 1`` it is
+``cos^(4+p) θ / H²``. The mapping ``m(u, s)`` is not linear, so the kernel is not separable
+(the simulator then uses its direct path).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from thintact_sdk.physics._spec import EffectSpec, ParamSpec
+
+SPEC = EffectSpec(
+    name="refraction",
+    stage="kernel",
+    description="the elastomer between scene and mask bends the rays (Snell's law)",
+    params={"n_scene_side": ParamSpec("1", 1.0, (1.0, 3.0), "refractive index of the scene-to-mask gap")},
+)
+
+
+def lateral_run_mm(theta: np.ndarray, z_mm: float, d_mm: float, n: float) -> np.ndarray:
+    """``ρ(θ) = d·tan θ + z·tan θ'`` in mm for air angles ``theta`` (rad)."""
+    tp = np.arcsin(np.sin(theta) / n)
+    return d_mm * np.tan(theta) + z_mm * np.tan(tp)
+
+
+def solve_air_angle(rho_mm: np.ndarray, z_mm: float, d_mm: float, n: float,
+                    iterations: int = 12) -> np.ndarray:
+    """Air angle θ (rad) of the ray whose lateral run is ``rho_mm`` (Newton's method)."""
+    rho = np.asarray(rho_mm, float)
+    theta = np.arctan(rho / (d_mm + z_mm / n))
+    for _ in range(iterations):
+        sin_t, cos_t = np.sin(theta), np.cos(theta)
+        sin_p = sin_t / n
+        cos_p = np.sqrt(1 - sin_p**2)
+        f = d_mm * sin_t / cos_t + z_mm * sin_p / cos_p - rho
+        df = d_mm / cos_t**2 + z_mm / cos_p**2 * cos_t / (n * cos_p)
+        theta = np.clip(theta - f / df, 0.0, np.pi / 2 - 1e-9)
+    return theta
+
+
+def crossing_fraction_and_factor(
+    rho_mm: np.ndarray, z_mm: float, d_mm: float, n: float, exponent: float = 0.0
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(kappa, factor)`` at lateral offsets ``rho_mm``.
+
+    ``kappa = d·tan θ / ρ`` places the mask crossing at ``u + (s - u)·kappa``; ``factor`` is
+    the irradiance per unit scene radiance and scene area (1/mm²).
+    """
+    rho = np.asarray(rho_mm, float)
+    theta = solve_air_angle(rho, z_mm, d_mm, n)
+    sin_t, cos_t = np.sin(theta), np.cos(theta)
+    cos_p = np.sqrt(1 - (sin_t / n) ** 2)
+    drho = d_mm / cos_t**2 + z_mm / cos_p**2 * cos_t / (n * cos_p)
+    small = rho < 1e-9
+    safe_rho = np.where(small, 1.0, rho)
+    kappa0 = d_mm / (d_mm + z_mm / n)
+    kappa = np.where(small, kappa0, d_mm * sin_t / cos_t / safe_rho)
+    sin_over_rho = np.where(small, 1.0 / (d_mm + z_mm / n), sin_t / safe_rho)
+    factor = cos_t ** (1 + exponent) * sin_over_rho / (n**2 * drho)
+    return kappa, factor
