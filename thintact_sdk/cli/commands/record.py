@@ -1,0 +1,247 @@
+"""``thintact record``: capture N frames from a profile's camera into a recording.
+
+The recording is a ``thintact-recording/1`` directory (CONTRACTS §3). Every frame goes
+through :func:`thintact_sdk.capture.to_measurement` (Bayer binning, profile black level);
+measurements are stored as uint16 when every value is an integer in 0..65535, else float32.
+Each manifest entry carries ``timestamp_ns``, ``frame_id``, ``exposure_us`` (and
+``gain_db``, ``device_timestamp_ns``, ``dropped_before`` when known). A ground-truth scene
+that the camera reports (``meta["scene"]``, e.g. the virtual camera) is saved as the
+frame's scene. ``--raw`` also keeps each raw mosaic (``raw/<index>.npy``, see
+:mod:`thintact_replay.rawframes`), which the ``replay`` camera then delivers as recorded.
+
+Dropped frames (gaps in the camera's frame ids) are never silent: each gap is reported,
+the count is printed at the end, and ``--fail-on-drop`` turns any drop into an error.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from thintact_sdk.capture import FrameGapCounter, create_camera, to_measurement
+from thintact_sdk.errors import DeviceError, EndOfStreamError, RecordingError, ThinTactError
+from thintact_sdk.frames import RawFrame
+from thintact_sdk.profile import Profile, load_profile
+from thintact_sdk.recording import RecordingWriter
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "record",
+        help="record frames from a profile's camera into a thintact-recording/1 directory",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("--profile", required=True, help="profile name or file")
+    p.add_argument("--frames", type=int, required=True, metavar="N", help="frames to record")
+    p.add_argument("--out", required=True, metavar="DIR", help="recording directory to create")
+    p.add_argument("--raw", action="store_true", help="also keep the raw mosaics (raw/*.npy)")
+    p.add_argument("--timeout", type=float, default=5.0, metavar="S",
+                   help="longest wait for one frame in seconds (default 5)")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a camera setting (YAML value), e.g. --set fps=0")
+    p.add_argument("--append", action="store_true", help="add frames to an existing recording")
+    p.add_argument("--fail-on-drop", action="store_true",
+                   help="exit with an error if the camera dropped any frame")
+    p.add_argument("--no-scenes", action="store_true",
+                   help="do not save ground-truth scenes reported by the camera")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=run)
+
+
+@dataclass
+class RecordSummary:
+    """What a recording run did."""
+
+    frames: int = 0
+    dropped: int = 0
+    gaps: list[tuple[int, int]] = field(default_factory=list)
+    elapsed_s: float = 0.0
+    camera_fps: float | None = None
+    """Frame rate from the frames' own timestamps (first to last)."""
+    ended_early: str | None = None
+
+
+def parse_settings(pairs: list[str]) -> dict[str, Any]:
+    """``["key=value", ...]`` → dict with YAML-typed values."""
+    out: dict[str, Any] = {}
+    for pair in pairs:
+        key, sep, value = pair.partition("=")
+        if not sep or not key:
+            raise ThinTactError(f"--set needs KEY=VALUE, got {pair!r}")
+        out[key.strip()] = yaml.safe_load(value)
+    return out
+
+
+def storage_array(data: np.ndarray) -> np.ndarray:
+    """The measurement as stored: uint16 when integral and within 0..65535, else float32."""
+    if data.size and np.all(np.isfinite(data)):
+        lo, hi = float(data.min()), float(data.max())
+        if lo >= 0 and hi <= 65535 and np.array_equal(data, np.round(data)):
+            return data.astype(np.uint16)
+    return data.astype(np.float32, copy=False)
+
+
+def _frame_fields(raw: RawFrame, missing_before: int) -> dict[str, Any]:
+    extra: dict[str, Any] = {"timestamp_ns": int(raw.timestamp_ns), "frame_id": int(raw.frame_id),
+                             "exposure_us": raw.exposure_us}
+    if raw.gain_db is not None:
+        extra["gain_db"] = raw.gain_db
+    if raw.device_timestamp_ns is not None:
+        extra["device_timestamp_ns"] = int(raw.device_timestamp_ns)
+    if missing_before:
+        extra["dropped_before"] = missing_before
+    return extra
+
+
+def _scene_of(raw: RawFrame, profile: Profile) -> np.ndarray | None:
+    scene = raw.meta.get("scene")
+    if isinstance(scene, np.ndarray) and scene.shape[:2] == (profile.scene.rows, profile.scene.cols):
+        return scene.astype(np.float32, copy=False)
+    return None
+
+
+def record(
+    profile: Profile,
+    frames: int,
+    out: Path,
+    *,
+    keep_raw: bool = False,
+    timeout_s: float = 5.0,
+    settings: dict[str, Any] | None = None,
+    append: bool = False,
+    scenes: bool = True,
+    progress: bool = True,
+) -> RecordSummary:
+    """Record ``frames`` frames from the profile's camera into ``out``.
+
+    Raises
+    ------
+    RecordingError
+        When ``out`` already holds a recording and ``append`` is false.
+    DeviceError
+        When the camera fails; every frame written before the fault stays in the recording.
+    """
+    if frames <= 0:
+        raise ThinTactError("--frames must be at least 1")
+    if (out / "manifest.json").is_file() and not append:
+        raise RecordingError(f"{out} already holds a recording; choose a new --out or pass --append")
+    save_raw = None
+    if keep_raw:
+        try:
+            from thintact_replay.rawframes import save_raw_frame
+        except ImportError:
+            raise ThinTactError("--raw needs the thintact-replay plugin (plugins/thintact_replay)") from None
+        save_raw = save_raw_frame
+    camera = create_camera(profile, settings=settings)
+    writer = RecordingWriter(out, profile)
+    first_index = len(writer.frames)
+    gaps = FrameGapCounter()
+    summary = RecordSummary()
+    stamps: list[int] = []
+    t0 = time.monotonic()
+    bar = _Progress(frames, enabled=progress)
+    try:
+        camera.open()
+        with bar:
+            for i in range(frames):
+                try:
+                    raw = camera.read(timeout_s=timeout_s)
+                except EndOfStreamError as err:
+                    summary.ended_early = str(err)
+                    break
+                missing = gaps.update(raw.frame_id)
+                if missing:
+                    bar.note(f"{missing} frame(s) dropped before frame id {raw.frame_id}")
+                meas = to_measurement(raw, profile)
+                extra = _frame_fields(raw, missing)
+                index = first_index + i
+                if save_raw is not None:
+                    extra.update(save_raw(out, index, raw))
+                writer.add(
+                    storage_array(meas.data),
+                    scene=_scene_of(raw, profile) if scenes else None,
+                    label=f"frame{index:06d}",
+                    **extra,
+                )
+                stamps.append(raw.timestamp_ns)
+                summary.frames += 1
+                bar.advance(summary.frames, time.monotonic() - t0, gaps.dropped)
+    except DeviceError as err:
+        raise type(err)(f"{err} ({summary.frames} frame(s) were saved in {out})") from None
+    finally:
+        camera.close()
+    summary.elapsed_s = time.monotonic() - t0
+    summary.dropped, summary.gaps = gaps.dropped, list(gaps.gaps)
+    if len(stamps) > 1 and stamps[-1] > stamps[0]:
+        summary.camera_fps = (len(stamps) - 1) * 1e9 / (stamps[-1] - stamps[0])
+    return summary
+
+
+class _Progress:
+    """A rich progress bar with a live fps and drop count (or nothing when disabled)."""
+
+    def __init__(self, total: int, enabled: bool) -> None:
+        self.total = total
+        self.enabled = enabled
+        self._progress: Any = None
+        self._task: Any = None
+
+    def __enter__(self) -> _Progress:
+        if self.enabled:
+            from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
+
+            self._progress = Progress(
+                TextColumn("recording"), BarColumn(), MofNCompleteColumn(),
+                TextColumn("{task.fields[fps]:.1f} fps"), TextColumn("{task.fields[drops]}"),
+                transient=False,
+            )
+            self._progress.__enter__()
+            self._task = self._progress.add_task("record", total=self.total, fps=0.0, drops="")
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self._progress is not None:
+            self._progress.__exit__(None, None, None)
+
+    def advance(self, done: int, elapsed_s: float, dropped: int) -> None:
+        if self._progress is not None:
+            fps = done / elapsed_s if elapsed_s > 0 else 0.0
+            self._progress.update(self._task, completed=done, fps=fps,
+                                  drops=f"{dropped} dropped" if dropped else "")
+
+    def note(self, message: str) -> None:
+        if self._progress is not None:
+            self._progress.console.print(f"[yellow]warning:[/yellow] {message}")
+        else:
+            print(f"warning: {message}", file=sys.stderr)
+
+
+def run(args: argparse.Namespace) -> int:
+    profile = load_profile(args.profile)
+    out = Path(args.out)
+    summary = record(
+        profile, args.frames, out,
+        keep_raw=args.raw, timeout_s=args.timeout, settings=parse_settings(args.set),
+        append=args.append, scenes=not args.no_scenes, progress=not args.quiet,
+    )
+    fps = f"{summary.frames / summary.elapsed_s:.1f}" if summary.elapsed_s > 0 else "n/a"
+    cam_fps = f"{summary.camera_fps:.1f}" if summary.camera_fps else "n/a"
+    print(f"recorded {summary.frames} frame(s) to {out} in {summary.elapsed_s:.2f} s "
+          f"({fps} fps written; camera {cam_fps} fps); dropped frames: {summary.dropped}")
+    if summary.ended_early:
+        print(f"warning: the source ended early: {summary.ended_early}", file=sys.stderr)
+    if summary.dropped:
+        where = ", ".join(f"{n} before id {fid}" for fid, n in summary.gaps[:10])
+        msg = f"the camera dropped {summary.dropped} frame(s) ({where})"
+        if args.fail_on_drop:
+            raise DeviceError(msg + "; the recording is kept but incomplete")
+        print(f"warning: {msg}; the manifest marks them (dropped_before)", file=sys.stderr)
+    return 0
