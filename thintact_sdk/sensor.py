@@ -26,14 +26,14 @@ from typing import Any
 import numpy as np
 
 from thintact_sdk.capture import FrameGapCounter, create_camera, to_measurement
-from thintact_sdk.errors import CalibrationError, DeviceError, ProfileError
+from thintact_sdk.errors import DeviceError, ProfileError
 from thintact_sdk.frames import Measurement, RawFrame, TactileFrame
 from thintact_sdk.interfaces import Camera, Decoder, LightController
 from thintact_sdk.plugin_manager import PluginRegistry, get_registry
 from thintact_sdk.profile import Profile
 from thintact_sdk.tactile.interpreter import TactileInterpreter
 from thintact_sdk.tactile.photometric import PhotometricLUT
-from thintact_sdk.tactile.store import device_lut_path, load_device_lut
+from thintact_sdk.tactile.store import lut_for_profile
 
 VIRTUAL_CAMERAS = ("virtual",)
 
@@ -215,18 +215,8 @@ class Sensor:
     def lut(self) -> PhotometricLUT:
         """The photometric-stereo LUT in use (loaded or built on first use)."""
         if self._lut is None:
-            self._lut = load_device_lut(self.profile)
-        if self._lut is None:
             cam = self.profile.camera.plugin if self.profile.camera is not None else None
-            if cam not in VIRTUAL_CAMERAS:
-                raise CalibrationError(
-                    f"no tactile LUT for device {self.profile.name!r} (looked for "
-                    f"{device_lut_path(self.profile)}); run `thintact calibrate-tactile "
-                    f"--profile {self.profile.name}` with a ball press"
-                )
-            from thintact_sdk.tactile.calibration import scene_level_lut
-
-            self._lut = scene_level_lut(self.profile)
+            self._lut = lut_for_profile(self.profile, allow_simulated=cam in VIRTUAL_CAMERAS)
         return self._lut
 
     @property

@@ -204,3 +204,23 @@ def test_wrong_image_size_is_a_clear_error(profile, lut):
     interp = TactileInterpreter(profile, lut)
     with pytest.raises(ThinTactError, match="expects 100×128×3"):
         interp.interpret(np.zeros((10, 10, 3), np.float32))
+
+
+def test_fine_grids_are_processed_binned_and_returned_full(profile):
+    from thintact_sdk.profile import SceneSpec, TactileConfig
+
+    fine = profile.model_copy(
+        update={
+            "scene": SceneSpec(rows=200, cols=256, pixel_pitch_um=63.0),
+            "tactile": TactileConfig(mm_per_px=0.063),
+        },
+        deep=True,
+    )
+    sim = TactileSimulator.for_profile(fine)
+    interp = TactileInterpreter.for_profile(fine)  # no stored LUT: simulated one
+    assert interp.factor == 2 and interp.work.rows == 100
+    interp.set_reference(sim.flat().scene)
+    s = sim.press(Sphere(2.0), 0.5, (-1.0, 0.5))
+    frame = interp.interpret(s.scene)
+    assert frame.depth_mm.shape == (200, 256)
+    assert _depth_rms(frame.depth_mm, s.depth_mm) < 0.06

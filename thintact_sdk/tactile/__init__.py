@@ -3,10 +3,11 @@
 Two calls cover most programs::
 
     from thintact_sdk import tactile
-    press = tactile.simulate_press(profile, tactile.Sphere(2.0), depth_mm=0.5)   # scene + truth
-    interp = tactile.TactileInterpreter(profile, tactile.scene_level_lut(profile))
-    interp.set_reference(tactile.TactileSimulator.for_profile(profile).flat().scene)
-    frame = interp.interpret(press.scene)                                       # TactileFrame
+    sim = tactile.TactileSimulator.for_profile(profile)
+    press = sim.press(tactile.Sphere(2.0), depth_mm=0.5)      # scene + ground truth
+    interp = tactile.TactileInterpreter.for_profile(profile)  # device LUT (or simulated)
+    interp.set_reference(sim.flat().scene)                    # no-contact image
+    frame = interp.interpret(press.scene)                     # TactileFrame
 
 See ``docs/tactile.md``.
 """
@@ -50,6 +51,7 @@ from thintact_sdk.tactile.store import (
     device_lut_path,
     find_lut,
     load_device_lut,
+    lut_for_profile,
     save_device_lut,
 )
 
@@ -86,6 +88,7 @@ __all__ = [
     "find_press_circle",
     "integrate_gradients",
     "load_device_lut",
+    "lut_for_profile",
     "make_indenter",
     "marker_lattice_mm",
     "mean_shear",

@@ -19,7 +19,7 @@ import numpy as np
 
 from thintact_sdk.errors import CalibrationError
 from thintact_sdk.profile import Profile
-from thintact_sdk.tactile.grid import TactileParams
+from thintact_sdk.tactile.grid import TactileParams, bin_image, binned_params, working_factor
 from thintact_sdk.tactile.indenters import Sphere
 from thintact_sdk.tactile.interpreter import fill_masked
 from thintact_sdk.tactile.markers import detect_markers
@@ -165,6 +165,7 @@ def calibrate_from_presses(
     ball_radius_mm: float = CALIBRATION_BALL_RADIUS_MM,
     bins: int = 32,
     meta: dict[str, Any] | None = None,
+    max_work_mm: float = 0.13,
 ) -> PhotometricLUT:
     """Calibrate a LUT from ball presses against a no-contact reference image.
 
@@ -182,15 +183,20 @@ def calibrate_from_presses(
         LUT nodes per colour axis.
     meta
         Extra provenance stored with the LUT.
+    max_work_mm
+        Work on the grid binned as the interpreter does (same default).
     """
-    params = TactileParams.from_profile(profile)
+    full = TactileParams.from_profile(profile)
+    factor = working_factor(full, max_work_mm)
+    params = binned_params(full, factor)
     sigma = max(1.0, params.marker_diameter_mm / params.mm_per_px)
+    reference = bin_image(reference, factor)
     ref_det = detect_markers(reference, params)
-    background = fill_masked(np.asarray(reference, np.float32), ref_det.mask, sigma)
+    background = fill_masked(reference, ref_det.mask, sigma)
     feats, gxs, gys, valids = [], [], [], []
     rng = np.random.default_rng(0)
     for press in presses:
-        img = np.asarray(press.image, np.float32)
+        img = bin_image(press.image, factor)
         det = detect_markers(img, params)
         change = img - background
         if press.grad_x is None or press.grad_y is None:
@@ -204,7 +210,7 @@ def calibrate_from_presses(
             flat = far & (rng.random(far.shape) < 0.1)
             valid = (inside | flat) & ~det.mask
         else:
-            gx, gy = press.grad_x, press.grad_y
+            gx, gy = bin_image(press.grad_x, factor), bin_image(press.grad_y, factor)
             moving = np.hypot(gx, gy) > 1e-3
             valid = (moving | (rng.random(gx.shape) < 0.1)) & ~det.mask
         feats.append(change)
@@ -217,6 +223,7 @@ def calibrate_from_presses(
         "presses": len(presses),
         "ball_radius_mm": ball_radius_mm,
         "slopes_from": "ball model" if presses and presses[0].grad_x is None else "simulator",
+        "work_mm_per_px": params.mm_per_px,
     }
     info.update(meta or {})
     return calibrate_lut(feats, gxs, gys, valids, bins=bins, meta=info)

@@ -3,7 +3,7 @@ y with rows) and the tactile parameters of a profile with their defaults."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -81,3 +81,50 @@ def pixel_grid_mm(rows: int, cols: int, mm_per_px: float) -> tuple[np.ndarray, n
     y = (np.arange(rows) - (rows - 1) / 2) * mm_per_px
     xx, yy = np.meshgrid(x, y)
     return xx, yy
+
+
+def working_factor(params: TactileParams, max_work_mm: float = 0.13) -> int:
+    """Integer binning factor f for tactile processing: the largest f dividing both grid
+    sides with ``f · mm_per_px ≤ max_work_mm`` (1 when the grid is already that coarse).
+
+    Photometric stereo and marker detection do not need the paper's 31.5 um pixels (the
+    membrane blurs finer detail, paper §VI-B); working at ≈ 0.13 mm keeps a frame within the
+    real-time budget.
+    """
+    best = 1
+    for f in range(2, min(params.rows, params.cols) + 1):
+        if f * params.mm_per_px > max_work_mm:
+            break
+        if params.rows % f == 0 and params.cols % f == 0:
+            best = f
+    return best
+
+
+def binned_params(params: TactileParams, factor: int) -> TactileParams:
+    """``params`` on the grid binned ``factor × factor`` (same field, same centre)."""
+    if factor == 1:
+        return params
+    return replace(
+        params, rows=params.rows // factor, cols=params.cols // factor,
+        mm_per_px=params.mm_per_px * factor,
+    )
+
+
+def bin_image(image: np.ndarray, factor: int) -> np.ndarray:
+    """Mean over ``factor × factor`` blocks: ``N × M (× C)`` → ``N/f × M/f (× C)`` float32."""
+    a = np.asarray(image, np.float32)
+    if factor == 1:
+        return a
+    n, m = a.shape[0] // factor, a.shape[1] // factor
+    shape = (n, factor, m, factor) + a.shape[2:]
+    return a[: n * factor, : m * factor].reshape(shape).mean(axis=(1, 3))
+
+
+def upsample(image: np.ndarray, factor: int) -> np.ndarray:
+    """Bilinear upsampling by ``factor`` (pixel centres aligned): inverse of :func:`bin_image`."""
+    if factor == 1:
+        return np.asarray(image, np.float32)
+    import cv2
+
+    a = np.ascontiguousarray(image, np.float32)
+    return cv2.resize(a, (a.shape[1] * factor, a.shape[0] * factor), interpolation=cv2.INTER_LINEAR)

@@ -9,13 +9,20 @@ the markers against the reference frame.
 from __future__ import annotations
 
 import time
+from typing import Any
 
 import cv2
 import numpy as np
 
 from thintact_sdk.frames import TactileFrame
 from thintact_sdk.profile import Profile
-from thintact_sdk.tactile.grid import TactileParams
+from thintact_sdk.tactile.grid import (
+    TactileParams,
+    bin_image,
+    binned_params,
+    upsample,
+    working_factor,
+)
 from thintact_sdk.tactile.markers import MarkerTracker, detect_markers, mean_shear
 from thintact_sdk.tactile.photometric import PhotometricLUT
 from thintact_sdk.tactile.poisson import integrate_gradients
@@ -62,6 +69,10 @@ class TactileInterpreter:
         :func:`thintact_sdk.tactile.markers.detect_markers`).
     min_contact_area_mm2
         Smallest region above the contact threshold that counts as contact.
+    max_work_mm
+        Photometric stereo and marker detection run on the scene grid binned to about this
+        pixel size (:func:`~thintact_sdk.tactile.grid.working_factor`); the depth map is
+        returned on the full grid.
 
     The first image interpreted becomes the reference (no-contact) frame unless
     :meth:`set_reference` is called first.
@@ -73,14 +84,27 @@ class TactileInterpreter:
         lut: PhotometricLUT | None = None,
         marker_threshold: float = 0.3,
         min_contact_area_mm2: float = 0.1,
+        max_work_mm: float = 0.13,
     ) -> None:
         self.params = TactileParams.from_profile(profile)
+        self.factor = working_factor(self.params, max_work_mm)
+        self.work = binned_params(self.params, self.factor)
         self.lut = lut
         self.marker_threshold = marker_threshold
         self.min_contact_area_mm2 = min_contact_area_mm2
         self.tracker = MarkerTracker(max_step_mm=0.45 * self.params.marker_pitch_mm)
+        self._sigma_px = max(1.0, self.work.marker_diameter_mm / self.work.mm_per_px)
         self.background: np.ndarray | None = None
         self.reference_markers_mm = np.zeros((0, 2))
+
+    @classmethod
+    def for_profile(cls, profile: Profile, **options: Any) -> TactileInterpreter:
+        """An interpreter with the device's LUT (or, for a virtual device without one, a LUT
+        calibrated on the tactile simulator; see
+        :func:`thintact_sdk.tactile.store.lut_for_profile`)."""
+        from thintact_sdk.tactile.store import lut_for_profile
+
+        return cls(profile, lut_for_profile(profile), **options)
 
     @property
     def has_reference(self) -> bool:
@@ -88,10 +112,9 @@ class TactileInterpreter:
 
     def set_reference(self, image: np.ndarray) -> None:
         """Use ``image`` (``N × M × 3``, no contact) as background and marker reference."""
-        img = self._check(image)
-        det = detect_markers(img, self.params, self.marker_threshold)
-        sigma = max(1.0, self.params.marker_diameter_mm / self.params.mm_per_px)
-        self.background = fill_masked(img, det.mask, sigma)
+        img = bin_image(self._check(image), self.factor)
+        det = detect_markers(img, self.work, self.marker_threshold)
+        self.background = fill_masked(img, det.mask, self._sigma_px)
         self.reference_markers_mm = det.positions_mm
         self.tracker.reset(det.positions_mm)
 
@@ -107,22 +130,24 @@ class TactileInterpreter:
             )
         return img
 
-    def depth_from_image(
-        self, image: np.ndarray, marker_mask: np.ndarray | None = None
-    ) -> np.ndarray:
-        """Depth map (``N × M`` float32 mm, ≥ 0) of one image against the reference."""
-        img = self._check(image)
+    def _work_depth(self, img: np.ndarray, marker_mask: np.ndarray | None) -> np.ndarray:
+        """Depth (mm, ≥ 0) on the working grid from a working-grid image."""
         if self.background is None:
-            raise RuntimeError("set_reference() before depth_from_image()")
+            raise RuntimeError("set_reference() before asking for depth")
         if self.lut is None:
             return np.zeros(img.shape[:2], np.float32)
         gx, gy = self.lut.lookup(img - self.background)
         if marker_mask is not None and marker_mask.any():
-            sigma = max(1.0, self.params.marker_diameter_mm / self.params.mm_per_px)
-            g = fill_masked(np.stack([gx, gy], axis=2), marker_mask, sigma)
+            g = fill_masked(np.stack([gx, gy], axis=2), marker_mask, self._sigma_px)
             gx, gy = g[..., 0], g[..., 1]
-        depth = integrate_gradients(gx, gy, self.params.mm_per_px)
+        depth = integrate_gradients(gx, gy, self.work.mm_per_px)
         return np.clip(depth, 0.0, None)
+
+    def depth_from_image(self, image: np.ndarray) -> np.ndarray:
+        """Depth map (``N × M`` float32 mm, ≥ 0) of one image against the reference."""
+        img = bin_image(self._check(image), self.factor)
+        det = detect_markers(img, self.work, self.marker_threshold)
+        return upsample(self._work_depth(img, det.mask), self.factor)
 
     def contact(self, depth_mm: np.ndarray) -> tuple[bool, float, np.ndarray]:
         """``(contact, area_mm2, mask)`` from a depth map and the contact threshold."""
@@ -135,11 +160,12 @@ class TactileInterpreter:
     ) -> TactileFrame:
         """Interpret one reconstructed image (``N × M × 3`` display units)."""
         t0 = time.perf_counter()
-        img = self._check(image)
+        full = self._check(image)
         if self.background is None:
-            self.set_reference(img)
-        det = detect_markers(img, self.params, self.marker_threshold)
-        depth = self.depth_from_image(img, det.mask)
+            self.set_reference(full)
+        img = bin_image(full, self.factor)
+        det = detect_markers(img, self.work, self.marker_threshold)
+        depth = upsample(self._work_depth(img, det.mask), self.factor)
         contact, area, _ = self.contact(depth)
         pos, disp = self.tracker.update(det.positions_mm)
         _, direction = mean_shear(disp)
@@ -151,7 +177,7 @@ class TactileInterpreter:
         if self.lut is None:
             meta["depth"] = "no LUT"
         return TactileFrame(
-            image=img,
+            image=full,
             depth_mm=depth,
             marker_positions_mm=pos,
             marker_displacements_mm=disp,

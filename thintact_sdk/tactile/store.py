@@ -70,3 +70,33 @@ def load_device_lut(profile: Profile, root: Path | None = None) -> PhotometricLU
             )
         return None
     return PhotometricLUT.load(p)
+
+
+def lut_for_profile(profile: Profile, allow_simulated: bool | None = None) -> PhotometricLUT:
+    """The LUT a sensor of ``profile`` uses.
+
+    The device's stored LUT when there is one; otherwise, when ``allow_simulated`` (default:
+    when the profile's camera is the virtual one), a LUT calibrated on the tactile
+    simulator's own scenes (:func:`thintact_sdk.tactile.calibration.scene_level_lut`).
+
+    Raises
+    ------
+    CalibrationError
+        When there is no stored LUT and a simulated one is not allowed.
+    """
+    lut = load_device_lut(profile)
+    if lut is not None:
+        return lut
+    if allow_simulated is None:
+        allow_simulated = profile.camera is not None and profile.camera.plugin == "virtual"
+    if not allow_simulated:
+        from thintact_sdk.errors import CalibrationError
+
+        raise CalibrationError(
+            f"no tactile LUT for device {profile.name!r} (looked for "
+            f"{device_lut_path(profile)}); run `thintact calibrate-tactile --profile "
+            f"{profile.name}` with a ball press"
+        )
+    from thintact_sdk.tactile.calibration import scene_level_lut
+
+    return scene_level_lut(profile)
