@@ -80,6 +80,11 @@ class SlitStack:
         t = np.einsum("nbk,nb->nk", self.right, vectors)
         return np.einsum("nak,nk->na", self.left, t)
 
+    def times_transposed(self, vectors: np.ndarray) -> np.ndarray:
+        """``Y_iᵀ v_i`` for every slit: ``vectors`` is ``n × A`` → ``n × B``."""
+        t = np.einsum("nak,na->nk", self.left, vectors)
+        return np.einsum("nbk,nk->nb", self.right, t)
+
     def image(self, i: int) -> np.ndarray:
         """Slit ``i`` (position in the stack) as a dense ``A × B`` array (for tests, figures)."""
         return self.left[i] @ self.right[i].T

@@ -1,0 +1,182 @@
+"""Stream a recording's slit frames into compressed per-channel slit stacks.
+
+Frames are read one at a time: the dark level is subtracted, exposure differences named in
+the frame metadata (``exposure_us``) are normalised to the reference exposure, and every
+slit channel is compressed (:func:`thintact_sdk.calibration.lowrank.compress`) before the
+next frame is read, so memory stays at one frame plus ``(R + S)·k`` numbers per slit.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from thintact_sdk.calibration.classify import ChannelRole, classify_scene, is_dark, is_slit
+from thintact_sdk.calibration.lowrank import DEFAULT_RANK, LowRankImage, compress
+from thintact_sdk.calibration.slits import ChannelSlits, SlitStack
+from thintact_sdk.errors import CalibrationError
+from thintact_sdk.recording import Recording
+
+Progress = Callable[[int, int, str], None]
+"""``progress(done, total, what)``: called after each frame is processed."""
+
+
+@dataclass
+class SlitCollection:
+    """Everything the solve needs from a recording.
+
+    Attributes
+    ----------
+    channels
+        One :class:`ChannelSlits` per channel.
+    dark_dn
+        ``R × S × C`` float64 level subtracted from every measurement (DN).
+    dark_source
+        Where :attr:`dark_dn` came from (dark frames or the profile's black level).
+    exposure_us
+        Reference exposure every frame was normalised to (None when frames carry none).
+    validation
+        Recording frame indices with a known scene that is neither dark nor a slit.
+    saturated
+        ``{frame index: fraction of saturated pixels}`` for frames with any.
+    frame_scale
+        ``{frame index: factor}`` applied to frames whose exposure differed.
+    """
+
+    channels: list[ChannelSlits]
+    dark_dn: np.ndarray
+    dark_source: str
+    exposure_us: float | None
+    validation: list[int] = field(default_factory=list)
+    saturated: dict[int, float] = field(default_factory=dict)
+    frame_scale: dict[int, float] = field(default_factory=dict)
+    slit_frames: int = 0
+
+
+def frame_exposure_us(recording: Recording, i: int) -> float | None:
+    """``exposure_us`` recorded with frame ``i`` (None when absent or not a number)."""
+    value = recording.frames[i].extra.get("exposure_us")
+    return float(value) if isinstance(value, int | float) and value > 0 else None
+
+
+def signal_of(
+    recording: Recording, i: int, dark_dn: np.ndarray, exposure_us: float | None
+) -> tuple[np.ndarray, float]:
+    """Frame ``i`` as DN above dark at the reference exposure (``R × S × C`` float64).
+
+    Returns the signal and the factor applied for the exposure difference (1 if none).
+    """
+    meas = np.asarray(recording.measurement(i), dtype=np.float64)
+    if meas.ndim == 2:
+        meas = meas[..., None]
+    scale = 1.0
+    exp = frame_exposure_us(recording, i)
+    if exposure_us is not None and exp is not None and abs(exp - exposure_us) > 1e-6 * exposure_us:
+        scale = exposure_us / exp
+    return (meas - dark_dn) * scale, scale
+
+
+def _dark(recording: Recording, dark_frames: list[int]) -> tuple[np.ndarray, str]:
+    prof = recording.profile
+    shape = (prof.sensor.rows, prof.sensor.cols, len(prof.sensor.channels))
+    if not dark_frames:
+        return np.full(shape, prof.noise.black_level_dn), "profile black level"
+    acc = np.zeros(shape)
+    for i in dark_frames:
+        m = np.asarray(recording.measurement(i), dtype=np.float64)
+        acc += m if m.ndim == 3 else m[..., None]
+    names = [recording.frames[i].label or recording.frames[i].measurement for i in dark_frames]
+    head = ", ".join(str(n) for n in names[:3]) + (" …" if len(names) > 3 else "")
+    return acc / len(dark_frames), f"{len(dark_frames)} dark frame(s) ({head})"
+
+
+def collect_slits(
+    recording: Recording,
+    rank: int = DEFAULT_RANK,
+    progress: Progress | None = None,
+) -> SlitCollection:
+    """Find the slit, dark and validation frames of ``recording`` and compress the slits.
+
+    Parameters
+    ----------
+    recording
+        A ``thintact-recording/1`` whose frames include single-row and single-column scenes.
+    rank
+        Rank kept per slit image (≥ 2).
+    progress
+        Optional callback, see :data:`Progress`.
+
+    Raises
+    ------
+    CalibrationError
+        When the recording has no slit frames.
+    """
+    prof = recording.profile
+    n_rows, n_cols = prof.scene.rows, prof.scene.cols
+    n_ch = len(prof.sensor.channels)
+    roles: dict[int, list[ChannelRole]] = {}
+    dark_frames: list[int] = []
+    validation: list[int] = []
+    for i in range(len(recording)):
+        scene = recording.scene(i)
+        if scene is None:
+            continue
+        r = classify_scene(scene)
+        if is_dark(r):
+            dark_frames.append(i)
+        elif is_slit(r):
+            roles[i] = r
+        else:
+            validation.append(i)
+    if not roles:
+        raise CalibrationError(
+            f"recording {recording.root} holds no slit frames (scenes with a single lit row or "
+            "column); record a slit scan with `thintact calibrate --profile ...`"
+        )
+    exposures = [e for e in (frame_exposure_us(recording, i) for i in roles) if e is not None]
+    reference = float(np.median(exposures)) if exposures else None
+    dark_dn, dark_source = _dark(recording, dark_frames)
+    saturation = prof.noise.saturation_dn - 1.0
+    h: list[tuple[list[int], list[np.ndarray], list[LowRankImage]]] = [([], [], []) for _ in range(n_ch)]
+    v: list[tuple[list[int], list[np.ndarray], list[LowRankImage]]] = [([], [], []) for _ in range(n_ch)]
+    out = SlitCollection([], dark_dn, dark_source, reference, validation)
+    total = len(roles)
+    for done, (i, r) in enumerate(sorted(roles.items()), start=1):
+        raw = np.asarray(recording.measurement(i))
+        sat = float(np.mean(raw >= saturation))
+        if sat > 0:
+            out.saturated[i] = sat
+        signal, scale = signal_of(recording, i, dark_dn, reference)
+        if scale != 1.0:
+            out.frame_scale[i] = scale
+        for c in range(min(n_ch, len(r))):
+            role = r[c]
+            if role.kind == "hslit" and role.profile is not None:
+                target = h[c]
+                image = compress(signal[..., c], rank, seed=i)
+            elif role.kind == "vslit" and role.profile is not None:
+                target = v[c]
+                image = compress(signal[..., c].T, rank, seed=i)
+            else:
+                continue
+            target[0].append(role.index)
+            target[1].append(role.profile)
+            target[2].append(image)
+        if progress is not None:
+            progress(done, total, recording.frames[i].label or recording.frames[i].measurement)
+    out.slit_frames = total
+    for c in range(n_ch):
+        if not h[c][0] or not v[c][0]:
+            raise CalibrationError(
+                f"channel {prof.sensor.channels[c]}: the recording needs both horizontal and "
+                f"vertical slits (found {len(h[c][0])} row and {len(v[c][0])} column slits)"
+            )
+        out.channels.append(
+            ChannelSlits(
+                SlitStack.from_images(*h[c]), SlitStack.from_images(*v[c]), n_rows, n_cols,
+                meta={"channel": prof.sensor.channels[c]},
+            )
+        )
+    return out

@@ -1,0 +1,319 @@
+"""From a recording with slit frames to a calibration bundle: solve, train, validate, save.
+
+Used by both ``thintact calibrate --from-recording`` and the wizard (which records first).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from thintact_sdk.calibration.collect import Progress, SlitCollection, collect_slits, signal_of
+from thintact_sdk.calibration.gauge import operator_error, term_errors
+from thintact_sdk.calibration.lowrank import DEFAULT_RANK
+from thintact_sdk.calibration.registration import RegistrationResult
+from thintact_sdk.calibration.solver import ChannelMatrices, Method, SolveReport, solve_channel
+from thintact_sdk.calibration.validation import (
+    DEFAULT_DECODER,
+    ValidationResult,
+    averaged_noise,
+    choose_tau,
+    make_decoder,
+    score,
+)
+from thintact_sdk.errors import CalibrationError
+from thintact_sdk.imaging.calibration_bundle import CalibrationBundle
+from thintact_sdk.imaging.t2s import SystemMatrices
+from thintact_sdk.profile import CalibrationLimits, Profile
+from thintact_sdk.recording import Recording
+
+
+@dataclass
+class CalibrationOptions:
+    """Settings of a calibration solve.
+
+    Attributes
+    ----------
+    method
+        ``"lsq"`` (joint least squares, default) or ``"paper"`` (Algorithm 1 verbatim).
+    max_iter, tol
+        Refinement (Algorithm 3) limits.
+    rank
+        Rank kept per slit image.
+    frame_gains
+        Estimate one gain per slit frame (unknown exposure/brightness drift).
+    tau
+        Tikhonov τ stored in the bundle (DN²); None chooses it on simulated data.
+    filter_steps
+        Adam steps of the joint-filter training (0: closed form only).
+    filter_scenes
+        Number of training scenes for the filter.
+    decoder
+        Decoder used for validation.
+    frames_averaged
+        Frames averaged per pattern (sets the noise for τ and filter training); None reads
+        it from the recording (``frames`` per frame) or assumes 1.
+    """
+
+    method: Method = "lsq"
+    max_iter: int = 50
+    tol: float = 1e-7
+    rank: int = DEFAULT_RANK
+    frame_gains: bool = False
+    tau: float | None = None
+    filter_steps: int = 100
+    filter_scenes: int = 32
+    decoder: str = DEFAULT_DECODER
+    frames_averaged: int | None = None
+
+
+@dataclass
+class CalibrationOutcome:
+    """What a calibration produced."""
+
+    bundle: CalibrationBundle
+    path: Path
+    reports: list[SolveReport]
+    collection: SlitCollection
+    validation: list[ValidationResult]
+    passed: bool
+    registration: RegistrationResult | None = None
+    reference: dict[str, Any] = field(default_factory=dict)
+    tau_table: dict[str, float] = field(default_factory=dict)
+
+
+def channel_matrices(sm: SystemMatrices, c: int) -> ChannelMatrices:
+    """Channel ``c`` of REC's :class:`SystemMatrices` as float64 :class:`ChannelMatrices`."""
+    po, qo, pc, qc = (np.asarray(a, np.float64) for a in sm.channel(c))
+    return ChannelMatrices(po, qo, pc, qc)
+
+
+def solve_matrices(
+    collection: SlitCollection, options: CalibrationOptions, profile: Profile
+) -> tuple[SystemMatrices, list[SolveReport]]:
+    """Algorithms 2-3 for every channel of ``collection``."""
+    mats: list[ChannelMatrices] = []
+    reports: list[SolveReport] = []
+    for slits in collection.channels:
+        m, rep = solve_channel(
+            slits, method=options.method, max_iter=options.max_iter, tol=options.tol,
+            frame_gains=options.frame_gains,
+        )
+        mats.append(m)
+        reports.append(rep)
+    sm = SystemMatrices(
+        np.stack([m.Po for m in mats]), np.stack([m.Qo for m in mats]),
+        np.stack([m.Pc for m in mats]), np.stack([m.Qc for m in mats]),
+        {
+            "source": "calibration",
+            "profile": profile.name,
+            "profile_hash": profile.content_hash(),
+            "method": options.method,
+            "gauge": "open term smoothest; ‖P‖_F = ‖Q‖_F per term",
+            "exposure_us": collection.exposure_us,
+        },
+    )
+    return sm, reports
+
+
+def _frames_averaged(recording: Recording, options: CalibrationOptions) -> int:
+    if options.frames_averaged is not None:
+        return max(1, int(options.frames_averaged))
+    counts = [f.extra.get("frames") for f in recording.frames]
+    nums = [int(c) for c in counts if isinstance(c, int) and c > 0]
+    return int(np.median(nums)) if nums else 1
+
+
+def build_bundle(
+    profile: Profile,
+    sm: SystemMatrices,
+    options: CalibrationOptions,
+    frames_averaged: int,
+    source: str,
+    exposure_us: float | None,
+    progress: Callable[[str], None] | None = None,
+) -> tuple[CalibrationBundle, dict[str, float]]:
+    """Train the joint filter on ``sm`` and choose τ: a bundle ready to decode with."""
+    from thintact_sdk.imaging.filter_training import train_joint_filter, training_scenes
+
+    n, m = sm.scene_shape
+    noise = averaged_noise(profile.noise, frames_averaged)
+    scenes = training_scenes(n, m, count=options.filter_scenes, seed=0)
+    if progress:
+        progress("training the joint filter")
+    jf = train_joint_filter(sm, scenes, noise=noise, steps=options.filter_steps, seed=0)
+    bundle = CalibrationBundle.create(
+        profile, sm, jf, tau=options.tau if options.tau is not None else 1.0, source=source,
+        exposure_us=exposure_us,
+    )
+    table: dict[str, float] = {}
+    if options.tau is None:
+        if progress:
+            progress("choosing tau")
+        tau_scenes = training_scenes(n, m, count=8, seed=1)
+        tau, table = choose_tau(profile, bundle, tau_scenes, noise, options.decoder)
+        bundle.meta["tau"] = tau
+    return bundle, table
+
+
+def validate(
+    recording: Recording,
+    collection: SlitCollection,
+    profile: Profile,
+    bundle: CalibrationBundle,
+    decoder: str = DEFAULT_DECODER,
+) -> list[ValidationResult]:
+    """Reconstruct every validation frame of ``recording`` and score it against its scene."""
+    dec = make_decoder(profile, bundle, decoder)
+    out = []
+    for i in collection.validation:
+        truth = recording.scene(i)
+        if truth is None:
+            continue
+        signal, _ = signal_of(recording, i, collection.dark_dn, collection.exposure_us)
+        est = dec.decode(signal.astype(np.float32))
+        label = recording.frames[i].label or Path(recording.frames[i].measurement).stem
+        out.append(score(label, est, truth))
+    return out
+
+
+def compare_with_reference(
+    recording: Recording,
+    collection: SlitCollection,
+    profile: Profile,
+    bundle: CalibrationBundle,
+    reference: SystemMatrices,
+    options: CalibrationOptions,
+    frames_averaged: int,
+) -> dict[str, Any]:
+    """How the calibrated matrices compare with reference ones (e.g. the simulator's fit).
+
+    Returns per-channel gauge-free operator errors, per-term errors in the canonical gauge,
+    and the validation PSNR/SSIM of a bundle built the same way from the reference.
+    """
+    sm = bundle.system_matrices
+    out: dict[str, Any] = {"operator_error": [], "term_errors": []}
+    for c in range(sm.channels):
+        est, ref = channel_matrices(sm, c), channel_matrices(reference, c)
+        out["operator_error"].append(operator_error(est, ref))
+        out["term_errors"].append(term_errors(est, ref))
+    ref_opts = CalibrationOptions(**{**options.__dict__, "tau": None})
+    ref_bundle, _ = build_bundle(profile, reference, ref_opts, frames_averaged, "simulator", collection.exposure_us)
+    ref_val = validate(recording, collection, profile, ref_bundle, options.decoder)
+    out["reference_tau"] = ref_bundle.tau
+    out["reference_psnr_db"] = {v.label: v.psnr_db for v in ref_val}
+    out["reference_ssim"] = {v.label: v.ssim for v in ref_val}
+    return out
+
+
+def limits_of(profile: Profile) -> CalibrationLimits:
+    """The profile's ``calibration_limits`` (defaults when absent)."""
+    return profile.calibration_limits or CalibrationLimits()
+
+
+def calibrate_recording(
+    recording: Recording,
+    out_dir: str | Path,
+    options: CalibrationOptions | None = None,
+    *,
+    source: str = "recording",
+    progress: Progress | None = None,
+    status: Callable[[str], None] | None = None,
+    registration: RegistrationResult | None = None,
+    reference: SystemMatrices | None = None,
+    report: bool = True,
+) -> CalibrationOutcome:
+    """Solve, train, validate and save a calibration bundle in ``out_dir``.
+
+    Parameters
+    ----------
+    recording
+        Frames with slit scenes (and ideally a dark frame and validation scenes).
+    out_dir
+        Bundle directory to write (``calibrations/<device>/<timestamp>/`` by convention).
+    options
+        Solve settings.
+    source
+        ``calibration.json`` source field (``wizard`` or ``recording``).
+    progress, status
+        Per-frame progress of the slit streaming, and one-line stage messages.
+    registration
+        Registration result to store and report (wizard).
+    reference
+        Matrices to compare with (virtual devices: the simulator's two-term fit).
+    report
+        Write ``report.html``.
+    """
+    opts = options or CalibrationOptions()
+    profile = recording.profile
+    if status:
+        status("reading slit frames")
+    collection = collect_slits(recording, rank=opts.rank, progress=progress)
+    if status:
+        status("solving the system matrices (Algorithms 2-3)")
+    sm, reports = solve_matrices(collection, opts, profile)
+    k = _frames_averaged(recording, opts)
+    bundle, tau_table = build_bundle(profile, sm, opts, k, source, collection.exposure_us, status)
+    if status:
+        status("validating")
+    val = validate(recording, collection, profile, bundle, opts.decoder)
+    lim = limits_of(profile)
+    mean_psnr = float(np.mean([v.psnr_db for v in val])) if val else float("nan")
+    mean_ssim = float(np.mean([v.ssim for v in val])) if val else float("nan")
+    passed = bool(val) and mean_psnr >= lim.min_psnr_db and mean_ssim >= lim.min_ssim
+    if registration is not None and not registration.passed:
+        passed = False
+    metrics: dict[str, Any] = {
+        "psnr_db": {v.label: v.psnr_db for v in val},
+        "ssim": {v.label: v.ssim for v in val},
+        "mean_psnr_db": mean_psnr,
+        "mean_ssim": mean_ssim,
+        "limits": {"min_psnr_db": lim.min_psnr_db, "min_ssim": lim.min_ssim},
+        "passed": passed,
+        "solve": [
+            {
+                "channel": ch.meta.get("channel", str(c)),
+                "method": opts.method,
+                "iterations": r.iterations,
+                "converged": r.converged,
+                "relative_residual": r.final_residual,
+                "residual_history": r.residual_history,
+            }
+            for c, (ch, r) in enumerate(zip(collection.channels, reports, strict=True))
+        ],
+        "slit_frames": collection.slit_frames,
+        "frames_averaged": k,
+        "dark": collection.dark_source,
+        "saturated_frames": {recording.frames[i].label or str(i): f for i, f in collection.saturated.items()},
+        "exposure_normalised_frames": len(collection.frame_scale),
+        "tau_selection": tau_table,
+    }
+    if opts.frame_gains:
+        metrics["frame_gains"] = [r.frame_gains for r in reports]
+    if registration is not None:
+        metrics["registration"] = registration.to_json()
+    ref_info: dict[str, Any] = {}
+    if reference is not None:
+        if status:
+            status("comparing with the reference matrices")
+        ref_info = compare_with_reference(recording, collection, profile, bundle, reference, opts, k)
+        metrics["reference"] = ref_info
+    if not val:
+        metrics["warning"] = "the recording has no validation frames (scenes that are neither dark nor slits)"
+    bundle.meta["metrics"] = metrics
+    bundle.meta["recording"] = str(recording.root)
+    out = Path(out_dir)
+    try:
+        bundle.save(out)
+    except OSError as err:
+        raise CalibrationError(f"cannot write the calibration bundle to {out}: {err}") from None
+    outcome = CalibrationOutcome(bundle, out, reports, collection, val, passed, registration, ref_info, tau_table)
+    if report:
+        from thintact_sdk.calibration.report import write_report
+
+        write_report(outcome, profile, out / "report.html")
+    return outcome
