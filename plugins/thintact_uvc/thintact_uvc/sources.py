@@ -74,18 +74,3 @@ def _present() -> str:
     nodes = sorted(glob.glob("/dev/video*"))
     return "present: " + ", ".join(nodes) if nodes else "no /dev/video* device on this machine"
 
-
-def list_video_devices() -> list[dict[str, str]]:
-    """``/dev/video*`` nodes with their ``/dev/v4l/by-id`` names and V4L2 card names."""
-    by_id: dict[str, str] = {}
-    for link in sorted(glob.glob("/dev/v4l/by-id/*")):
-        by_id[os.path.realpath(link)] = link
-    out = []
-    for node in sorted(glob.glob("/dev/video*")):
-        name_file = Path("/sys/class/video4linux") / Path(node).name / "name"
-        try:
-            card = name_file.read_text(encoding="utf-8").strip()
-        except OSError:
-            card = ""
-        out.append({"path": node, "by_id": by_id.get(os.path.realpath(node), ""), "name": card})
-    return out

@@ -31,6 +31,9 @@ from thintact_sdk.frames import RawFrame
 from thintact_sdk.profile import Profile, load_profile
 from thintact_sdk.recording import RecordingWriter
 
+MAX_GAP_NOTES = 10
+"""Gaps reported one by one while recording; later ones are only counted."""
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
@@ -158,8 +161,10 @@ def record(
                     summary.ended_early = str(err)
                     break
                 missing = gaps.update(raw.frame_id)
-                if missing:
-                    bar.note(f"{missing} frame(s) dropped before frame id {raw.frame_id}")
+                if missing and len(gaps.gaps) <= MAX_GAP_NOTES:
+                    bar.note(f"{missing} frame(s) dropped before frame id {raw.frame_id}"
+                             + ("; further gaps are counted, not listed"
+                                if len(gaps.gaps) == MAX_GAP_NOTES else ""))
                 meas = to_measurement(raw, profile)
                 extra = _frame_fields(raw, missing)
                 index = first_index + i
