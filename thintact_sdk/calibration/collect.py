@@ -92,6 +92,21 @@ def _dark(recording: Recording, dark_frames: list[int]) -> tuple[np.ndarray, str
     return acc / len(dark_frames), f"{len(dark_frames)} dark frame(s) ({head})"
 
 
+def dark_level(recording: Recording, use_dark_frames: bool = True) -> tuple[np.ndarray, str]:
+    """The level to subtract from ``recording``'s measurements (``R × S × C`` DN) and its source.
+
+    The mean of the frames whose scene is all zero when there are any (and
+    ``use_dark_frames``), else the profile's black level.
+    """
+    frames = []
+    if use_dark_frames:
+        for i in range(len(recording)):
+            scene = recording.scene(i)
+            if scene is not None and is_dark(classify_scene(scene)):
+                frames.append(i)
+    return _dark(recording, frames)
+
+
 def collect_slits(
     recording: Recording,
     rank: int = DEFAULT_RANK,

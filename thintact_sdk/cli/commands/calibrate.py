@@ -1,0 +1,193 @@
+"""``thintact calibrate``: the LCD calibration wizard, or a calibration from a recording.
+
+    thintact calibrate --profile thintact-paper            # wizard (resumes an unfinished run)
+    thintact calibrate --from-recording REC --out CAL       # offline, same solve
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from typing import Any
+
+from rich.console import Console
+from rich.progress import (
+    BarColumn,
+    MofNCompleteColumn,
+    Progress,
+    TextColumn,
+    TimeElapsedColumn,
+    TimeRemainingColumn,
+)
+
+from thintact_sdk.errors import ThinTactError
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "calibrate",
+        help="calibrate the system matrices: LCD wizard (--profile) or from a recording",
+        description="Slit-scan calibration of the T2S system matrices (paper §D, Alg. 1-3), "
+        "joint-filter training and validation; writes calibrations/<device>/<timestamp>/.",
+    )
+    src = p.add_mutually_exclusive_group(required=True)
+    src.add_argument("--profile", metavar="P", help="run the wizard for this profile (name or file)")
+    src.add_argument("--from-recording", metavar="DIR", help="calibrate from a thintact-recording/1 directory")
+    p.add_argument("--out", metavar="DIR", help="bundle directory (default calibrations/<device>/<timestamp>)")
+    p.add_argument("--restart", action="store_true", help="wizard: start a new capture instead of resuming")
+    p.add_argument("--frames", type=int, help="frames averaged per pattern (default 100; 8 for virtual cameras)")
+    p.add_argument("--method", choices=["lsq", "paper"], default="lsq",
+                   help="lsq: joint least squares per slit (default); paper: Algorithm 1 verbatim")
+    p.add_argument("--max-iter", type=int, default=50, help="refinement iterations (Algorithm 3)")
+    p.add_argument("--tau", type=float, help="Tikhonov tau in DN² (default: chosen on simulated data)")
+    p.add_argument("--frame-gains", action="store_true",
+                   help="estimate one gain per slit frame (unrecorded exposure or brightness drift)")
+    p.add_argument("--filter-steps", type=int, default=100, help="Adam steps of the filter training")
+    p.add_argument("--camera-set", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a camera setting (value parsed as JSON when possible)")
+    p.add_argument("--no-registration-check", action="store_true",
+                   help="wizard: continue even if the registration check fails")
+    p.add_argument("--compare-reference", action="store_true",
+                   help="virtual devices: compare with the simulator's two-term fit")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    p.set_defaults(func=run)
+
+
+def _parse_settings(pairs: list[str]) -> dict[str, Any]:
+    from thintact_sdk.errors import ProfileError
+
+    out: dict[str, Any] = {}
+    for item in pairs:
+        key, sep, value = item.partition("=")
+        if not sep or not key:
+            raise ProfileError(f"--camera-set expects KEY=VALUE, got {item!r}")
+        try:
+            out[key] = json.loads(value)
+        except json.JSONDecodeError:
+            out[key] = value
+    return out
+
+
+def _progress(disabled: bool, console: Console) -> Progress:
+    return Progress(
+        TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
+        TextColumn("{task.fields[label]}"), TimeElapsedColumn(), TextColumn("left"),
+        TimeRemainingColumn(), console=console, disable=disabled,
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    from thintact_sdk.calibration.pipeline import CalibrationOptions
+
+    console = Console(stderr=True)
+    options = CalibrationOptions(
+        method=args.method, max_iter=args.max_iter, tau=args.tau, frame_gains=args.frame_gains,
+        filter_steps=args.filter_steps,
+    )
+    if args.from_recording:
+        outcome = _offline(args, options, console)
+    else:
+        outcome = _wizard(args, options, console)
+    m = outcome.bundle.meta["metrics"]
+    verdict = "PASS" if outcome.passed else "FAIL"
+    print(f"calibration bundle: {outcome.path}")
+    print(f"validation: mean PSNR {m['mean_psnr_db']:.2f} dB, mean SSIM {m['mean_ssim']:.3f} -> {verdict} "
+          f"(limits {m['limits']['min_psnr_db']} dB, {m['limits']['min_ssim']})")
+    for s in m["solve"]:
+        print(f"  channel {s['channel']}: {s['iterations']} iterations, "
+              f"{'converged' if s['converged'] else 'NOT converged'}, relative residual {s['relative_residual']:.3e}")
+    if "reference" in m:
+        errs = ", ".join(f"{e:.4f}" for e in m["reference"]["operator_error"])
+        print(f"  vs simulator two-term fit: operator error per channel {errs}")
+    print(f"report: {outcome.path / 'report.html'}")
+    return 0 if outcome.passed else 1
+
+
+def _offline(args: argparse.Namespace, options: Any, console: Console) -> Any:
+    from thintact_sdk.calibration.pipeline import calibrate_recording
+    from thintact_sdk.errors import CalibrationError
+    from thintact_sdk.recording import Recording
+
+    if not args.out:
+        raise CalibrationError("--from-recording needs --out DIR (the bundle directory to write)")
+    rec = Recording(args.from_recording)
+    with _progress(args.no_progress, console) as prog:
+        task = prog.add_task("slit frames", total=None, label="")
+
+        def on_frame(done: int, total: int, label: str) -> None:
+            prog.update(task, completed=done, total=total, label=label)
+
+        return calibrate_recording(
+            rec, Path(args.out), options, source="recording", progress=on_frame,
+            status=lambda s: console.print(f"[dim]{s}[/dim]"),
+            reference=_reference(rec.profile, {}) if args.compare_reference else None,
+        )
+
+
+def _reference(profile: Any, camera_settings: dict[str, Any]) -> Any:
+    from thintact_sdk.errors import PluginError
+    from thintact_sdk.imaging.simulator import Simulator
+    from thintact_sdk.imaging.t2s import SystemMatrices
+
+    try:
+        from thintact_virtual.bench import signal_scale_dn
+    except ImportError:
+        raise PluginError("--compare-reference needs the virtual sensor plugin (thintact-virtual)") from None
+    settings = dict(profile.camera.settings) if profile.camera is not None else {}
+    settings.update(camera_settings)
+    return SystemMatrices.two_term_fit(Simulator(profile), scale_dn=signal_scale_dn(profile, settings))
+
+
+def _wizard(args: argparse.Namespace, options: Any, console: Console) -> Any:
+    from thintact_sdk.calibration.wizard import (
+        WizardSettings,
+        find_unfinished,
+        new_bundle_dir,
+        run_wizard,
+    )
+    from thintact_sdk.capture import create_camera
+    from thintact_sdk.errors import ProfileError
+    from thintact_sdk.plugin_manager import get_registry
+    from thintact_sdk.profile import load_profile
+
+    profile = load_profile(args.profile)
+    if profile.camera is None:
+        raise ProfileError(f"profile {profile.name!r} has no camera section: the wizard needs a camera")
+    if profile.display is None:
+        raise ProfileError(
+            f"profile {profile.name!r} has no display section: add display.plugin (pygame or "
+            "virtual), display_index, origin_px and pixel_pitch_um"
+        )
+    cam_settings = _parse_settings(args.camera_set)
+    if args.out:
+        bundle_dir = Path(args.out)
+    else:
+        unfinished = None if args.restart else find_unfinished(Path.cwd() / "calibrations" / profile.name)
+        bundle_dir = unfinished or new_bundle_dir(profile)
+        if unfinished is not None:
+            console.print(f"resuming the unfinished calibration in {unfinished} (--restart for a new one)")
+    if args.restart and (bundle_dir / "capture").exists():
+        raise ProfileError(f"--restart: {bundle_dir} already holds a capture; choose another --out")
+    virtual = profile.camera.plugin == "virtual"
+    frames = args.frames if args.frames is not None else (8 if virtual else 100)
+    camera = create_camera(profile, settings=cam_settings)
+    display = get_registry().create("display", profile.display.plugin, profile, dict(profile.display.settings))
+    reference = _reference(profile, cam_settings) if args.compare_reference else None
+    with _progress(args.no_progress, console) as prog:
+        task = prog.add_task("patterns", total=None, label="")
+
+        def on_step(done: int, total: int, label: str) -> None:
+            prog.update(task, completed=done, total=total, label=label)
+
+        def status(s: str) -> None:
+            prog.console.print(f"[dim]{s}[/dim]")
+
+        try:
+            return run_wizard(
+                profile, bundle_dir, camera, display,
+                WizardSettings(frames=frames, check_registration=not args.no_registration_check),
+                options, progress=on_step, status=status, reference=reference,
+            )
+        except ThinTactError as err:
+            raise type(err)(f"{err} (captured frames are kept in {bundle_dir / 'capture'}; run again to resume)") from None
