@@ -1,0 +1,86 @@
+"""ThinTact decoders plugin: ``thintact-noniterative``, ``t2s-iterative`` and ``flatcam``.
+
+Every factory is ``factory(profile, settings) -> Decoder``. The calibration bundle comes from
+``settings["bundle"]`` / ``settings["calibration"]`` / ``profile.decoder.calibration`` or, for
+virtual profiles, the newest bundle under ``calibrations/<profile.name>/``.
+
+Common settings: ``tau`` (overrides the bundle's), ``backend`` (``"numpy"`` default or
+``"torch"``), ``dtype`` (``"float32"``), ``device`` (torch), ``gemm_dtype`` (torch:
+``"bfloat16"`` for speed). ``thintact-noniterative`` also takes ``fold`` and ``max_rank``;
+``t2s-iterative`` takes ``iterations`` (800).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import thintact_sdk
+from thintact_decoders.backend import ArrayBackend
+from thintact_decoders.flatcam import FlatCamDecoder
+from thintact_decoders.iterative import T2SIterativeDecoder
+from thintact_decoders.loading import resolve_bundle
+from thintact_decoders.noniterative import NonIterativeDecoder
+from thintact_sdk.errors import CalibrationError
+from thintact_sdk.profile import Profile
+
+__all__ = ["ArrayBackend", "FlatCamDecoder", "NonIterativeDecoder", "T2SIterativeDecoder"]
+
+
+def _backend(settings: dict[str, Any]) -> ArrayBackend:
+    try:
+        return ArrayBackend(
+            str(settings.get("backend", "numpy")),
+            dtype=str(settings.get("dtype", "float32")),
+            device=settings.get("device"),
+            gemm_dtype=settings.get("gemm_dtype"),
+        )
+    except ValueError as err:
+        raise CalibrationError(f"decoder settings: {err}") from None
+
+
+def _tau(bundle_tau: float, settings: dict[str, Any], profile: Profile) -> float:
+    if "tau" in settings:
+        return float(settings["tau"])
+    if bundle_tau > 0:
+        return bundle_tau
+    if profile.decoder is not None and "tau" in profile.decoder.settings:
+        return float(profile.decoder.settings["tau"])
+    raise CalibrationError("no Tikhonov tau: the bundle has none; pass settings={'tau': ...}")
+
+
+def make_noniterative(profile: Profile, settings: dict[str, Any]) -> NonIterativeDecoder:
+    """Build the joint-filter decoder for ``profile``."""
+    bundle = resolve_bundle(profile, settings)
+    if bundle.filter is None:
+        raise CalibrationError(f"calibration {bundle.path} has no filter.npz: the non-iterative decoder needs one")
+    return NonIterativeDecoder(
+        bundle.system_matrices, bundle.filter, _tau(bundle.tau, settings, profile), _backend(settings),
+        fold=str(settings.get("fold", "auto")), max_rank=int(settings.get("max_rank", 8)),
+    )
+
+
+def make_iterative(profile: Profile, settings: dict[str, Any]) -> T2SIterativeDecoder:
+    """Build the iterative T2S (Nesterov) decoder for ``profile``."""
+    bundle = resolve_bundle(profile, settings)
+    return T2SIterativeDecoder(
+        bundle.system_matrices, _tau(bundle.tau, settings, profile),
+        iterations=int(settings.get("iterations", 800)), backend=_backend(settings),
+    )
+
+
+def make_flatcam(profile: Profile, settings: dict[str, Any]) -> FlatCamDecoder:
+    """Build the FlatCam closed-form decoder for ``profile``."""
+    bundle = resolve_bundle(profile, settings)
+    return FlatCamDecoder(bundle.system_matrices, _tau(bundle.tau, settings, profile), _backend(settings))
+
+
+@thintact_sdk.hookimpl
+def thintact_decoders() -> list[thintact_sdk.Component]:
+    return [
+        thintact_sdk.Component("thintact-noniterative", make_noniterative,
+                               "ThinTact joint DCT filter + closed-form Tikhonov (real time)"),
+        thintact_sdk.Component("t2s-iterative", make_iterative,
+                               "full T2S Tikhonov by Nesterov gradient, 800 iterations (baseline)"),
+        thintact_sdk.Component("flatcam", make_flatcam,
+                               "FlatCam closed form, coding term only after mean removal (baseline)"),
+    ]

@@ -1,0 +1,126 @@
+"""A tiny array-namespace shim so every algorithm is written once for numpy and torch.
+
+Algorithms use only ``@``, ``*``, ``+``, ``-``, ``/``, ``reshape`` and the methods below.
+``ArrayBackend("numpy")`` runs on numpy/OpenBLAS; ``ArrayBackend("torch")`` on torch tensors
+(CUDA when present unless ``device`` says otherwise). ``gemm_dtype`` may be ``"bfloat16"``
+(torch only) for the large products, trading a measured amount of accuracy for speed.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+_NP_DTYPES = {"float32": np.float32, "float64": np.float64}
+
+
+class ArrayBackend:
+    """Array operations on one backend.
+
+    Parameters
+    ----------
+    name
+        ``"numpy"`` or ``"torch"``.
+    dtype
+        Working precision, ``"float32"`` or ``"float64"``.
+    device
+        torch device (``"cpu"``, ``"cuda"``); default CUDA when available.
+    gemm_dtype
+        Precision of the big matrix products (default ``dtype``; torch also ``"bfloat16"``).
+    """
+
+    def __init__(
+        self,
+        name: str = "numpy",
+        dtype: str = "float32",
+        device: str | None = None,
+        gemm_dtype: str | None = None,
+    ) -> None:
+        if name not in ("numpy", "torch"):
+            raise ValueError(f"backend must be 'numpy' or 'torch', got {name!r}")
+        if dtype not in _NP_DTYPES:
+            raise ValueError(f"dtype must be float32 or float64, got {dtype!r}")
+        gemm_dtype = gemm_dtype or dtype
+        if gemm_dtype == "bfloat16" and name != "torch":
+            raise ValueError("gemm_dtype bfloat16 needs the torch backend")
+        self.name = name
+        self.dtype_name = dtype
+        self.gemm_dtype_name = gemm_dtype
+        if name == "torch":
+            import torch
+
+            self._torch = torch
+            self.device = device or ("cuda" if torch.cuda.is_available() else "cpu")
+            self.dtype: Any = getattr(torch, dtype)
+            self.gemm_dtype: Any = getattr(torch, gemm_dtype)
+        else:
+            self.device = "cpu"
+            self.dtype = _NP_DTYPES[dtype]
+            self.gemm_dtype = _NP_DTYPES[gemm_dtype]
+
+    def __repr__(self) -> str:
+        return f"ArrayBackend({self.name!r}, {self.dtype_name}, gemm={self.gemm_dtype_name}, {self.device})"
+
+    def asarray(self, a: np.ndarray, gemm: bool = False) -> Any:
+        """Convert a numpy array to this backend (working or GEMM precision), contiguous."""
+        dt = self.gemm_dtype if gemm else self.dtype
+        if self.name == "numpy":
+            return np.ascontiguousarray(a, dtype=dt)
+        t = self._torch.from_numpy(np.ascontiguousarray(a))
+        return t.to(device=self.device, dtype=dt).contiguous()
+
+    def to_numpy(self, a: Any) -> np.ndarray:
+        """Back to a numpy array (float32/64 as computed)."""
+        if self.name == "numpy":
+            return np.asarray(a)
+        return a.detach().to("cpu", dtype=self._torch.float32 if a.dtype == self._torch.bfloat16 else a.dtype).numpy()
+
+    def cast(self, a: Any, gemm: bool) -> Any:
+        """Cast an array of this backend to the working or GEMM precision (no copy if equal)."""
+        dt = self.gemm_dtype if gemm else self.dtype
+        if self.name == "numpy":
+            return a.astype(dt, copy=False)
+        return a.to(dt)
+
+    def swap(self, a: Any) -> Any:
+        """Transpose the last two axes."""
+        return a.swapaxes(-1, -2)
+
+    def permute(self, a: Any, axes: tuple[int, ...]) -> Any:
+        """Reorder axes."""
+        return a.transpose(axes) if self.name == "numpy" else a.permute(*axes)
+
+    def contiguous(self, a: Any) -> Any:
+        """A C-contiguous version."""
+        return np.ascontiguousarray(a) if self.name == "numpy" else a.contiguous()
+
+    def zeros_like(self, a: Any) -> Any:
+        """Zeros of the same shape and type."""
+        return np.zeros_like(a) if self.name == "numpy" else self._torch.zeros_like(a)
+
+    def sum_axis(self, a: Any, axis: int) -> Any:
+        """Sum over one axis."""
+        return a.sum(axis=axis) if self.name == "numpy" else a.sum(dim=axis)
+
+    def sum_squares(self, a: Any) -> float:
+        """``Σ a²`` as a Python float."""
+        return float((a * a).sum())
+
+    def channels_first(self, image: np.ndarray, gemm: bool = False) -> Any:
+        """``R × S × C`` numpy image (any real dtype, e.g. uint16 DN) → ``C × R × S`` on this backend.
+
+        One pass that converts and de-interleaves (numpy ``copyto`` into a channel-first buffer).
+        """
+        c = image.shape[-1]
+        buf = np.empty((c, *image.shape[:-1]), np.float32 if self.name == "torch" else self.gemm_dtype
+                       if gemm else self.dtype)
+        np.copyto(buf, np.moveaxis(image, -1, 0), casting="unsafe")
+        if self.name == "numpy":
+            return buf
+        t = self._torch.from_numpy(buf).to(self.device)
+        return t.to(self.gemm_dtype if gemm else self.dtype)
+
+    def channels_last(self, a: Any) -> np.ndarray:
+        """``C × N × M`` on this backend → ``N × M × C`` float32 numpy."""
+        return np.ascontiguousarray(np.moveaxis(self.to_numpy(a), 0, -1), dtype=np.float32)

@@ -1,0 +1,67 @@
+"""Where a decoder's calibration comes from (settings, profile, or the newest virtual bundle)."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+from thintact_sdk.errors import CalibrationError
+from thintact_sdk.imaging.calibration_bundle import CalibrationBundle, find_latest
+from thintact_sdk.profile import Profile
+
+REPO_CALIBRATIONS = Path(__file__).resolve().parents[3] / "calibrations"
+
+
+def calibration_roots() -> list[Path]:
+    """Directories searched for ``<profile>/<timestamp>/`` bundles: ``THINTACT_CALIBRATION_PATH``,
+    ``./calibrations`` and the SDK checkout's ``calibrations/``."""
+    env = [Path(d) for d in os.environ.get("THINTACT_CALIBRATION_PATH", "").split(os.pathsep) if d]
+    import thintact_sdk
+
+    sdk_repo = Path(thintact_sdk.__file__).resolve().parents[1] / "calibrations"
+    roots = env + [Path.cwd() / "calibrations", sdk_repo, REPO_CALIBRATIONS]
+    seen: list[Path] = []
+    for r in roots:
+        if r not in seen:
+            seen.append(r)
+    return seen
+
+
+def resolve_bundle(profile: Profile, settings: dict[str, Any]) -> CalibrationBundle:
+    """The calibration bundle a decoder should use.
+
+    Order: ``settings["bundle"]`` (a :class:`CalibrationBundle` object), ``settings["calibration"]``
+    (a directory), ``profile.decoder.calibration`` (resolved against the profile file), and, for
+    a profile whose camera is ``virtual``, the newest bundle under ``calibrations/<profile.name>/``.
+    """
+    obj = settings.get("bundle")
+    if obj is not None:
+        if not isinstance(obj, CalibrationBundle):
+            raise CalibrationError(f"settings['bundle'] must be a CalibrationBundle, got {type(obj).__name__}")
+        bundle = obj
+    elif settings.get("calibration"):
+        bundle = CalibrationBundle.load(Path(str(settings["calibration"])).expanduser())
+    elif profile.decoder is not None and profile.decoder.calibration:
+        bundle = CalibrationBundle.load(profile.resolve_path(profile.decoder.calibration))
+    elif profile.camera is not None and profile.camera.plugin == "virtual":
+        for root in calibration_roots():
+            if (root / profile.name).is_dir():
+                try:
+                    bundle = CalibrationBundle.load(find_latest(root / profile.name))
+                    break
+                except CalibrationError:
+                    continue
+        else:
+            raise CalibrationError(
+                f"no calibration bundle for virtual profile {profile.name!r} under "
+                f"{', '.join(str(r) for r in calibration_roots())}; run "
+                f"`python tools/make_virtual_calibration.py {profile.name}`"
+            )
+    else:
+        raise CalibrationError(
+            f"profile {profile.name!r} names no calibration: set decoder.calibration to a bundle "
+            "directory (thintact calibrate writes one) or pass settings={'calibration': DIR}"
+        )
+    bundle.check_shapes(profile)
+    return bundle

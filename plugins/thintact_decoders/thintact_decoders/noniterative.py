@@ -1,0 +1,213 @@
+"""The ThinTact non-iterative decoder (paper §B): joint filter, subtraction, closed-form Tikhonov.
+
+``Yc = Y − Φs ⊙ IDCT(Φf ⊙ DCT(Y))``, then per channel
+``X̂ = V_P [(Σ_P U_Pᵀ Yc U_Q Σ_Q) ./ (σ_P σ_Qᵀ + τ)] V_Qᵀ``.
+
+Fast path (exact when the filter has that structure, which ``train_joint_filter`` can impose):
+when Φf is zero outside its lowest ``kr × ks`` DCT frequencies and ``Φs = Σ_j u_j v_jᵀ`` has a
+small rank r, the filter folds into the Tikhonov products::
+
+    Σ_P U_Pᵀ Yc U_Q Σ_Q = L Y Rt − Σ_j L_j [Φf_k ⊙ (D_k Y E_kᵀ)] R_j
+
+with ``L = Σ_P U_Pᵀ``, ``Rt = U_Q Σ_Q``, ``D_k``/``E_k`` the first kr/ks rows of the DCT
+matrices, ``L_j = L diag(u_j) D_kᵀ`` and ``R_j = E_k diag(v_j) Rt``. ``[L; D_k] Y`` is one
+product, so a frame costs one big GEMM, one medium GEMM and small ones, all channels batched.
+The black level folds in as a precomputed constant, so raw DN go straight in.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from thintact_decoders.backend import ArrayBackend
+from thintact_sdk.imaging.dct import dct2, dct_matrix, idct2
+from thintact_sdk.imaging.recon_filter import JointFilter
+from thintact_sdk.imaging.t2s import SystemMatrices
+from thintact_sdk.imaging.tikhonov import TikhonovSolver
+from thintact_sdk.interfaces import Decoder
+
+
+def filter_structure(jf: JointFilter, tol: float = 1e-6) -> tuple[int, int, int]:
+    """``(kr, ks, rank)``: the support block of Φf and the numerical rank of Φs (all channels)."""
+    nz = np.abs(jf.phi_f) > 0
+    rows = np.flatnonzero(nz.any(axis=(0, 2)))
+    cols = np.flatnonzero(nz.any(axis=(0, 1)))
+    kr = int(rows[-1]) + 1 if rows.size else 1
+    ks = int(cols[-1]) + 1 if cols.size else 1
+    rank = 0
+    for c in range(jf.channels):
+        s = np.linalg.svd(jf.phi_s[c].astype(np.float64), compute_uv=False)
+        rank = max(rank, int(np.sum(s > tol * s[0])) if s[0] > 0 else 0)
+    return kr, ks, max(rank, 1)
+
+
+class NonIterativeDecoder(Decoder):
+    """Joint-filter + closed-form decoder.
+
+    Parameters
+    ----------
+    system_matrices
+        T2S matrices (DN per display unit); only ``Pc``, ``Qc`` are used at run time.
+    joint_filter
+        Trained Φf, Φs; ``None`` skips the filter (``Yc = Y``).
+    tau
+        Tikhonov weight τ (DN² units of the matrices).
+    backend
+        :class:`ArrayBackend` (default numpy float32).
+    fold
+        ``"auto"``: fold the filter when its structure allows it exactly (``kr·ks`` ≤ a quarter of
+        ``R·S`` and rank(Φs) ≤ ``max_rank``), else apply it with DCTs. ``"never"``: always DCTs.
+        ``"approx"``: fold after truncating Φs to ``max_rank`` and Φf to ``block`` (an
+        approximation whose cost must be measured).
+    max_rank, block
+        Limits for folding (``block`` = ``(kr, ks)``, only for ``"approx"``).
+    """
+
+    name = "thintact-noniterative"
+
+    def __init__(
+        self,
+        system_matrices: SystemMatrices,
+        joint_filter: JointFilter | None,
+        tau: float,
+        backend: ArrayBackend | None = None,
+        fold: str = "auto",
+        max_rank: int = 8,
+        block: tuple[int, int] | None = None,
+    ) -> None:
+        if fold not in ("auto", "never", "approx"):
+            raise ValueError(f"fold must be 'auto', 'never' or 'approx', got {fold!r}")
+        self.xp = backend or ArrayBackend("numpy")
+        self.tau = float(tau)
+        sm = system_matrices
+        self.channels = sm.channels
+        self.sensor_shape = sm.sensor_shape
+        self.scene_shape = sm.scene_shape
+        solvers = [TikhonovSolver(sm.Pc[c], sm.Qc[c], self.tau, np.float64) for c in range(sm.channels)]
+        left = np.stack([s.left for s in solvers])  # C × kP × R
+        right = np.stack([s.right for s in solvers])  # C × S × kQ
+        self.k_p = left.shape[1]
+        self.folded = False
+        self.filter_info: dict[str, Any] = {"filter": joint_filter is not None}
+        self._jf = joint_filter
+        big_left = left
+        if joint_filter is not None:
+            kr, ks, rank = filter_structure(joint_filter)
+            r, s = self.sensor_shape
+            foldable = kr * ks <= (r * s) // 4 and rank <= max_rank
+            if fold == "approx":
+                kr, ks = block or (kr, ks)
+                rank = min(rank, max_rank)
+                foldable = True
+            self.filter_info.update(kr=kr, ks=ks, phi_s_rank=rank)
+            if fold != "never" and foldable:
+                self.folded = True
+                big_left, self._lcat, self._rcat, self._phif = self._fold(left, right, joint_filter,
+                                                                          kr, ks, rank)
+                self._ek_t = self.xp.asarray(dct_matrix(s)[:ks].T, gemm=True)  # S × ks
+                self.kr, self.rank = kr, rank
+            elif self.xp.name == "torch":
+                self._dr = self.xp.asarray(dct_matrix(r))
+                self._ds = self.xp.asarray(dct_matrix(s))
+                self._pf = self.xp.asarray(joint_filter.phi_f)
+                self._ps = self.xp.asarray(joint_filter.phi_s)
+        self.filter_info["folded"] = self.folded
+        self._big_left = self.xp.asarray(big_left, gemm=True)
+        self._right = self.xp.asarray(right, gemm=True)
+        self._inv_denom = self.xp.asarray(np.stack([s.inv_denom for s in solvers]))
+        self._vp = self.xp.asarray(np.stack([s.vp for s in solvers]))
+        self._vqt = self.xp.asarray(np.stack([s.vqt for s in solvers]))
+        self._unit_core: Any = None
+
+    # -- precomputation ----------------------------------------------------------------
+    def _fold(
+        self, left: np.ndarray, right: np.ndarray, jf: JointFilter, kr: int, ks: int, rank: int
+    ) -> tuple[np.ndarray, Any, Any, Any]:
+        r, s = self.sensor_shape
+        dk = dct_matrix(r)[:kr]  # kr × R
+        ek = dct_matrix(s)[:ks]  # ks × S
+        lcats, rcats = [], []
+        for c in range(self.channels):
+            u, sv, vt = np.linalg.svd(jf.phi_s[c].astype(np.float64), full_matrices=False)
+            ls, rs = [], []
+            for j in range(rank):
+                uj = u[:, j] * sv[j]
+                ls.append((left[c] * uj[None, :]) @ dk.T)  # kP × kr
+                rs.append((ek * vt[j][None, :]) @ right[c])  # ks × kQ
+            lcats.append(np.concatenate(ls, axis=1))  # kP × (rank·kr)
+            rcats.append(np.concatenate(rs, axis=1))  # ks × (rank·kQ)
+        big_left = np.concatenate([left, np.broadcast_to(dk, (self.channels, kr, r))], axis=1)
+        phif = jf.phi_f[:, :kr, :ks].astype(np.float64)
+        return (big_left, self.xp.asarray(np.stack(lcats)), self.xp.asarray(np.stack(rcats)),
+                self.xp.asarray(phif))
+
+    # -- the per-frame work ------------------------------------------------------------
+    def _core(self, y: Any) -> Any:
+        """``Σ_P U_Pᵀ Yc U_Q Σ_Q`` for channel-first ``y`` (``C × R × S``, GEMM precision)."""
+        xp = self.xp
+        t = self._big_left @ y  # C × (kP [+ kr]) × S
+        core = xp.cast(t[:, : self.k_p] @ self._right, gemm=False)  # C × kP × kQ
+        if self.folded:
+            z = xp.cast(t[:, self.k_p :] @ self._ek_t, gemm=False)  # C × kr × ks
+            w = self._phif * z
+            tw = w @ self._rcat  # C × kr × (rank·kQ)
+            c, kr, _ = tw.shape
+            k_q = core.shape[-1]
+            stacked = xp.contiguous(xp.permute(tw.reshape(c, kr, self.rank, k_q), (0, 2, 1, 3)))
+            core = core - self._lcat @ stacked.reshape(c, self.rank * kr, k_q)
+        return core
+
+    def _filter_unfolded(self, y_np: np.ndarray) -> np.ndarray:
+        assert self._jf is not None
+        return y_np - self._jf.phi_s * idct2(self._jf.phi_f * dct2(y_np, workers=-1), workers=-1)
+
+    def _solve(self, y_cf: Any, black_dn: float = 0.0) -> np.ndarray:
+        xp = self.xp
+        if self._jf is not None and not self.folded:
+            if xp.name == "numpy":
+                y_cf = xp.asarray(self._filter_unfolded(np.asarray(y_cf, np.float64)), gemm=True)
+            else:
+                y32 = xp.cast(y_cf, gemm=False)
+                f = self._ps * (xp.swap(self._dr) @ (self._pf * (self._dr @ y32 @ xp.swap(self._ds))) @ self._ds)
+                y_cf = xp.cast(y32 - f, gemm=True)
+        core = self._core(y_cf)
+        if black_dn:
+            core = core - black_dn * self._black_core()
+        core = core * self._inv_denom
+        return xp.channels_last(self._vp @ core @ self._vqt)
+
+    def _black_core(self) -> Any:
+        if self._unit_core is None:
+            ones = np.ones((self.channels, *self.sensor_shape), np.float32)
+            xp = self.xp
+            y = xp.asarray(ones, gemm=True)
+            if self._jf is not None and not self.folded:
+                if xp.name == "numpy":
+                    y = xp.asarray(self._filter_unfolded(ones.astype(np.float64)), gemm=True)
+                else:
+                    f = self._ps * (xp.swap(self._dr) @ (self._pf * (self._dr @ xp.cast(y, False)
+                                                                    @ xp.swap(self._ds))) @ self._ds)
+                    y = xp.cast(xp.cast(y, False) - f, gemm=True)
+            self._unit_core = self._core(y)
+        return self._unit_core
+
+    def _check(self, signal: np.ndarray) -> None:
+        want = (*self.sensor_shape, self.channels)
+        if signal.shape != want:
+            raise ValueError(f"measurement must be {want[0]}×{want[1]}×{want[2]}, got {signal.shape}")
+
+    def decode(self, signal: np.ndarray) -> np.ndarray:
+        """Reconstruct ``N × M × C`` float32 (display units) from ``R × S × C`` DN above black."""
+        self._check(signal)
+        return self._solve(self.xp.channels_first(signal, gemm=True))
+
+    def decode_raw(self, raw: np.ndarray, black_level_dn: float) -> np.ndarray:
+        """Reconstruct from raw binned DN (``R × S × C``, e.g. uint16, black level included).
+
+        The black level is removed as a precomputed constant in the solve, so the only per-pixel
+        work before the products is one conversion to floating point.
+        """
+        self._check(raw)
+        return self._solve(self.xp.channels_first(raw, gemm=True), float(black_level_dn))
