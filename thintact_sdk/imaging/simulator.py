@@ -365,6 +365,12 @@ class Simulator(ImagingModel):
         out = self._dn_stage(y * g)
         return out[0] if single else out
 
+    def signal_dn_from_linear(self, linear: np.ndarray, gain_dn_per_unit: Any) -> np.ndarray:
+        """Stages 4-5 on a linear signal from :meth:`linear_batch` (``F × R × S × C``):
+        ``gain · linear`` then the DN effects; DN above black."""
+        g = np.broadcast_to(np.asarray(gain_dn_per_unit, float), (self.n_channels,))
+        return self._dn_stage(np.asarray(linear, float) * g)
+
     def predict_dn(self, scenes: np.ndarray, gain_dn_per_unit: Any) -> np.ndarray:
         """Expected (noiseless) DN, black level included, clipped to ``[0, saturation_dn]``."""
         nz = self.profile.noise

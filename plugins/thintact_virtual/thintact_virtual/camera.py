@@ -1,0 +1,203 @@
+"""The virtual camera: simulated ThinTact frames as a Bayer ``RGGB`` mosaic.
+
+Settings (``profile.camera.settings`` merged with the factory's ``settings``):
+
+``scenes``          library name of :data:`thintact_sdk.imaging.scenes.LIBRARY` or a list of
+                    names (default ``"gelsight"``); frame k shows ``names[k % len]`` with
+                    index ``k // len`` (GelSight press / random seed).
+``slot``            scene-slot key (default the profile's name); a scene set there overrides
+                    the library.
+``fps``             frame rate the reads are paced to; 0 = as fast as possible.
+``seed``            noise seed (default 0).
+``noise``           add Poisson + read noise (default true); else the expected DN, rounded.
+``white_level_dn``  DN above black of the brightest all-white pixel at 10 000 us
+                    (default 0.6·(saturation - black)).
+``exposure_us``     exposure (default 10 000 us); the signal scales linearly with it.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import OrderedDict
+from typing import Any
+
+import numpy as np
+
+from thintact_sdk.bayer import mosaic_from_rgb
+from thintact_sdk.errors import DeviceError, ThinTactError, UnsupportedFeatureError
+from thintact_sdk.frames import RawFrame
+from thintact_sdk.imaging.noise import signal_to_dn
+from thintact_sdk.imaging.scenes import LIBRARY, make_scene
+from thintact_sdk.imaging.simulator import Simulator
+from thintact_sdk.interfaces import Camera, CameraCapabilities, Range
+from thintact_sdk.profile import Profile
+from thintact_virtual.bench import REFERENCE_EXPOSURE_US, get_scene_slot, white_level_dn
+
+EXPOSURE_RANGE_US = Range(10.0, 1_000_000.0, "us")
+
+
+class VirtualCamera(Camera):
+    """A camera whose frames are the simulator's images of a scene (see module docstring)."""
+
+    name = "virtual"
+
+    def __init__(self, profile: Profile, settings: dict[str, Any] | None = None) -> None:
+        base = dict(profile.camera.settings) if profile.camera is not None else {}
+        base.update(settings or {})
+        self.profile = profile
+        self.settings = base
+        names = base.get("scenes", "gelsight")
+        self.scene_names: list[str] = [names] if isinstance(names, str) else list(names)
+        for n in self.scene_names:
+            if n not in LIBRARY:
+                raise ThinTactError(
+                    f"virtual camera: unknown scene {n!r}; library scenes: {', '.join(LIBRARY)}"
+                )
+        if not self.scene_names:
+            raise ThinTactError("virtual camera: 'scenes' is an empty list")
+        self.fps = float(base.get("fps", 0.0) or 0.0)
+        if self.fps < 0:
+            raise ThinTactError("virtual camera: fps must be >= 0")
+        self.noise = bool(base.get("noise", True))
+        self.seed = int(base.get("seed", 0) or 0)
+        self.slot_key = str(base.get("slot", profile.name))
+        self._exposure_us = float(base.get("exposure_us", REFERENCE_EXPOSURE_US))
+        self._check_exposure(self._exposure_us)
+        self._white_dn = white_level_dn(profile, base)
+        self._sim: Simulator | None = None
+        self._gain = 0.0
+        self._rng = np.random.default_rng(self.seed)
+        self._frame_id = 0
+        self._library_index = 0
+        self._next_due_ns = 0
+        self._linear_cache: OrderedDict[Any, np.ndarray] = OrderedDict()
+        self._scenes: dict[Any, np.ndarray] = {}
+        self._is_open = False
+        self._level: float | None = None
+        nz = profile.noise
+        self.pixel_format = "BayerRG12" if nz.saturation_dn <= 4095 else "BayerRG16"
+
+    @staticmethod
+    def _check_exposure(exposure_us: float) -> None:
+        if not EXPOSURE_RANGE_US.min <= exposure_us <= EXPOSURE_RANGE_US.max:
+            raise ThinTactError(
+                f"virtual camera: exposure {exposure_us} us outside "
+                f"{EXPOSURE_RANGE_US.min}..{EXPOSURE_RANGE_US.max} us"
+            )
+
+    # -- Camera API -----------------------------------------------------------------------
+    def open(self) -> None:
+        if self._is_open:
+            return
+        self._sim = Simulator(self.profile)
+        self._gain = self._sim.reference_gain(self._white_dn)
+        self._level = self._sim.physics.get("saturation", {}).get("level_dn")
+        self._next_due_ns = time.monotonic_ns()
+        self._is_open = True
+
+    def close(self) -> None:
+        self._is_open = False
+
+    def capabilities(self) -> CameraCapabilities:
+        return CameraCapabilities(
+            width=2 * self.profile.sensor.cols,
+            height=2 * self.profile.sensor.rows,
+            pixel_formats=[self.pixel_format],
+            pixel_format=self.pixel_format,
+            fps=self.fps or None,
+            fps_range=Range(0.0, 1000.0, "Hz"),
+            exposure_range_us=EXPOSURE_RANGE_US,
+            gain_range_db=None,
+            missing=[],
+        )
+
+    def set_exposure_us(self, exposure_us: float) -> None:
+        """Set the exposure (us); the signal scales linearly with it."""
+        self._check_exposure(float(exposure_us))
+        self._exposure_us = float(exposure_us)
+
+    def set_gain_db(self, gain_db: float) -> None:
+        raise UnsupportedFeatureError("virtual camera: gain control not supported")
+
+    @property
+    def exposure_us(self) -> float:
+        return self._exposure_us
+
+    @property
+    def gain_dn_per_unit(self) -> float:
+        """DN per simulator unit at the current exposure."""
+        return self._gain * self._exposure_us / REFERENCE_EXPOSURE_US
+
+    def read(self, timeout_s: float = 2.0) -> RawFrame:
+        """Render the next frame (paced to ``fps``)."""
+        if not self._is_open or self._sim is None:
+            raise DeviceError("virtual camera: read() before open()")
+        if self.fps > 0:
+            now = time.monotonic_ns()
+            wait_s = (self._next_due_ns - now) / 1e9
+            if wait_s > timeout_s:
+                from thintact_sdk.errors import DeviceTimeoutError
+
+                raise DeviceTimeoutError("virtual camera: next frame not due within the timeout")
+            if wait_s > 0:
+                time.sleep(wait_s)
+            self._next_due_ns = max(self._next_due_ns, now) + int(1e9 / self.fps)
+        scene, key = self._current_scene()
+        signal = self._sim.signal_dn_from_linear(self._linear(scene, key)[None],
+                                                 self.gain_dn_per_unit)[0]
+        rng = self._rng if self.noise else None
+        dn = signal_to_dn(signal, self.profile.noise, rng, saturation_dn=self._level)
+        dn16 = np.round(dn).astype(np.uint16)
+        frame = RawFrame(
+            data=mosaic_from_rgb(dn16, "RGGB"),
+            timestamp_ns=time.monotonic_ns(),
+            frame_id=self._frame_id,
+            pixel_format=self.pixel_format,
+            exposure_us=self._exposure_us,
+            gain_db=None,
+            meta={"scene": scene, "scene_source": "slot" if key[0] == "slot" else
+                  f"{key[0]}:{key[1]}"},
+        )
+        self._frame_id += 1
+        return frame
+
+    # -- rendering ------------------------------------------------------------------------
+    def _current_scene(self) -> tuple[np.ndarray, tuple[Any, ...]]:
+        version, slot_scene = get_scene_slot(self.slot_key).snapshot()
+        if slot_scene is not None:
+            return slot_scene, ("slot", self.slot_key, version)
+        k = self._library_index
+        self._library_index += 1
+        name = self.scene_names[k % len(self.scene_names)]
+        index = k // len(self.scene_names)
+        if name == "gelsight":
+            from thintact_sdk.imaging.scenes import gelsight_count
+
+            index %= gelsight_count()
+        elif name != "random":
+            index = 0
+        key = (name, index)
+        if key not in self._scenes:
+            self._scenes[key] = make_scene(name, self.profile.scene.rows,
+                                           self.profile.scene.cols, index)
+        return self._scenes[key], key
+
+    def _linear(self, scene: np.ndarray, key: tuple[Any, ...]) -> np.ndarray:
+        """Linear signal (simulator units, ``R × S × 3``), cached per scene."""
+        if key in self._linear_cache:
+            self._linear_cache.move_to_end(key)
+            return self._linear_cache[key]
+        assert self._sim is not None
+        x = np.asarray(scene, dtype=float)
+        if x.shape != (self.profile.scene.rows, self.profile.scene.cols, 3):
+            raise ThinTactError(
+                f"virtual camera: scene shape {x.shape} does not match the profile's "
+                f"{self.profile.scene.rows}×{self.profile.scene.cols}×3"
+            )
+        lin = self._sim.linear_batch(x[None])[0]
+        self._linear_cache[key] = lin
+        limit = max(2, int(256e6 // max(lin.nbytes, 1)))
+        while len(self._linear_cache) > limit:
+            old, _ = self._linear_cache.popitem(last=False)
+            self._scenes.pop(old, None)
+        return lin
