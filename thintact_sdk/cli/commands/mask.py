@@ -1,0 +1,217 @@
+"""``thintact mask ...``: design, optimise (GA), show, compare and apply mask patterns.
+
+The designs come from the ``mask`` plugins (``thintact-masks``: ``mls``, ``random``, ``ga``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from typing import Any
+
+from thintact_sdk.errors import PluginError, ThinTactError
+
+
+def _plugin() -> Any:
+    try:
+        import thintact_masks
+    except ImportError:
+        raise PluginError("mask commands need the thintact-masks plugin: "
+                          "pip install -e plugins/thintact_masks") from None
+    return thintact_masks
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("mask", help="design, optimise (GA), show and compare mask patterns")
+    msub = p.add_subparsers(dest="mask_command", metavar="ACTION", required=True)
+
+    o = msub.add_parser("optimize", help="optimise phi for a device with the paper's GA",
+                        description="Genetic-algorithm mask optimisation (paper III-C). Writes "
+                        "DIR/checkpoint.npz every generation; re-running with the same DIR and "
+                        "settings resumes. Writes DIR/design.json and DIR/fitness.png.")
+    o.add_argument("--profile", required=True, help="device profile name or file")
+    o.add_argument("--out", required=True, metavar="DIR", help="output and checkpoint directory")
+    o.add_argument("--population", type=int, default=200, help="individuals (paper 200)")
+    o.add_argument("--generations", type=int, default=2000, help="generations (paper 2000)")
+    o.add_argument("--K", type=int, default=None, help="mask length (default: the profile's)")
+    o.add_argument("--seed", type=int, default=0)
+    o.add_argument("--scale", type=float, default=1.0,
+                   help="optimise on a self-similar scaled-down device (0 < scale <= 1)")
+    o.add_argument("--frames", type=int, default=100,
+                   help="frames averaged per simulated measurement (noise; paper 100)")
+    o.add_argument("--noise-free", action="store_true", help="simulate without sensor noise")
+    o.add_argument("--tau", type=float, default=None,
+                   help="Tikhonov weight in relative-irradiance units (default: Wiener value)")
+    o.add_argument("--float32", action="store_true", help="single precision eigen-decompositions")
+    o.add_argument("--no-progress", action="store_true", help="no progress bar")
+    o.set_defaults(func=run_optimize)
+
+    s = msub.add_parser("show", help="render a design's K x K pattern as a PNG")
+    s.add_argument("design", metavar="DESIGN.json")
+    s.add_argument("--out", required=True, metavar="PNG")
+    s.add_argument("--cell-px", type=int, default=1, help="image pixels per mask cell")
+    s.set_defaults(func=run_show)
+
+    c = msub.add_parser("compare", help="white uniformity, PSNR, SSIM and fitness of designs "
+                        "vs the MLS and random baselines on a device")
+    c.add_argument("designs", nargs="*", metavar="DESIGN.json")
+    c.add_argument("--profile", required=True)
+    c.add_argument("--K", type=int, default=None, help="baseline mask length (default: profile's)")
+    c.add_argument("--scale", type=float, default=1.0, help="compare on a scaled-down device")
+    c.add_argument("--frames", type=int, default=100)
+    c.add_argument("--json", action="store_true", help="machine-readable output")
+    c.set_defaults(func=run_compare)
+
+    d = msub.add_parser("design", help="write a design file from the mls or random designer")
+    d.add_argument("--kind", default="mls", help="mask plugin component (mls, random)")
+    d.add_argument("--K", type=int, required=True)
+    d.add_argument("--feature-um", type=float, required=True)
+    d.add_argument("--seed", type=int, default=0)
+    d.add_argument("--out", required=True, metavar="DESIGN.json")
+    d.set_defaults(func=run_design)
+
+    a = msub.add_parser("apply", help="write a copy of a profile that uses a design's phi")
+    a.add_argument("design", metavar="DESIGN.json")
+    a.add_argument("--profile", required=True)
+    a.add_argument("--out", required=True, metavar="PROFILE.yaml")
+    a.set_defaults(func=run_apply)
+
+
+def _fitness_settings(args: argparse.Namespace) -> Any:
+    from thintact_masks.fitness import FitnessSettings
+
+    if args.frames < 1:
+        raise ThinTactError(f"--frames must be >= 1, got {args.frames}")
+    if getattr(args, "tau", None) is not None and not args.tau > 0:
+        raise ThinTactError(f"--tau must be > 0, got {args.tau}")
+    return FitnessSettings(noise=not getattr(args, "noise_free", False),
+                           frames_averaged=args.frames, tau=getattr(args, "tau", None),
+                           dtype="float32" if getattr(args, "float32", False) else "float64")
+
+
+def run_optimize(args: argparse.Namespace) -> int:
+    _plugin()
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeRemainingColumn,
+    )
+    from thintact_masks.ga import GAConfig
+    from thintact_masks.optimize import DESIGN_NAME, PLOT_NAME, optimize_mask
+
+    from thintact_sdk.profile import load_profile
+
+    profile = load_profile(args.profile)
+    if args.K is not None and args.K < 2:
+        raise ThinTactError(f"--K must be at least 2, got {args.K}")
+    config = GAConfig(population=args.population, generations=args.generations, seed=args.seed)
+    config.validate(args.K if args.K is not None else profile.mask.K)
+    settings = _fitness_settings(args)
+    bar = Progress(TextColumn("[bold]GA[/]"), BarColumn(), MofNCompleteColumn(),
+                   TextColumn("best {task.fields[best]:.4f}  mean {task.fields[mean]:.4f}"),
+                   TimeRemainingColumn(), disable=args.no_progress)
+    with bar:
+        task = bar.add_task("ga", total=args.generations, best=float("nan"), mean=float("nan"))
+
+        def progress(state: Any) -> None:
+            bar.update(task, completed=state.generation, best=state.best_history[-1],
+                       mean=state.mean_history[-1])
+
+        _, rec = optimize_mask(profile, config, args.K, settings, args.scale, args.out, progress)
+    out = Path(args.out)
+    base = rec["baselines"]
+    print(f"best fitness {rec['fitness']:.4f} after {len(rec['history']['best']) - 1} generations "
+          f"(MLS {base['mls']['fitness']:.4f}, random {base['random']['fitness']:.4f})")
+    print(f"design: {out / DESIGN_NAME}\nplot:   {out / PLOT_NAME}")
+    return 0
+
+
+def run_show(args: argparse.Namespace) -> int:
+    _plugin()
+    from thintact_masks.design_io import load_design, render_mask_png
+
+    mask, _ = load_design(args.design)
+    path = render_mask_png(mask, args.out, args.cell_px)
+    print(f"{path}: {mask.K}x{mask.K} cells ({mask.design}), open fraction "
+          f"{float(mask.pattern().mean()):.3f}")
+    return 0
+
+
+def run_compare(args: argparse.Namespace) -> int:
+    _plugin()
+    import numpy as np
+    from thintact_masks.compare import score_masks
+    from thintact_masks.design_io import load_design
+    from thintact_masks.devices import scaled_profile
+    from thintact_masks.optimize import baseline_phi
+
+    from thintact_sdk.interfaces import Mask
+    from thintact_sdk.profile import load_profile
+
+    device = scaled_profile(load_profile(args.profile), args.scale)
+    k = args.K if args.K is not None else device.mask.K
+    if k < 2:
+        raise ThinTactError(f"--K must be at least 2, got {k}")
+    masks: dict[str, Mask] = {
+        "mls": Mask(baseline_phi("mls", k), device.mask.feature_um, design="mls"),
+        "random": Mask(baseline_phi("random", k, 1), device.mask.feature_um, design="random"),
+    }
+    for f in args.designs:
+        mask, _ = load_design(f)
+        masks[Path(f).stem if Path(f).stem != "design" else str(Path(f).parent.name)] = mask
+    if args.scale == 1.0:  # a scaled device's own phi is only a placeholder
+        masks.setdefault("profile", Mask(np.asarray(device.mask.phi, np.int8),
+                                         device.mask.feature_um, design=device.mask.design or ""))
+    scores = score_masks(device, masks, _fitness_settings(args))
+    if args.json:
+        print(json.dumps([s.as_dict() for s in scores], indent=1))
+        return 0
+    print(f"device {device.name}: white-scene uniformity (1 - std/mean), PSNR (dB), SSIM, fitness")
+    print(f"{'mask':24s} {'K':>5s} {'uniform':>8s} {'PSNRw':>7s} {'PSNRu':>7s} {'SSIMw':>6s} "
+          f"{'SSIMu':>6s} {'fitness':>9s}")
+    for s in scores:
+        print(f"{s.name:24s} {masks[s.name].K:5d} {s.uniformity_white:8.4f} {s.psnr_white_db:7.2f} "
+              f"{s.psnr_usaf_db:7.2f} {s.ssim_white:6.3f} {s.ssim_usaf:6.3f} {s.fitness:9.3f}")
+    return 0
+
+
+def run_design(args: argparse.Namespace) -> int:
+    _plugin()
+    from thintact_masks.design_io import design_record, write_json_atomic
+
+    from thintact_sdk.plugin_manager import get_registry
+
+    if args.kind == "ga":
+        raise ThinTactError("use 'thintact mask optimize' for GA designs")
+    if args.K < 1 or not args.feature_um > 0:
+        raise ThinTactError("--K must be >= 1 and --feature-um > 0")
+    designer = get_registry().create("mask", args.kind)
+    mask = designer.design(args.K, args.feature_um, seed=args.seed)
+    path = write_json_atomic(args.out, design_record(mask))
+    print(f"{path}: {args.kind} design, K={mask.K}, feature {mask.feature_um} um")
+    return 0
+
+
+def run_apply(args: argparse.Namespace) -> int:
+    _plugin()
+    from thintact_masks.design_io import load_design
+
+    from thintact_sdk.profile import load_profile, profile_from_dict, write_profile
+
+    mask, rec = load_design(args.design)
+    profile = load_profile(args.profile)
+    d = profile.contract_dict()
+    d["mask"] = {**d["mask"], "phi": [int(v) for v in mask.phi], "design": mask.design,
+                 "feature_um": mask.feature_um or profile.mask.feature_um}
+    d["mask"].pop("phi_rows", None)
+    if mask.phi_rows is not None:
+        d["mask"]["phi_rows"] = [int(v) for v in mask.phi_rows]
+    new = profile_from_dict(d, where=args.out)
+    path = write_profile(new, args.out)
+    if rec.get("scale", 1.0) != 1.0:
+        print(f"warning: {args.design} was optimised on a device scaled by {rec['scale']}")
+    print(f"{path}: profile {new.name!r} with the {mask.design} mask (K={mask.K})")
+    return 0
