@@ -138,3 +138,18 @@ def test_record_from_genicam_with_raw_mosaics(tmp_path, capsys):
         for i, raw in enumerate(cam):
             assert raw.pixel_format == "Mono8" and raw.data.shape == (256, 320)
             np.testing.assert_array_equal(to_measurement(raw, p).data, rec.measurement(i))
+
+
+@pytest.mark.skipif(viky_producer() is None, reason="genicam wheel without viky.cti")
+def test_capture_thread_keeps_up_with_the_camera(tmp_path, capsys):
+    prof_path = _profile_file(tmp_path, "viky-fast", {
+        "plugin": "genicam", "bayer_pattern": "RGGB",
+        "settings": {"cti": str(viky_producer()), "Width": 320, "Height": 256,
+                     "PixelFormat": "Mono8", "AcquisitionFrameRate": 100.0}})
+    out = tmp_path / "rec"
+    assert main(["record", "--profile", str(prof_path), "--frames", "50", "--out", str(out),
+                 "--quiet"]) == 0
+    text = capsys.readouterr().out
+    assert "dropped frames: 0" in text, text
+    ids = [f["frame_id"] for f in json.loads((out / "manifest.json").read_text())["frames"]]
+    assert ids == list(range(ids[0], ids[0] + 50))

@@ -16,7 +16,9 @@ the count is printed at the end, and ``--fail-on-drop`` turns any drop into an e
 from __future__ import annotations
 
 import argparse
+import queue
 import sys
+import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -55,6 +57,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="exit with an error if the camera dropped any frame")
     p.add_argument("--no-scenes", action="store_true",
                    help="do not save ground-truth scenes reported by the camera")
+    p.add_argument("--buffer-mb", type=float, default=512.0, metavar="MB",
+                   help="memory for frames waiting to be written (default 512)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
 
@@ -122,8 +126,14 @@ def record(
     append: bool = False,
     scenes: bool = True,
     progress: bool = True,
+    buffer_mb: float = 512.0,
 ) -> RecordSummary:
     """Record ``frames`` frames from the profile's camera into ``out``.
+
+    A capture thread reads the camera into a queue of at most ``buffer_mb`` MiB of frames
+    while this thread bins and writes them, so a burst faster than the disk is absorbed;
+    when the queue is full the capture thread waits and the camera drops frames, which the
+    frame-id gaps then report.
 
     Raises
     ------
@@ -151,12 +161,14 @@ def record(
     stamps: list[int] = []
     t0 = time.monotonic()
     bar = _Progress(frames, enabled=progress)
+    reader: _BufferedReader | None = None
     try:
         camera.open()
+        reader = _BufferedReader(camera, frames, timeout_s, buffer_mb * 2**20)
         with bar:
             for i in range(frames):
                 try:
-                    raw = camera.read(timeout_s=timeout_s)
+                    raw = reader.next()
                 except EndOfStreamError as err:
                     summary.ended_early = str(err)
                     break
@@ -178,16 +190,103 @@ def record(
                 )
                 stamps.append(raw.timestamp_ns)
                 summary.frames += 1
-                bar.advance(summary.frames, time.monotonic() - t0, gaps.dropped)
+                bar.advance(summary.frames, time.monotonic() - t0, gaps.dropped, reader.buffered)
     except DeviceError as err:
         raise type(err)(f"{err} ({summary.frames} frame(s) were saved in {out})") from None
     finally:
+        if reader is not None:
+            reader.stop()
         camera.close()
     summary.elapsed_s = time.monotonic() - t0
     summary.dropped, summary.gaps = gaps.dropped, list(gaps.gaps)
     if len(stamps) > 1 and stamps[-1] > stamps[0]:
         summary.camera_fps = (len(stamps) - 1) * 1e9 / (stamps[-1] - stamps[0])
     return summary
+
+
+class _BufferedReader:
+    """Reads ``frames`` frames from an opened camera on a thread into a bounded queue.
+
+    The queue holds at most ``buffer_bytes`` of frame data (at least two frames); camera
+    errors travel through the queue and are raised by :meth:`next` in order.
+    """
+
+    def __init__(self, camera: Any, frames: int, timeout_s: float, buffer_bytes: float) -> None:
+        self.camera = camera
+        self.frames = frames
+        self.timeout_s = timeout_s
+        self.buffer_bytes = buffer_bytes
+        self._queue: queue.Queue[tuple[RawFrame | None, BaseException | None]] | None = None
+        self._ready = threading.Event()
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="record-capture", daemon=True)
+        self._first: tuple[RawFrame | None, BaseException | None] | None = None
+        self._thread.start()
+
+    @property
+    def buffered(self) -> int:
+        """Frames read from the camera and not yet taken by :meth:`next`."""
+        return self._queue.qsize() if self._queue is not None else 0
+
+    def _put(self, item: tuple[RawFrame | None, BaseException | None]) -> bool:
+        assert self._queue is not None
+        while not self._stop.is_set():
+            try:
+                self._queue.put(item, timeout=0.1)
+                return True
+            except queue.Full:
+                continue
+        return False
+
+    def _run(self) -> None:
+        try:
+            first = self.camera.read(timeout_s=self.timeout_s)
+        except BaseException as err:  # noqa: BLE001 - handed to the consumer
+            self._first = (None, err)
+            self._ready.set()
+            return
+        slots = max(2, int(self.buffer_bytes // max(first.data.nbytes, 1)))
+        self._queue = queue.Queue(maxsize=slots)
+        self._first = (first, None)
+        self._ready.set()
+        for _ in range(self.frames - 1):
+            if self._stop.is_set():
+                return
+            try:
+                item: tuple[RawFrame | None, BaseException | None] = (
+                    self.camera.read(timeout_s=self.timeout_s), None)
+            except BaseException as err:  # noqa: BLE001
+                item = (None, err)
+            if not self._put(item) or item[1] is not None:
+                return
+
+    def next(self) -> RawFrame:
+        """The next frame, or the camera's error in its place."""
+        if self._first is None or not self._ready.is_set():
+            while not self._ready.wait(0.1):
+                if not self._thread.is_alive() and not self._ready.is_set():
+                    raise DeviceError("the capture thread ended without a frame")
+        if self._first is not None:
+            item, self._first = self._first, None
+        else:
+            assert self._queue is not None
+            while True:
+                try:
+                    item = self._queue.get(timeout=0.1)
+                    break
+                except queue.Empty:
+                    if not self._thread.is_alive() and self._queue.empty():
+                        raise DeviceError("the capture thread ended early") from None
+        raw, err = item
+        if err is not None:
+            raise err
+        assert raw is not None
+        return raw
+
+    def stop(self) -> None:
+        """Stop reading and wait for the thread (bounded by the read timeout)."""
+        self._stop.set()
+        self._thread.join(timeout=self.timeout_s + 1.0)
 
 
 class _Progress:
@@ -205,22 +304,25 @@ class _Progress:
 
             self._progress = Progress(
                 TextColumn("recording"), BarColumn(), MofNCompleteColumn(),
-                TextColumn("{task.fields[fps]:.1f} fps"), TextColumn("{task.fields[drops]}"),
+                TextColumn("{task.fields[fps]:.1f} fps"), TextColumn("{task.fields[queued]}"),
+                TextColumn("{task.fields[drops]}"),
                 transient=False,
             )
             self._progress.__enter__()
-            self._task = self._progress.add_task("record", total=self.total, fps=0.0, drops="")
+            self._task = self._progress.add_task("record", total=self.total, fps=0.0, drops="",
+                                                queued="")
         return self
 
     def __exit__(self, *exc: object) -> None:
         if self._progress is not None:
             self._progress.__exit__(None, None, None)
 
-    def advance(self, done: int, elapsed_s: float, dropped: int) -> None:
+    def advance(self, done: int, elapsed_s: float, dropped: int, queued: int) -> None:
         if self._progress is not None:
             fps = done / elapsed_s if elapsed_s > 0 else 0.0
             self._progress.update(self._task, completed=done, fps=fps,
-                                  drops=f"{dropped} dropped" if dropped else "")
+                                  drops=f"{dropped} dropped" if dropped else "",
+                                  queued=f"{queued} queued" if queued else "")
 
     def note(self, message: str) -> None:
         if self._progress is not None:
@@ -236,6 +338,7 @@ def run(args: argparse.Namespace) -> int:
         profile, args.frames, out,
         keep_raw=args.raw, timeout_s=args.timeout, settings=parse_settings(args.set),
         append=args.append, scenes=not args.no_scenes, progress=not args.quiet,
+        buffer_mb=args.buffer_mb,
     )
     fps = f"{summary.frames / summary.elapsed_s:.1f}" if summary.elapsed_s > 0 else "n/a"
     cam_fps = f"{summary.camera_fps:.1f}" if summary.camera_fps else "n/a"
