@@ -167,3 +167,24 @@ def test_device_lost_then_reconnected():
         assert cam.read().data.shape == (256, 320)
     finally:
         cam.close()
+
+
+def test_vendor_features_are_written_or_reported():
+    prof = _profile(**MONO, features={"BouncingBallSize": 30, "AcquisitionMode": "Continuous",
+                                      "AspectRatio": 2.0, "LaserPower": 3})
+    cam = create_camera(prof)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        cam.open()
+    try:
+        # AcquisitionMode is read-only but already Continuous; AspectRatio is read-only
+        assert cam.capabilities().missing == ["AspectRatio", "LaserPower"]
+        msgs = " | ".join(str(w.message) for w in caught)
+        assert "LaserPower cannot be honoured: the device has no such feature" in msgs
+        assert "AspectRatio cannot be honoured: the device does not allow writing" in msgs
+        nm = cam._node_map()
+        assert nm.BouncingBallSize.value == 30 and nm.AcquisitionMode.value == "Continuous"
+    finally:
+        cam.close()
+    with pytest.raises(DeviceError, match="BouncingBallSize 500 .* outside the device's range"):
+        create_camera(_profile(**MONO, features={"BouncingBallSize": 500})).open()

@@ -140,3 +140,13 @@ def test_bad_settings(tmp_path):
         create_camera(_profile(tmp_path / "nothing")).open()
     with pytest.raises(ProfileError, match="rate"):
         create_camera(_profile(tmp_path, rate="slowly"))
+
+
+def test_capabilities_describe_the_recording(tmp_path):
+    _write(tmp_path / "rec", n=5, period_ns=50_000_000, scenes=False)
+    with create_camera(_profile(tmp_path / "rec", "BGGR")) as cam:
+        caps = cam.capabilities()
+        assert len(cam) == 5
+    assert (caps.width, caps.height, caps.pixel_format) == (320, 256, "BayerBG16")
+    assert caps.fps == pytest.approx(20.0)
+    assert caps.missing == ["ExposureTime", "Gain"]

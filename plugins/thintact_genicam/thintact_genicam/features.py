@@ -93,9 +93,12 @@ def _check_value(feature: str, node: Any, value: Any) -> Any:
         return str(value)
     if isinstance(value, bool):
         return value
-    lo, hi = getattr(node, "min", None), getattr(node, "max", None)
+    try:
+        lo, hi = node.min, node.max
+    except Exception:  # noqa: BLE001 - string/boolean/command nodes have no range
+        return value
     unit = UNITS.get(feature, "")
-    if lo is not None and hi is not None and not lo <= float(value) <= hi:
+    if not lo <= float(value) <= hi:
         raise DeviceError(
             f"{feature} {value} {unit} is outside the device's range {lo}..{hi} {unit}".rstrip()
         )
@@ -132,7 +135,13 @@ def apply_feature(node_map: Any, feature: str, value: Any, report: ApplyReport) 
                 pass
     node = getattr(node_map, name)
     if access_mode(node) not in _WRITABLE:
-        report.missing[feature] = "the device does not allow writing it now"
+        current = read_feature(node_map, feature)
+        if current is not None and _same(current, value):
+            report.applied[feature] = current  # read-only, but already what was asked
+            return True
+        report.missing[feature] = (
+            f"the device does not allow writing it now (it reads {current!r})"
+        )
         return False
     checked = _check_value(feature, node, value)
     try:
@@ -141,6 +150,12 @@ def apply_feature(node_map: Any, feature: str, value: Any, report: ApplyReport) 
         raise DeviceError(f"the device refused {feature} = {value}: {err}") from None
     report.applied[feature] = read_feature(node_map, feature)
     return True
+
+
+def _same(current: Any, wanted: Any) -> bool:
+    if isinstance(current, (int, float)) and isinstance(wanted, (int, float)):
+        return abs(float(current) - float(wanted)) <= 1e-9 * max(1.0, abs(float(wanted)))
+    return str(current) == str(wanted)
 
 
 def read_feature(node_map: Any, feature: str) -> Any:

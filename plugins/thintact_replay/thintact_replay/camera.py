@@ -157,15 +157,15 @@ class ReplayCamera(Camera):
 
     def capabilities(self) -> CameraCapabilities:
         rec = self._recording()
-        raw = self._frame_data(0)[0]
+        raw, pixel_format = self._frame_data(0)
         fps = None
         if len(rec) > 1 and self._times_ns[-1] > 0:
             fps = (len(rec) - 1) * 1e9 / self._times_ns[-1]
         return CameraCapabilities(
             width=int(raw.shape[1]),
             height=int(raw.shape[0]),
-            pixel_formats=[self._frame_data(0)[1]],
-            pixel_format=self._frame_data(0)[1],
+            pixel_formats=[pixel_format],
+            pixel_format=pixel_format,
             fps=fps,
             missing=["ExposureTime", "Gain"],
         )
