@@ -153,3 +153,23 @@ def test_capture_thread_keeps_up_with_the_camera(tmp_path, capsys):
     assert "dropped frames: 0" in text, text
     ids = [f["frame_id"] for f in json.loads((out / "manifest.json").read_text())["frames"]]
     assert ids == list(range(ids[0], ids[0] + 50))
+
+
+def test_record_from_the_virtual_camera_and_replay_it(tmp_path, capsys):
+    from thintact_sdk.plugin_manager import get_registry
+
+    if "virtual" not in get_registry().components("camera"):
+        pytest.skip("virtual camera plugin not installed")
+    out = tmp_path / "rec"
+    assert main(["record", "--profile", "virtual-mini", "--frames", "3", "--out", str(out),
+                 "--set", "fps=0", "--quiet"]) == 0
+    assert "recorded 3 frame(s)" in capsys.readouterr().out
+    rec = Recording(out)
+    for i in range(3):
+        assert rec.measurement(i).dtype == np.uint16  # integral DN → uint16
+        assert rec.scene(i).shape == (50, 64, 3)  # the camera's ground truth kept
+    p = load_profile(_replay_profile(tmp_path, out, name="virtual-replay"))
+    with create_camera(p) as cam:
+        for i, raw in enumerate(cam):
+            np.testing.assert_array_equal(to_measurement(raw, p).data, rec.measurement(i))
+            np.testing.assert_array_equal(raw.meta["scene"], rec.scene(i))
