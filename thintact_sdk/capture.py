@@ -16,6 +16,7 @@ Typical use::
 
 from __future__ import annotations
 
+import re
 import warnings
 from dataclasses import dataclass, field
 from typing import Any
@@ -33,8 +34,10 @@ __all__ = [
     "DroppedFramesWarning",
     "FrameGapCounter",
     "binning_pattern",
+    "bit_depth_problem",
     "create_camera",
     "open_camera",
+    "pixel_format_bits",
     "read_measurement",
     "to_measurement",
 ]
@@ -74,6 +77,32 @@ def binning_pattern(raw: RawFrame, profile: Profile) -> str:
             "layout (RGGB, BGGR, GRBG, GBRG)"
         )
     return declared
+
+
+def pixel_format_bits(pixel_format: str) -> int | None:
+    """Bits per sample named by a GenICam pixel format (``BayerRG12p`` → 12), or None."""
+    digits = re.search(r"(\d+)(?:p|Packed|_?Planar)?f?$", pixel_format)
+    return int(digits.group(1)) if digits else None
+
+
+def bit_depth_problem(pixel_format: str, profile: Profile) -> str | None:
+    """A message when the format cannot reach the profile's ``noise.saturation_dn``.
+
+    E.g. a camera set to ``BayerRG8`` (at most 255 DN) under a profile calibrated for a
+    12-bit sensor (saturation 4095 DN): black level, noise and saturation would all be
+    wrong by a factor of 16. Returns None when the depth is unknown or sufficient.
+    """
+    bits = pixel_format_bits(pixel_format)
+    if bits is None or pixel_format.endswith("f"):
+        return None
+    full_scale = 2**bits - 1
+    if profile.noise.saturation_dn > full_scale:
+        return (
+            f"pixel format {pixel_format} gives at most {full_scale} DN but profile "
+            f"{profile.name!r} has noise.saturation_dn {profile.noise.saturation_dn:g} DN; "
+            "choose a deeper pixel format or a profile for this bit depth"
+        )
+    return None
 
 
 def to_measurement(

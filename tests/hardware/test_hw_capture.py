@@ -11,7 +11,9 @@ from thintact_sdk.bayer import mosaic_from_rgb
 from thintact_sdk.capture import (
     DroppedFramesWarning,
     FrameGapCounter,
+    bit_depth_problem,
     create_camera,
+    pixel_format_bits,
     to_measurement,
 )
 from thintact_sdk.errors import DeviceError, PluginError, ProfileError
@@ -89,3 +91,12 @@ def test_create_camera_errors(profile):
     cam_cfg = profile.camera.model_copy(update={"plugin": "no-such-camera"})
     with pytest.raises(PluginError, match="no-such-camera"):
         create_camera(profile.model_copy(update={"camera": cam_cfg}))
+
+
+def test_bit_depth_check(profile):
+    assert [pixel_format_bits(f) for f in ("BayerRG12", "BayerRG12p", "Mono8", "RGBa8")] == [
+        12, 12, 8, 8]
+    assert pixel_format_bits("Custom") is None
+    assert bit_depth_problem("BayerRG12", profile) is None  # saturation 4095 DN fits 12 bit
+    assert "at most 255 DN" in bit_depth_problem("BayerRG8", profile)
+    assert bit_depth_problem("BayerRG32f", profile) is None

@@ -28,11 +28,15 @@ pytestmark = pytest.mark.skipif(VIKY is None, reason="genicam wheel without viky
 MONO = {"Width": 320, "Height": 256, "PixelFormat": "Mono8", "AcquisitionFrameRate": 100.0}
 
 
-def _profile(pattern="RGGB", **settings):
+def _profile(pattern="RGGB", bits=8, **settings):
+    """virtual-mini geometry; an 8-bit noise model like viky's frames unless ``bits`` says."""
     base = load_profile("virtual-mini")
     cam = {"plugin": "genicam", "bayer_pattern": pattern,
            "settings": {"cti": str(VIKY), **settings}}
-    return base.model_copy(update={"camera": type(base.camera).model_validate(cam)})
+    noise = base.noise.model_copy(update={"black_level_dn": 4.0,
+                                          "saturation_dn": float(2**bits - 1)})
+    return base.model_copy(update={"camera": type(base.camera).model_validate(cam),
+                                   "noise": noise})
 
 
 def test_viky_lists_its_devices():
@@ -42,7 +46,7 @@ def test_viky_lists_its_devices():
 
 
 def test_settings_frames_and_missing_features():
-    prof = _profile(**MONO, ExposureTime=5000.0, gain_db=2.0)
+    prof = _profile(bits=12, **MONO, ExposureTime=5000.0, gain_db=2.0)
     cam = create_camera(prof)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -50,6 +54,8 @@ def test_settings_frames_and_missing_features():
     try:
         msgs = [str(w.message) for w in caught if w.category is GenICamSettingWarning]
         assert any("ExposureTime" in m for m in msgs) and any("Gain" in m for m in msgs)
+        # viky is 8-bit, this profile's noise model saturates at 4095 DN
+        assert any("Mono8 gives at most 255 DN" in m for m in msgs)
         caps = cam.capabilities()
         assert caps.missing == ["ExposureTime", "Gain"]
         assert (caps.width, caps.height, caps.pixel_format) == (320, 256, "Mono8")
@@ -68,7 +74,7 @@ def test_settings_frames_and_missing_features():
         assert f.data.shape == (256, 320) and f.data.dtype == np.uint8
         assert f.pixel_format == "Mono8"
         m = to_measurement(f, prof)
-        assert m.data.shape == (128, 160, 3) and m.black_level_dn == 64.0
+        assert m.data.shape == (128, 160, 3) and m.black_level_dn == 4.0
     assert frames[1].timestamp_ns > frames[0].timestamp_ns
     cam.close()  # twice is fine
 

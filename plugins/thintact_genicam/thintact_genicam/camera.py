@@ -46,7 +46,7 @@ from thintact_genicam.features import (
     read_feature,
 )
 from thintact_genicam.producers import quiet_harvesters, resolve_producer
-from thintact_sdk.capture import FrameGapCounter
+from thintact_sdk.capture import FrameGapCounter, bit_depth_problem
 from thintact_sdk.errors import (
     DeviceError,
     DeviceLostError,
@@ -169,6 +169,10 @@ class GenICamCamera(Camera):
                 raise UnsupportedFeatureError(f"{msg} (settings.strict is on)")
             warnings.warn(msg, GenICamSettingWarning, stacklevel=3)
         self._report = report
+        pixel_format = read_feature(nm, "PixelFormat")
+        depth_problem = bit_depth_problem(str(pixel_format), self.profile) if pixel_format else None
+        if depth_problem:
+            warnings.warn(f"genicam: {depth_problem}", GenICamSettingWarning, stacklevel=3)
         exposure = read_feature(nm, "ExposureTime")
         gain = read_feature(nm, "Gain")
         self._exposure_us = float(exposure) if exposure is not None else None

@@ -27,7 +27,12 @@ from typing import Any
 import numpy as np
 import yaml
 
-from thintact_sdk.capture import FrameGapCounter, create_camera, to_measurement
+from thintact_sdk.capture import (
+    FrameGapCounter,
+    bit_depth_problem,
+    create_camera,
+    to_measurement,
+)
 from thintact_sdk.errors import DeviceError, EndOfStreamError, RecordingError, ThinTactError
 from thintact_sdk.frames import RawFrame
 from thintact_sdk.profile import Profile, load_profile
@@ -177,6 +182,10 @@ def record(
                     bar.note(f"{missing} frame(s) dropped before frame id {raw.frame_id}"
                              + ("; further gaps are counted, not listed"
                                 if len(gaps.gaps) == MAX_GAP_NOTES else ""))
+                if i == 0:
+                    depth_problem = bit_depth_problem(raw.pixel_format, profile)
+                    if depth_problem:
+                        bar.note(depth_problem)
                 meas = to_measurement(raw, profile)
                 extra = _frame_fields(raw, missing)
                 index = first_index + i
