@@ -9,6 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from thintact_masks.blas import blas_threads
 from thintact_masks.fitness import FitnessEvaluator, FitnessSettings
 from thintact_sdk.imaging.direct_generation import direct_system_matrices
 from thintact_sdk.interfaces import Mask
@@ -50,14 +51,15 @@ def score_masks(profile: Profile, masks: dict[str, Mask],
     """Score every mask on ``profile`` (each with its own K; φ_rows is taken as φ)."""
     out = []
     evaluators: dict[int, FitnessEvaluator] = {}
-    for name, mask in masks.items():
-        ev = evaluators.get(mask.K)
-        if ev is None:
-            ev = evaluators[mask.K] = FitnessEvaluator(profile, mask.K, settings)
-        e = ev.evaluate(np.asarray(mask.phi))
-        p = e.parts
-        out.append(MaskScore(name, e.fitness, p["uniformity_white"], p["psnr_white"],
-                             p["psnr_usaf"], p["ssim_white"], p["ssim_usaf"]))
+    with blas_threads(1):
+        for name, mask in masks.items():
+            ev = evaluators.get(mask.K)
+            if ev is None:
+                ev = evaluators[mask.K] = FitnessEvaluator(profile, mask.K, settings)
+            e = ev.evaluate(np.asarray(mask.phi))
+            p = e.parts
+            out.append(MaskScore(name, e.fitness, p["uniformity_white"], p["psnr_white"],
+                                 p["psnr_usaf"], p["ssim_white"], p["ssim_usaf"]))
     return out
 
 

@@ -21,6 +21,7 @@ import json
 import os
 import time
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -167,19 +168,31 @@ FitnessFn = Callable[[np.ndarray], float]
 
 
 def evaluate_population(population: np.ndarray, fitness_fn: FitnessFn,
-                        known: dict[bytes, float] | None = None) -> np.ndarray:
-    """Fitness of every row of ``population``; genes found in ``known`` are not re-evaluated."""
+                        known: dict[bytes, float] | None = None, workers: int = 1) -> np.ndarray:
+    """Fitness of every row of ``population``.
+
+    Genes found in ``known`` (and duplicates) are evaluated once; with ``workers > 1`` the
+    new genes are evaluated concurrently in threads (numpy releases the GIL in LAPACK), the
+    results being the same as a serial evaluation.
+    """
     known = {} if known is None else known
-    out = np.empty(population.shape[0])
-    for n, g in enumerate(population):
+    todo: dict[bytes, np.ndarray] = {}
+    for g in population:
         key = g.tobytes()
-        if key not in known:
-            known[key] = float(fitness_fn(g))
-        out[n] = known[key]
-    return out
+        if key not in known and key not in todo:
+            todo[key] = g
+    if workers > 1 and len(todo) > 1:
+        with ThreadPoolExecutor(max_workers=workers) as pool:
+            values = list(pool.map(fitness_fn, todo.values()))
+    else:
+        values = [fitness_fn(g) for g in todo.values()]
+    for key, value in zip(todo, values, strict=True):
+        known[key] = float(value)
+    return np.array([known[g.tobytes()] for g in population])
 
 
-def initial_state(K: int, config: GAConfig, fitness_fn: FitnessFn) -> GAState:  # noqa: N803
+def initial_state(K: int, config: GAConfig, fitness_fn: FitnessFn,  # noqa: N803
+                  workers: int = 1) -> GAState:
     """Seeded random initial population (plus the MLS baseline), evaluated."""
     config.validate(K)
     rng = np.random.default_rng(config.seed)
@@ -187,12 +200,13 @@ def initial_state(K: int, config: GAConfig, fitness_fn: FitnessFn) -> GAState:  
     if config.include_mls:
         pop[0] = repeat_to_length(mls_sequence(8), K)
     t0 = time.perf_counter()
-    fit = evaluate_population(pop, fitness_fn)
+    fit = evaluate_population(pop, fitness_fn, workers=workers)
     return GAState(0, pop, fit, [float(fit.max())], [float(fit.mean())],
                    rng.bit_generator.state, time.perf_counter() - t0)
 
 
-def next_generation(state: GAState, config: GAConfig, fitness_fn: FitnessFn) -> GAState:
+def next_generation(state: GAState, config: GAConfig, fitness_fn: FitnessFn,
+                    workers: int = 1) -> GAState:
     """One generation: elitism, tournament selection, crossover, mutation, evaluation."""
     rng = np.random.default_rng()
     rng.bit_generator.state = state.rng_state
@@ -210,7 +224,7 @@ def next_generation(state: GAState, config: GAConfig, fitness_fn: FitnessFn) -> 
             children.append(np.array(child, np.int8, copy=True))
     pop = np.stack(children[: config.population])
     known = {g.tobytes(): float(f) for g, f in zip(state.population, state.fitness, strict=True)}
-    fit = evaluate_population(pop, fitness_fn, known)
+    fit = evaluate_population(pop, fitness_fn, known, workers)
     return GAState(state.generation + 1, pop, fit,
                    state.best_history + [float(fit.max())],
                    state.mean_history + [float(fit.mean())],
@@ -261,7 +275,7 @@ ProgressFn = Callable[[GAState], None]
 
 def run_ga(K: int, config: GAConfig, fitness_fn: FitnessFn,  # noqa: N803
            out_dir: str | os.PathLike[str] | None = None, run_key: dict[str, Any] | None = None,
-           progress: ProgressFn | None = None) -> GAState:
+           progress: ProgressFn | None = None, workers: int = 1) -> GAState:
     """Run (or resume) the GA up to ``config.generations`` generations.
 
     Parameters
@@ -280,6 +294,8 @@ def run_ga(K: int, config: GAConfig, fitness_fn: FitnessFn,  # noqa: N803
         What identifies the run besides the GA settings (profile hash, fitness settings, K).
     progress
         Called with the state after the initial population and after every generation.
+    workers
+        Individuals evaluated concurrently (does not change the result).
     """
     config.validate(K)
     key = {"ga": config.resume_key(), "K": K, **(run_key or {})}
@@ -291,14 +307,14 @@ def run_ga(K: int, config: GAConfig, fitness_fn: FitnessFn,  # noqa: N803
                 f"the checkpoint in {out_dir} belongs to a different run (other profile, K, seed "
                 "or settings); use another --out directory or the same settings")
     else:
-        state = initial_state(K, config, fitness_fn)
+        state = initial_state(K, config, fitness_fn, workers)
         state.meta = {"run_key": key}
         if out_dir is not None:
             save_checkpoint(out_dir, state)
     if progress is not None:
         progress(state)
     while state.generation < config.generations:
-        state = next_generation(state, config, fitness_fn)
+        state = next_generation(state, config, fitness_fn, workers)
         if out_dir is not None:
             save_checkpoint(out_dir, state)
         if progress is not None:

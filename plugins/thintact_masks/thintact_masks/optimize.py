@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 
+from thintact_masks.blas import blas_threads
 from thintact_masks.design_io import design_record, plot_fitness, write_json_atomic
 from thintact_masks.devices import scaled_profile
 from thintact_masks.fitness import FitnessEvaluator, FitnessSettings
@@ -23,7 +24,8 @@ PLOT_NAME = "fitness.png"
 def optimize_mask(profile: Profile, config: GAConfig, K: int | None = None,  # noqa: N803
                   settings: FitnessSettings | None = None, scale: float = 1.0,
                   out_dir: str | os.PathLike[str] | None = None,
-                  progress: ProgressFn | None = None) -> tuple[Mask, dict[str, Any]]:
+                  progress: ProgressFn | None = None, workers: int = 1
+                  ) -> tuple[Mask, dict[str, Any]]:
     """Optimise φ for ``profile`` with the paper's GA; resumable through ``out_dir``.
 
     Parameters
@@ -43,6 +45,9 @@ def optimize_mask(profile: Profile, config: GAConfig, K: int | None = None,  # n
         checkpoint of the same run is continued.
     progress
         Called with the GA state after every generation.
+    workers
+        Individuals evaluated concurrently, each with single-threaded BLAS (the result does
+        not depend on it).
 
     Returns
     -------
@@ -55,13 +60,14 @@ def optimize_mask(profile: Profile, config: GAConfig, K: int | None = None,  # n
     evaluator = FitnessEvaluator(device, k, settings)
     run_key = {"profile_hash": profile.content_hash(), "scale": scale,
                "fitness": settings.to_dict()}
-    state = run_ga(k, config, evaluator.fitness, out_dir, run_key, progress)
-    best = state.best_phi
-    best_eval = evaluator.evaluate(best)
-    baselines = {
-        "mls": evaluator.evaluate(MLSDesigner().design(k, device.mask.feature_um).phi),
-        "random": evaluator.evaluate(random_phi(k, config.seed + 1)),
-    }
+    with blas_threads(1):
+        state = run_ga(k, config, evaluator.fitness, out_dir, run_key, progress, workers)
+        best = state.best_phi
+        best_eval = evaluator.evaluate(best)
+        baselines = {
+            "mls": evaluator.evaluate(MLSDesigner().design(k, device.mask.feature_um).phi),
+            "random": evaluator.evaluate(random_phi(k, config.seed + 1)),
+        }
     mask = Mask(phi=best, feature_um=device.mask.feature_um, design="ga",
                 provenance={"seed": config.seed, "generations": state.generation,
                             "population": config.population, "fitness": best_eval.fitness,
