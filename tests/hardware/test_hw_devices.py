@@ -112,3 +112,14 @@ def test_devices_cli_text_and_json(tmp_path, capsys, monkeypatch):
 def test_bad_usb_backend_is_a_one_line_error(capsys):
     assert main(["devices", "--no-profiles", "--usb-backend", "nosuchmodule:x"]) == 2
     assert "cannot load USB backend" in capsys.readouterr().err
+
+
+def test_a_hanging_producer_is_reported_not_waited_for():
+    import time
+
+    from thintact_sdk.cli.commands.devices import _bounded
+
+    t0 = time.monotonic()
+    devices, error = _bounded(lambda cti: time.sleep(2.0) or [], "slow.cti", 0.2)
+    assert devices == [] and "did not finish enumerating within" in error
+    assert time.monotonic() - t0 < 1.0

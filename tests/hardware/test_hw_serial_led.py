@@ -151,3 +151,14 @@ def test_emulator_module_runs_as_a_program():
     finally:
         proc.terminate()
         assert proc.wait(timeout=5) == 0
+
+
+def test_reused_sequence_number_with_a_new_command_is_executed(emu):
+    with serial.serial_for_url(emu.port, timeout=1.0) as port:
+        port.write(encode_line(7, "SET 1 100"))
+        assert decode_line(port.readline()).words == ("OK",)
+        port.write(encode_line(7, "SET 1 100"))  # a retry: answered, not executed again
+        assert decode_line(port.readline()).words == ("OK",)
+        port.write(encode_line(7, "GET"))  # same seq, new command (a restarted host)
+        assert decode_line(port.readline()).words[2] == "100"
+    assert emu.state.log == ["SET 1 100", "GET"]

@@ -61,6 +61,7 @@ def test_16bit_bayer_ffv1_video_bins_back_exactly(tmp_path):
         raws = [cam.read() for _ in range(4)]
         with pytest.raises(EndOfVideo, match="ended after 4 frames"):
             cam.read()
+        assert cam.capabilities().pixel_format == "Mono16"
     assert [r.frame_id for r in raws] == [0, 1, 2, 3]
     for raw, m in zip(raws, meas, strict=True):
         assert raw.pixel_format == "Mono16" and raw.data.dtype == np.uint16

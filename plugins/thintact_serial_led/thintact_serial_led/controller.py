@@ -3,7 +3,7 @@
 Every request carries a fresh sequence number and a CRC-8; the controller waits at most
 ``timeout_s`` for the matching reply and retries up to ``retries`` times when the reply is
 missing, garbled or reports a checksum error. The board repeats (but does not re-execute)
-a command whose sequence number it has just executed, so retries are safe.
+the line it has just executed (same sequence number and body), so retries are safe.
 
 Errors
 ------

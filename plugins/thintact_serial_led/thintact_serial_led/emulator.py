@@ -82,7 +82,7 @@ class LedFirmwareEmulator:
         self.corrupt_replies = 0
         self.reply_delay_s = 0.0
         self._started = time.monotonic()
-        self._last_seq: int | None = None
+        self._last_line: bytes | None = None
         self._last_reply: bytes | None = None
         self._stop = threading.Event()
         self._lock = threading.Lock()
@@ -171,14 +171,15 @@ class LedFirmwareEmulator:
             else:
                 self._send(encode_line(ERROR_SEQ, "ERR SYN unreadable line"))
             return
-        if line.seq == self._last_seq and self._last_reply is not None:
-            # a retry of the command just executed: repeat the answer, do not act twice
+        if raw == self._last_line and self._last_reply is not None:
+            # a retry of the command just executed (same seq, same body): repeat the
+            # answer, do not act twice
             self._send(self._last_reply)
             return
         with self._lock:
             body = self._execute(line.words)
         reply = encode_line(line.seq, body)
-        self._last_seq, self._last_reply = line.seq, reply
+        self._last_line, self._last_reply = raw, reply
         self.state.commands += 1
         self.state.log.append(line.body)
         self._send(reply)

@@ -110,6 +110,7 @@ class UvcCamera(Camera):
         self._index = 0
         self._exposure_us: float | None = None
         self._next_due = 0.0
+        self._last_format = str(settings.get("pixel_format", ""))
         self._is_open = False
 
     # -- lifecycle --------------------------------------------------------------------
@@ -215,6 +216,7 @@ class UvcCamera(Camera):
 
     # -- Camera API ---------------------------------------------------------------------
     def capabilities(self) -> CameraCapabilities:
+        """Size and rate as OpenCV reports them; the pixel format of the last frame read."""
         cap = self._capture()
         fps = float(cap.get(cv2.CAP_PROP_FPS) or 0.0)
         if not self.source.is_live and "fps" in self.settings:
@@ -223,8 +225,8 @@ class UvcCamera(Camera):
         return CameraCapabilities(
             width=int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)),
             height=int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT)),
-            pixel_formats=[str(self.settings.get("pixel_format", ""))] if "pixel_format" in self.settings else [],
-            pixel_format=str(self.settings.get("pixel_format", "")),
+            pixel_formats=[self._last_format] if self._last_format else [],
+            pixel_format=self._last_format,
             fps=fps if fps > 0 else None,
             exposure_range_us=Range(0.0, float("inf"), "us") if live_exposure else None,
             missing=list(self._missing),
@@ -294,6 +296,7 @@ class UvcCamera(Camera):
         self._delivered += 1
         self._index += 1
         data, fmt = self._to_rgb(img)
+        self._last_format = fmt
         return RawFrame(
             data=data,
             timestamp_ns=received,

@@ -20,6 +20,7 @@ USB
 from __future__ import annotations
 
 import argparse
+import concurrent.futures as cf
 import importlib
 import json
 import os
@@ -41,6 +42,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="do not load the producers named by profiles")
     p.add_argument("--usb-backend", metavar="MODULE:ATTR",
                    help="pyusb backend to use (an IBackend, or a callable returning one)")
+    p.add_argument("--timeout", type=float, default=10.0, metavar="S",
+                   help="longest wait for one GenTL producer's enumeration (default 10)")
     p.add_argument("--json", action="store_true", help="machine-readable output")
     p.set_defaults(func=run)
 
@@ -71,8 +74,26 @@ def genicam_producers(extra: list[str], from_profiles: bool = True) -> dict[str,
     return named
 
 
-def genicam_devices(extra: list[str], from_profiles: bool = True) -> list[dict[str, Any]]:
-    """One entry per producer: ``producer``, ``named_by``, ``devices`` and ``error``."""
+def _bounded(fn: Any, arg: str, timeout_s: float) -> tuple[list[dict[str, Any]], str | None]:
+    """``fn(arg)`` on a worker thread; a producer that hangs is reported, not waited for."""
+    pool = cf.ThreadPoolExecutor(max_workers=1, thread_name_prefix="gentl-enum")
+    future = pool.submit(fn, arg)
+    try:
+        return future.result(timeout=timeout_s), None
+    except cf.TimeoutError:
+        return [], f"the producer did not finish enumerating within {timeout_s:.0f} s"
+    except ThinTactError as err:
+        return [], str(err)
+    finally:
+        pool.shutdown(wait=False)
+
+
+def genicam_devices(extra: list[str], from_profiles: bool = True,
+                    timeout_s: float = 10.0) -> list[dict[str, Any]]:
+    """One entry per producer: ``producer``, ``named_by``, ``devices`` and ``error``.
+
+    A producer whose enumeration takes longer than ``timeout_s`` is reported as hanging.
+    """
     out: list[dict[str, Any]] = []
     for cti, named_by in genicam_producers(extra, from_profiles).items():
         entry: dict[str, Any] = {"producer": cti, "named_by": named_by, "devices": [],
@@ -85,10 +106,7 @@ def genicam_devices(extra: list[str], from_profiles: bool = True) -> list[dict[s
             except ImportError:
                 entry["error"] = "the thintact-genicam plugin (harvesters) is not installed"
             else:
-                try:
-                    entry["devices"] = list_devices(cti)
-                except ThinTactError as err:
-                    entry["error"] = str(err)
+                entry["devices"], entry["error"] = _bounded(list_devices, cti, timeout_s)
         out.append(entry)
     return out
 
@@ -175,7 +193,7 @@ def collect(args: argparse.Namespace, usb_backend: Any = None) -> dict[str, Any]
     if usb_backend is None and args.usb_backend:
         usb_backend = load_usb_backend(args.usb_backend)
     return {
-        "genicam": genicam_devices(args.cti, not args.no_profiles),
+        "genicam": genicam_devices(args.cti, not args.no_profiles, args.timeout),
         "uvc": uvc_devices(),
         "serial": serial_ports(),
         "usb": usb_devices(usb_backend),
