@@ -282,6 +282,8 @@ class GenICamCamera(Camera):
             try:
                 with buf:
                     frame = self._to_raw(buf)
+            except DeviceError:
+                raise  # a frame this plugin cannot decode: the device itself is fine
             except Exception as err:  # noqa: BLE001
                 return self._lost(f"{type(err).__name__}: {err}", timeout_s)
             if frame is not None:
@@ -307,7 +309,11 @@ class GenICamCamera(Camera):
         flat = np.asarray(comp.data)
         per_px = flat.size // (h * w) if h * w else 0
         if per_px < 1 or flat.size != per_px * h * w:
-            raise DeviceError(f"frame payload of {flat.size} values does not fit {w}×{h}")
+            raise DeviceError(
+                f"frame {buf.frame_id}: {comp.data_format} payload of {flat.size} values does "
+                f"not fit {w}×{h} (line padding or a pixel format harvesters cannot unpack); "
+                "choose another PixelFormat"
+            )
         data = flat.reshape(h, w) if per_px == 1 else flat.reshape(h, w, per_px)
         frame_id = int(buf.frame_id)
         try:
