@@ -162,3 +162,14 @@ def test_reused_sequence_number_with_a_new_command_is_executed(emu):
         port.write(encode_line(7, "GET"))  # same seq, new command (a restarted host)
         assert decode_line(port.readline()).words[2] == "100"
     assert emu.state.log == ["SET 1 100", "GET"]
+
+
+def test_silent_board_at_open_times_out_and_releases_the_port(emu):
+    emu.silent = True
+    ctrl = get_registry().create("light_controller", "serial-led", emu.port, dict(FAST))
+    t0 = time.monotonic()
+    with pytest.raises(DeviceTimeoutError, match="STA"):
+        ctrl.open()
+    assert time.monotonic() - t0 < 1.5
+    with pytest.raises(DeviceLostError, match="not open"):
+        ctrl.get_intensities()
