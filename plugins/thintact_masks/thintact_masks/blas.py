@@ -11,6 +11,7 @@ from __future__ import annotations
 import ctypes
 from collections.abc import Iterator
 from contextlib import contextmanager
+from typing import Any
 
 _SET_NAMES = ("scipy_openblas_set_num_threads64_", "scipy_openblas_set_num_threads",
               "openblas_set_num_threads64_", "openblas_set_num_threads")
@@ -18,7 +19,7 @@ _GET_NAMES = ("scipy_openblas_get_num_threads64_", "scipy_openblas_get_num_threa
               "openblas_get_num_threads64_", "openblas_get_num_threads")
 
 
-def _loaded_openblas() -> list[tuple[ctypes._CFuncPtr, ctypes._CFuncPtr]]:
+def _loaded_openblas() -> list[tuple[Any, Any]]:
     """(set, get) function pairs of every OpenBLAS mapped into this process (Linux)."""
     import numpy  # noqa: F401 - make sure numpy's BLAS is loaded
     import scipy.linalg  # noqa: F401 - and scipy's

@@ -202,7 +202,7 @@ def initial_state(K: int, config: GAConfig, fitness_fn: FitnessFn,  # noqa: N803
     t0 = time.perf_counter()
     fit = evaluate_population(pop, fitness_fn, workers=workers)
     return GAState(0, pop, fit, [float(fit.max())], [float(fit.mean())],
-                   rng.bit_generator.state, time.perf_counter() - t0)
+                   dict(rng.bit_generator.state), time.perf_counter() - t0)
 
 
 def next_generation(state: GAState, config: GAConfig, fitness_fn: FitnessFn,
@@ -228,7 +228,7 @@ def next_generation(state: GAState, config: GAConfig, fitness_fn: FitnessFn,
     return GAState(state.generation + 1, pop, fit,
                    state.best_history + [float(fit.max())],
                    state.mean_history + [float(fit.mean())],
-                   rng.bit_generator.state,
+                   dict(rng.bit_generator.state),
                    state.elapsed_s + time.perf_counter() - t0, state.meta)
 
 
