@@ -13,6 +13,7 @@ from thintact_serial_led.emulator import LedFirmwareEmulator
 from thintact_serial_led.protocol import LineError, crc8, decode_line, encode_line
 
 from thintact_sdk.errors import (
+    DeviceError,
     DeviceLostError,
     DeviceNotFoundError,
     DeviceTimeoutError,
@@ -111,6 +112,8 @@ def test_vanished_port_is_device_lost(led, emu):
     with pytest.raises(DeviceLostError, match="vanished"):
         led.set_all([0.2] * 10)
     assert time.monotonic() - t0 < 1.5
+    with pytest.raises(DeviceLostError, match="vanished earlier"):
+        led.get_intensities()
 
 
 def test_missing_port_and_wrong_led_count(emu):
@@ -171,5 +174,6 @@ def test_silent_board_at_open_times_out_and_releases_the_port(emu):
     with pytest.raises(DeviceTimeoutError, match="STA"):
         ctrl.open()
     assert time.monotonic() - t0 < 1.5
-    with pytest.raises(DeviceLostError, match="not open"):
+    with pytest.raises(DeviceError, match="not open") as err:
         ctrl.get_intensities()
+    assert not isinstance(err.value, DeviceLostError)

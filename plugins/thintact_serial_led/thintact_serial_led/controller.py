@@ -21,6 +21,7 @@ from typing import Any
 import serial
 
 from thintact_sdk.errors import (
+    DeviceError,
     DeviceLostError,
     DeviceNotFoundError,
     DeviceTimeoutError,
@@ -68,6 +69,7 @@ class SerialLedController(LightController):
         self._serial: serial.SerialBase | None = None
         self._seq = 0
         self._rx = b""
+        self._lost = False
         self.stats = {"requests": 0, "retries": 0, "bad_lines": 0}
 
     # -- lifecycle --------------------------------------------------------------------
@@ -83,7 +85,8 @@ class SerialLedController(LightController):
             self._serial.reset_input_buffer()
         except (serial.SerialException, OSError):
             pass
-        self._seq = int(time.monotonic_ns() % 256)
+        self._seq = int(time.monotonic_ns() % 255)
+        self._lost = False
         try:
             status = self.status()
         except BaseException:
@@ -158,7 +161,9 @@ class SerialLedController(LightController):
             See the module docstring.
         """
         if self._serial is None:
-            raise DeviceLostError(f"LED controller on {self.port} is not open")
+            if self._lost:
+                raise DeviceLostError(f"LED controller port {self.port} vanished earlier; open it again")
+            raise DeviceError(f"LED controller on {self.port} is not open; call open() first")
         self._seq = (self._seq + 1) % 255  # 0xff is reserved for the board's framing errors
         seq = self._seq
         line = encode_line(seq, body)
@@ -213,6 +218,7 @@ class SerialLedController(LightController):
             raise DeviceTimeoutError(f"writing to the LED board on {self.port} timed out") from None
         except (serial.SerialException, OSError) as err:
             self.close()
+            self._lost = True
             raise DeviceLostError(f"LED controller port {self.port} vanished: {err}") from None
 
     def _read_line(self, deadline: float) -> bytes | None:
@@ -225,6 +231,7 @@ class SerialLedController(LightController):
                 chunk = self._serial.read(max(1, self._serial.in_waiting or 1))
             except (serial.SerialException, OSError) as err:
                 self.close()
+                self._lost = True
                 raise DeviceLostError(f"LED controller port {self.port} vanished: {err}") from None
             self._rx += chunk
             if b"\n" not in self._rx and len(self._rx) > MAX_LINE_BYTES:
