@@ -113,12 +113,15 @@ def operator_error(estimate: ChannelMatrices, reference: ChannelMatrices) -> flo
 
 
 def term_errors(estimate: ChannelMatrices, reference: ChannelMatrices) -> dict[str, float]:
-    """Relative errors of each matrix after putting both sets in the canonical gauge.
+    """Relative errors of each matrix after putting both sets in the canonical gauge
+    (and the coding pair's sign aligned with the reference).
 
     Returns ``{"Po": …, "Qo": …, "Pc": …, "Qc": …, "open_term": …, "coding_term": …}``; the
     ``*_term`` entries compare the products ``Q ⊗ P`` of one term (scale-free).
     """
     e, r = fix_gauge(estimate), fix_gauge(reference)
+    if float(np.sum(e.Pc * r.Pc)) < 0:  # the coding pair's sign is a convention: align it
+        e = type(e)(e.Po, e.Qo, -e.Pc, -e.Qc)
     out: dict[str, float] = {}
     for name in ("Po", "Qo", "Pc", "Qc"):
         x, y = getattr(e, name), getattr(r, name)

@@ -155,7 +155,7 @@ def build_bundle(
         if progress:
             progress("choosing tau")
         tau_scenes = training_scenes(n, m, count=8, seed=1)
-        tau, table = choose_tau(profile, bundle, tau_scenes, noise, options.decoder)
+        tau, table = choose_tau(bundle, tau_scenes, noise)
         bundle.meta["tau"] = tau
     return bundle, table
 
@@ -210,6 +210,12 @@ def compare_with_reference(
     return out
 
 
+def scaled(sm: SystemMatrices, factor: float) -> SystemMatrices:
+    """``sm`` with its products scaled by ``factor`` (each matrix by ``sqrt(factor)``)."""
+    r = float(np.sqrt(factor))
+    return SystemMatrices(sm.Po * r, sm.Qo * r, sm.Pc * r, sm.Qc * r, dict(sm.meta))
+
+
 def limits_of(profile: Profile) -> CalibrationLimits:
     """The profile's ``calibration_limits`` (defaults when absent)."""
     return profile.calibration_limits or CalibrationLimits()
@@ -225,6 +231,7 @@ def calibrate_recording(
     status: Callable[[str], None] | None = None,
     registration: RegistrationResult | None = None,
     reference: SystemMatrices | None = None,
+    reference_exposure_us: float | None = None,
     report: bool = True,
 ) -> CalibrationOutcome:
     """Solve, train, validate and save a calibration bundle in ``out_dir``.
@@ -245,6 +252,9 @@ def calibrate_recording(
         Registration result to store and report (wizard).
     reference
         Matrices to compare with (virtual devices: the simulator's two-term fit).
+    reference_exposure_us
+        Exposure the reference is expressed at; it is rescaled to the calibration's
+        exposure when both are known (signal is linear in exposure).
     report
         Write ``report.html``.
     """
@@ -300,6 +310,8 @@ def calibrate_recording(
     if reference is not None:
         if status:
             status("comparing with the reference matrices")
+        if reference_exposure_us and collection.exposure_us:
+            reference = scaled(reference, collection.exposure_us / reference_exposure_us)
         ref_info = compare_with_reference(recording, collection, profile, bundle, reference, opts, k)
         metrics["reference"] = ref_info
     if not val:

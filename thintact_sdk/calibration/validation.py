@@ -13,6 +13,7 @@ import numpy as np
 
 from thintact_sdk.imaging.calibration_bundle import CalibrationBundle
 from thintact_sdk.imaging.metrics import psnr, ssim
+from thintact_sdk.imaging.tikhonov import TikhonovSolver
 from thintact_sdk.interfaces import Decoder
 from thintact_sdk.plugin_manager import get_registry
 from thintact_sdk.profile import NoiseSpec, Profile
@@ -68,50 +69,49 @@ def averaged_noise(noise: NoiseSpec, frames: int) -> NoiseSpec:
     )
 
 
-def coding_scale(bundle: CalibrationBundle) -> float:
-    """Largest ``σ_max(Pc)² σ_max(Qc)²`` over channels (DN²): the natural unit of τ."""
-    sm = bundle.system_matrices
-    best = 0.0
-    for c in range(sm.channels):
-        sp = np.linalg.norm(np.asarray(sm.Pc[c], np.float64), 2)
-        sq = np.linalg.norm(np.asarray(sm.Qc[c], np.float64), 2)
-        best = max(best, float(sp * sq) ** 2)
-    return best
-
-
 def choose_tau(
-    profile: Profile,
     bundle: CalibrationBundle,
     scenes: list[np.ndarray],
     noise: NoiseSpec,
-    decoder: str = DEFAULT_DECODER,
     seed: int = 0,
 ) -> tuple[float, dict[str, float]]:
     """τ maximising the mean PSNR on simulated measurements of ``scenes``.
 
     The measurements are ``bundle``'s own forward model plus Gaussian noise of ``noise``
     (use :func:`averaged_noise` for averaged frames), so the choice never looks at the
-    validation frames it is later scored on.
+    validation frames it is later scored on. Each candidate is the non-iterative decoder's
+    math (joint filter, then the closed-form Tikhonov of :class:`TikhonovSolver`), with the
+    SVDs computed once.
 
     Returns
     -------
     (tau, table)
         The chosen τ (DN²) and ``{f"{tau:.3g}": mean PSNR dB}`` for every candidate.
     """
+    if bundle.filter is None:
+        raise ValueError("choose_tau needs a bundle with a trained filter")
     rng = np.random.default_rng(seed)
     sm = bundle.system_matrices
-    measured = []
+    coding = []
     for x in scenes:
         y = sm.forward(x)
         var = noise.read_noise_dn**2 + np.maximum(y, 0) / noise.electrons_per_dn
-        measured.append((y + rng.standard_normal(y.shape) * np.sqrt(var)).astype(np.float32))
-    unit = coding_scale(bundle)
+        y = y + rng.standard_normal(y.shape) * np.sqrt(var)
+        coding.append(np.asarray(bundle.filter.coding_component(y), np.float64))
+    solvers = [TikhonovSolver(sm.Pc[c], sm.Qc[c], 1.0) for c in range(sm.channels)]
+    spectra = [np.outer(s.singular_values_p**2, s.singular_values_q**2) for s in solvers]
+    unit = max(float(sp.max()) for sp in spectra)
     table: dict[str, float] = {}
     best_tau, best = float("nan"), -np.inf
     for rel in TAU_GRID:
         tau = rel * unit
-        dec = make_decoder(profile, bundle, decoder, tau=tau)
-        value = float(np.mean([score("", dec.decode(y), x).psnr_db for y, x in zip(measured, scenes, strict=True)]))
+        for solver, spec in zip(solvers, spectra, strict=True):
+            solver.inv_denom = 1.0 / (spec + tau)
+        values = []
+        for yc, x in zip(coding, scenes, strict=True):
+            est = np.stack([solvers[c].solve(yc[..., c]) for c in range(sm.channels)], axis=-1)
+            values.append(score("", est, x).psnr_db)
+        value = float(np.mean(values))
         table[f"{tau:.3g}"] = value
         if value > best:
             best_tau, best = tau, value

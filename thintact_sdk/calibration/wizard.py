@@ -192,6 +192,7 @@ def run_wizard(
     progress: StepProgress | None = None,
     status: Callable[[str], None] | None = None,
     reference: SystemMatrices | None = None,
+    reference_exposure_us: float | None = None,
 ) -> CalibrationOutcome:
     """Capture (or resume) into ``bundle_dir/capture`` and write the bundle in ``bundle_dir``.
 
@@ -211,5 +212,5 @@ def run_wizard(
     rec = Recording(capture_dir, profile=profile)
     return calibrate_recording(
         rec, bundle_dir, options, source="wizard", status=status, registration=registration,
-        reference=reference,
+        reference=reference, reference_exposure_us=reference_exposure_us,
     )

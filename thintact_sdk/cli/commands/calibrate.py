@@ -23,6 +23,9 @@ from rich.progress import (
 
 from thintact_sdk.errors import ThinTactError
 
+REFERENCE_EXPOSURE_US = 10_000.0
+"""The virtual camera's reference exposure (its two-term fit is expressed at it)."""
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
@@ -122,6 +125,7 @@ def _offline(args: argparse.Namespace, options: Any, console: Console) -> Any:
             rec, Path(args.out), options, source="recording", progress=on_frame,
             status=lambda s: console.print(f"[dim]{s}[/dim]"),
             reference=_reference(rec.profile, {}) if args.compare_reference else None,
+            reference_exposure_us=REFERENCE_EXPOSURE_US,
         )
 
 
@@ -188,6 +192,7 @@ def _wizard(args: argparse.Namespace, options: Any, console: Console) -> Any:
                 profile, bundle_dir, camera, display,
                 WizardSettings(frames=frames, check_registration=not args.no_registration_check),
                 options, progress=on_step, status=status, reference=reference,
+                reference_exposure_us=REFERENCE_EXPOSURE_US,
             )
         except ThinTactError as err:
             raise type(err)(f"{err} (captured frames are kept in {bundle_dir / 'capture'}; run again to resume)") from None
