@@ -20,6 +20,7 @@ import queue
 import sys
 import threading
 import time
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -168,7 +169,12 @@ def record(
     bar = _Progress(frames, enabled=progress)
     reader: _BufferedReader | None = None
     try:
-        camera.open()
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            camera.open()
+        opened_with = [str(w.message) for w in caught]
+        for message in opened_with:
+            _Progress.warn(message)
         reader = _BufferedReader(camera, frames, timeout_s, buffer_mb * 2**20)
         with bar:
             for i in range(frames):
@@ -184,7 +190,7 @@ def record(
                                 if len(gaps.gaps) == MAX_GAP_NOTES else ""))
                 if i == 0:
                     depth_problem = bit_depth_problem(raw.pixel_format, profile)
-                    if depth_problem:
+                    if depth_problem and not any(depth_problem in m for m in opened_with):
                         bar.note(depth_problem)
                 meas = to_measurement(raw, profile)
                 extra = _frame_fields(raw, missing)
@@ -332,6 +338,11 @@ class _Progress:
             self._progress.update(self._task, completed=done, fps=fps,
                                   drops=f"{dropped} dropped" if dropped else "",
                                   queued=f"{queued} queued" if queued else "")
+
+    @staticmethod
+    def warn(message: str) -> None:
+        """One warning line on stderr (camera setting and bit-depth warnings at open)."""
+        print(f"warning: {message}", file=sys.stderr)
 
     def note(self, message: str) -> None:
         if self._progress is not None:
