@@ -121,3 +121,13 @@ def test_matches_the_golden_baseline_physics(golden_dir, device: str, limit: flo
     gain = (pred * irradiance).sum(axis=(0, 1, 2)) / (pred * pred).sum(axis=(0, 1, 2))
     rel = np.sqrt(np.mean((irradiance - gain * pred) ** 2) / np.mean(irradiance**2))
     assert rel < limit
+
+
+@pytest.mark.parametrize("device,limit", [("mini", 0.025), ("wide", 0.045)])
+def test_close_to_the_simulators_two_term_fit(golden_dir, device: str, limit: float) -> None:
+    """Operator-level relative difference from SIM's best two-term fit (after one scale)."""
+    pytest.importorskip("thintact_sdk.imaging.simulator")
+    from thintact_masks.compare import direct_vs_simulator
+
+    prof = read_profile_file(golden_dir / device / "profile.json")
+    assert direct_vs_simulator(prof) < limit

@@ -44,6 +44,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     o.add_argument("--tau", type=float, default=None,
                    help="Tikhonov weight in relative-irradiance units (default: Wiener value)")
     o.add_argument("--float32", action="store_true", help="single precision eigen-decompositions")
+    o.add_argument("--workers", type=int, default=1,
+                   help="individuals evaluated at once, one BLAS thread each (result unchanged)")
     o.add_argument("--no-progress", action="store_true", help="no progress bar")
     o.set_defaults(func=run_optimize)
 
@@ -109,6 +111,8 @@ def run_optimize(args: argparse.Namespace) -> int:
         raise ThinTactError(f"--K must be at least 2, got {args.K}")
     config = GAConfig(population=args.population, generations=args.generations, seed=args.seed)
     config.validate(args.K if args.K is not None else profile.mask.K)
+    if args.workers < 1:
+        raise ThinTactError(f"--workers must be >= 1, got {args.workers}")
     settings = _fitness_settings(args)
     bar = Progress(TextColumn("[bold]GA[/]"), BarColumn(), MofNCompleteColumn(),
                    TextColumn("best {task.fields[best]:.4f}  mean {task.fields[mean]:.4f}"),
@@ -120,7 +124,8 @@ def run_optimize(args: argparse.Namespace) -> int:
             bar.update(task, completed=state.generation, best=state.best_history[-1],
                        mean=state.mean_history[-1])
 
-        _, rec = optimize_mask(profile, config, args.K, settings, args.scale, args.out, progress)
+        _, rec = optimize_mask(profile, config, args.K, settings, args.scale, args.out, progress,
+                               args.workers)
     out = Path(args.out)
     base = rec["baselines"]
     print(f"best fitness {rec['fitness']:.4f} after {len(rec['history']['best']) - 1} generations "
