@@ -79,11 +79,12 @@ class KernelParams:
     channels: int
     n_sub: int
     rank_tol: float
+    force_direct: bool = False
 
     @property
     def separable(self) -> bool:
-        """True unless the mask is rotated or the scene side refracts."""
-        return self.angle_deg == 0.0 and self.n_scene_side == 1.0
+        """True unless the mask is rotated, the scene side refracts or the direct path is forced."""
+        return self.angle_deg == 0.0 and self.n_scene_side == 1.0 and not self.force_direct
 
     def grid_x(self) -> AxisGrid:
         return AxisGrid(self.cols, self.pitch_um * 1e-3, self.scene_cols, self.scene_pitch_um * 1e-3)
@@ -102,7 +103,7 @@ def clear_kernel_cache() -> None:
 
 
 def kernel_params(profile: Profile, physics: dict[str, dict[str, Any]],
-                  n_sub: int = 4, rank_tol: float = 1e-7) -> KernelParams:
+                  n_sub: int = 4, rank_tol: float = 1e-7, force_direct: bool = False) -> KernelParams:
     """The kernel parameters of a profile with resolved physics."""
     g = physics.get("geometry", {})
     z, d = geometry.distances_mm(profile.geometry.scene_to_mask_mm,
@@ -126,6 +127,7 @@ def kernel_params(profile: Profile, physics: dict[str, dict[str, Any]],
         dy_um=mis.get("dy_um", 0.0),
         n_scene_side=physics.get("refraction", {}).get("n_scene_side", 1.0),
         channels=len(profile.sensor.channels), n_sub=n_sub, rank_tol=rank_tol,
+        force_direct=force_direct,
     )
 
 
@@ -228,6 +230,8 @@ class Simulator(ImagingModel):
         Sub-intervals per pixel for the first-moment correction of the smooth factor.
     rank_tol
         Relative truncation of the separable expansion of the radiometric factor.
+    direct
+        Use the direct (dense, non-separable) path even for separable physics.
 
     Notes
     -----
@@ -235,18 +239,16 @@ class Simulator(ImagingModel):
     ``Simulator`` for a profile whose physics only changes post-kernel effects is cheap.
     """
 
-    def __init__(self, profile: Profile, *, n_sub: int = 4, rank_tol: float = 1e-7) -> None:
+    def __init__(self, profile: Profile, *, n_sub: int = 4, rank_tol: float = 1e-7,
+                 direct: bool = False) -> None:
         self.profile = profile
         self.physics = resolve_physics(profile.physics)
-        if "diffraction" in self.physics and not (
-            self.physics.get("mask_misalignment", {}).get("angle_deg", 0.0) == 0.0
-            and self.physics.get("refraction", {}).get("n_scene_side", 1.0) == 1.0
-        ):
+        self.kernel_params = kernel_params(profile, self.physics, n_sub, rank_tol, direct)
+        if "diffraction" in self.physics and not self.kernel_params.separable:
             raise ThinTactError(
                 "physics: diffraction cannot be combined with a rotated mask or refraction "
                 "(the simulator's diffraction model needs a separable, straight-ray kernel)"
             )
-        self.kernel_params = kernel_params(profile, self.physics, n_sub, rank_tol)
         self._kernel: Any = None
         self._ref_gain: float | None = None
 

@@ -31,18 +31,31 @@ def lateral_run_mm(theta: np.ndarray, z_mm: float, d_mm: float, n: float) -> np.
 
 
 def solve_air_angle(rho_mm: np.ndarray, z_mm: float, d_mm: float, n: float,
-                    iterations: int = 12) -> np.ndarray:
-    """Air angle θ (rad) of the ray whose lateral run is ``rho_mm`` (Newton's method)."""
+                    iterations: int = 60) -> np.ndarray:
+    """Air angle θ (rad) of the ray whose lateral run is ``rho_mm``.
+
+    Solved for ``t = tan θ`` by safeguarded Newton steps inside the bracket
+    ``ρ/(d + z/n) ≤ t ≤ ρ/d`` (``ρ(t)`` is increasing; ``tan θ' ≤ tan θ / n``).
+    """
     rho = np.asarray(rho_mm, float)
-    theta = np.arctan(rho / (d_mm + z_mm / n))
+    lo = rho / (d_mm + z_mm / n)
+    hi = rho / d_mm
+    t = lo.copy()
     for _ in range(iterations):
-        sin_t, cos_t = np.sin(theta), np.cos(theta)
+        sin_t = t / np.sqrt(1 + t**2)
         sin_p = sin_t / n
         cos_p = np.sqrt(1 - sin_p**2)
-        f = d_mm * sin_t / cos_t + z_mm * sin_p / cos_p - rho
-        df = d_mm / cos_t**2 + z_mm / cos_p**2 * cos_t / (n * cos_p)
-        theta = np.clip(theta - f / df, 0.0, np.pi / 2 - 1e-9)
-    return theta
+        f = d_mm * t + z_mm * sin_p / cos_p - rho
+        if np.all(np.abs(f) <= 1e-13 * (1 + rho)):
+            break
+        lo = np.where(f < 0, t, lo)
+        hi = np.where(f > 0, t, hi)
+        # d(sinθ)/dt = (1+t²)^(-3/2); d(tanθ')/d(sinθ') = 1/cos³θ'
+        df = d_mm + z_mm / (n * cos_p**3) * (1 + t**2) ** -1.5
+        t_new = t - f / df
+        bad = (t_new <= lo) | (t_new >= hi) | ~np.isfinite(t_new)
+        t = np.where(bad, (lo + hi) / 2, t_new)
+    return np.arctan(t)
 
 
 def crossing_fraction_and_factor(

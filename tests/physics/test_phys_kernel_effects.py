@@ -1,0 +1,187 @@
+"""Kernel effects (diffraction, angular response, refraction, misalignment, leakage, geometry)
+against independent calculations."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from tests.simulator.sim_helpers import rel_rms, tiny_profile
+from thintact_sdk.imaging.sim_reference import reference_forward
+from thintact_sdk.imaging.simulator import Simulator
+from thintact_sdk.physics import diffraction, refraction
+from thintact_sdk.profile import load_profile
+
+
+@pytest.fixture(scope="module")
+def mini():
+    return load_profile("virtual-mini")
+
+
+@pytest.fixture(scope="module")
+def scenes():
+    return np.random.default_rng(11).random((3, 50, 64, 3))
+
+
+@pytest.fixture(scope="module")
+def small(mini):
+    """virtual-mini's pitches and mask on a quarter of its area (fast direct-path builds)."""
+    p = mini.model_copy(deep=True)
+    p.sensor.rows, p.sensor.cols, p.scene.rows, p.scene.cols = 64, 80, 25, 32
+    return p
+
+
+@pytest.fixture(scope="module")
+def small_scenes():
+    return np.random.default_rng(13).random((3, 25, 32, 3))
+
+
+def _with_mask(profile, phi, phi_rows=None):
+    p = profile.model_copy(deep=True)
+    p.mask.phi = [int(v) for v in phi]
+    p.mask.phi_rows = None if phi_rows is None else [int(v) for v in phi_rows]
+    return p
+
+
+def test_leakage_one_is_open_aperture(mini, scenes):
+    y = Simulator(mini.with_physics({"mask_leakage": {"transmittance": 1.0}})).forward_batch(scenes)
+    y_open = Simulator(_with_mask(mini, np.ones(mini.mask.K))).forward_batch(scenes)
+    assert np.allclose(y, y_open, rtol=1e-10, atol=0)
+
+
+def test_leakage_is_linear_in_t(mini, scenes):
+    y0 = Simulator(mini).forward_batch(scenes)
+    y1 = Simulator(mini.with_physics({"mask_leakage": {"transmittance": 1.0}})).forward_batch(scenes)
+    yt = Simulator(mini.with_physics({"mask_leakage": {"transmittance": 0.2}})).forward_batch(scenes)
+    assert np.allclose(yt, 0.8 * y0 + 0.2 * y1, rtol=1e-10)
+
+
+def test_geometry_effect_equals_profile_geometry(mini, scenes):
+    moved = mini.model_copy(deep=True)
+    moved.geometry.scene_to_mask_mm = 4.5
+    moved.geometry.mask_to_sensor_mm = 1.1
+    ph = {"geometry": {"scene_to_mask_mm": 4.5, "mask_to_sensor_mm": 1.1}}
+    assert np.array_equal(Simulator(mini.with_physics(ph)).forward_batch(scenes),
+                          Simulator(moved).forward_batch(scenes))
+    assert rel_rms(Simulator(moved).forward_batch(scenes), Simulator(mini).forward_batch(scenes)) > 1e-2
+
+
+def test_angular_response_zero_is_identity(mini, scenes):
+    y = Simulator(mini.with_physics({"pixel_angular_response": {"exponent": 0.0}}))
+    assert np.allclose(y.forward_batch(scenes), Simulator(mini).forward_batch(scenes), rtol=1e-12)
+
+
+def test_one_cell_shift_equals_rolled_phi(small, small_scenes):
+    """The device only sees the central cells, so a shift by one cell (+x, +y) is φ rolled by one."""
+    d = small.mask.feature_um
+    shifted = small.with_physics({"mask_misalignment": {"dx_um": d, "dy_um": -d}})
+    rolled = _with_mask(small, np.roll(small.mask.phi, 1), np.roll(small.mask.rows_vector, -1))
+    y_roll = Simulator(rolled).forward_batch(small_scenes)
+    assert np.allclose(Simulator(shifted).forward_batch(small_scenes), y_roll, rtol=1e-9)
+    assert rel_rms(Simulator(shifted, direct=True).forward_batch(small_scenes), y_roll) < 1e-3
+
+
+def test_direct_path_matches_separable(small, small_scenes):
+    assert rel_rms(Simulator(small, direct=True).forward_batch(small_scenes),
+                   Simulator(small).forward_batch(small_scenes)) < 1e-3
+
+
+def test_rotation_small_angle_is_continuous(small, small_scenes):
+    y0 = Simulator(small).forward_batch(small_scenes)
+    rot = [Simulator(small.with_physics({"mask_misalignment": {"angle_deg": a}})).forward_batch(
+        small_scenes) for a in (1e-4, 0.5)]
+    assert rel_rms(rot[0], y0) < 1e-3 < rel_rms(rot[1], y0)
+
+
+RAY_DEVICE = dict(rows=4, cols=5, scene_rows=3, scene_cols=4, pitch_um=20.0,
+                  scene_pitch_um=60.0, feature_um=25.0, z_mm=1.0, d_mm=0.3)
+
+
+@pytest.mark.parametrize("physics", [
+    {"mask_misalignment": {"angle_deg": 3.0, "dx_um": 10.0}},
+    {"refraction": {"n_scene_side": 1.4}},
+    {"refraction": {"n_scene_side": 1.4}, "pixel_angular_response": {"exponent": 2.0}},
+])
+def test_non_separable_against_brute_force(physics):
+    prof = tiny_profile(physics, **RAY_DEVICE)
+    sim = Simulator(prof)
+    assert not sim.separable
+    x = np.random.default_rng(12).random((3, 4, 3))
+    assert rel_rms(sim.forward(x), reference_forward(prof, x, 12, 12)) < 1e-2
+    from thintact_sdk.errors import ThinTactError
+
+    with pytest.raises(ThinTactError, match="not separable"):
+        sim.separable_terms(0)
+
+
+def test_refraction_index_one_is_identity(mini, scenes):
+    sim = Simulator(mini.with_physics({"refraction": {"n_scene_side": 1.0}}))
+    assert sim.separable
+    assert np.allclose(sim.forward_batch(scenes), Simulator(mini).forward_batch(scenes), rtol=1e-12)
+    kappa, factor = refraction.crossing_fraction_and_factor(np.array([0.0, 0.7, 3.0]), 4.8, 1.0, 1.0)
+    h = 5.8
+    assert np.allclose(kappa, 1.0 / h)
+    assert np.allclose(factor, h**2 / (h**2 + np.array([0.0, 0.7, 3.0]) ** 2) ** 2)
+
+
+def test_snell_ray_check():
+    z, d, n = 4.8, 1.0, 1.45
+    rho = np.array([0.0, 0.01, 0.5, 2.0, 6.0, 15.0])
+    theta = refraction.solve_air_angle(rho, z, d, n)
+    theta_m = np.arcsin(np.sin(theta) / n)
+    assert np.allclose(np.sin(theta), n * np.sin(theta_m))
+    assert np.allclose(d * np.tan(theta) + z * np.tan(theta_m), rho, atol=1e-12)
+    kappa, _ = refraction.crossing_fraction_and_factor(rho, z, d, n)
+    # the crossing point is where the air segment of the ray meets the mask plane
+    assert np.allclose(kappa[1:] * rho[1:], d * np.tan(theta[1:]))
+    assert kappa[0] == pytest.approx(d / (d + z / n))
+
+
+def test_refraction_factor_conserves_flux():
+    """Integrating the irradiance factor over the whole scene plane gives π/n² · ∫cos^(1+p)…:
+    for p = 0, ∫ cosθ dΩ over the hemisphere of the air side that the medium can fill,
+    i.e. π·(1/n²)·(n² sin²θc) = π with sinθc = 1 (every air direction is reached)."""
+    z, d, n = 4.8, 1.0, 1.45
+    rho = np.linspace(0, 4000.0, 400_001)
+    _, factor = refraction.crossing_fraction_and_factor(rho, z, d, n)
+    flux = np.trapezoid(factor * 2 * np.pi * rho, rho)
+    assert flux * n**2 == pytest.approx(math.pi, rel=2e-3)
+
+
+def test_diffraction_field_against_numerical_fresnel_integral():
+    edges = np.array([-0.03, -0.01, 0.0, 0.02, 0.05])
+    vals = np.array([[1.0, 0.0, 1.0, 1.0], [1.0, -1.0, 1.0, -1.0]])
+    w = diffraction.fresnel_width_mm(530.0, 4.8, 1.0)
+    m_star = np.array([-0.02, 0.001, 0.035])
+    v = diffraction.axis_fields(edges, vals, m_star, w)
+    m = np.linspace(edges[0], edges[-1], 400_001)
+    cell = np.clip(np.searchsorted(edges, m, side="right") - 1, 0, 3)
+    for k, ms in enumerate(m_star):
+        kern = np.exp(1j * np.pi * (m - ms) ** 2 / w**2)
+        num = np.trapezoid(vals[:, cell] * kern, m, axis=1) / (w * np.exp(1j * np.pi / 4))
+        assert np.allclose(v[:, k], num, atol=1e-4)  # trapezoid error at the cell jumps
+    wide = diffraction.axis_fields(np.array([-50.0, 50.0]), np.ones((1, 1)), np.array([0.0]), w)
+    assert abs(wide[0, 0] - 1) < 1e-3
+
+
+def test_diffraction_tends_to_geometric(mini, scenes):
+    y_geo = Simulator(mini).forward_batch(scenes)
+    tiny_wave = Simulator(mini.with_physics({"diffraction": {"wavelength_nm": [5.0, 5.0, 5.0]}}))
+    real = Simulator(mini.with_physics({"diffraction": {}}))
+    e_tiny = rel_rms(tiny_wave.forward_batch(scenes), y_geo)
+    e_real = rel_rms(real.forward_batch(scenes), y_geo)
+    assert e_tiny < 5e-3 < e_real
+    assert e_tiny < e_real / 5
+    x = scenes[0]
+    for c in range(3):
+        terms = real.separable_terms(c)
+        assert np.allclose(sum(p @ x[..., c] @ q.T for p, q in terms), real.forward(x)[..., c])
+
+
+def test_diffraction_rejected_with_rotation(mini):
+    from thintact_sdk.errors import ThinTactError
+
+    with pytest.raises(ThinTactError, match="diffraction"):
+        Simulator(mini.with_physics({"diffraction": {}, "mask_misalignment": {"angle_deg": 0.2}}))
