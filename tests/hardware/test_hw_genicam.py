@@ -194,3 +194,14 @@ def test_vendor_features_are_written_or_reported():
         cam.close()
     with pytest.raises(DeviceError, match="BouncingBallSize 500 .* outside the device's range"):
         create_camera(_profile(**MONO, features={"BouncingBallSize": 500})).open()
+
+
+def test_opening_twice_restarts_cleanly():
+    cam = create_camera(_profile(**MONO))
+    cam.open()
+    try:
+        cam.read()
+        cam.open()
+        assert cam.read().data.shape == (256, 320) and cam.dropped_frames == 0
+    finally:
+        cam.close()

@@ -182,3 +182,19 @@ def test_missing_devices_and_settings(tmp_path):
         create_camera(_profile())
     with pytest.raises(ProfileError, match="unknown uvc camera setting"):
         create_camera(_profile(device=0, exposure=3))
+
+
+def test_opening_twice_restarts_the_file(tmp_path):
+    meas = _measurements(2, seed=5)
+    _write_video(tmp_path / "v.mkv", [mosaic_from_rgb(m) for m in meas])
+    prof = _profile(device=str(tmp_path / "v.mkv"))
+    cam = create_camera(prof)
+    cam.open()
+    try:
+        cam.read()
+        cam.open()
+        raw = cam.read()
+        assert raw.frame_id == 0
+        np.testing.assert_array_equal(to_measurement(raw, prof).data, meas[0])
+    finally:
+        cam.close()

@@ -113,6 +113,8 @@ class GenICamCamera(Camera):
         """Load the producer, open the device, apply the settings and start streaming."""
         from harvesters.core import Harvester
 
+        if self._ia is not None:
+            self._release()  # opening again restarts cleanly
         quiet_harvesters()
         h = Harvester()
         try:

@@ -10,6 +10,9 @@ width, height, fps, exposure_us, gain, fourcc
     ``capabilities().missing`` with a :class:`UvcSettingWarning` (or an error with
     ``strict: true``). V4L2 takes the exposure in units of 100 us. For files, ``fps`` paces
     playback (default: as fast as read) and the others are missing.
+convert_rgb
+    Live devices only: false delivers the driver's frames unconverted, for UVC cameras that
+    stream raw Bayer (``fourcc: BA81`` etc.; default true: OpenCV converts to colour).
 pixel_format
     Name given to single-channel frames (default ``Mono8``/``Mono16`` by depth; say
     ``BayerRG16`` etc. when the frames are raw mosaics of another layout than the profile's).
@@ -54,7 +57,7 @@ from thintact_sdk.profile import Profile
 from thintact_uvc.sources import Source, resolve_source
 
 KNOWN_KEYS = {"device", "width", "height", "fps", "exposure_us", "gain", "fourcc", "strict",
-              "pixel_format", "loop", "open_timeout_s"}
+              "pixel_format", "loop", "open_timeout_s", "convert_rgb"}
 V4L2_EXPOSURE_UNIT_US = 100.0
 
 
@@ -116,6 +119,8 @@ class UvcCamera(Camera):
     # -- lifecycle --------------------------------------------------------------------
     def open(self) -> None:
         """Open the source (bounded by ``open_timeout_s``) and apply the settings."""
+        if self._cap is not None:
+            self.close()  # opening again restarts cleanly
         cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_ERROR)
         self._pool = cf.ThreadPoolExecutor(max_workers=1, thread_name_prefix="uvc-read")
         fut = self._pool.submit(self._open_capture)
@@ -149,7 +154,12 @@ class UvcCamera(Camera):
             cap = cv2.VideoCapture(str(self.source.target), cv2.CAP_IMAGES)
         else:
             cap = cv2.VideoCapture(str(self.source.target), cv2.CAP_FFMPEG)
-        if cap.isOpened() and (self.source.kind == "sequence" or _gray_codec(cap)):
+        if not cap.isOpened():
+            return cap
+        if self.source.is_live:
+            if not self.settings.get("convert_rgb", True):
+                cap.set(cv2.CAP_PROP_CONVERT_RGB, 0)  # raw Bayer UVC formats (BA81, GRBG...)
+        elif self.source.kind == "sequence" or _gray_codec(cap):
             cap.set(cv2.CAP_PROP_CONVERT_RGB, 0)  # keep 16-bit gray data exact
         return cap
 
