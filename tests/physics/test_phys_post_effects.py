@@ -1,0 +1,137 @@
+"""Scene, signal and DN effects, the registry and resolve_physics."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.ndimage import gaussian_filter
+
+from thintact_sdk.errors import ThinTactError
+from thintact_sdk.imaging.simulator import Simulator
+from thintact_sdk.physics import EFFECTS, resolve_physics, stray_light
+from thintact_sdk.profile import load_profile
+
+CONTRACT_EFFECTS = {
+    "diffraction": ["wavelength_nm"], "pixel_angular_response": ["exponent"],
+    "refraction": ["n_scene_side"], "mask_misalignment": ["angle_deg", "dx_um", "dy_um"],
+    "mask_leakage": ["transmittance"], "geometry": ["scene_to_mask_mm", "mask_to_sensor_mm"],
+    "sensor_gamma": ["gamma"], "saturation": ["level_dn"], "sensor_blur": ["sigma_um"],
+    "scene_blur": ["sigma_um"], "display_gamma": ["gamma"], "color_crosstalk": ["matrix"],
+    "veiling_glare": ["fraction"], "stray_light": ["mean_dn"],
+}
+
+
+@pytest.fixture(scope="module")
+def mini():
+    return load_profile("virtual-mini")
+
+
+@pytest.fixture(scope="module")
+def scenes():
+    return np.random.default_rng(21).random((2, 50, 64, 3))
+
+
+@pytest.fixture(scope="module")
+def base(mini, scenes):
+    return Simulator(mini).forward_batch(scenes)
+
+
+def test_registry_covers_contract_vocabulary():
+    assert set(EFFECTS) == set(CONTRACT_EFFECTS)
+    for name, params in CONTRACT_EFFECTS.items():
+        spec = EFFECTS[name]
+        assert list(spec.params) == params and spec.description and spec.stage in (
+            "scene", "kernel", "signal", "dn")
+        for p in spec.params.values():
+            assert p.unit and p.bounds[0] <= p.bounds[1]
+
+
+@pytest.mark.parametrize("physics,match", [
+    ({"fog": {}}, "unknown effect"),
+    ({"sensor_gamma": {"gama": 1.0}}, "unknown parameter"),
+    ({"mask_leakage": {"transmittance": 2.0}}, "outside the physical range"),
+    ({"diffraction": {"wavelength_nm": [500, 500]}}, "shape"),
+    ({"color_crosstalk": {"matrix": [[0.9, 0, 0], [0, 1, 0], [0, 0, 1]]}}, "diagonal"),
+])
+def test_resolve_physics_refuses_bad_entries(physics, match):
+    with pytest.raises(ThinTactError, match=match):
+        resolve_physics(physics)
+
+
+def test_resolve_fills_defaults():
+    r = resolve_physics({"mask_misalignment": {"angle_deg": 0.3}})
+    assert r == {"mask_misalignment": {"angle_deg": 0.3, "dx_um": 0.0, "dy_um": 0.0}}
+
+
+def test_neutral_parameters_are_identity(mini, scenes, base):
+    neutral = {name: {} for name in ("display_gamma", "scene_blur", "sensor_blur", "color_crosstalk",
+                                     "veiling_glare", "stray_light", "sensor_gamma", "saturation")}
+    assert np.allclose(Simulator(mini.with_physics(neutral)).forward_batch(scenes), base, rtol=1e-12)
+
+
+def test_display_gamma_acts_on_scene(mini, scenes):
+    y = Simulator(mini.with_physics({"display_gamma": {"gamma": 2.2}})).forward_batch(scenes)
+    assert np.allclose(y, Simulator(mini).forward_batch(scenes**2.2), rtol=1e-12)
+
+
+def test_scene_blur_acts_on_scene_and_stays_separable(mini, scenes):
+    sim = Simulator(mini.with_physics({"scene_blur": {"sigma_um": 63.0}}))
+    blurred = gaussian_filter(scenes, sigma=(0, 2, 2, 0), mode="reflect")
+    y = sim.forward_batch(scenes)
+    assert np.allclose(y, Simulator(mini).forward_batch(blurred), rtol=1e-10)
+    terms = sim.separable_terms(1)
+    assert np.allclose(sum(p @ scenes[0, ..., 1] @ q.T for p, q in terms), y[0, ..., 1], rtol=1e-9)
+
+
+def test_sensor_blur_and_glare(mini, scenes, base):
+    sim = Simulator(mini.with_physics({"sensor_blur": {"sigma_um": 15.0},
+                                       "veiling_glare": {"fraction": 0.1}}))
+    y = sim.forward_batch(scenes)
+    b = gaussian_filter(base, sigma=(0, 1.5, 1.5, 0), mode="reflect")
+    assert np.allclose(y, b + 0.1 * b.mean(axis=(1, 2), keepdims=True), rtol=1e-10)
+    terms = sim.separable_terms(2)
+    assert np.allclose(sum(p @ scenes[1, ..., 2] @ q.T for p, q in terms), y[1, ..., 2], rtol=1e-9)
+
+
+def test_color_crosstalk_mixes_channels(mini, scenes, base):
+    m = [[1.0, 0.05, 0.0], [0.02, 1.0, 0.03], [0.0, 0.1, 1.0]]
+    sim = Simulator(mini.with_physics({"color_crosstalk": {"matrix": m}}))
+    assert np.allclose(sim.forward_batch(scenes), base @ np.asarray(m).T, rtol=1e-12)
+    with pytest.raises(ThinTactError, match="not separable"):
+        sim.separable_terms(0)
+
+
+def test_dn_effects_take_the_gain(mini, scenes, base):
+    gain = np.array([20000.0, 21000.0, 19000.0])
+    lin = base * gain
+    fs = 4095 - 64
+    sim = Simulator(mini.with_physics({"stray_light": {"mean_dn": [30.0, 20.0, 10.0]},
+                                       "sensor_gamma": {"gamma": 0.9},
+                                       "saturation": {"level_dn": 2500.0}}))
+    shape = stray_light.shape(128, 160)
+    assert shape.mean() == pytest.approx(1.0)
+    want = lin + shape[None, :, :, None] * np.array([30.0, 20.0, 10.0])
+    want = np.minimum(fs * (want / fs) ** 0.9, 2500.0 - 64)
+    assert np.allclose(sim.predict_signal_dn(scenes, gain), want, rtol=1e-12)
+    dn = sim.predict_dn(scenes, gain)
+    assert dn.max() <= 2500.0 and np.allclose(dn, want + 64)
+    # forward applies them at the reference gain and divides it back out
+    g = sim.reference_gain()
+    assert np.allclose(sim.forward_batch(scenes), sim.predict_signal_dn(scenes, g) / g)
+
+
+def test_stray_light_mean_is_mean_dn(mini, scenes):
+    sim = Simulator(mini.with_physics({"stray_light": {"mean_dn": [12.0, 0.0, 5.0]}}))
+    extra = sim.predict_signal_dn(scenes, 1000.0) - Simulator(mini).predict_signal_dn(scenes, 1000.0)
+    assert np.allclose(extra.mean(axis=(0, 1, 2)), [12.0, 0.0, 5.0])
+    assert extra[0, 64, 80, 0] > extra[0, 0, 0, 0]
+
+
+def test_changing_post_effects_reuses_the_kernel(mini, scenes):
+    import time
+
+    Simulator(mini).forward_batch(scenes)
+    t0 = time.perf_counter()
+    for g in (0.8, 0.9, 1.1):
+        Simulator(mini.with_physics({"sensor_gamma": {"gamma": g}})).predict_dn(scenes, 2e4)
+    assert time.perf_counter() - t0 < 3.0
