@@ -122,6 +122,7 @@ def test_truncated_source_is_a_one_line_error(tmp_path, capsys):
                  str(tmp_path / "rec"), "--quiet"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "frame 1" in err and "truncated" in err
+    assert not (tmp_path / "rec").exists()  # nothing is created for a camera that fails to open
 
 
 @pytest.mark.skipif(viky_producer() is None, reason="genicam wheel without viky.cti")

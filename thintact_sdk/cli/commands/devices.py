@@ -31,11 +31,20 @@ from thintact_sdk.errors import ThinTactError
 from thintact_sdk.profile import available_profiles, read_profile_file
 
 GENTL_PATH_ENV = "GENICAM_GENTL64_PATH"
+CLI_DESCRIPTION = """\
+List what this machine can see:
+  GenICam  devices of each GenTL producer named by a profile (camera.settings.cti),
+           by --cti, or by GENICAM_GENTL64_PATH
+  UVC      /dev/video* nodes with their /dev/v4l/by-id names
+  Serial   serial ports with USB VID:PID (use one as a profile's light.port)
+  USB      every USB device by VID:PID with its strings (pyusb; --usb-backend injects one)
+"""
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("devices", help="list GenICam and UVC cameras, serial ports and USB devices",
-                       description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+                       description=CLI_DESCRIPTION,
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--cti", action="append", default=[], metavar="PATH",
                    help="also enumerate this GenTL producer (repeatable)")
     p.add_argument("--no-profiles", action="store_true",

@@ -39,6 +39,19 @@ from thintact_sdk.frames import RawFrame
 from thintact_sdk.profile import Profile, load_profile
 from thintact_sdk.recording import RecordingWriter
 
+CLI_DESCRIPTION = """\
+Capture N frames from the profile's camera into a thintact-recording/1 directory.
+
+Frames are binned with the profile's Bayer layout; measurements keep the black level and
+are stored as uint16 when integral, else float32. Each frame records timestamp_ns,
+frame_id and exposure_us (and gain_db, device_timestamp_ns, dropped_before when known);
+a ground-truth scene reported by the camera (the virtual camera) is saved with it.
+--raw also keeps the raw mosaics (raw/*.npy), which the replay camera delivers as recorded.
+
+Dropped frames (gaps in the camera's frame ids) are never silent: gaps are reported as they
+happen, the total at the end, and --fail-on-drop makes any drop an error (exit status 2).
+"""
+
 MAX_GAP_NOTES = 10
 """Gaps reported one by one while recording; later ones are only counted."""
 
@@ -47,7 +60,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "record",
         help="record frames from a profile's camera into a thintact-recording/1 directory",
-        description=__doc__,
+        description=CLI_DESCRIPTION,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("--profile", required=True, help="profile name or file")
@@ -160,8 +173,6 @@ def record(
             raise ThinTactError("--raw needs the thintact-replay plugin (plugins/thintact_replay)") from None
         save_raw = save_raw_frame
     camera = create_camera(profile, settings=settings)
-    writer = RecordingWriter(out, profile)
-    first_index = len(writer.frames)
     gaps = FrameGapCounter()
     summary = RecordSummary()
     stamps: list[int] = []
@@ -175,6 +186,8 @@ def record(
         opened_with = [str(w.message) for w in caught]
         for message in opened_with:
             _Progress.warn(message)
+        writer = RecordingWriter(out, profile)  # only once the camera works
+        first_index = len(writer.frames)
         reader = _BufferedReader(camera, frames, timeout_s, buffer_mb * 2**20)
         with bar:
             for i in range(frames):
