@@ -150,3 +150,30 @@ def test_capabilities_describe_the_recording(tmp_path):
     assert (caps.width, caps.height, caps.pixel_format) == (320, 256, "BayerBG16")
     assert caps.fps == pytest.approx(20.0)
     assert caps.missing == ["ExposureTime", "Gain"]
+
+
+def test_png_measurements_replay_exactly(tmp_path):
+    import json
+
+    import cv2
+
+    root = tmp_path / "rec"
+    (root / "measurements").mkdir(parents=True)
+    prof = load_profile("virtual-mini")
+    RecordingWriter(root, prof)  # manifest + profile.json
+    rng = np.random.default_rng(11)
+    meas, frames = [], []
+    for i in range(2):
+        m = rng.integers(0, 65535, size=(128, 160, 3)).astype(np.uint16)
+        cv2.imwrite(str(root / "measurements" / f"{i}.png"), m[..., ::-1])  # PNG stores BGR
+        meas.append(m)
+        frames.append({"measurement": f"measurements/{i}.png", "label": f"p{i}"})
+    manifest = json.loads((root / "manifest.json").read_text())
+    manifest["frames"] = frames
+    (root / "manifest.json").write_text(json.dumps(manifest))
+    p = _profile(root, rate="fast")
+    with create_camera(p) as cam:
+        got = [to_measurement(r, p).data for r in cam]
+    assert len(got) == 2
+    for g, m in zip(got, meas, strict=True):
+        np.testing.assert_array_equal(g, m)
