@@ -131,6 +131,16 @@ def test_truncated_and_missing_files_are_clear_errors(tmp_path):
         create_camera(_profile(root)).open()
 
 
+def test_missing_scene_is_found_at_open(tmp_path):
+    root = tmp_path / "rec"
+    _write(root, n=3)
+    sorted((root / "scenes").iterdir())[1].unlink()
+    with pytest.raises(RecordingError, match=r"frame 1 file scenes/.* is missing"):
+        create_camera(_profile(root)).open()
+    with create_camera(_profile(root, scenes=False, rate="fast")) as cam:
+        assert len(list(cam)) == 3  # scenes not wanted: the recording plays
+
+
 def test_bad_settings(tmp_path):
     with pytest.raises(ProfileError, match="settings.path"):
         create_camera(_profile(tmp_path).model_copy(

@@ -27,9 +27,9 @@ scenes
 
 End of recording
 ----------------
-Without ``loop``, :meth:`ReplayCamera.read` raises :class:`EndOfRecording` (an
-``thintact_sdk.errors.EndOfStreamError``) after the last frame; iterating over the camera (``for raw in cam``)
-stops there instead.
+Without ``loop``, :meth:`ReplayCamera.read` raises :class:`EndOfRecording` (a
+``thintact_sdk.errors.EndOfStreamError``) after the last frame; iterating over the camera
+(``for raw in cam``) stops there instead.
 """
 
 from __future__ import annotations
@@ -60,13 +60,18 @@ class EndOfRecording(EndOfStreamError):
     """The replayed recording has no more frames (and ``loop`` is off)."""
 
 
-def _check_frame_files(rec: Recording) -> None:
-    """Raise RecordingError naming the first frame whose measurement is missing or truncated."""
+def _check_frame_files(rec: Recording, scenes: bool) -> None:
+    """Raise RecordingError naming the first frame with a missing or truncated file.
+
+    Checks each frame's measurement, kept raw mosaic, and (with ``scenes``) its scene.
+    """
     for i, fr in enumerate(rec.frames):
         names = [fr.measurement]
         raw = fr.extra.get(RAW_FIELD)
         if isinstance(raw, str):
             names.append(raw)
+        if scenes and fr.scene is not None:
+            names.append(fr.scene)
         for rel in names:
             path = rec.root / rel
             problem = None
@@ -123,7 +128,7 @@ class ReplayCamera(Camera):
         rec = Recording(self.path, profile=self.profile)
         if len(rec) == 0:
             raise RecordingError(f"recording {self.path} has no frames")
-        _check_frame_files(rec)
+        _check_frame_files(rec, self.with_scenes)
         self._rec = rec
         self._times_ns = self._schedule(rec)
         self._ids = [int(fr.extra.get("frame_id", i)) for i, fr in enumerate(rec.frames)]
