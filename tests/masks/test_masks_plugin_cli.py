@@ -66,10 +66,14 @@ def test_optimize_show_compare_apply(tmp_path, tiny_profile_file, capsys) -> Non
 
     capsys.readouterr()
     assert main(["mask", "compare", "--profile", str(tiny_profile_file), str(out / "design.json"),
-                 "--json"]) == 0
-    scores = {s["name"]: s for s in json.loads(capsys.readouterr().out)}
+                 "--json", "--exact"]) == 0
+    tables = json.loads(capsys.readouterr().out)
+    scores = {s["name"]: s for s in tables["direct generation"]}
     assert {"mls", "random", "run", "profile"} <= set(scores)
     assert scores["run"]["fitness"] == pytest.approx(rec["fitness"])
+    exact = {s["name"]: s for s in tables["exact simulator"]}
+    for name, s in scores.items():  # direct generation is close to the exact physics
+        assert exact[name]["fitness"] == pytest.approx(s["fitness"], rel=0.05)
 
     new_profile = tmp_path / "with_ga.yaml"
     assert main(["mask", "apply", str(out / "design.json"), "--profile", str(tiny_profile_file),

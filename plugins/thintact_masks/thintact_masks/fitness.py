@@ -228,7 +228,10 @@ class FitnessEvaluator:
 
     def reconstruct(self, phi: np.ndarray) -> dict[str, np.ndarray]:
         """Tikhonov reconstructions ``{"usaf", "white"}`` (``N × M`` float64) for φ."""
-        pc, qc = self.coding_matrices(phi)
+        return self.reconstruct_from(*self.coding_matrices(phi))
+
+    def reconstruct_from(self, pc: np.ndarray, qc: np.ndarray) -> dict[str, np.ndarray]:
+        """Reconstructions for given coding matrices (``R × N``, ``S × M``, relative units)."""
         lam_p, vp = self._eig(pc)
         lam_q, vq = self._eig(qc)
         gain = np.outer(lam_p, lam_q)
@@ -252,7 +255,15 @@ class FitnessEvaluator:
         phi = np.asarray(phi)
         if phi.shape != (self.K,):
             raise ValueError(f"phi must have shape ({self.K},), got {phi.shape}")
-        rec = self.reconstruct(phi)
+        return self.score(self.reconstruct(phi), keep_reconstructions)
+
+    def evaluate_matrices(self, pc: np.ndarray, qc: np.ndarray,
+                          keep_reconstructions: bool = False) -> Evaluation:
+        """Fitness of given coding matrices (e.g. from the exact simulator), relative units."""
+        return self.score(self.reconstruct_from(pc, qc), keep_reconstructions)
+
+    def score(self, rec: dict[str, np.ndarray], keep_reconstructions: bool = False) -> Evaluation:
+        """Fitness and its parts from the reconstructions ``{"usaf", "white"}``."""
         white = rec["white"]
         parts = {
             "ssim_usaf": self._ssim["usaf"](rec["usaf"]),
