@@ -100,3 +100,28 @@ def test_bit_depth_check(profile):
     assert bit_depth_problem("BayerRG12", profile) is None  # saturation 4095 DN fits 12 bit
     assert "at most 255 DN" in bit_depth_problem("BayerRG8", profile)
     assert bit_depth_problem("BayerRG32f", profile) is None
+
+
+def test_open_camera_and_read_measurement_through_a_real_plugin(tmp_path, profile):
+    from thintact_sdk.capture import open_camera, read_measurement
+    from thintact_sdk.recording import RecordingWriter
+
+    rgb = _rgb(profile, 9)
+    RecordingWriter(tmp_path / "rec", profile).add(rgb, label="one")
+    cam_cfg = profile.camera.model_copy(update={"plugin": "replay", "bayer_pattern": "none"})
+    replay_profile = profile.model_copy(update={"camera": cam_cfg})
+    with open_camera(replay_profile, settings={"path": str(tmp_path / "rec"),
+                                               "rate": "fast"}) as cam:
+        assert cam.is_open
+        m = read_measurement(cam, replay_profile)
+    np.testing.assert_array_equal(m.data, rgb)
+
+
+def test_preallocated_output_is_filled(profile):
+    rgb = _rgb(profile, 4)
+    out = np.empty(rgb.shape, np.float32)
+    for raw in (RawFrame(mosaic_from_rgb(rgb), 0, 0, "BayerRG16"), RawFrame(rgb, 0, 0, "RGB16")):
+        out[...] = -1
+        m = to_measurement(raw, profile, out=out)
+        assert m.data is out
+        np.testing.assert_array_equal(out, rgb)
