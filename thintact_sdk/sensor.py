@@ -250,8 +250,18 @@ class Sensor:
         return to_measurement(self.read_raw(), self.profile)
 
     def reconstruct(self, measurement: Measurement) -> np.ndarray:
-        """Decode a measurement into the ``N × M × 3`` float32 scene (display units)."""
-        return np.asarray(self.decoder.decode(measurement.signal()), np.float32)
+        """Decode a measurement into the ``N × M × 3`` float32 scene (display units).
+
+        Uses the decoder's ``decode_raw(data, black_level_dn)`` when it has one (the black
+        level folded into the solve), else ``decode(signal)``.
+        """
+        decoder = self.decoder
+        decode_raw = getattr(decoder, "decode_raw", None)
+        if decode_raw is not None:
+            out = decode_raw(measurement.data, measurement.black_level_dn)
+        else:
+            out = decoder.decode(measurement.signal())
+        return np.asarray(out, np.float32)
 
     def read_image(self) -> np.ndarray:
         """The next reconstructed membrane image, ``N × M × 3`` float32."""

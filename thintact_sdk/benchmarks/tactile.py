@@ -1,0 +1,283 @@
+"""Tactile accuracy and latency through the full lensless path (paper §VI-C table).
+
+1. Depth: a chamfered prism and a 4 mm sphere pressed 0.25/0.50/0.75/1.00 mm at random
+   places and rotations, rendered by the tactile simulator, imaged by the virtual camera
+   (simulator + noise), reconstructed by the profile's decoder and interpreted with a LUT
+   calibrated the same way (ball presses through the same path). Per-image RMS over the
+   pixels deeper than the contact threshold, mean over presses (paper's method).
+2. Markers: displacement RMS error after shearing a pressed sphere in three frames.
+3. Latency: raw Bayer frame → tactile frame on the paper's device (1024×1280 binned,
+   400×512 scene), per frame and streamed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+DEPTH_GOAL_MM = 0.05
+MARKER_GOAL_MM = 0.02
+LATENCY_GOAL_MS = 60.0
+FPS_GOAL = 20.0
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--profile", default="virtual-finger", help="device for the accuracy tests")
+    p.add_argument("--latency-profile", default="thintact-paper",
+                   help="device for the latency test (default: the paper's)")
+    p.add_argument("--presses", type=int, default=3,
+                   help="random presses per indenter and depth (default 3)")
+    p.add_argument("--calibration-presses", type=int, default=12,
+                   help="ball presses for the LUT calibration through the path")
+    p.add_argument("--marker-presses", type=int, default=6)
+    p.add_argument("--latency-frames", type=int, default=30)
+    p.add_argument("--skip-latency", action="store_true")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--json", type=Path, help="also write the figures to this JSON file")
+
+
+def _progress() -> Any:
+    from rich.progress import Progress
+
+    return Progress(transient=True)
+
+
+def accuracy(args: argparse.Namespace, out: dict[str, Any]) -> None:
+    """Depth table and marker error on ``args.profile`` through its virtual camera."""
+    from thintact_sdk.errors import ThinTactError
+    from thintact_sdk.profile import load_profile
+    from thintact_sdk.sensor import VIRTUAL_CAMERAS, Sensor
+    from thintact_sdk.tactile.device_calibration import calibrate_virtual, scene_slot
+    from thintact_sdk.tactile.evaluation import PAPER_TABLE_MM, evaluate_depth, evaluate_markers
+
+    profile = load_profile(args.profile)
+    if profile.camera is None or profile.camera.plugin not in VIRTUAL_CAMERAS:
+        raise ThinTactError(f"--profile {args.profile}: the accuracy test needs a virtual camera")
+    settings = {"slot": "bench-tactile", "fps": 0, "seed": args.seed}
+    with Sensor(profile, camera_settings=settings) as sensor, _progress() as bar:
+        slot = scene_slot(sensor)
+        task = bar.add_task("LUT calibration", total=args.calibration_presses)
+        t0 = time.perf_counter()
+        sensor._lut = calibrate_virtual(
+            sensor, args.calibration_presses, seed=args.seed,
+            progress=lambda i, n: bar.update(task, completed=i, total=n),
+        )
+        calib_s = time.perf_counter() - t0
+        task = bar.add_task("depth table", total=1)
+        rows = evaluate_depth(sensor, slot.set, presses=args.presses, seed=args.seed + 1,
+                              progress=lambda i, n: bar.update(task, completed=i, total=n))
+        task = bar.add_task("markers", total=args.marker_presses)
+        markers = evaluate_markers(sensor, slot.set, presses=args.marker_presses,
+                                   seed=args.seed + 2,
+                                   progress=lambda i, n: bar.update(task, completed=i, total=n))
+    print(f"\nDepth accuracy through the lensless path ({profile.name}: "
+          f"{profile.sensor.rows}x{profile.sensor.cols} sensor, {profile.scene.rows}x"
+          f"{profile.scene.cols} scene at {profile.scene.pixel_pitch_um / 1000:.3f} mm; decoder "
+          f"{profile.decoder.plugin if profile.decoder else '?'}; LUT from "
+          f"{args.calibration_presses} 3 mm ball presses through the same path, {calib_s:.1f} s; "
+          f"{args.presses} random presses per row)")
+    print(f"{'indenter':16s} {'depth':>6s} {'RMS sensor':>11s} {'RMS scene':>10s} "
+          f"{'paper real':>11s} {'Real2Sim':>9s}")
+    for r in rows:
+        real, r2s = PAPER_TABLE_MM.get((r.indenter, r.depth_mm), (float("nan"),) * 2)
+        print(f"{r.indenter:16s} {r.depth_mm:5.2f}mm {r.rms_mm:9.3f}mm {r.rms_scene_mm:8.3f}mm "
+              f"{real:9.3f}mm {r2s:7.3f}mm")
+    worst = max(r.rms_mm for r in rows)
+    mean = float(np.mean([r.rms_mm for r in rows]))
+    print(f"mean {mean:.3f} mm, worst {worst:.3f} mm (goal ≤ {DEPTH_GOAL_MM} mm: "
+          f"{'met' if worst <= DEPTH_GOAL_MM else 'NOT met'})")
+    print(f"\nMarker displacement: RMS error {markers.rms_mm:.4f} mm over "
+          f"{markers.tracked_fraction:.0%} of markers tracked (true displacements up to "
+          f"{markers.max_true_mm:.2f} mm, {args.marker_presses} sheared presses in 3 steps); "
+          f"shear direction error {markers.direction_error_deg:.1f}° "
+          f"(goal ≤ {MARKER_GOAL_MM} mm: {'met' if markers.rms_mm <= MARKER_GOAL_MM else 'NOT met'})")
+    out["depth"] = [r.__dict__ for r in rows]
+    out["depth_mean_mm"], out["depth_worst_mm"] = mean, worst
+    out["markers"] = markers.__dict__
+    out["lut_calibration_s"] = calib_s
+
+
+def _latency_decoder(profile: Any) -> tuple[Any, str]:
+    """The profile's decoder, or, without a calibration bundle, one built from the simulator
+    (two-term fit + joint filter, closed form) so the timing has the real structure."""
+    from thintact_sdk.errors import CalibrationError
+    from thintact_sdk.plugin_manager import get_registry
+
+    cfg = profile.decoder
+    name = cfg.plugin if cfg is not None else "thintact-noniterative"
+    settings = dict(cfg.settings) if cfg is not None else {}
+    try:
+        return get_registry().create("decoder", name, profile, settings), "calibration bundle"
+    except CalibrationError:
+        pass
+    from thintact_sdk.imaging.calibration_bundle import CalibrationBundle
+
+    cache = Path.home() / ".cache" / "thintact-sdk" / "bench-bundles" / profile.content_hash()[:16]
+    try:
+        bundle = CalibrationBundle.load(cache)
+        how = f"simulator-built bundle (cached in {cache})"
+    except CalibrationError:
+        from thintact_sdk.imaging.filter_training import train_joint_filter, training_scenes
+        from thintact_sdk.imaging.simulator import Simulator, white_level_gain
+        from thintact_sdk.imaging.t2s import SystemMatrices
+
+        sim = Simulator(profile)
+        sm = SystemMatrices.two_term_fit(sim, scale_dn=white_level_gain(sim))
+        scenes = training_scenes(profile.scene.rows, profile.scene.cols, count=4)
+        jf = train_joint_filter(sm, scenes, low_block="auto", phi_s_rank=2, steps=0,
+                                closed_form_rounds=1)
+        tau = float(settings.get("tau", 0.01))
+        bundle = CalibrationBundle.create(profile, sm, jf, tau=tau, source="simulator")
+        bundle.save(cache)
+        how = "simulator-built bundle (two-term fit, closed-form filter; now cached)"
+    settings["bundle"] = bundle
+    return get_registry().create("decoder", name, profile, settings), how
+
+
+def latency(args: argparse.Namespace, out: dict[str, Any]) -> None:
+    """Raw Bayer → TactileFrame on ``args.latency_profile``, single frames and streamed."""
+    from thintact_sdk.bayer import mosaic_from_rgb
+    from thintact_sdk.capture import to_measurement
+    from thintact_sdk.frames import RawFrame
+    from thintact_sdk.imaging.noise import signal_to_dn
+    from thintact_sdk.imaging.simulator import Simulator, white_level_gain
+    from thintact_sdk.profile import load_profile
+    from thintact_sdk.sensor import Sensor
+    from thintact_sdk.tactile import Sphere, TactileSimulator, scene_level_lut
+
+    profile = load_profile(args.latency_profile)
+    t0 = time.perf_counter()
+    decoder, how = _latency_decoder(profile)
+    setup_decoder_s = time.perf_counter() - t0
+    tsim = TactileSimulator.for_profile(profile)
+    sim = Simulator(profile)
+    gain = white_level_gain(sim)
+    rng = np.random.default_rng(args.seed)
+    scenes = [tsim.flat().scene] + [
+        tsim.press(Sphere(2.0), d, (x, 0.0)).scene for d, x in ((0.5, -2.0), (0.8, 1.0))
+    ]
+    raws = []
+    for i, sc in enumerate(scenes):
+        dn = signal_to_dn(sim.forward(sc) * gain, profile.noise, rng)
+        raws.append(RawFrame(mosaic_from_rgb(dn.astype(np.uint16)), 0, i + 1, "BayerRG12"))
+    lut = scene_level_lut(profile)
+    sensor = Sensor(profile, lut=lut, decoder=decoder)
+    stages: dict[str, list[float]] = {"bin": [], "decode": [], "interpret": [], "total": []}
+    for k in range(args.latency_frames):
+        raw = raws[k % len(raws)]
+        raw.frame_id = k + 1
+        t0 = time.perf_counter()
+        m = to_measurement(raw, profile)
+        t1 = time.perf_counter()
+        img = sensor.reconstruct(m)
+        t2 = time.perf_counter()
+        sensor.interpreter.interpret(img, raw.timestamp_ns, raw.frame_id)
+        t3 = time.perf_counter()
+        for key, v in zip(stages, (t1 - t0, t2 - t1, t3 - t2, t3 - t0), strict=True):
+            stages[key].append(v * 1e3)
+    med = {k: float(np.median(v)) for k, v in stages.items()}
+    p95 = float(np.percentile(stages["total"], 95))
+    fps = _streamed_fps(profile, raws, sensor, args.latency_frames)
+    print(f"\nLatency raw Bayer {2 * profile.sensor.rows}x{2 * profile.sensor.cols} → tactile "
+          f"frame on {profile.name} ({profile.scene.rows}x{profile.scene.cols} scene; decoder "
+          f"{type(decoder).__name__} from a {how}, set up in {setup_decoder_s:.1f} s; tactile "
+          f"work grid {sensor.interpreter.work.rows}x{sensor.interpreter.work.cols}; "
+          f"{args.latency_frames} frames)")
+    print(f"median {med['total']:.1f} ms (bin {med['bin']:.1f}, decode {med['decode']:.1f}, "
+          f"interpret {med['interpret']:.1f}), p95 {p95:.1f} ms "
+          f"(goal ≤ {LATENCY_GOAL_MS:.0f} ms: {'met' if med['total'] <= LATENCY_GOAL_MS else 'NOT met'})")
+    print(f"streamed: {fps['fps']:.1f} tactile frames/s from a camera delivering "
+          f"{fps['camera_fps']:.0f} frames/s, {fps['consumer_dropped'] + fps['skipped']} "
+          f"frames skipped by newest-frame delivery (goal ≥ {FPS_GOAL:.0f} fps: "
+          f"{'met' if fps['fps'] >= FPS_GOAL else 'NOT met'})")
+    out["latency_ms"] = {"median": med, "p95_total": p95, "decoder_source": how}
+    out["stream"] = fps
+
+
+def _streamed_fps(profile: Any, raws: list[Any], sensor: Any, frames: int) -> dict[str, float]:
+    """Tactile frames per second from Sensor.stream on a camera replaying ``raws`` at 30 fps."""
+    import thintact_sdk
+    from thintact_sdk.interfaces import Camera, CameraCapabilities
+    from thintact_sdk.plugin_manager import PluginRegistry
+    from thintact_sdk.profile import CameraConfig
+    from thintact_sdk.sensor import Sensor
+
+    camera_fps = 30.0
+
+    class MemoryCamera(Camera):
+        name = "bench-memory"
+
+        def __init__(self) -> None:
+            self._n = 0
+            self._next = time.monotonic()
+
+        def open(self) -> None:
+            self._is_open = True
+
+        def close(self) -> None:
+            self._is_open = False
+
+        def capabilities(self) -> CameraCapabilities:
+            h, w = raws[0].data.shape
+            return CameraCapabilities(w, h, ["BayerRG12"], "BayerRG12", camera_fps)
+
+        def read(self, timeout_s: float = 2.0) -> Any:
+            self._next += 1.0 / camera_fps
+            time.sleep(max(0.0, self._next - time.monotonic()))
+            self._n += 1
+            raw = raws[self._n % len(raws)]
+            return type(raw)(raw.data, time.monotonic_ns(), self._n, raw.pixel_format)
+
+    class _Plugin:
+        @thintact_sdk.hookimpl
+        def thintact_cameras(self) -> list[thintact_sdk.Component]:
+            return [thintact_sdk.Component("bench-memory", lambda p, s: MemoryCamera())]
+
+    reg = PluginRegistry()
+    reg.register(_Plugin(), "bench-memory")
+    prof = profile.model_copy(
+        update={"camera": CameraConfig(plugin="bench-memory"), "light": None}, deep=True
+    )
+    s = Sensor(prof, lut=sensor.lut, decoder=sensor.decoder, registry=reg)
+    with s:
+        t0 = None
+        n = 0
+        for _ in s.stream(max_frames=frames + 1, timeout_s=10.0):
+            if t0 is None:
+                t0 = time.perf_counter()
+            else:
+                n += 1
+        elapsed = time.perf_counter() - (t0 or time.perf_counter())
+    return {
+        "fps": n / elapsed if elapsed > 0 else float("nan"),
+        "camera_fps": camera_fps,
+        "skipped": float(s.stats.skipped),
+        "consumer_dropped": float(s.stats.consumer_dropped),
+        "processed": float(s.stats.processed),
+    }
+
+
+def run(args: argparse.Namespace) -> int:
+    from thintact_sdk.machine import machine_summary
+
+    print(machine_summary())
+    out: dict[str, Any] = {"machine": machine_summary()}
+    t0 = time.perf_counter()
+    accuracy(args, out)
+    if not args.skip_latency:
+        latency(args, out)
+    out["wall_s"] = time.perf_counter() - t0
+    import os
+
+    load = os.getloadavg()
+    print(f"\nbenchmark wall time {out['wall_s']:.0f} s; load average {load[0]:.1f} on "
+          f"{os.cpu_count()} cores (timings on a shared machine are inflated by other work)")
+    out["load_average"] = load[0]
+    if args.json is not None:
+        args.json.write_text(json.dumps(out, indent=1, default=float) + "\n")
+    return 0
