@@ -123,3 +123,17 @@ def test_resuming_a_different_run_exits_2(tmp_path, tiny_profile_file, capsys) -
     assert main(base) == 0
     assert main(base + ["--seed", "9"]) == 2
     assert "different run" in capsys.readouterr().err
+
+
+def test_shipped_designs_load_and_beat_their_baselines() -> None:
+    from thintact_masks.design_io import DESIGNS_DIR, load_design
+
+    files = sorted(DESIGNS_DIR.glob("*.json"))
+    assert files, "no shipped designs"
+    for f in files:
+        mask, rec = load_design(f.stem)  # shipped designs resolve by name
+        assert mask.design == "ga" and mask.K == rec["K"] == len(rec["phi"])
+        assert rec["fitness"] > rec["baselines"]["mls"]["fitness"]
+        assert rec["fitness"] > rec["baselines"]["random"]["fitness"]
+        assert rec["history"]["best"][-1] == pytest.approx(rec["fitness"])
+        assert f.stat().st_size < 2_000_000
