@@ -93,6 +93,14 @@ def _check_same_profile(capture: Path, profile: Profile) -> None:
         )
 
 
+def _remove_partial_writes(capture_dir: Path) -> None:
+    """Delete temp files of atomic writes a killed run left behind (never complete frames)."""
+    for sub in (capture_dir, capture_dir / "scenes", capture_dir / "measurements"):
+        if sub.is_dir():
+            for tmp in sub.glob(".*.tmp"):
+                tmp.unlink(missing_ok=True)
+
+
 def _restore_exposure(camera: Camera, writer: RecordingWriter) -> float | None:
     for fr in writer.frames:
         if fr.label == "white" and isinstance(fr.extra.get("exposure_us"), int | float):
@@ -202,6 +210,7 @@ def run_wizard(
     capture_dir = bundle_dir / CAPTURE_DIR
     if (capture_dir / "manifest.json").is_file():
         _check_same_profile(capture_dir, profile)
+        _remove_partial_writes(capture_dir)
     bundle_dir.mkdir(parents=True, exist_ok=True)
     (bundle_dir / "wizard.json").write_text(
         json.dumps({"frames": ws.frames, "flush": ws.flush, "exposure_target": ws.exposure_target}) + "\n",

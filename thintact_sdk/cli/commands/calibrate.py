@@ -40,6 +40,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", metavar="DIR", help="bundle directory (default calibrations/<device>/<timestamp>)")
     p.add_argument("--restart", action="store_true", help="wizard: start a new capture instead of resuming")
     p.add_argument("--frames", type=int, help="frames averaged per pattern (default 100; 8 for virtual cameras)")
+    p.add_argument("--flush", type=int, default=1,
+                   help="frames dropped after each pattern change (default 1)")
     p.add_argument("--method", choices=["lsq", "paper"], default="lsq",
                    help="lsq: joint least squares per slit (default); paper: Algorithm 1 verbatim")
     p.add_argument("--max-iter", type=int, default=50, help="refinement iterations (Algorithm 3)")
@@ -190,7 +192,7 @@ def _wizard(args: argparse.Namespace, options: Any, console: Console) -> Any:
         try:
             return run_wizard(
                 profile, bundle_dir, camera, display,
-                WizardSettings(frames=frames, check_registration=not args.no_registration_check),
+                WizardSettings(frames=frames, flush=args.flush, check_registration=not args.no_registration_check),
                 options, progress=on_step, status=status, reference=reference,
                 reference_exposure_us=REFERENCE_EXPOSURE_US,
             )

@@ -1,0 +1,104 @@
+"""The wizard against any Camera/Display: exposure, registration, averaging, resume."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from cal_testkit import (
+    REFERENCE_EXPOSURE_US,
+    FakeCamera,
+    FakeDisplay,
+    synthetic_matrices,
+    synthetic_profile,
+)
+
+from thintact_sdk.calibration.gauge import operator_error
+from thintact_sdk.calibration.pipeline import CalibrationOptions, channel_matrices
+from thintact_sdk.calibration.plan import build_plan
+from thintact_sdk.calibration.wizard import WizardSettings, find_unfinished, run_wizard
+from thintact_sdk.errors import CalibrationError, DeviceTimeoutError
+from thintact_sdk.recording import Recording
+
+FAST = CalibrationOptions(filter_steps=0, filter_scenes=8)
+SETTINGS = WizardSettings(frames=2, validation=("gelsight:1", "smooth_color"))
+
+
+class MirroredDisplay(FakeDisplay):
+    def show(self, scene: np.ndarray) -> None:
+        super().show(scene[:, ::-1])
+
+
+def test_wizard_calibrates_a_synthetic_device(tmp_path: Path) -> None:
+    prof = synthetic_profile()
+    sm = synthetic_matrices(gains_dn=(30.0, 40.0, 25.0))
+    disp = FakeDisplay()
+    cam = FakeCamera(prof, sm, disp, seed=1)
+    out = run_wizard(prof, tmp_path / "cal", cam, disp, SETTINGS, FAST)
+    rec = Recording(tmp_path / "cal" / "capture")
+    labels = [f.label for f in rec.frames]
+    assert labels == [s.label for s in build_plan(prof, SETTINGS.validation)]
+    assert all(f.extra["frames"] == 2 for f in rec.frames)
+    # exposure changed so the white frame peaks at 70 % of full scale, and recorded
+    exposure = rec.frames[1].extra["exposure_us"]
+    assert exposure != REFERENCE_EXPOSURE_US and out.bundle.meta["exposure_us"] == pytest.approx(exposure)
+    white = rec.measurement(1).astype(float) - prof.noise.black_level_dn
+    full = prof.noise.saturation_dn - prof.noise.black_level_dn
+    assert 0.6 * full < np.percentile(white, 99.9) < 0.8 * full
+    assert out.registration is not None and out.registration.passed
+    truth = [channel_matrices(sm, c) for c in range(3)]
+    scale = exposure / REFERENCE_EXPOSURE_US
+    for c in range(3):
+        t = truth[c]
+        ref = type(t)(t.Po * np.sqrt(scale), t.Qo * np.sqrt(scale), t.Pc * np.sqrt(scale), t.Qc * np.sqrt(scale))
+        assert operator_error(channel_matrices(out.bundle.system_matrices, c), ref) < 0.03
+    assert (tmp_path / "cal" / "report.html").is_file()
+    assert out.bundle.meta["source"] == "wizard"
+
+
+def test_registration_catches_a_mirrored_panel_before_the_slit_scan(tmp_path: Path) -> None:
+    prof = synthetic_profile()
+    disp = MirroredDisplay()
+    cam = FakeCamera(prof, synthetic_matrices(), disp, noise=False)
+    with pytest.raises(CalibrationError, match="mirrored left-right"):
+        run_wizard(prof, tmp_path / "cal", cam, disp, SETTINGS, FAST)
+    labels = [f.label for f in Recording(tmp_path / "cal" / "capture").frames]
+    assert labels[-1] == "reg_br" and not any(lab.startswith("hslit") for lab in labels)
+
+
+def test_interrupted_wizard_resumes_without_losing_or_repeating_frames(tmp_path: Path) -> None:
+    prof = synthetic_profile()
+    sm = synthetic_matrices()
+    # uninterrupted reference run (noiseless camera: runs are comparable bit for bit)
+    disp = FakeDisplay()
+    full = run_wizard(prof, tmp_path / "a", FakeCamera(prof, sm, disp, noise=False), disp, SETTINGS, FAST)
+    # the same run, the camera dying after 60 frames
+    disp = FakeDisplay()
+    with pytest.raises(DeviceTimeoutError):
+        run_wizard(prof, tmp_path / "b", FakeCamera(prof, sm, disp, noise=False, fail_after=60), disp, SETTINGS, FAST)
+    assert find_unfinished(tmp_path) == tmp_path / "b"
+    partial = [f.label for f in Recording(tmp_path / "b" / "capture").frames]
+    assert 0 < len(partial) < len(build_plan(prof, SETTINGS.validation))
+    disp = FakeDisplay()
+    cam = FakeCamera(prof, sm, disp, noise=False)
+    resumed = run_wizard(prof, tmp_path / "b", cam, disp, SETTINGS, FAST)
+    labels = [f.label for f in Recording(tmp_path / "b" / "capture").frames]
+    assert labels[: len(partial)] == partial and len(labels) == len(set(labels))
+    assert labels == [f.label for f in Recording(tmp_path / "a" / "capture").frames]
+    assert cam.exposure_us == pytest.approx(full.bundle.meta["exposure_us"])  # restored, not re-probed
+    for c in range(3):
+        np.testing.assert_allclose(resumed.bundle.system_matrices.Po[c], full.bundle.system_matrices.Po[c], rtol=1e-5)
+        np.testing.assert_allclose(resumed.bundle.system_matrices.Qc[c], full.bundle.system_matrices.Qc[c], rtol=1e-5)
+    assert find_unfinished(tmp_path) is None
+
+
+def test_resume_refuses_a_changed_profile(tmp_path: Path) -> None:
+    prof = synthetic_profile()
+    disp = FakeDisplay()
+    with pytest.raises(DeviceTimeoutError):
+        run_wizard(prof, tmp_path / "c", FakeCamera(prof, synthetic_matrices(), disp, fail_after=10), disp, SETTINGS, FAST)
+    other = prof.model_copy(update={"geometry": prof.geometry.model_copy(update={"scene_to_mask_mm": 4.0})})
+    disp = FakeDisplay()
+    with pytest.raises(CalibrationError, match="different profile"):
+        run_wizard(other, tmp_path / "c", FakeCamera(other, synthetic_matrices(), disp), disp, SETTINGS, FAST)
