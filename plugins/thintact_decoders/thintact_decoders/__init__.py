@@ -1,4 +1,4 @@
-"""ThinTact decoders plugin: ``thintact-noniterative``, ``t2s-iterative`` and ``flatcam``.
+"""ThinTact decoders plugin: ``thintact-noniterative``, ``t2s-iterative``, ``flatcam``, ``t2s-closed-form``.
 
 Every factory is ``factory(profile, settings) -> Decoder``. The calibration bundle comes from
 ``settings["bundle"]`` / ``settings["calibration"]`` / ``profile.decoder.calibration`` or, for
@@ -7,7 +7,9 @@ virtual profiles, the newest bundle under ``calibrations/<profile.name>/``.
 Common settings: ``tau`` (overrides the bundle's), ``backend`` (``"numpy"`` default or
 ``"torch"``), ``dtype`` (``"float32"``), ``device`` (torch), ``gemm_dtype`` (torch:
 ``"bfloat16"`` for speed). ``thintact-noniterative`` also takes ``fold`` and ``max_rank``;
-``t2s-iterative`` takes ``iterations`` (800).
+``t2s-iterative`` takes ``iterations`` (800). ``t2s-closed-form`` (this SDK's extension: the
+exact full-T2S Tikhonov minimiser without iterations, see :mod:`thintact_decoders.t2s_closed_form`)
+takes ``open_rtol`` and ``max_open_rank`` and uses the bundle's ``tau_t2s_closed_form`` if present.
 """
 
 from __future__ import annotations
@@ -20,10 +22,17 @@ from thintact_decoders.flatcam import FlatCamDecoder
 from thintact_decoders.iterative import T2SIterativeDecoder
 from thintact_decoders.loading import resolve_bundle
 from thintact_decoders.noniterative import NonIterativeDecoder
+from thintact_decoders.t2s_closed_form import T2SClosedFormDecoder
 from thintact_sdk.errors import CalibrationError
 from thintact_sdk.profile import Profile
 
-__all__ = ["ArrayBackend", "FlatCamDecoder", "NonIterativeDecoder", "T2SIterativeDecoder"]
+__all__ = [
+    "ArrayBackend",
+    "FlatCamDecoder",
+    "NonIterativeDecoder",
+    "T2SClosedFormDecoder",
+    "T2SIterativeDecoder",
+]
 
 
 def _backend(settings: dict[str, Any]) -> ArrayBackend:
@@ -74,6 +83,17 @@ def make_flatcam(profile: Profile, settings: dict[str, Any]) -> FlatCamDecoder:
     return FlatCamDecoder(bundle.system_matrices, _tau(bundle.tau, settings, profile), _backend(settings))
 
 
+def make_t2s_closed_form(profile: Profile, settings: dict[str, Any]) -> T2SClosedFormDecoder:
+    """Build the exact non-iterative full-T2S decoder for ``profile``."""
+    bundle = resolve_bundle(profile, settings)
+    tau = _tau(float(bundle.meta.get("tau_t2s_closed_form", bundle.tau)), settings, profile)
+    return T2SClosedFormDecoder(
+        bundle.system_matrices, tau, _backend(settings),
+        open_rtol=float(settings.get("open_rtol", 1e-6)),
+        max_open_rank=int(settings.get("max_open_rank", 8)),
+    )
+
+
 @thintact_sdk.hookimpl
 def thintact_decoders() -> list[thintact_sdk.Component]:
     return [
@@ -83,4 +103,6 @@ def thintact_decoders() -> list[thintact_sdk.Component]:
                                "full T2S Tikhonov by Nesterov gradient, 800 iterations (baseline)"),
         thintact_sdk.Component("flatcam", make_flatcam,
                                "FlatCam closed form, coding term only after mean removal (baseline)"),
+        thintact_sdk.Component("t2s-closed-form", make_t2s_closed_form,
+                               "exact full-T2S Tikhonov without iterations (low-rank open term, Woodbury)"),
     ]

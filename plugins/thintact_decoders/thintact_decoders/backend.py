@@ -99,6 +99,12 @@ class ArrayBackend:
         """Zeros of the same shape and type."""
         return np.zeros_like(a) if self.name == "numpy" else self._torch.zeros_like(a)
 
+    def cat(self, arrays: list[Any], axis: int) -> Any:
+        """Concatenate along an axis."""
+        if self.name == "numpy":
+            return np.concatenate(arrays, axis=axis)
+        return self._torch.cat(arrays, dim=axis)
+
     def sum_axis(self, a: Any, axis: int) -> Any:
         """Sum over one axis."""
         return a.sum(axis=axis) if self.name == "numpy" else a.sum(dim=axis)

@@ -1,0 +1,179 @@
+"""Non-iterative solution of the *full* T2S Tikhonov problem (this SDK's extension).
+
+``min ‖Po X Qoᵀ + Pc X Qcᵀ − Y‖² + τ‖X‖²`` has no closed form in general, but the open
+matrices of a ThinTact are numerically low-rank (the open component is a smooth blur: the
+singular values of Po, Qo fall by ~10⁴ within a handful). With ``Po ≈ Σ_i s_i u_i v_iᵀ``
+(rank kp) and ``Qo`` (rank kq) the open operator ``Ao = Qo ⊗ Po = E Fᵀ`` has rank
+``K = kp·kq`` (``E`` scaled sensor images, ``F`` orthonormal scene images), and
+
+    AᵀA + τI = Hc + W Mmid Wᵀ,   Hc = QcᵀQc ⊗ PcᵀPc + τI,
+    W = [F, G], G = AcᵀE,        Mmid = [[D, I], [I, 0]], D = EᵀE (diagonal)
+
+so Woodbury's identity gives the exact minimiser with ``Hc⁻¹`` (diagonal in the SVD bases of
+Pc, Qc, i.e. the coding-only closed form) plus a rank-2K correction::
+
+    x0 = Hc⁻¹(Pcᵀ Y Qc) + Hc⁻¹F (Eᵀ Y)
+    x  = x0 − Hc⁻¹W (Mmid⁻¹ + Wᵀ Hc⁻¹ W)⁻¹ Wᵀ x0
+
+Per frame this is the coding-only closed form of the raw measurement (no joint filter), K
+projections ``Eᵀ Y`` (folded into the same big product) and three thin ``NM × 2K`` products.
+It is exact up to the truncation of Po, Qo (``open_rtol``), i.e. the limit iterative-800 tends to.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from thintact_decoders.backend import ArrayBackend
+from thintact_sdk.imaging.t2s import SystemMatrices
+from thintact_sdk.imaging.tikhonov import TikhonovSolver
+from thintact_sdk.interfaces import Decoder
+
+
+def _truncated_svd(a: np.ndarray, rtol: float, max_rank: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    u, s, vt = np.linalg.svd(a, full_matrices=False)
+    k = int(np.sum(s > rtol * s[0])) if s[0] > 0 else 1
+    k = max(1, min(k, max_rank))
+    return u[:, :k], s[:k], vt[:k].T
+
+
+class T2SClosedFormDecoder(Decoder):
+    """Exact (up to open-term truncation) full-T2S Tikhonov reconstruction, non-iterative.
+
+    Parameters
+    ----------
+    system_matrices
+        T2S matrices (DN per display unit); needs ``R ≥ N`` and ``S ≥ M``.
+    tau
+        Tikhonov weight τ (DN² units of the matrices).
+    backend
+        :class:`ArrayBackend` (default numpy float32).
+    open_rtol, max_open_rank
+        Singular values of Po, Qo kept: above ``open_rtol`` × the largest, at most
+        ``max_open_rank`` per axis. ``truncation`` in :attr:`info` reports what was dropped.
+    """
+
+    name = "t2s-closed-form"
+
+    def __init__(
+        self,
+        system_matrices: SystemMatrices,
+        tau: float,
+        backend: ArrayBackend | None = None,
+        open_rtol: float = 1e-6,
+        max_open_rank: int = 8,
+    ) -> None:
+        self.xp = backend or ArrayBackend("numpy")
+        sm = system_matrices
+        (r, s), (n, m) = sm.sensor_shape, sm.scene_shape
+        if r < n or s < m:
+            raise ValueError("t2s-closed-form needs at least as many sensor rows/cols as scene rows/cols")
+        self.channels, self.sensor_shape, self.scene_shape = sm.channels, (r, s), (n, m)
+        self.tau = float(tau)
+        svds = []
+        for c in range(sm.channels):
+            up, sp, vpo = _truncated_svd(sm.Po[c].astype(np.float64), open_rtol, max_open_rank)
+            uq, sq, vqo = _truncated_svd(sm.Qo[c].astype(np.float64), open_rtol, max_open_rank)
+            svds.append((up, sp, vpo, uq, sq, vqo))
+        kp = max(len(v[1]) for v in svds)
+        kq = max(len(v[4]) for v in svds)
+        self._kp, self._kq = kp, kq
+        k = kp * kq
+        per: dict[str, list[np.ndarray]] = {key: [] for key in (
+            "left", "right", "den", "vp", "vqt", "uq", "scale", "a", "b", "a2", "b2", "small")}
+        self.info: dict[str, Any] = {"open_rank": [], "dropped_open_sv": []}
+        for c in range(sm.channels):
+            up, sp, vpo = _pad(*svds[c][:3], kp)
+            uq, sq, vqo = _pad(*svds[c][3:], kq)
+            sol = TikhonovSolver(sm.Pc[c], sm.Qc[c], self.tau, np.float64)
+            # scene images of F and G expressed in the SVD bases of Pc, Qc (separable there)
+            a, b = sol.vp.T @ vpo, sol.vqt @ vqo  # kP × kp, kQ × kq
+            a2, b2 = (sol.left @ up) * sp, (sol.right.T @ uq) * sq  # Vpᵀ Pcᵀ u s, Vqᵀ Qcᵀ u s
+            a_all, b_all = np.concatenate([a, a2], 1), np.concatenate([b, b2], 1)
+            x1 = np.einsum("ab,bj,bl->ajl", sol.inv_denom, b_all, b_all)
+            t = np.einsum("ai,ak,ajl->ijkl", a_all, a_all, x1)  # ⟨ω_ij, Hc⁻¹ ω_kl⟩
+            blocks = [[t[:kp, :kq, :kp, :kq], t[:kp, :kq, kp:, kq:]],
+                      [t[kp:, kq:, :kp, :kq], t[kp:, kq:, kp:, kq:]]]
+            gram = np.block([[blk.reshape(k, k) for blk in row] for row in blocks])
+            d = np.outer(sp**2, sq**2).ravel()
+            eye = np.eye(k)
+            mmid_inv = np.block([[np.zeros((k, k)), eye], [eye, -np.diag(d)]])
+            per["small"].append(np.linalg.inv(mmid_inv + gram))
+            per["left"].append(np.concatenate([sol.left, up.T], axis=0))  # (kP + kp) × R
+            per["right"].append(sol.right)
+            per["den"].append(sol.inv_denom)
+            per["vp"].append(sol.vp)
+            per["vqt"].append(sol.vqt)
+            per["uq"].append(uq)
+            per["scale"].append(np.outer(sp, sq))
+            for key, val in (("a", a), ("b", b), ("a2", a2), ("b2", b2)):
+                per[key].append(val)
+            self.info["open_rank"].append([int(np.sum(sp > 0)), int(np.sum(sq > 0))])
+            full_p = np.linalg.svd(sm.Po[c].astype(np.float64), compute_uv=False)
+            full_q = np.linalg.svd(sm.Qo[c].astype(np.float64), compute_uv=False)
+            self.info["dropped_open_sv"].append([
+                float(full_p[len(svds[c][1]):].max(initial=0) / full_p[0]),
+                float(full_q[len(svds[c][4]):].max(initial=0) / full_q[0])])
+        self.k_p = per["left"][0].shape[0] - kp
+        xp = self.xp
+        self._left = xp.asarray(np.stack(per["left"]), gemm=True)
+        self._right = xp.asarray(np.stack(per["right"]), gemm=True)
+        self._uq = xp.asarray(np.stack(per["uq"]), gemm=True)  # C × S × kq
+        st = {key: xp.asarray(np.stack(per[key])) for key in ("den", "vp", "vqt", "scale", "a", "b",
+                                                             "a2", "b2", "small")}
+        self._den, self._vp, self._vqt, self._scale = st["den"], st["vp"], st["vqt"], st["scale"]
+        self._a, self._b, self._a2, self._b2, self._small = st["a"], st["b"], st["a2"], st["b2"], st["small"]
+        self._unit: Any = None
+
+    def _linear(self, y: Any) -> tuple[Any, Any]:
+        """``(Σ_P U_Pᵀ Y U_Q Σ_Q, Eᵀ Y)`` for channel-first ``y`` (GEMM precision)."""
+        xp = self.xp
+        t = self._left @ y  # C × (kP + kp) × S
+        core = xp.cast(t[:, : self.k_p] @ self._right, gemm=False)
+        e = xp.cast(t[:, self.k_p :] @ self._uq, gemm=False) * self._scale  # C × kp × kq
+        return core, e
+
+    def _solve(self, y: Any, black_dn: float = 0.0) -> np.ndarray:
+        xp = self.xp
+        core, e = self._linear(y)
+        if black_dn:
+            if self._unit is None:
+                ones = np.ones((self.channels, *self.sensor_shape), np.float32)
+                self._unit = self._linear(xp.asarray(ones, gemm=True))
+            core = core - black_dn * self._unit[0]
+            e = e - black_dn * self._unit[1]
+        a, b, a2, b2 = self._a, self._b, self._a2, self._b2
+        xi0 = self._den * (core + a @ e @ xp.swap(b))  # Hc⁻¹ b in SVD coefficients
+        c = core.shape[0]
+        k = self._kp * self._kq
+        w = xp.contiguous(xp.swap(a) @ xi0 @ b).reshape(c, k, 1)
+        w2 = xp.contiguous(xp.swap(a2) @ xi0 @ b2).reshape(c, k, 1)
+        coef = self._small @ xp.cat([w, w2], axis=1)
+        cf = xp.contiguous(coef[:, :k]).reshape(c, self._kp, self._kq)
+        cg = xp.contiguous(coef[:, k:]).reshape(c, self._kp, self._kq)
+        xi = xi0 - self._den * (a @ cf @ xp.swap(b) + a2 @ cg @ xp.swap(b2))
+        return xp.channels_last(self._vp @ xi @ self._vqt)
+
+    def _check(self, signal: np.ndarray) -> None:
+        want = (*self.sensor_shape, self.channels)
+        if signal.shape != want:
+            raise ValueError(f"measurement must be {want[0]}×{want[1]}×{want[2]}, got {signal.shape}")
+
+    def decode(self, signal: np.ndarray) -> np.ndarray:
+        """Reconstruct ``N × M × C`` float32 from ``R × S × C`` DN above black."""
+        self._check(signal)
+        return self._solve(self.xp.channels_first(signal, gemm=True))
+
+    def decode_raw(self, raw: np.ndarray, black_level_dn: float) -> np.ndarray:
+        """Reconstruct from raw binned DN (black level included), black removed in the solve."""
+        self._check(raw)
+        return self._solve(self.xp.channels_first(raw, gemm=True), float(black_level_dn))
+
+
+def _pad(u: np.ndarray, s: np.ndarray, v: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    extra = k - len(s)
+    if extra <= 0:
+        return u, s, v
+    return (np.pad(u, ((0, 0), (0, extra))), np.pad(s, (0, extra)), np.pad(v, ((0, 0), (0, extra))))

@@ -1,0 +1,76 @@
+"""t2s-closed-form: the exact full-T2S Tikhonov minimiser, checked against a dense solve."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from thintact_decoders import ArrayBackend, T2SClosedFormDecoder, T2SIterativeDecoder
+
+from thintact_sdk.imaging.t2s import SystemMatrices
+
+
+def _low_rank_open_matrices(seed: int = 0) -> SystemMatrices:
+    """Small T2S matrices whose open part has rank 2 per axis (like a smooth blur)."""
+    rng = np.random.default_rng(seed)
+    r, s, n, m = 30, 34, 12, 14
+
+    def smooth(rows: int, cols: int) -> np.ndarray:
+        return rng.random((rows, 2)) @ rng.random((2, cols)) * 3
+
+    po = np.stack([smooth(r, n) for _ in range(2)])
+    qo = np.stack([smooth(s, m) for _ in range(2)])
+    pc = rng.standard_normal((2, r, n))
+    qc = rng.standard_normal((2, s, m))
+    return SystemMatrices(po, qo, pc, qc)
+
+
+def _dense_solution(sm: SystemMatrices, y: np.ndarray, tau: float) -> np.ndarray:
+    n, m = sm.scene_shape
+    out = np.empty((n, m, sm.channels))
+    for c in range(sm.channels):
+        po, qo, pc, qc = (a.astype(np.float64) for a in sm.channel(c))
+        a = np.kron(qo, po) + np.kron(qc, pc)  # acts on column-major vec(X)
+        rhs = a.T @ y[..., c].astype(np.float64).ravel(order="F")
+        out[..., c] = np.linalg.solve(a.T @ a + tau * np.eye(n * m), rhs).reshape(n, m, order="F")
+    return out
+
+
+@pytest.mark.parametrize("tau", [1e-3, 10.0])
+def test_matches_the_dense_minimiser(tau) -> None:
+    sm = _low_rank_open_matrices()
+    rng = np.random.default_rng(1)
+    x = rng.random((*sm.scene_shape, 2))
+    y = sm.forward(x) + rng.standard_normal((*sm.sensor_shape, 2)) * 0.5
+    dec = T2SClosedFormDecoder(sm, tau, ArrayBackend("numpy", "float64"))
+    assert dec.info["open_rank"][0] == [2, 2]
+    exact = _dense_solution(sm, y, tau)
+    np.testing.assert_allclose(dec.decode(y), exact, atol=1e-5 * np.abs(exact).max())
+    # float32 on both backends stays close, and the black level folds in exactly
+    for be in (ArrayBackend("numpy"), ArrayBackend("torch")):
+        d32 = T2SClosedFormDecoder(sm, tau, be)
+        np.testing.assert_allclose(d32.decode(y.astype(np.float32)), exact, atol=1e-2 * np.abs(exact).max())
+        np.testing.assert_allclose(d32.decode_raw((y + 64).astype(np.float32), 64.0), exact,
+                                   atol=1e-2 * np.abs(exact).max())
+
+
+def test_iterative_nesterov_tends_to_the_closed_form() -> None:
+    sm = _low_rank_open_matrices(2)
+    x = np.random.default_rng(3).random((*sm.scene_shape, 2))
+    y = sm.forward(x)
+    tau = 30.0  # well conditioned enough for 800 Nesterov steps to get close
+    closed = T2SClosedFormDecoder(sm, tau, ArrayBackend("numpy", "float64")).decode(y)
+    gaps = []
+    for iters in (50, 400, 3000):
+        it = T2SIterativeDecoder(sm, tau, iterations=iters, backend=ArrayBackend("numpy", "float64"))
+        gaps.append(float(np.abs(it.decode(y) - closed).max()))
+    assert gaps[0] > gaps[1] > gaps[2]
+    assert gaps[2] < 5e-3 * np.abs(closed).max()
+
+
+def test_truncated_open_rank_is_reported() -> None:
+    sm = _low_rank_open_matrices(4)
+    rng = np.random.default_rng(5)
+    full_rank = SystemMatrices(sm.Po + 1e-3 * rng.random(sm.Po.shape), sm.Qo, sm.Pc, sm.Qc)
+    dec = T2SClosedFormDecoder(full_rank, 1.0, max_open_rank=2)
+    assert dec.info["open_rank"][0] == [2, 2]
+    assert 0 < dec.info["dropped_open_sv"][0][0] < 1e-2
