@@ -26,6 +26,11 @@ import numpy as np
 
 from thintact_sdk.diagnose.candidates import CANDIDATES, Candidate
 from thintact_sdk.diagnose.model import DiagnosisModel, Evaluation, Values
+from thintact_sdk.errors import ThinTactError
+
+#: failures of the simulator for one candidate (an effect combination it cannot model, a
+#: missing optional path): the candidate is dropped and the log says why
+SIMULATION_ERRORS = (ThinTactError, ImportError, NotImplementedError, ValueError)
 
 
 @dataclass
@@ -178,7 +183,7 @@ def fit_candidate(
         res.amplitude_dn = _amplitude(model, ev0, res.evaluation)
         return res
     prof = model.profile
-    step = cand.step(prof) * 0.05
+    step = cand.step(prof) * 0.01
     cur = _clip(cand, res.vector.copy(), model)
 
     def ev_at(v: np.ndarray) -> Evaluation:
@@ -290,8 +295,13 @@ def select_effects(
             log.append("time budget reached: selection stopped")
             break
         scores = []
-        for name in remaining:
-            res = score_candidate(model, vals, ev, CANDIDATES[name])
+        for name in list(remaining):
+            try:
+                res = score_candidate(model, vals, ev, CANDIDATES[name])
+            except SIMULATION_ERRORS as err:
+                log.append(f"{name} left out: the simulator cannot model it here ({err})")
+                remaining.remove(name)
+                continue
             scores.append(res)
             say(f"score {name}: Δχ² ≈ {res.score_dchi2:.1f}")
         scores.sort(key=lambda r: -(r.score_dchi2 - r.k * ln_n))
@@ -299,7 +309,12 @@ def select_effects(
         for res in scores[:n_fit]:
             if res.score_dchi2 - res.k * ln_n < 0.5 * margin and fitted:
                 continue
-            fit_candidate(model, vals, ev, res, deadline=deadline)
+            try:
+                fit_candidate(model, vals, ev, res, deadline=deadline)
+            except SIMULATION_ERRORS as err:
+                log.append(f"{res.name} left out: fitting it failed in the simulator ({err})")
+                remaining.remove(res.name)
+                continue
             fitted.append(res)
             say(f"fit {res.name}: Δχ² = {res.dchi2:.1f}, amplitude {res.amplitude_dn:.2f} DN")
         ok = [

@@ -1,0 +1,59 @@
+"""``thintact diagnose RECORDING --out DIR``: where and how a recording departs from the
+simulation, which effects of the vocabulary are missing, fitted (CONTRACTS §6)."""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "diagnose",
+        help="compare a recording with the simulation, name and fit the missing physics",
+        description=__doc__,
+    )
+    p.add_argument("recording", metavar="RECORDING", help="thintact-recording/1 directory")
+    p.add_argument("--out", required=True, metavar="DIR", help="output directory")
+    p.add_argument("--time-budget", type=float, default=100.0, metavar="S",
+                   help="seconds allowed for naming effects (default 100)")
+    p.add_argument("--sys-frac", type=float, default=1e-3, metavar="F",
+                   help="systematic-error allowance, relative (default 0.001)")
+    p.add_argument("--max-effects", type=int, default=4, metavar="K",
+                   help="accept at most K effects (default 4)")
+    p.add_argument("--quiet", action="store_true", help="no progress lines")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from rich.console import Console
+
+    from thintact_sdk.diagnose import DiagnoseOptions, diagnose, load_diagnosis_data
+    from thintact_sdk.diagnose.outputs import write_outputs
+    from thintact_sdk.errors import ThinTactError
+
+    if args.time_budget <= 0 or args.sys_frac < 0 or args.max_effects < 0:
+        raise ThinTactError("--time-budget must be > 0, --sys-frac and --max-effects >= 0")
+    con = Console(stderr=True, quiet=args.quiet)
+    t0 = time.perf_counter()
+    data = load_diagnosis_data(args.recording)
+    con.print(
+        f"{data.n_frames} frames with scenes ({data.skipped} without), "
+        f"{data.profile.sensor.rows}×{data.profile.sensor.cols} sensor"
+    )
+    opts = DiagnoseOptions(sys_frac=args.sys_frac, time_budget_s=args.time_budget, max_effects=args.max_effects)
+    with con.status("diagnosing...") as status:
+        d = diagnose(data, options=opts, progress=lambda m: status.update(m))
+    paths = write_outputs(d, args.out)
+    rep = d.report
+    print(f"baseline: rms {rep['baseline']['rms_dn']:.2f} DN, chi2/dof {rep['baseline']['chi2_per_dof']:.3f} "
+          f"(noise rms {rep['noise_rms_dn']:.2f} DN)")
+    for f in rep["findings"]:
+        alt = f" (or: {', '.join(f['alternatives'])})" if f["alternatives"] else ""
+        print(f"  + {f['effect']}{alt}: {f['params']} -> chi2/dof {f['chi2_per_dof_after']:.3f}")
+    print(f"final: rms {rep['final']['rms_dn']:.2f} DN, chi2/dof {rep['final']['chi2_per_dof']:.3f}")
+    if rep["unexplained"]["significant"]:
+        print(f"unexplained: {rep['unexplained']['summary']}")
+    print(f"wrote {paths['report']}, {paths['fitted_profile']}, {paths['html']} "
+          f"in {time.perf_counter() - t0:.1f} s ({int(d.timing_s.get('simulations', 0))} simulations)")
+    return 0

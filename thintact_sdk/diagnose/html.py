@@ -1,0 +1,172 @@
+"""``report.html``: the figures a person needs to see the diagnosis (matplotlib Agg, PNGs
+embedded as base64)."""
+
+from __future__ import annotations
+
+import base64
+import html
+import io
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from thintact_sdk.diagnose.locate import Location
+from thintact_sdk.diagnose.run import Diagnosis
+
+
+def _png(fig: Any) -> str:
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=80, bbox_inches="tight")
+    import matplotlib.pyplot as plt
+
+    plt.close(fig)
+    return base64.b64encode(buf.getvalue()).decode("ascii")
+
+
+def _rects(ax: Any, spots: list[dict[str, Any]], color: str) -> None:
+    from matplotlib.patches import Rectangle
+
+    for h in spots:
+        ax.add_patch(
+            Rectangle((h["col0"] - 0.5, h["row0"] - 0.5), h["col1"] - h["col0"], h["row1"] - h["row0"],
+                      fill=False, edgecolor=color, lw=1.5)
+        )
+
+
+def figure_residual_maps(d: Diagnosis) -> Any:
+    """Mean signed residual (noise units) and excess χ² per pixel, before and after."""
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(2, 2, figsize=(10, 7))
+    for col, (loc, name) in enumerate(((d.baseline_location, "baseline"), (d.final_location, "fitted"))):
+        lim = float(np.percentile(np.abs(d.baseline_location.mean_z_map), 99)) or 1.0
+        im = axes[0, col].imshow(loc.mean_z_map, cmap="RdBu_r", vmin=-lim, vmax=lim)
+        axes[0, col].set_title(f"{name}: mean residual / σ")
+        fig.colorbar(im, ax=axes[0, col], fraction=0.04)
+        ex = d.baseline_location.excess_map
+        elim = float(np.percentile(np.abs(ex), 99.5)) or 1.0
+        im = axes[1, col].imshow(loc.excess_map, cmap="magma", vmin=0, vmax=elim)
+        axes[1, col].set_title(f"{name}: excess χ² per pixel (Σ frames, channels)")
+        fig.colorbar(im, ax=axes[1, col], fraction=0.04)
+    _rects(axes[1, 0], d.report["located"]["hotspots"], "cyan")
+    _rects(axes[1, 1], d.report["unexplained"]["hotspots"], "lime")
+    for ax in axes.ravel():
+        ax.set_xlabel("sensor column")
+        ax.set_ylabel("sensor row")
+    fig.tight_layout()
+    return fig
+
+
+def figure_where(d: Diagnosis) -> Any:
+    """χ² per value by channel, frame, signal level, radius and spatial frequency."""
+    import matplotlib.pyplot as plt
+
+    b, a = d.baseline_location, d.final_location
+    chans = list(d.data.profile.sensor.channels)
+    fig, axes = plt.subplots(2, 3, figsize=(13, 7))
+    x = np.arange(len(chans))
+    axes[0, 0].bar(x - 0.2, b.by_channel, 0.4, label="baseline")
+    axes[0, 0].bar(x + 0.2, a.by_channel, 0.4, label="fitted")
+    axes[0, 0].set_xticks(x, chans)
+    axes[0, 0].set_title("by channel")
+    xf = np.arange(len(d.data.labels))
+    axes[0, 1].bar(xf - 0.2, b.by_frame, 0.4, label="baseline")
+    axes[0, 1].bar(xf + 0.2, a.by_frame, 0.4, label="fitted")
+    axes[0, 1].set_xticks(xf, d.data.labels, rotation=75, fontsize=7)
+    axes[0, 1].set_title("by frame (scene)")
+    panels = ((b.by_signal, a.by_signal, axes[0, 2]), (b.by_radius, a.by_radius, axes[1, 0]),
+              (b.by_frequency, a.by_frequency, axes[1, 1]))
+    for pb, pa, ax in panels:
+        ax.plot(pb.centres, pb.chi2, "o-", label="baseline")
+        ax.plot(pa.centres, pa.chi2, "s-", label="fitted")
+        ax.set_xlabel(f"{pb.name} ({pb.unit})")
+        ax.set_title(f"by {pb.name}")
+    axes[1, 1].set_ylabel("residual power / noise power")
+    for ax in axes.ravel()[:5]:
+        ax.axhline(1.0, color="k", lw=0.8, ls="--")
+        ax.set_yscale("log")
+        ax.legend(fontsize=8)
+    axes[0, 0].set_ylabel("χ² per value")
+    _history_axes(axes[1, 2], d.history)
+    fig.tight_layout()
+    return fig
+
+
+def _history_axes(ax: Any, history: list[tuple[str, float, float]]) -> None:
+    names = [h[0] for h in history]
+    chi = [h[2] for h in history]
+    ax.bar(range(len(names)), chi, color=["tab:red"] + ["tab:green"] * (len(names) - 1))
+    ax.axhline(1.0, color="k", lw=0.8, ls="--")
+    ax.set_xticks(range(len(names)), names, rotation=30, fontsize=8, ha="right")
+    ax.set_title("the fit: χ²/dof as effects are added")
+    for i, (_, rms, c) in enumerate(history):
+        ax.text(i, c, f"{c:.3f}\n{rms:.1f} DN", ha="center", va="bottom", fontsize=7)
+
+
+def figure_fit(d: Diagnosis) -> Any:
+    """Measured and predicted along the row through the worst baseline frame's worst pixel."""
+    import matplotlib.pyplot as plt
+
+    loc: Location = d.baseline_location
+    f = int(np.argmax(loc.by_frame))
+    r = int(np.unravel_index(int(np.argmax(loc.excess_map)), loc.excess_map.shape)[0])
+    meas = d.data.measured_dn[f, r]
+    chans = list(d.data.profile.sensor.channels)
+    fig, axes = plt.subplots(1, len(chans), figsize=(13, 3.2), squeeze=False)
+    for c, ax in enumerate(axes[0]):
+        ax.plot(meas[:, c], ".", ms=3, color="k", label="measured")
+        ax.plot(d.baseline_pred_dn[f, r, :, c], "-", color="tab:red", lw=1, label="baseline")
+        ax.plot(d.final_pred_dn[f, r, :, c], "-", color="tab:green", lw=1, label="fitted")
+        ax.set_title(f"frame '{d.data.labels[f]}', row {r}, channel {chans[c]}")
+        ax.set_xlabel("sensor column")
+        ax.set_ylabel("DN")
+    axes[0][0].legend(fontsize=8)
+    fig.tight_layout()
+    return fig
+
+
+def render_html(d: Diagnosis) -> str:
+    """The whole ``report.html`` as a string."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    rep = d.report
+    figs = [
+        ("Residual maps before and after (where the mismatch sits in space)", figure_residual_maps(d)),
+        ("Where the mismatch sits: channel, scene, signal level, radius, spatial frequency; the fit", figure_where(d)),
+        ("The fit along one sensor row", figure_fit(d)),
+    ]
+    e = html.escape
+    rows = "".join(
+        f"<tr><td>{e(f['effect'])}</td><td><code>{e(json.dumps(f['params']))}</code></td>"
+        f"<td>{f['rms_dn_after']:.2f}</td><td>{f['chi2_per_dof_after']:.3f}</td>"
+        f"<td>{e(', '.join(f['alternatives']) or '-')}</td><td>{e(f['evidence'])}</td></tr>"
+        for f in rep["findings"]
+    ) or "<tr><td colspan=6>no effect clears the criterion: the simulation explains the recording</td></tr>"
+    imgs = "".join(
+        f"<h2>{e(t)}</h2><img src='data:image/png;base64,{_png(fig)}' alt='{e(t)}'>" for t, fig in figs
+    )
+    un = rep["unexplained"]
+    timing = ", ".join(f"{k} {v:.1f}" for k, v in d.timing_s.items())
+    return f"""<!doctype html><html><head><meta charset="utf-8"><title>ThinTact diagnosis</title>
+<style>body{{font-family:sans-serif;max-width:1300px;margin:auto}}td,th{{border:1px solid #ccc;
+padding:4px;vertical-align:top}}table{{border-collapse:collapse}}img{{max-width:100%}}</style></head>
+<body><h1>Diagnosis of {e(str(d.data.profile.name))}: {d.data.n_frames} frames</h1>
+<p>Noise rms {rep['noise_rms_dn']:.2f} DN. Baseline rms {rep['baseline']['rms_dn']:.2f} DN,
+χ²/dof {rep['baseline']['chi2_per_dof']:.3f} &rarr; final rms {rep['final']['rms_dn']:.2f} DN,
+χ²/dof {rep['final']['chi2_per_dof']:.3f}.</p>
+<h2>Where</h2><p>{e(rep['located']['summary'])}</p>
+<h2>Findings</h2><table><tr><th>effect</th><th>parameters</th><th>rms after (DN)</th>
+<th>χ²/dof after</th><th>alternatives</th><th>evidence</th></tr>{rows}</table>
+<h2>Unexplained</h2><p><b>{'significant' if un['significant'] else 'none'}</b>: {e(un['summary'])}</p>
+{imgs}
+<p><small>timing (s): {e(timing)}</small></p></body></html>
+"""
+
+
+def write_html(d: Diagnosis, path: Path) -> Path:
+    """Write ``report.html``; returns its path."""
+    path.write_text(render_html(d), encoding="utf-8")
+    return path

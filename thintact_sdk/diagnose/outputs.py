@@ -1,0 +1,32 @@
+"""Writing a diagnosis to its output directory (CONTRACTS §6)."""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+from thintact_sdk.diagnose.html import write_html
+from thintact_sdk.diagnose.run import Diagnosis
+from thintact_sdk.errors import ThinTactError
+from thintact_sdk.profile import write_profile
+
+
+def write_outputs(d: Diagnosis, out_dir: str | os.PathLike[str]) -> dict[str, Path]:
+    """Write ``report.json``, ``fitted_profile.json`` and ``report.html`` into ``out_dir``.
+
+    Raises
+    ------
+    ThinTactError
+        When the directory cannot be created or written.
+    """
+    out = Path(out_dir)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        rep = out / "report.json"
+        rep.write_text(json.dumps(d.report, indent=1, ensure_ascii=False) + "\n", encoding="utf-8")
+        prof = write_profile(d.fitted_profile, out / "fitted_profile.json")
+        page = write_html(d, out / "report.html")
+    except OSError as err:
+        raise ThinTactError(f"cannot write the diagnosis to {out}: {err}") from None
+    return {"report": rep, "fitted_profile": prof, "html": page}
