@@ -45,8 +45,9 @@ class DirectKernel:
     cols: int
     info: dict[str, float] = field(default_factory=dict)
 
-    def apply(self, scenes: np.ndarray) -> np.ndarray:
-        """``F × N × M × C`` scenes → ``F × R × S × C`` signal (simulator units)."""
+    def apply(self, scenes: np.ndarray, dtype: str = "float32") -> np.ndarray:
+        """``F × N × M × C`` scenes → ``F × R × S × C`` float64 signal (simulator units);
+        the operator is stored in float32, so the arithmetic is float32 whatever ``dtype``."""
         f, n, m, c = scenes.shape
         x = np.asarray(scenes, np.float32).transpose(1, 2, 0, 3).reshape(n * m, f * c)
         y = (self.G @ x).astype(float)

@@ -31,7 +31,12 @@ import numpy as np
 from thintact_sdk.errors import ThinTactError
 from thintact_sdk.imaging.sim_axis import AxisGrid, mask_cell_edges_mm
 from thintact_sdk.imaging.sim_radiometry import SeparableExpansion
-from thintact_sdk.imaging.sim_separable import SeparableKernel, SeparableTerm, axis_term_matrices
+from thintact_sdk.imaging.sim_separable import (
+    SeparableKernel,
+    SeparableTerm,
+    axis_term_matrices,
+    compress_terms,
+)
 from thintact_sdk.interfaces import ImagingModel
 from thintact_sdk.physics import (
     color_crosstalk,
@@ -80,6 +85,7 @@ class KernelParams:
     n_sub: int
     rank_tol: float
     force_direct: bool = False
+    compress_tol: float = 1e-5
 
     @property
     def separable(self) -> bool:
@@ -163,15 +169,17 @@ def build_separable_kernel(kp: KernelParams) -> SeparableKernel:
     if kp.wavelengths_nm is None:
         c_o, c_c = mask_leakage.intensity_coefficients(kp.leakage)
         mx = axis_term_matrices(gx, alpha, beta, edges_x, np.stack([np.ones(k), phi_x]),
-                                exp.fx, exp.dfx, exp.d2fx, kp.n_sub)
+                                exp.fx_derivs, kp.n_sub)
         my = axis_term_matrices(gy, alpha, beta, edges_y, np.stack([np.ones(k), phi_y]),
-                                exp.gy, exp.dgy, exp.d2gy, kp.n_sub)
+                                exp.gy_derivs, kp.n_sub)
         terms = []
         for part, v, coef in (("open", 0, c_o), ("coding", 1, c_c)):
             if coef == 0:
                 continue
             for ll in range(exp.rank):
                 terms.append(SeparableTerm(coef * my[v, ll], mx[v, ll], part))
+        terms = compress_terms(terms, kp.compress_tol)
+        info["terms"] = float(len(terms))
         return SeparableKernel([terms] * kp.channels, info)
     a_o, a_c = mask_leakage.amplitude_coefficients(kp.leakage)
     by_wavelength: dict[float, list[SeparableTerm]] = {}
@@ -180,14 +188,13 @@ def build_separable_kernel(kp: KernelParams) -> SeparableKernel:
         lam = kp.wavelengths_nm[min(ch, len(kp.wavelengths_nm) - 1)]
         if lam not in by_wavelength:
             mats = []
-            for grid, edges, phi, fac, dfac, d2fac in (
-                    (gx, edges_x, phi_x, exp.fx, exp.dfx, exp.d2fx),
-                    (gy, edges_y, phi_y, exp.gy, exp.dgy, exp.d2gy)):
+            for grid, edges, phi, fac in ((gx, edges_x, phi_x, exp.fx_derivs),
+                                          (gy, edges_y, phi_y, exp.gy_derivs)):
                 lo, hi = _crossing_range_mm(grid, alpha, beta)
                 pad = 4 * grid.sensor_pitch_mm + 4 * grid.scene_pitch_mm
                 fe, fv = diffraction.axis_intensity_profiles(
                     edges, phi, lo - pad, hi + pad, lam, kp.z_mm, kp.d_mm)
-                mats.append(axis_term_matrices(grid, alpha, beta, fe, fv, fac, dfac, d2fac, kp.n_sub))
+                mats.append(axis_term_matrices(grid, alpha, beta, fe, fv, fac, kp.n_sub))
             mx, my = mats
             coefs = (("open", 0, a_o**2), ("open", 1, a_c**2),
                      ("coding", 2, 2 * a_o * a_c), ("coding", 3, -2 * a_o * a_c))
@@ -197,7 +204,7 @@ def build_separable_kernel(kp: KernelParams) -> SeparableKernel:
                     continue
                 for ll in range(exp.rank):
                     terms.append(SeparableTerm(coef * my[v, ll], mx[v, ll], part))
-            by_wavelength[lam] = terms
+            by_wavelength[lam] = compress_terms(terms, kp.compress_tol)
         per_channel.append(by_wavelength[lam])
     return SeparableKernel(per_channel, info)
 
@@ -232,6 +239,9 @@ class Simulator(ImagingModel):
         Relative truncation of the separable expansion of the radiometric factor.
     direct
         Use the direct (dense, non-separable) path even for separable physics.
+    precision
+        Arithmetic of the separable forward: ``"float64"`` (default) or ``"float32"``
+        (about twice as fast at full size, relative error ~1e-7). Outputs are float64.
 
     Notes
     -----
@@ -240,7 +250,10 @@ class Simulator(ImagingModel):
     """
 
     def __init__(self, profile: Profile, *, n_sub: int = 4, rank_tol: float = 1e-7,
-                 direct: bool = False) -> None:
+                 direct: bool = False, precision: str = "float64") -> None:
+        if precision not in ("float64", "float32"):
+            raise ThinTactError(f"precision must be 'float64' or 'float32', got {precision!r}")
+        self.precision = precision
         self.profile = profile
         self.physics = resolve_physics(profile.physics)
         self.kernel_params = kernel_params(profile, self.physics, n_sub, rank_tol, direct)
@@ -317,7 +330,7 @@ class Simulator(ImagingModel):
     def linear_batch(self, scenes: np.ndarray) -> np.ndarray:
         """Stages 1-3: ``F × N × M × C`` → ``F × R × S × C`` linear signal (simulator units)."""
         x = self._scene_stage(self._check(scenes))
-        return self._signal_stage(self.kernel.apply(x))
+        return self._signal_stage(self.kernel.apply(x, self.precision))
 
     # -- public API -----------------------------------------------------------------------
     def reference_gain(self, white_level_dn: float | None = None) -> float:
