@@ -1,3 +1,4 @@
+# ruff: noqa: I001  (thintact_sdk is imported before numpy on purpose)
 """Simulator benchmark: speed at the paper's full size, accuracy against brute force and the
 golden baseline, and the diagnosis workload (128×160 device, 24 frames).
 
@@ -10,6 +11,7 @@ import argparse
 import time
 from pathlib import Path
 
+import thintact_sdk  # noqa: F401  (first: tunes OpenBLAS before numpy loads)
 import numpy as np
 
 from thintact_sdk.imaging.sim_reference import reference_forward
