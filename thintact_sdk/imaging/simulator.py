@@ -23,7 +23,7 @@ effects (if any) applied at :meth:`Simulator.reference_gain` and divided back ou
 from __future__ import annotations
 
 from collections import OrderedDict
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -214,8 +214,11 @@ def get_kernel(kp: KernelParams) -> Any:
     if kp in _KERNEL_CACHE:
         _KERNEL_CACHE.move_to_end(kp)
         return _KERNEL_CACHE[kp]
-    if kp.separable:
-        kern: Any = build_separable_kernel(kp)
+    if kp.separable and kp.wavelengths_nm is None and kp.leakage != 0.0:
+        # geometric leakage only rescales the open and coding halves: reuse the t = 0 kernel
+        kern: Any = _rescaled_for_leakage(get_kernel(replace(kp, leakage=0.0)), kp.leakage)
+    elif kp.separable:
+        kern = build_separable_kernel(kp)
     else:
         from thintact_sdk.imaging.sim_direct import build_direct_kernel
 
@@ -224,6 +227,20 @@ def get_kernel(kp: KernelParams) -> Any:
     while len(_KERNEL_CACHE) > _CACHE_SIZE:
         _KERNEL_CACHE.popitem(last=False)
     return kern
+
+
+def _rescaled_for_leakage(base: SeparableKernel, transmittance: float) -> SeparableKernel:
+    """The t = 0 kernel with the open half scaled by (1 + t) and the coding half by (1 - t)."""
+    c_o, c_c = mask_leakage.intensity_coefficients(transmittance)
+    scale = {"open": c_o / 0.5, "coding": c_c / 0.5}
+    done: dict[int, list[SeparableTerm]] = {}
+    per_channel = []
+    for ts in base.terms:
+        if id(ts) not in done:
+            done[id(ts)] = [SeparableTerm(t.P * scale[t.part], t.Q, t.part) for t in ts
+                            if scale[t.part] != 0.0]
+        per_channel.append(done[id(ts)])
+    return SeparableKernel(per_channel, dict(base.info))
 
 
 class Simulator(ImagingModel):
