@@ -94,10 +94,26 @@ class SeparableExpansion:
 
     def _derivs(self, t: np.ndarray, nodes: np.ndarray, weights: np.ndarray
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        flat = t.ravel()
+        # pixel-pair offsets repeat a lot on regular grids: evaluate each value once
+        uniq, inverse = np.unique(np.round(flat, 12), return_inverse=True)
+        if uniq.size < 0.8 * flat.size:
+            f, df, d2f = self._derivs_flat(uniq, nodes, weights)
+            shape = t.shape + (weights.shape[1],)
+            return (f[inverse].reshape(shape), df[inverse].reshape(shape),
+                    d2f[inverse].reshape(shape))
+        f, df, d2f = self._derivs_flat(flat, nodes, weights)
+        shape = t.shape + (weights.shape[1],)
+        return f.reshape(shape), df.reshape(shape), d2f.reshape(shape)
+
+    def _derivs_flat(self, t: np.ndarray, nodes: np.ndarray, weights: np.ndarray
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         q, h = self.q, self.h_mm
-        tt = t[..., None]
-        base = h**2 + tt**2 + nodes**2
-        k = h ** (q - 2) * base ** (-q / 2)
-        dk = -q * tt * k / base
-        d2k = -q * k / base + q * (q + 2) * tt**2 * k / base**2
+        tt = t[:, None]
+        inv = 1.0 / (h**2 + tt**2 + nodes**2)
+        half_q = q / 2
+        k = inv * inv if half_q == 2.0 else inv**half_q
+        k *= h ** (q - 2)
+        dk = -q * tt * k * inv
+        d2k = -q * k * inv + q * (q + 2) * tt**2 * k * inv**2
         return k @ weights, dk @ weights, d2k @ weights
