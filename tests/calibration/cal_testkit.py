@@ -32,8 +32,9 @@ def synthetic_profile(name: str = "cal-synthetic", **display: Any) -> Profile:
     return Profile.model_validate(d)
 
 
-def synthetic_matrices(gains_dn: tuple[float, float, float] = (12.0, 15.0, 10.0), seed: int = 3) -> SystemMatrices:
-    """Three channels of :func:`synthetic.system` with different gains (DN at 10 ms)."""
+def synthetic_matrices(gains_dn: tuple[float, float, float] = (8.0, 10.0, 7.0), seed: int = 3) -> SystemMatrices:
+    """Three channels of :func:`synthetic.system` with different gains (white peaks at about
+    70 % of full scale at 10 ms with the defaults)."""
     chans = [synthetic.system(seed=seed, gain_dn=g) for g in gains_dn]
     return SystemMatrices(
         np.stack([c.Po for c in chans]), np.stack([c.Qo for c in chans]),
@@ -116,18 +117,25 @@ class FakeCamera(Camera):
 
 def write_slit_recording(root: Any, profile: Profile, sm: SystemMatrices, rng: np.random.Generator | None,
                          validation: list[np.ndarray], dark: bool = True,
-                         exposure_of: dict[str, float] | None = None, label_slits: bool = False) -> RecordingWriter:
+                         exposure_of: dict[str, float] | None = None, label_slits: bool = False,
+                         hidden_gain: dict[str, float] | None = None, offset_dn: Any = 0.0) -> RecordingWriter:
     """A recording with (optional) dark frame, all row and column slits and validation scenes.
 
     Slit labels are meaningless unless ``label_slits`` (the calibration must not rely on them).
+    ``exposure_of`` changes a frame's exposure and records it; ``hidden_gain`` scales a
+    frame's signal without recording anything; ``offset_dn`` (scalar or ``R × S × 1`` map) is
+    added to every frame (stray light, black level other than the profile's).
     """
     n, m = profile.scene.rows, profile.scene.cols
     w = RecordingWriter(root, profile)
     exposure_of = exposure_of or {}
+    hidden_gain = hidden_gain or {}
 
     def add(scene: np.ndarray, label: str) -> None:
         exp = exposure_of.get(label, REFERENCE_EXPOSURE_US)
-        w.add(measure(sm, profile, scene, rng, exp).astype(np.float32), scene, label=label, exposure_us=exp)
+        effective = exp * hidden_gain.get(label, 1.0)
+        dn = measure(sm, profile, scene, rng, effective, offset_dn)
+        w.add(dn.astype(np.float32), scene, label=label, exposure_us=exp)
 
     if dark:
         add(np.zeros((n, m, 3), np.float32), "frame_dark")

@@ -38,7 +38,7 @@ def _op_errors(rec: Recording, sm_true) -> list[float]:  # type: ignore[no-untyp
 
 def test_recording_calibration_matches_the_truth_and_writes_a_bundle(tmp_path: Path) -> None:
     prof = synthetic_profile()
-    sm_true = synthetic_matrices(gains_dn=(60.0, 80.0, 50.0))
+    sm_true = synthetic_matrices()
     write_slit_recording(tmp_path / "rec", prof, sm_true, np.random.default_rng(0), _validation())
     out = calibrate_recording(Recording(tmp_path / "rec"), tmp_path / "cal", FAST, reference=sm_true)
     bundle = CalibrationBundle.load(tmp_path / "cal")
@@ -49,7 +49,7 @@ def test_recording_calibration_matches_the_truth_and_writes_a_bundle(tmp_path: P
     m = meta["metrics"]
     assert m["dark"].startswith("1 dark frame") and m["slit_frames"] == 24 + 32
     assert all(s["converged"] for s in m["solve"])
-    assert max(m["reference"]["operator_error"]) < 0.02
+    assert max(m["reference"]["operator_error"]) < 0.06  # noise of single frames at ~70 % full scale
     # reconstructions from the calibration are as good as from the true matrices
     for label, ref_psnr in m["reference"]["reference_psnr_db"].items():
         assert m["psnr_db"][label] > ref_psnr - 0.5, (label, m["psnr_db"][label], ref_psnr)

@@ -83,7 +83,7 @@ def simulate_recording(profile: Profile, root: Path, case: Case, seed: int = 0) 
     return Recording(root)
 
 
-def run_case(profile: Profile, case: Case, methods: list[tuple[str, bool]], work: Path) -> list[dict[str, Any]]:
+def run_case(profile: Profile, case: Case, methods: list[tuple[str, str]], work: Path) -> list[dict[str, Any]]:
     """Calibrate one simulated recording with every ``(method, frame_gains)``; returns rows."""
     rec = simulate_recording(profile, work / "rec", case)
     rows = []
@@ -98,7 +98,7 @@ def run_case(profile: Profile, case: Case, methods: list[tuple[str, bool]], work
         val = [v for v in out.validation if v.label.startswith("val_")]
         rows.append({
             "case": case.name,
-            "method": method + ("+gains" if gains else ""),
+            "method": f"{method}/gains {gains}",
             "psnr_db": float(np.mean([v.psnr_db for v in val])),
             "ssim": float(np.mean([v.ssim for v in val])),
             "psnr_by_scene": {v.label: round(v.psnr_db, 2) for v in val},
@@ -123,13 +123,11 @@ def main(argv: list[str] | None = None) -> int:
           f"{profile.scene.rows}x{profile.scene.cols}; validation {', '.join(DEFAULT_VALIDATION)}")
     rows: list[dict[str, Any]] = []
     for case in cases:
-        methods = [("paper", False), ("lsq", False)]
-        if case.exposure_jitter > 0:
-            methods.append(("lsq", True))
+        methods = [("paper", "off"), ("lsq", "off"), ("lsq", "auto")]
         with tempfile.TemporaryDirectory() as tmp:
             for r in run_case(profile, case, methods, Path(tmp)):
                 rows.append(r)
-                print(f"{r['case']:32s} {r['method']:11s} PSNR {r['psnr_db']:6.2f} dB  SSIM {r['ssim']:.3f}  "
+                print(f"{r['case']:32s} {r['method']:15s} PSNR {r['psnr_db']:6.2f} dB  SSIM {r['ssim']:.3f}  "
                       f"iterations {r['iterations']}  {r['seconds']} s", flush=True)
     if args.json:
         Path(args.json).write_text(json.dumps(rows, indent=1) + "\n", encoding="utf-8")

@@ -16,6 +16,14 @@ import numpy as np
 from thintact_sdk.calibration.classify import ChannelRole, classify_scene, is_dark, is_slit
 from thintact_sdk.calibration.lowrank import DEFAULT_RANK, LowRankImage, compress
 from thintact_sdk.calibration.slits import ChannelSlits, SlitStack
+from thintact_sdk.calibration.sumrule import (
+    GAIN_IMPROVEMENT,
+    apply_gains,
+    dark_from_white,
+    find_white,
+    fit_white_gains,
+    unit_slit_frames,
+)
 from thintact_sdk.errors import CalibrationError
 from thintact_sdk.recording import Recording
 
@@ -43,6 +51,9 @@ class SlitCollection:
         ``{frame index: fraction of saturated pixels}`` for frames with any.
     frame_scale
         ``{frame index: factor}`` applied to frames whose exposure differed.
+    frame_gains
+        The white-frame gain fit (see :mod:`thintact_sdk.calibration.sumrule`): whether it
+        was applied, the residual share it removed and the gains per orientation.
     """
 
     channels: list[ChannelSlits]
@@ -53,6 +64,7 @@ class SlitCollection:
     saturated: dict[int, float] = field(default_factory=dict)
     frame_scale: dict[int, float] = field(default_factory=dict)
     slit_frames: int = 0
+    frame_gains: dict[str, object] = field(default_factory=dict)
 
 
 def frame_exposure_us(recording: Recording, i: int) -> float | None:
@@ -111,6 +123,7 @@ def collect_slits(
     recording: Recording,
     rank: int = DEFAULT_RANK,
     progress: Progress | None = None,
+    frame_gains: str = "auto",
 ) -> SlitCollection:
     """Find the slit, dark and validation frames of ``recording`` and compress the slits.
 
@@ -122,6 +135,13 @@ def collect_slits(
         Rank kept per slit image (≥ 2).
     progress
         Optional callback, see :data:`Progress`.
+    frame_gains
+        ``"auto"``, ``"on"`` or ``"off"``: correct per-frame gains from the white frame
+        (:mod:`~thintact_sdk.calibration.sumrule`); ``auto`` applies them only when they
+        explain most of the white-fit residual. Needs a white frame and complete unit slits.
+
+    Without a dark frame, the dark level is measured from the white frame and the slit sums
+    when the recording allows it, else the profile's black level is used.
 
     Raises
     ------
@@ -153,6 +173,14 @@ def collect_slits(
     exposures = [e for e in (frame_exposure_us(recording, i) for i in roles) if e is not None]
     reference = float(np.median(exposures)) if exposures else None
     dark_dn, dark_source = _dark(recording, dark_frames)
+    h_set = unit_slit_frames(roles, "hslit", n_rows)
+    v_set = unit_slit_frames(roles, "vslit", n_cols)
+    complete = [s for s in (h_set, v_set) if s is not None]
+    white = find_white(recording, validation) if complete else None
+    same_exposure = len(set(exposures)) <= 1
+    if not dark_frames and white is not None and same_exposure:
+        dark_dn = dark_from_white(recording, white, complete)
+        dark_source = "measured from the white frame and the slit sums (no dark frame)"
     saturation = prof.noise.saturation_dn - 1.0
     h: list[tuple[list[int], list[np.ndarray], list[LowRankImage]]] = [([], [], []) for _ in range(n_ch)]
     v: list[tuple[list[int], list[np.ndarray], list[LowRankImage]]] = [([], [], []) for _ in range(n_ch)]
@@ -161,6 +189,9 @@ def collect_slits(
     for done, (i, r) in enumerate(sorted(roles.items()), start=1):
         raw = np.asarray(recording.measurement(i))
         sat = float(np.mean(raw >= saturation))
+        recorded = recording.frames[i].extra.get("saturated_fraction")
+        if isinstance(recorded, int | float):  # the wizard's worst single frame of the average
+            sat = max(sat, float(recorded))
         if sat > 0:
             out.saturated[i] = sat
         signal, scale = signal_of(recording, i, dark_dn, reference)
@@ -182,6 +213,8 @@ def collect_slits(
         if progress is not None:
             progress(done, total, recording.frames[i].label or recording.frames[i].measurement)
     out.slit_frames = total
+    if frame_gains not in ("auto", "on", "off"):
+        raise ValueError(f"frame_gains must be auto, on or off, got {frame_gains!r}")
     for c in range(n_ch):
         if not h[c][0] or not v[c][0]:
             raise CalibrationError(
@@ -194,4 +227,30 @@ def collect_slits(
                 meta={"channel": prof.sensor.channels[c]},
             )
         )
+    if frame_gains != "off" and white is not None:
+        _white_gains(recording, out, white, h_set is not None, v_set is not None, frame_gains)
     return out
+
+
+def _white_gains(
+    recording: Recording, out: SlitCollection, white: int, horizontal: bool, vertical: bool, mode: str
+) -> None:
+    """Fit (and maybe apply) per-frame gains of each complete orientation from the white frame."""
+    w_signal, _ = signal_of(recording, white, out.dark_dn, out.exposure_us)
+    result: dict[str, object] = {}
+    for name, use in (("horizontal", horizontal), ("vertical", vertical)):
+        if not use:
+            continue
+        stacks = [getattr(ch, name) for ch in out.channels]
+        whites = [w_signal[..., c] if name == "horizontal" else w_signal[..., c].T for c in range(len(stacks))]
+        fit = fit_white_gains(stacks, whites)
+        applied = mode == "on" or fit.improvement >= GAIN_IMPROVEMENT
+        if applied:
+            for st in stacks:
+                apply_gains(st, fit.factors)
+        result[name] = {
+            "applied": applied,
+            "residual_removed": fit.improvement,
+            "gains": (1.0 / fit.factors).tolist(),
+        }
+    out.frame_gains = result

@@ -45,7 +45,8 @@ class CalibrationOptions:
     rank
         Rank kept per slit image.
     frame_gains
-        Estimate one gain per slit frame (unknown exposure/brightness drift).
+        ``auto``, ``on`` or ``off``: per-slit-frame gains from the white frame (unrecorded
+        exposure or brightness drift, :mod:`thintact_sdk.calibration.sumrule`).
     tau
         Tikhonov τ stored in the bundle (DN²); None chooses it on simulated data.
     filter_steps
@@ -63,7 +64,7 @@ class CalibrationOptions:
     max_iter: int = 50
     tol: float = 1e-7
     rank: int = DEFAULT_RANK
-    frame_gains: bool = False
+    frame_gains: str = "auto"
     tau: float | None = None
     filter_steps: int = 100
     filter_scenes: int = 32
@@ -100,8 +101,7 @@ def solve_matrices(
     reports: list[SolveReport] = []
     for slits in collection.channels:
         m, rep = solve_channel(
-            slits, method=options.method, max_iter=options.max_iter, tol=options.tol,
-            frame_gains=options.frame_gains,
+            slits, method=options.method, max_iter=options.max_iter, tol=options.tol
         )
         mats.append(m)
         reports.append(rep)
@@ -177,7 +177,10 @@ def validate(
         signal, _ = signal_of(recording, i, collection.dark_dn, collection.exposure_us)
         est = dec.decode(signal.astype(np.float32))
         label = recording.frames[i].label or Path(recording.frames[i].measurement).stem
-        out.append(score(label, est, truth))
+        result = score(label, est, truth)
+        raw = np.asarray(recording.measurement(i))
+        result.saturated_fraction = float(np.mean(raw >= profile.noise.saturation_dn - 1.0))
+        out.append(result)
     return out
 
 
@@ -262,7 +265,7 @@ def calibrate_recording(
     profile = recording.profile
     if status:
         status("reading slit frames")
-    collection = collect_slits(recording, rank=opts.rank, progress=progress)
+    collection = collect_slits(recording, rank=opts.rank, progress=progress, frame_gains=opts.frame_gains)
     if status:
         status("solving the system matrices (Algorithms 2-3)")
     sm, reports = solve_matrices(collection, opts, profile)
@@ -298,12 +301,15 @@ def calibrate_recording(
         "slit_frames": collection.slit_frames,
         "frames_averaged": k,
         "dark": collection.dark_source,
-        "saturated_frames": {recording.frames[i].label or str(i): f for i, f in collection.saturated.items()},
+        "saturated_frames": {
+            **{recording.frames[i].label or str(i): f for i, f in collection.saturated.items()},
+            **{v.label: v.saturated_fraction for v in val if v.saturated_fraction > 0},
+        },
         "exposure_normalised_frames": len(collection.frame_scale),
         "tau_selection": tau_table,
     }
-    if opts.frame_gains:
-        metrics["frame_gains"] = [r.frame_gains for r in reports]
+    if collection.frame_gains:
+        metrics["frame_gains"] = collection.frame_gains
     if registration is not None:
         metrics["registration"] = registration.to_json()
     ref_info: dict[str, Any] = {}

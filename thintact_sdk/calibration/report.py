@@ -128,7 +128,10 @@ def write_report(outcome: CalibrationOutcome, profile: Profile, path: str | Path
     rows = []
     for v in outcome.validation:
         ok = v.psnr_db >= lim.get("min_psnr_db", 0) and v.ssim >= lim.get("min_ssim", 0)
-        rows.append([v.label, f"{v.psnr_db:.2f}", f"{v.ssim:.3f}", "pass" if ok else "below limit"])
+        note = "pass" if ok else "below limit"
+        if v.saturated_fraction > 0:
+            note += f" (saturated: {100 * v.saturated_fraction:.2f} % of pixels)"
+        rows.append([v.label, f"{v.psnr_db:.2f}", f"{v.ssim:.3f}", note])
     parts.append(_table(rows, ["scene", "PSNR (dB)", "SSIM", "vs limits"]) if rows else
                  "<p>No validation frames in the recording.</p>")
     fig = _validation_figure(outcome)

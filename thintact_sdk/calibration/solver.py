@@ -72,16 +72,12 @@ class SolveReport:
         (DN² over DN²).
     change_history
         Relative change of the matrices at each iteration.
-    frame_gains
-        With per-frame gain estimation: ``{"horizontal": [N], "vertical": [M]}`` gain of
-        each scene row's / column's slit relative to the average (1 = nominal).
     """
 
     iterations: int
     converged: bool
     residual_history: list[float] = field(default_factory=list)
     change_history: list[float] = field(default_factory=list)
-    frame_gains: dict[str, list[float]] = field(default_factory=dict)
 
     @property
     def final_residual(self) -> float:
@@ -151,41 +147,6 @@ def _fit_columns(
     return a_cols.T, b_cols.T, float(np.sum(resid))
 
 
-def _frame_gains(
-    other: SlitStack, a_cols: np.ndarray, b_cols: np.ndarray, big_a: np.ndarray, big_b: np.ndarray
-) -> np.ndarray:
-    """Per-frame gain correction of the slits that produced ``big_a, big_b``.
-
-    The columns of ``big_a`` (``A × n``, e.g. ``Po`` from horizontal slits) carry each
-    frame's unknown gain (exposure or display drift): ``big_a = Po·diag(g)``. The other
-    orientation's slits see ``Po c_j`` (sums of those columns), so ``x = 1/g`` is the least
-    squares solution of ``Z_j ≈ a_j (big_a D_j x)ᵀ + b_j (big_b D_j x)ᵀ`` over every slit
-    ``j`` of ``other`` (``D_j = diag(c_j)``, ``a_j, b_j`` its fitted columns). Returns ``x``
-    (``(n,)``, mean 1: the average frame sets the scale).
-    """
-    idx = other.index
-    a = a_cols.T[idx]  # n_other × B
-    b = b_cols.T[idx]
-    c = other.profile  # n_other × n
-    m = other.times_transposed(a)  # n_other × A
-    nn = other.times_transposed(b)
-    aa, bb, ab = (np.einsum("nb,nb->n", x, y) for x, y in ((a, a), (b, b), (a, b)))
-    gram_aa, gram_bb = big_a.T @ big_a, big_b.T @ big_b
-    gram_ab = big_a.T @ big_b
-    hess = (
-        gram_aa * ((c.T * aa) @ c)
-        + (gram_ab + gram_ab.T) * ((c.T * ab) @ c)
-        + gram_bb * ((c.T * bb) @ c)
-    )
-    rhs = np.sum(c * (m @ big_a + nn @ big_b), axis=0)
-    hess[np.diag_indices_from(hess)] += 1e-10 * np.trace(hess) / len(hess)
-    x = np.linalg.solve(hess, rhs)
-    mean = float(np.mean(x))
-    if not np.isfinite(mean) or mean <= 0:
-        raise CalibrationError("per-frame gain estimation failed (no consistent solution)")
-    return x / mean
-
-
 def _known_vectors(m_open: np.ndarray, m_code: np.ndarray, profile: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``u_i = M_o rᵢ``, ``w_i = M_c rᵢ`` for every slit profile ``rᵢ`` (rows of ``profile``)."""
     return profile @ m_open.T, profile @ m_code.T
@@ -233,7 +194,6 @@ def refine(
     max_iter: int = 50,
     tol: float = 1e-7,
     gauge: bool = True,
-    frame_gains: bool = False,
 ) -> tuple[ChannelMatrices, SolveReport]:
     """Algorithm 3: alternate Algorithm 1 on horizontal and vertical slits until converged.
 
@@ -253,10 +213,6 @@ def refine(
     gauge
         Fix the open/coding mixing after every iteration (only with ``"lsq"``, which is
         invariant to it); the Frobenius balance of Algorithm 3 is always applied.
-    frame_gains
-        Also estimate one gain per slit frame (exposure differences, display drift) from
-        the consistency of horizontal and vertical slits (``"lsq"`` only); the estimates
-        are in ``report.frame_gains``.
     """
     h, v = slits.horizontal, slits.vertical
     total = float(h.energy.sum() + v.energy.sum())
@@ -268,16 +224,8 @@ def refine(
     for it in range(1, max_iter + 1):
         u, w = _known_vectors(cur.Qo, cur.Qc, h.profile)
         po, pc, res_h = _fit_columns(h, u, w, slits.n_rows, method)
-        if frame_gains and method == "lsq":
-            x = _frame_gains(v, cur.Qo, cur.Qc, po, pc)
-            po, pc = po * x[None, :], pc * x[None, :]
-            report.frame_gains["horizontal"] = (1.0 / x).tolist()
         uq, wq = _known_vectors(po, pc, v.profile)
         qo, qc, res_v = _fit_columns(v, uq, wq, slits.n_cols, method)
-        if frame_gains and method == "lsq":
-            y = _frame_gains(h, po, pc, qo, qc)
-            qo, qc = qo * y[None, :], qc * y[None, :]
-            report.frame_gains["vertical"] = (1.0 / y).tolist()
         new = balance_frobenius(ChannelMatrices(po, qo, pc, qc))
         if gauge and method == "lsq":
             new = fix_gauge(new)
@@ -310,16 +258,13 @@ def solve_channel(
     method: Method = "lsq",
     max_iter: int = 50,
     tol: float = 1e-7,
-    frame_gains: bool = False,
 ) -> tuple[ChannelMatrices, SolveReport]:
     """Algorithms 2 then 3 for one channel; raises :class:`CalibrationError` on missing slits."""
     problems = slits.check_complete()
     if problems:
         raise CalibrationError("cannot solve the system matrices: " + "; ".join(problems))
     init = initial_estimates(slits, method)
-    mats, report = refine(
-        slits, init, method=method, max_iter=max_iter, tol=tol, frame_gains=frame_gains
-    )
+    mats, report = refine(slits, init, method=method, max_iter=max_iter, tol=tol)
     if method == "lsq":
         mats = fix_gauge(mats)
     return mats, report

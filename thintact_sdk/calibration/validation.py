@@ -37,6 +37,9 @@ class ValidationResult:
         ``N × M × 3`` float32 reconstruction.
     truth
         ``N × M × 3`` float32 displayed scene.
+    saturated_fraction
+        Fraction of the measurement's pixels at saturation (a saturated frame cannot be
+        reconstructed faithfully: lower the exposure or the display brightness).
     """
 
     label: str
@@ -44,6 +47,7 @@ class ValidationResult:
     ssim: float
     estimate: np.ndarray
     truth: np.ndarray
+    saturated_fraction: float = 0.0
 
 
 def make_decoder(
