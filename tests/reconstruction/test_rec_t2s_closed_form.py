@@ -74,3 +74,14 @@ def test_truncated_open_rank_is_reported() -> None:
     dec = T2SClosedFormDecoder(full_rank, 1.0, max_open_rank=2)
     assert dec.info["open_rank"][0] == [2, 2]
     assert 0 < dec.info["dropped_open_sv"][0][0] < 1e-2
+
+
+def test_iterate_reproduces_the_iterative_decoder() -> None:
+    sm = _low_rank_open_matrices(6)
+    rng = np.random.default_rng(7)
+    y = sm.forward(rng.random((*sm.scene_shape, 2))) + rng.standard_normal((*sm.sensor_shape, 2))
+    be = ArrayBackend("numpy", "float64")
+    closed = T2SClosedFormDecoder(sm, 30.0, be)
+    plain = T2SIterativeDecoder(sm, 30.0, iterations=100, backend=be).decode(y)
+    fast = closed.iterate(y, iterations=100)
+    np.testing.assert_allclose(fast, plain, atol=1e-4 * np.abs(plain).max())

@@ -137,11 +137,11 @@ def _fit_phi_s(h: np.ndarray, k: np.ndarray, rank: int | None, iters: int = 30) 
         v = vt_[:rank].T
         w, kc = h[c] + lam, k[c] + lam
         eye = np.eye(rank) * 1e-12
-        for _ in range(iters):  # weighted ALS: rows of U, then rows of V
-            a = np.einsum("rs,sj,sk->rjk", w, v, v) + eye * w.mean()
-            u = np.linalg.solve(a, (kc @ v)[..., None])[..., 0]
-            a = np.einsum("rs,rj,rk->sjk", w, u, u) + eye * w.mean()
-            v = np.linalg.solve(a, (kc.T @ u)[..., None])[..., 0]
+        for _ in range(iters):  # weighted ALS: rows of U, then rows of V (Gram blocks by GEMM)
+            a = (w @ (v[:, :, None] * v[:, None, :]).reshape(-1, rank * rank)).reshape(-1, rank, rank)
+            u = np.linalg.solve(a + eye * w.mean(), (kc @ v)[..., None])[..., 0]
+            a = (w.T @ (u[:, :, None] * u[:, None, :]).reshape(-1, rank * rank)).reshape(-1, rank, rank)
+            v = np.linalg.solve(a + eye * w.mean(), (kc.T @ u)[..., None])[..., 0]
         out[c] = u @ v.T
     return out
 

@@ -82,7 +82,7 @@ class T2SClosedFormDecoder(Decoder):
         self._kp, self._kq = kp, kq
         k = kp * kq
         per: dict[str, list[np.ndarray]] = {key: [] for key in (
-            "left", "right", "den", "vp", "vqt", "uq", "scale", "a", "b", "a2", "b2", "small")}
+            "left", "right", "den", "vp", "vqt", "uq", "scale", "a", "b", "a2", "b2", "small", "sig2")}
         self.info: dict[str, Any] = {"open_rank": [], "dropped_open_sv": []}
         for c in range(sm.channels):
             up, sp, vpo = _pad(*svds[c][:3], kp)
@@ -104,6 +104,7 @@ class T2SClosedFormDecoder(Decoder):
             per["left"].append(np.concatenate([sol.left, up.T], axis=0))  # (kP + kp) × R
             per["right"].append(sol.right)
             per["den"].append(sol.inv_denom)
+            per["sig2"].append(np.outer(sol.singular_values_p**2, sol.singular_values_q**2))
             per["vp"].append(sol.vp)
             per["vqt"].append(sol.vqt)
             per["uq"].append(uq)
@@ -122,9 +123,10 @@ class T2SClosedFormDecoder(Decoder):
         self._right = xp.asarray(np.stack(per["right"]), gemm=True)
         self._uq = xp.asarray(np.stack(per["uq"]), gemm=True)  # C × S × kq
         st = {key: xp.asarray(np.stack(per[key])) for key in ("den", "vp", "vqt", "scale", "a", "b",
-                                                             "a2", "b2", "small")}
+                                                             "a2", "b2", "small", "sig2")}
         self._den, self._vp, self._vqt, self._scale = st["den"], st["vp"], st["vqt"], st["scale"]
         self._a, self._b, self._a2, self._b2, self._small = st["a"], st["b"], st["a2"], st["b2"], st["small"]
+        self._sig2 = st["sig2"]  # σ_P,i² σ_Q,j² of Pc, Qc
         self._unit: Any = None
 
     def _linear(self, y: Any) -> tuple[Any, Any]:
@@ -155,6 +157,45 @@ class T2SClosedFormDecoder(Decoder):
         cg = xp.contiguous(coef[:, k:]).reshape(c, self._kp, self._kq)
         xi = xi0 - self._den * (a @ cf @ xp.swap(b) + a2 @ cg @ xp.swap(b2))
         return xp.channels_last(self._vp @ xi @ self._vqt)
+
+    def _normal_op(self, xi: Any) -> Any:
+        """``AᵀA`` in SVD coefficients: ``(σ_P² σ_Qᵀ²) ⊙ ξ + W Mmid Wᵀ ξ`` (τ excluded)."""
+        xp = self.xp
+        a, b, a2, b2 = self._a, self._b, self._a2, self._b2
+        wf = xp.swap(a) @ xi @ b
+        wg = xp.swap(a2) @ xi @ b2
+        d = self._scale * self._scale  # D = s_p² s_q² as kp × kq
+        out = self._sig2 * xi + a @ (d * wf + wg) @ xp.swap(b) + a2 @ wf @ xp.swap(b2)
+        return out
+
+    def iterate(self, signal: np.ndarray, iterations: int = 800, power_iterations: int = 100) -> np.ndarray:
+        """Nesterov's accelerated gradient (step ``1/L``) on the same objective, run in this
+        decoder's coordinates: the iterates of the iterative T2S baseline (up to the open-term
+        truncation) at a tiny cost per iteration. For checking iterative baselines; ``decode``
+        gives the limit they converge to.
+        """
+        self._check(signal)
+        xp = self.xp
+        core, e = self._linear(xp.channels_first(signal, gemm=True))
+        rhs = core + self._a @ e @ xp.swap(self._b)  # Aᵀ y in coefficients
+        rng = np.random.default_rng(0)
+        v = xp.asarray(rng.standard_normal(tuple(rhs.shape)))
+        lam = 0.0
+        for _ in range(power_iterations):
+            v = v / np.sqrt(xp.sum_squares(v))
+            w = self._normal_op(v)
+            lam = float((v * w).sum())
+            v = w
+        step = 1.0 / (2.0 * (lam * 1.02 + self.tau))
+        x = xp.zeros_like(rhs)
+        z, t = x, 1.0
+        for _ in range(iterations):
+            grad = 2.0 * (self._normal_op(z) - rhs) + (2.0 * self.tau) * z
+            x_new = z - step * grad
+            t_new = (1.0 + np.sqrt(1.0 + 4.0 * t * t)) / 2.0
+            z = x_new + ((t - 1.0) / t_new) * (x_new - x)
+            x, t = x_new, t_new
+        return xp.channels_last(self._vp @ x @ self._vqt)
 
     def _check(self, signal: np.ndarray) -> None:
         want = (*self.sensor_shape, self.channels)

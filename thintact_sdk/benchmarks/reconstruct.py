@@ -1,0 +1,259 @@
+"""Reconstruction speed and quality on the paper's device (thintact-paper), one run.
+
+Per-frame latency from a uint16 binned raw frame (1024 × 1280 × 3, black level included) in
+memory to the 400 × 512 × 3 scene, of the non-iterative decoders (the paper's joint-filter
+decoder and this SDK's exact closed form of the full T2S problem) on numpy and torch, in
+float32 and (torch) bfloat16 products; the iterative T2S baseline (Nesterov, 800 iterations)
+timed over a few iterations and extrapolated; their ratio; PSNR/SSIM of all of them on white,
+USAF and GelSight scenes simulated with the full simulator plus sensor noise; MLS vs the
+masks plugin's GA design (uniformity of the white reconstruction and PSNR).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+SCENES = (("white", 0), ("usaf", 0), ("gelsight", 20))
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    """Command-line options of ``thintact bench reconstruct``."""
+    p.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
+    p.add_argument("--profile", default="thintact-paper", help="device profile (default thintact-paper)")
+    p.add_argument("--repeats", type=int, default=12, help="timed frames per decoder (median reported)")
+    p.add_argument("--train-scenes", type=int, default=16, help="filter training scenes")
+    p.add_argument("--iterative-probe", type=int, default=3,
+                   help="iterations of the plain iterative decoder actually timed (then extrapolated)")
+    p.add_argument("--no-mask-compare", action="store_true", help="skip the MLS vs GA comparison")
+
+
+def _median_ms(fn: Callable[[], Any], repeats: int) -> float:
+    fn()
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return float(np.median(times) * 1e3)
+
+
+def _uniformity(white_recon: np.ndarray) -> dict[str, float]:
+    """White-scene uniformity: coefficient of variation and min/max ratio of the mean image
+    (central 90 % of the field, per-pixel mean over channels)."""
+    g = np.asarray(white_recon, np.float64).mean(axis=2)
+    n, m = g.shape
+    c = g[n // 20 : n - n // 20, m // 20 : m - m // 20]
+    return {"cv": float(c.std() / max(c.mean(), 1e-12)),
+            "min_over_max": float(c.min() / max(c.max(), 1e-12))}
+
+
+class _Device:
+    """Simulator, two-term fit, measurements and trained filter of one profile."""
+
+    def __init__(self, profile: Any, train_count: int, say: Callable[[str], None]) -> None:
+        from thintact_virtual.bench import signal_scale_dn
+
+        from thintact_sdk.imaging.filter_training import (
+            make_training_data,
+            train_joint_filter,
+            training_scenes,
+        )
+        from thintact_sdk.imaging.recon_virtual import coding_power, simulate_measurements
+        from thintact_sdk.imaging.scenes import make_scene
+        from thintact_sdk.imaging.simulator import Simulator
+        from thintact_sdk.imaging.t2s import SystemMatrices
+
+        self.profile = profile
+        say(f"{profile.name}: simulator and two-term fit")
+        sim = Simulator(profile)
+        self.scale = signal_scale_dn(profile, {})
+        self.sm = SystemMatrices.two_term_fit(sim, scale_dn=self.scale)
+        n, m = self.sm.scene_shape
+        self.scenes = [make_scene(name, n, m, i) for name, i in SCENES]
+        say(f"{profile.name}: simulating noisy measurements")
+        self.signal, _ = simulate_measurements(sim, self.scale, self.scenes, profile.noise, seed=1)
+        nz = profile.noise
+        self.raw = [np.clip(np.round(s + nz.black_level_dn), 0, nz.saturation_dn).astype(np.uint16)
+                    for s in self.signal]
+        say(f"{profile.name}: training the joint filter (closed form, {train_count} scenes)")
+        data = make_training_data(self.sm, training_scenes(n, m, train_count), noise=profile.noise)
+        self.filter = train_joint_filter(self.sm, data=data, low_block="auto", phi_s_rank=4, steps=0)
+        del data
+        self.unit = coding_power(self.sm)
+
+
+def _raw_call(dec: Any, raw: np.ndarray, black: float) -> Callable[[], np.ndarray]:
+    """A zero-argument call decoding one uint16 raw frame (what is timed)."""
+    return lambda: dec.decode_raw(raw, black)
+
+
+def _from_signal(dec: Any, black: float) -> Callable[[np.ndarray], np.ndarray]:
+    """Decode a noisy signal (DN above black) through the raw path: add black, round to uint16."""
+    return lambda y: dec.decode_raw(np.clip(np.round(y + black), 0, 65535).astype(np.uint16), black)
+
+
+def _quality(decode: Callable[[np.ndarray], np.ndarray], dev: _Device) -> dict[str, Any]:
+    from thintact_sdk.imaging.metrics import psnr, ssim
+
+    out: dict[str, Any] = {}
+    for (name, _), x, y in zip(SCENES, dev.scenes, dev.signal, strict=True):
+        xh = np.clip(decode(y), 0.0, 1.0)
+        out[name] = {"psnr_db": round(float(psnr(xh, x)), 2), "ssim": round(float(ssim(xh, x)), 3)}
+        if name == "white":
+            out[name]["uniformity"] = {k: round(v, 4) for k, v in _uniformity(xh).items()}
+    return out
+
+
+def _best_tau(make: Callable[[float], Callable[[np.ndarray], np.ndarray]], dev: _Device) -> float:
+    """τ (from a coarse grid × the coding power) maximising mean PSNR over the GelSight and USAF
+    frames (the white frame is kept for the uniformity figure)."""
+    from thintact_sdk.imaging.metrics import psnr
+
+    best = (-np.inf, dev.unit)
+    for rel in (0.1, 0.3, 1.0, 3.0):
+        decode = make(rel * dev.unit)
+        value = np.mean([psnr(np.clip(decode(y), 0, 1), x)
+                         for x, y in zip(dev.scenes[1:], dev.signal[1:], strict=True)])
+        if value > best[0]:
+            best = (float(value), rel * dev.unit)
+    return best[1]
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run the benchmark and print its figures (table or ``--json``)."""
+    from rich.console import Console
+    from thintact_decoders import (
+        ArrayBackend,
+        NonIterativeDecoder,
+        T2SClosedFormDecoder,
+        T2SIterativeDecoder,
+    )
+
+    from thintact_sdk.machine import machine_summary
+    from thintact_sdk.profile import load_profile
+
+    console = Console(stderr=True)
+    t_start = time.perf_counter()
+    with console.status("starting") as status:
+        say = status.update
+        profile = load_profile(args.profile)
+        dev = _Device(profile, args.train_scenes, say)
+        black = profile.noise.black_level_dn
+        say("choosing tau")
+        tau_ni = _best_tau(lambda t: NonIterativeDecoder(dev.sm, dev.filter, t).decode, dev)
+        tau_cf = _best_tau(lambda t: T2SClosedFormDecoder(dev.sm, t).decode, dev)
+        result: dict[str, Any] = {
+            "profile": profile.name,
+            "sensor": list(dev.sm.sensor_shape), "scene": list(dev.sm.scene_shape),
+            "two_term_fit_relative_error": dev.sm.meta["fit_relative_error"][0],
+            "filter": {"low_block": dev.filter.meta["low_block"], "phi_s_rank": 4,
+                       "training_loss": dev.filter.meta["final_loss"], "training": "closed form only"},
+            "tau": {"thintact-noniterative": tau_ni, "t2s-closed-form / iterative": tau_cf},
+            "latency_ms": {}, "quality": {},
+        }
+        configs = [("numpy", "float32", None), ("torch", "float32", None), ("torch", "float32", "bfloat16")]
+        raw = dev.raw[2]
+        for be_name, dtype, gemm in configs:
+            be = ArrayBackend(be_name, dtype, gemm_dtype=gemm)
+            tag = f"{be_name}-{gemm or dtype}"
+            say(f"timing non-iterative decoders ({tag})")
+            for label, dec in (
+                ("thintact-noniterative", NonIterativeDecoder(dev.sm, dev.filter, tau_ni, be)),
+                ("t2s-closed-form", T2SClosedFormDecoder(dev.sm, tau_cf, be)),
+            ):
+                key = f"{label} [{tag}]"
+                result["latency_ms"][key] = round(_median_ms(_raw_call(dec, raw, black), args.repeats), 2)
+                result["quality"][key] = _quality(_from_signal(dec, black), dev)
+        say("iterative T2S: timing a few iterations")
+        it = T2SIterativeDecoder(dev.sm, tau_cf, iterations=args.iterative_probe, power_iterations=3)
+        y_cf = it.xp.channels_first(dev.signal[2])
+        probe_ms = _median_ms(lambda: it.solve(y_cf), 2)
+        setup_ms = _median_ms(lambda: it.adjoint(y_cf), 2)
+        per_iter = max(probe_ms - setup_ms, 0.0) / args.iterative_probe
+        it800_ms = setup_ms + 800 * per_iter
+        result["iterative800"] = {
+            "latency_ms_extrapolated": round(it800_ms, 1),
+            "measured": f"{args.iterative_probe} iterations (Gram form, numpy float32), median of 2 runs,"
+                        " extrapolated linearly to 800",
+            "per_iteration_ms": round(per_iter, 2),
+        }
+        say("iterative T2S: 800 iterations for quality (same iterates, decoder coordinates)")
+        ref = T2SClosedFormDecoder(dev.sm, tau_cf, ArrayBackend("numpy", "float64"))
+        result["quality"]["t2s-iterative-800"] = _quality(lambda y: ref.iterate(y, 800), dev)
+        best_ni = min((v, k) for k, v in result["latency_ms"].items() if "noniterative" in k)
+        best_cf = min((v, k) for k, v in result["latency_ms"].items() if "closed-form" in k)
+        result["speedup_vs_iterative800"] = {
+            best_ni[1]: round(it800_ms / best_ni[0], 0), best_cf[1]: round(it800_ms / best_cf[0], 0)}
+        if not args.no_mask_compare:
+            result["mask_compare"] = _mask_compare(profile, dev, result, args, say)
+        result["machine"] = machine_summary()
+        result["wall_s"] = round(time.perf_counter() - t_start, 1)
+    _print(result, args.json)
+    return 0
+
+
+def _mask_compare(profile: Any, dev: _Device, result: dict[str, Any], args: argparse.Namespace,
+                  say: Callable[[str], None]) -> dict[str, Any]:
+    from thintact_decoders import NonIterativeDecoder, T2SClosedFormDecoder
+
+    from thintact_sdk.profile import profile_from_dict
+
+    out: dict[str, Any] = {"mls": {
+        k: result["quality"][f"{k} [numpy-float32]"] for k in ("thintact-noniterative", "t2s-closed-form")}}
+    try:
+        from thintact_masks.design_io import load_design
+
+        mask, record = load_design(f"{profile.name}-ga")
+    except Exception as err:  # noqa: BLE001 - any missing design is reported, not fatal
+        out["ga"] = f"no GA design available from the masks plugin ({type(err).__name__}: {err})"
+        return out
+    d = profile.contract_dict()
+    d["mask"] = {**d["mask"], "phi": [int(v) for v in mask.phi], "design": "ga",
+                 "feature_um": mask.feature_um or d["mask"]["feature_um"]}
+    if mask.phi_rows is not None:
+        d["mask"]["phi_rows"] = [int(v) for v in mask.phi_rows]
+    ga_profile = profile_from_dict(d, where="GA design")
+    ga = _Device(ga_profile, args.train_scenes, say)
+    tau_ni = _best_tau(lambda t: NonIterativeDecoder(ga.sm, ga.filter, t).decode, ga)
+    tau_cf = _best_tau(lambda t: T2SClosedFormDecoder(ga.sm, t).decode, ga)
+    out["ga"] = {
+        "thintact-noniterative": _quality(NonIterativeDecoder(ga.sm, ga.filter, tau_ni).decode, ga),
+        "t2s-closed-form": _quality(T2SClosedFormDecoder(ga.sm, tau_cf).decode, ga),
+        "design": {k: record.get(k) for k in ("design", "K", "feature_um") if k in record},
+    }
+    return out
+
+
+def _print(result: dict[str, Any], as_json: bool) -> None:
+    if as_json:
+        print(json.dumps(result, indent=1))
+        return
+    from rich.console import Console
+    from rich.table import Table
+
+    con = Console()
+    con.print(f"[bold]thintact bench reconstruct[/bold] — {result['profile']} "
+              f"(sensor {result['sensor']}, scene {result['scene']}), wall {result['wall_s']} s")
+    con.print(f"two-term fit error vs simulator: {result['two_term_fit_relative_error']:.2%}; "
+              f"filter: {result['filter']}; tau: {result['tau']}")
+    tab = Table("decoder [backend]", "ms/frame", "white dB", "USAF dB", "GelSight dB", "SSIM G",
+                "white CV")
+    for key, q in result["quality"].items():
+        ms = result["latency_ms"].get(key)
+        if key == "t2s-iterative-800":
+            ms = result["iterative800"]["latency_ms_extrapolated"]
+        tab.add_row(key, f"{ms:.1f}" if ms is not None else "-", str(q["white"]["psnr_db"]),
+                    str(q["usaf"]["psnr_db"]), str(q["gelsight"]["psnr_db"]), str(q["gelsight"]["ssim"]),
+                    str(q["white"]["uniformity"]["cv"]))
+    con.print(tab)
+    con.print(f"iterative-800: {result['iterative800']['measured']}")
+    con.print(f"speed-up vs iterative-800: {result['speedup_vs_iterative800']}")
+    if "mask_compare" in result:
+        con.print("mask comparison (numpy float32): " + json.dumps(result["mask_compare"]))
+    con.print(f"machine: {result['machine']}")
