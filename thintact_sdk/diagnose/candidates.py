@@ -43,6 +43,9 @@ class Candidate:
     null, step, lower, upper
         Functions of the profile giving ``(k,)`` vectors: the null value (effect absent),
         the typical amplitude of the first-order signature, and physical bounds.
+    slow_params
+        Parameters that switch the simulator to its slow (non-separable) path: left at
+        their null value in the score and refined last, time permitting.
     channelwise
         Parameter i acts only on channel i (diffraction wavelengths), so one simulation
         with every parameter stepped gives every column of the Jacobian.
@@ -59,6 +62,7 @@ class Candidate:
     from_params: Callable[[dict[str, Any], Profile], np.ndarray]
     channelwise: bool = False
     signed: tuple[bool, ...] = field(default=())
+    slow_params: tuple[int, ...] = ()
 
     @property
     def k(self) -> int:
@@ -166,11 +170,11 @@ def _build() -> dict[str, Candidate]:
     to, frm = _scalar("pixel_angular_response", "exponent")
     cands.append(
         Candidate("pixel_angular_response", "optical", ("exponent",), _const(0.0), _const(4.0),
-                  _const(-20.0), _const(60.0), to, frm, signed=(True,))
+                  _const(0.0), _const(50.0), to, frm, signed=(False,))
     )
     cands.append(
         Candidate("diffraction", "optical", ("wavelength_nm R", "wavelength_nm G", "wavelength_nm B"),
-                  _const(0.0, 0.0, 0.0), _const(*DEFAULT_WAVELENGTHS_NM), _const(0.0, 0.0, 0.0),
+                  _const(0.0, 0.0, 0.0), _const(*DEFAULT_WAVELENGTHS_NM), _const(1.0, 1.0, 1.0),
                   _const(2000.0, 2000.0, 2000.0), _wl_to, _wl_from, channelwise=True,
                   signed=(False, False, False))
     )
@@ -182,7 +186,7 @@ def _build() -> dict[str, Candidate]:
     cands.append(
         Candidate("mask_misalignment", "optical", ("angle_deg", "dx_um", "dy_um"), _const(0, 0, 0),
                   _const(0.3, 5.0, 5.0), _const(-10.0, -500.0, -500.0), _const(10.0, 500.0, 500.0),
-                  _mis_to, _mis_from, signed=(True, True, True))
+                  _mis_to, _mis_from, signed=(True, True, True), slow_params=(0,))
     )
     to, frm = _scalar("mask_leakage", "transmittance")
     cands.append(
@@ -217,7 +221,7 @@ def _build() -> dict[str, Candidate]:
     to, frm = _scalar("veiling_glare", "fraction")
     cands.append(
         Candidate("veiling_glare", "post", ("fraction",), _const(0.0), _const(0.03), _const(0.0),
-                  _const(2.0), to, frm, signed=(False,))
+                  _const(1.0), to, frm, signed=(False,))
     )
     to, frm = _scalar("sensor_gamma", "gamma")
     cands.append(

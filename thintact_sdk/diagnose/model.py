@@ -100,6 +100,8 @@ class DiagnosisModel:
         self.cache_size = cache_size
         self.n_sim = 0
         self.sim_seconds = 0.0
+        #: estimated seconds of one simulation on the simulator's slow (direct) path
+        self.slow_sim_s = 10.0
         noise = self.profile.noise
         self.black = float(noise.black_level_dn)
         self.full_scale = float(noise.saturation_dn) - self.black

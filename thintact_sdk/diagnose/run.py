@@ -29,6 +29,7 @@ from thintact_sdk.diagnose.stats import (
     valid_pixels,
 )
 from thintact_sdk.diagnose.structure import Structure, find_structure
+from thintact_sdk.diagnose.threads import blas_threads
 from thintact_sdk.diagnose.words import describe_effect, tell_apart
 from thintact_sdk.profile import Profile
 
@@ -52,6 +53,12 @@ class DiagnoseOptions:
     candidates
         Effect names to consider (default: every CONTRACTS §5 effect the simulator knows,
         minus those the profile already models).
+    blas_threads
+        OpenBLAS threads while diagnosing (1 is fastest on a busy machine; None leaves
+        numpy's setting).
+    fit_frames
+        Effects are named and fitted on at most this many frames spread over the
+        recording (the simulator's cost grows with frames); every frame is evaluated.
     """
 
     sys_frac: float = 1e-3
@@ -60,6 +67,8 @@ class DiagnoseOptions:
     max_effects: int = 4
     time_budget_s: float = 100.0
     candidates: list[str] | None = None
+    fit_frames: int = 12
+    blas_threads: int | None = 1
 
 
 @dataclass
@@ -122,7 +131,12 @@ def profile_params(name: str, params: dict[str, Any]) -> dict[str, Any]:
     spec = EFFECTS.get(name)
     if spec is None:
         return params
-    return {k: v for k, v in params.items() if k in spec.params}
+    out: dict[str, Any] = {}
+    for k, v in params.items():
+        if k in spec.params:
+            lo, hi = spec.params[k].bounds
+            out[k] = np.clip(np.asarray(v, float), lo, hi).tolist()
+    return out
 
 
 def _view(model: DiagnosisModel, data: DiagnosisData, pred: np.ndarray, values: Values) -> ModelView:
@@ -167,6 +181,17 @@ def diagnose(
 ) -> Diagnosis:
     """Diagnose a recording (CONTRACTS §6): see the package docstring."""
     opt = options or DiagnoseOptions()
+    with blas_threads(opt.blas_threads):
+        return _diagnose(data, simulate, variance_fn, opt, progress)
+
+
+def _diagnose(
+    data: DiagnosisData,
+    simulate: SimulateFn | None,
+    variance_fn: VarianceFn | None,
+    opt: DiagnoseOptions,
+    progress: Callable[[str], None] | None,
+) -> Diagnosis:
     t_start = time.perf_counter()
     deadline = t_start + opt.time_budget_s
     say = progress or (lambda _m: None)
@@ -183,32 +208,33 @@ def diagnose(
     cands = opt.candidates if opt.candidates is not None else known_candidates(prof)
     timing: dict[str, float] = {}
 
-    model.set_reference(None)
-    ev0 = model.evaluate(base_values)
-    model.set_reference(ev0.pred_dn)
-    ev0 = model.evaluate(base_values)
+    ev0 = _evaluate_full(model, base_values)
     base = _view(model, data, ev0.pred_dn, base_values)
     loc0 = _locate(base, data, black)
     timing["baseline_s"] = time.perf_counter() - t_start
     say(f"baseline: rms {base.stats.rms_dn:.2f} DN, χ²/dof {base.stats.chi2_per_dof:.3f}")
 
+    sub = subset_frames(data, opt.fit_frames)
+    fit_model = DiagnosisModel(sub, sim, var_fn, sys_frac=opt.sys_frac)
     sel = select_effects(
-        model, cands, base_values, max_effects=opt.max_effects, margin=opt.margin,
+        fit_model, cands, base_values, max_effects=opt.max_effects, margin=opt.margin,
         amp_floor=opt.amp_floor, deadline=deadline, progress=say,
     )
-    final = _view(model, data, sel.evaluation.pred_dn, sel.values)
+    ev1 = _evaluate_full(model, sel.values)
+    final = _view(model, data, ev1.pred_dn, sel.values)
     struct = _structure(final, data, black)
     if struct.significant and time.perf_counter() < deadline - 0.25 * opt.time_budget_s:
         # a local defect biases the effect fits: fit again without its pixels
         say("local defect found: refitting the effects without it")
-        model2 = DiagnosisModel(data, sim, var_fn, sys_frac=opt.sys_frac, exclude=struct.mask)
-        model2.cache = model.cache
+        fit2 = DiagnosisModel(sub, sim, var_fn, sys_frac=opt.sys_frac, exclude=struct.mask)
+        fit2.cache = fit_model.cache
         sel = select_effects(
-            model2, cands, base_values, max_effects=opt.max_effects, margin=opt.margin,
+            fit2, cands, base_values, max_effects=opt.max_effects, margin=opt.margin,
             amp_floor=opt.amp_floor, deadline=deadline, progress=say,
         )
-        model = model2
-        final = _view(model, data, sel.evaluation.pred_dn, sel.values)
+        fit_model = fit2
+        ev1 = _evaluate_full(model, sel.values)
+        final = _view(model, data, ev1.pred_dn, sel.values)
         struct = _structure(final, data, black)
     timing["selection_s"] = time.perf_counter() - t_start - timing["baseline_s"]
     loc1 = _locate(final, data, black)
@@ -216,14 +242,17 @@ def diagnose(
     history = [("baseline", base.stats.rms_dn, base.stats.chi2_per_dof)]
     findings = []
     phys = dict(prof.physics)
-    for rnd in sel.rounds:
-        findings.append(_finding(rnd, model, data, prof, sel))
-        history.append((f"+ {rnd.name}", findings[-1]["rms_dn_after"], findings[-1]["chi2_per_dof_after"]))
+    accepted: Values = dict(base_values)
+    for i, rnd in enumerate(sel.rounds):
+        accepted[rnd.name] = rnd.vector
+        if i == len(sel.rounds) - 1:
+            view = final
+        else:
+            ev_r = _evaluate_full(model, accepted)
+            view = _view(model, data, ev_r.pred_dn, accepted)
+        findings.append(_finding(rnd, fit_model, sub, prof, view))
+        history.append((f"+ {rnd.name}", view.stats.rms_dn, view.stats.chi2_per_dof))
         phys[rnd.name] = profile_params(rnd.name, findings[-1]["params"])
-    if sel.rounds:
-        # the last round's model is the final model; its numbers are the final ones
-        findings[-1]["rms_dn_after"] = round(final.stats.rms_dn, 4)
-        findings[-1]["chi2_per_dof_after"] = round(final.stats.chi2_per_dof, 4)
     fitted = prof.with_physics(phys)
     report: dict[str, Any] = {
         "noise_rms_dn": round(base.stats.noise_rms_dn, 4),
@@ -238,16 +267,36 @@ def diagnose(
         },
     }
     timing["total_s"] = time.perf_counter() - t_start
-    timing["simulations"] = float(model.n_sim)
+    timing["simulations"] = float(model.n_sim + fit_model.n_sim)
     return Diagnosis(
-        data, report, fitted, ev0.pred_dn, sel.evaluation.pred_dn, loc0, loc1, struct, sel, history, timing
+        data, report, fitted, ev0.pred_dn, ev1.pred_dn, loc0, loc1, struct, sel, history, timing
     )
 
 
-def _finding(rnd: Round, model: DiagnosisModel, data: DiagnosisData, prof: Profile, sel: Selection) -> dict[str, Any]:
+def _evaluate_full(model: DiagnosisModel, values: Values) -> Evaluation:
+    """Evaluate with weights taken at the model's own prediction (two passes)."""
+    model.set_reference(None)
+    ev = model.evaluate(values)
+    model.set_reference(ev.pred_dn)
+    return model.evaluate(values)
+
+
+def subset_frames(data: DiagnosisData, n: int) -> DiagnosisData:
+    """At most ``n`` frames spread evenly over the recording (all when it has fewer)."""
+    f = data.n_frames
+    if n <= 0 or f <= n:
+        return data
+    idx = np.unique(np.round(np.linspace(0, f - 1, n)).astype(int))
+    return DiagnosisData(
+        data.profile, [data.labels[i] for i in idx], data.scenes[idx], data.measured_dn[idx], data.skipped
+    )
+
+
+def _finding(
+    rnd: Round, model: DiagnosisModel, data: DiagnosisData, prof: Profile, view: ModelView
+) -> dict[str, Any]:
+    """One ``findings`` entry; ``view`` is the whole recording with effects up to ``rnd``."""
     params = contract_params(rnd.name, rnd.vector, model, rnd.evaluation.beta)
-    vals_after = {k: v for k, v in sel.values.items()}
-    view = _view(model, data, rnd.evaluation.pred_dn, vals_after)
     ev_txt = (
         f"{describe_effect(rnd.name, params, prof)} Adding it lowers χ² by {rnd.dchi2:.0f} "
         f"(with a {model.sys_frac:.1%} systematic allowance), above the {rnd.threshold:.0f} that "

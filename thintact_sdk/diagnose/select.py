@@ -31,6 +31,8 @@ from thintact_sdk.errors import ThinTactError
 #: failures of the simulator for one candidate (an effect combination it cannot model, a
 #: missing optional path): the candidate is dropped and the log says why
 SIMULATION_ERRORS = (ThinTactError, ImportError, NotImplementedError, ValueError)
+#: effects scored through a cheaper proxy instead of their own signature
+PROXIED = frozenset({"refraction"})
 
 
 @dataclass
@@ -45,6 +47,7 @@ class CandidateResult:
     fitted: np.ndarray | None = None
     evaluation: Evaluation | None = None
     amplitude_dn: float = 0.0  # rms change of the prediction caused by the fitted effect
+    refined: bool = False  # Levenberg-Marquardt done (not only the line search)
 
 
 @dataclass
@@ -116,7 +119,8 @@ def score_candidate(
         trial[cand.name] = null.copy()
         ev = model.evaluate(trial)
         vec = ev.beta[:, 1:].ravel() if ev.beta.shape[1] > 1 else null
-        return CandidateResult(cand.name, cand.k, ev0.chi2 - ev.chi2, vec, ev0.chi2 - ev.chi2, vec, ev)
+        d = ev0.chi2 - ev.chi2
+        return CandidateResult(cand.name, cand.k, d, vec, d, vec, ev, refined=True)
     if cand.name == "saturation":
         return _score_saturation(model, values, ev0, cand)
     cols: list[np.ndarray] = []
@@ -130,6 +134,8 @@ def score_candidate(
             cols.append(ci)
     else:
         for i in range(cand.k):
+            if i in cand.slow_params:
+                continue
             trial = dict(values)
             v = null.copy()
             v[i] += step[i]
@@ -137,16 +143,20 @@ def score_candidate(
             d_i = float(trial[cand.name][i] - null[i]) or step[i]
             cols.append((model.evaluate(trial, beta=ev0.beta).pred_dn - ev0.pred_dn) / d_i)
     nuis = model.nuisance_directions(values, ev0)
-    u = np.zeros(cand.k)
-    h = np.zeros((cand.k, cand.k))
+    fast = [i for i in range(cand.k) if i not in cand.slow_params]
+    kf = len(fast)
+    u = np.zeros(kf)
+    h = np.zeros((kf, kf))
     for c in range(resid.shape[3]):
         jc = np.stack([col[..., c].ravel() for col in cols])
         wc = w[..., c].ravel()
         jp = _project(jc, nuis[c].reshape(nuis[c].shape[0], -1), wc)
         u += (jp * wc) @ resid[..., c].ravel()
         h += (jp * wc) @ jp.T
-    a, gain = _bounded_quadratic(u, h, signed)
-    vec = _clip(cand, null + a, model)
+    a, gain = _bounded_quadratic(u, h, tuple(signed[i] for i in fast))
+    full = np.zeros(cand.k)
+    full[fast] = a
+    vec = _clip(cand, null + full, model)
     return CandidateResult(cand.name, cand.k, gain, vec)
 
 
@@ -164,7 +174,7 @@ def _score_saturation(
     trial[cand.name] = np.array([top])
     ev = model.evaluate(trial)
     d = ev0.chi2 - ev.chi2
-    return CandidateResult(cand.name, 1, d, np.array([top]), d, np.array([top]), ev)
+    return CandidateResult(cand.name, 1, d, np.array([top]), d, np.array([top]), ev, refined=True)
 
 
 def fit_candidate(
@@ -172,72 +182,185 @@ def fit_candidate(
     values: Values,
     ev0: Evaluation,
     res: CandidateResult,
-    n_iter: int = 5,
+    n_iter: int = 6,
     deadline: float | None = None,
+    refine: bool = True,
 ) -> CandidateResult:
-    """Levenberg-Marquardt fit of ``res.name`` (starting at its score estimate) with the
-    gains profiled; fills ``dchi2``, ``fitted``, ``evaluation`` and ``amplitude_dn``."""
+    """Fit ``res.name`` with the gains profiled; fills ``dchi2``, ``fitted``,
+    ``evaluation`` and ``amplitude_dn``.
+
+    A line search along the score direction (0.5 to 8 times the linear estimate, which
+    a large effect overshoots or undershoots) gives the start; Levenberg-Marquardt with
+    finite-difference Jacobians refines the cheap parameters; parameters that need the
+    simulator's slow direct path (a mask rotation) are refined last by a parabola through
+    three values, when the time budget allows.
+    """
     cand = CANDIDATES[res.name]
-    if res.evaluation is not None and res.fitted is not None:
+    if res.evaluation is not None and res.fitted is not None and (res.refined or not refine):
         res.dchi2 = ev0.chi2 - res.evaluation.chi2
         res.amplitude_dn = _amplitude(model, ev0, res.evaluation)
         return res
+    if res.evaluation is not None and res.fitted is not None:
+        cur, ev = res.fitted, res.evaluation
+    else:
+        cur, ev = _line_search(model, cand, values, ev0, res, deadline)
+    if refine:
+        cur, ev = _refine(model, cand, values, cur, ev, n_iter, deadline)
+        res.refined = True
+    res.fitted = cur
+    res.evaluation = ev
+    res.dchi2 = ev0.chi2 - ev.chi2
+    res.amplitude_dn = _amplitude(model, ev0, ev)
+    return res
+
+
+def _line_search(
+    model: DiagnosisModel,
+    cand: Candidate,
+    values: Values,
+    ev0: Evaluation,
+    res: CandidateResult,
+    deadline: float | None,
+) -> tuple[np.ndarray, Evaluation]:
     prof = model.profile
-    step = cand.step(prof) * 0.01
-    cur = _clip(cand, res.vector.copy(), model)
+    null = cand.null(prof)
+    active = [i for i in range(cand.k) if i not in cand.slow_params]
 
     def ev_at(v: np.ndarray) -> Evaluation:
         t = dict(values)
         t[cand.name] = v
         return model.evaluate(t)
 
-    # a zero score estimate (one-sided at the null) starts from a small step instead
-    if np.allclose(cur, cand.null(prof)):
-        cur = _clip(cand, cand.null(prof) + 0.3 * cand.step(prof), model)
-    ev = ev_at(cur)
+    def late() -> bool:
+        return deadline is not None and time.perf_counter() > deadline
+
+    direction = res.vector - null
+    if not np.any(direction):
+        direction = 0.3 * cand.step(prof) * np.isin(np.arange(cand.k), active)
+    cur, ev = null.copy(), ev0
+    for t in (1.0, 0.5, 2.0, 4.0, 8.0):
+        trial = _clip(cand, null + t * direction, model)
+        e = ev_at(trial)
+        if e.chi2 < ev.chi2:
+            cur, ev = trial, e
+        elif t >= 2.0 or late():
+            break
+    return cur, ev
+
+
+def _refine(
+    model: DiagnosisModel,
+    cand: Candidate,
+    values: Values,
+    cur: np.ndarray,
+    ev: Evaluation,
+    n_iter: int,
+    deadline: float | None,
+) -> tuple[np.ndarray, Evaluation]:
+    active = [i for i in range(cand.k) if i not in cand.slow_params]
+
+    def ev_at(v: np.ndarray) -> Evaluation:
+        t = dict(values)
+        t[cand.name] = v
+        return model.evaluate(t)
+
+    def late() -> bool:
+        return deadline is not None and time.perf_counter() > deadline
+
+    iters = 2 * n_iter if cand.channelwise else n_iter  # one simulation per Jacobian
+    cur, ev = _levenberg_marquardt(model, cand, ev_at, cur, ev, active, iters, late)
+    for i in cand.slow_params:
+        if deadline is not None and deadline - time.perf_counter() < 3.5 * model.slow_sim_s:
+            break
+        cur, ev = _parabola(cand, ev_at, cur, ev, i, model)
+    return cur, ev
+
+
+def _levenberg_marquardt(
+    model: DiagnosisModel,
+    cand: Candidate,
+    ev_at: Callable[[np.ndarray], Evaluation],
+    cur: np.ndarray,
+    ev: Evaluation,
+    active: list[int],
+    n_iter: int,
+    late: Callable[[], bool],
+) -> tuple[np.ndarray, Evaluation]:
+    prof = model.profile
+    step = cand.step(prof) * 0.01
+    upper = cand.upper(prof)
     lam = 1e-3
     w = model.weights
     for _ in range(n_iter):
-        if deadline is not None and time.perf_counter() > deadline:
+        if late():
             break
         cols = []
         if cand.channelwise:
-            hstep = np.where(cur + step <= cand.upper(prof), step, -step)
+            hstep = np.where(cur + step <= upper, step, -step)
             diff = ev_at(cur + hstep).pred_dn - ev.pred_dn
-            for i in range(cand.k):
+            for i in active:
                 ci = np.zeros_like(diff)
                 ci[..., i] = diff[..., i] / hstep[i]
                 cols.append(ci.ravel())
         else:
-            for i in range(cand.k):
+            for i in active:
                 v = cur.copy()
-                hi = step[i] if cur[i] + step[i] <= cand.upper(prof)[i] else -step[i]
+                hi = step[i] if cur[i] + step[i] <= upper[i] else -step[i]
                 v[i] += hi
                 cols.append(((ev_at(v).pred_dn - ev.pred_dn) / hi).ravel())
         j = np.stack(cols)
         wr = (w * (model.data.measured_dn - ev.pred_dn)).ravel()
         g = j @ wr
         hm = (j * w.ravel()) @ j.T
-        improved = False
+        gain = 0.0
         for _try in range(4):
             a = hm + lam * np.diag(np.diag(hm) + 1e-12)
-            delta = np.linalg.lstsq(a, g, rcond=None)[0]
+            delta = np.zeros(cand.k)
+            delta[active] = np.linalg.lstsq(a, g, rcond=None)[0]
             new = _clip(cand, cur + delta, model)
             ev_new = ev_at(new)
             if ev_new.chi2 < ev.chi2:
                 gain = ev.chi2 - ev_new.chi2
                 cur, ev = new, ev_new
                 lam = max(lam / 5, 1e-6)
-                improved = True
                 break
             lam *= 10
-        if not improved or gain < 0.5:
+        if gain < max(0.5, 2e-6 * ev.chi2):
             break
-    res.fitted = cur
-    res.evaluation = ev
-    res.dchi2 = ev0.chi2 - ev.chi2
-    res.amplitude_dn = _amplitude(model, ev0, ev)
-    return res
+    return cur, ev
+
+
+def _parabola(
+    cand: Candidate,
+    ev_at: Callable[[np.ndarray], Evaluation],
+    cur: np.ndarray,
+    ev: Evaluation,
+    i: int,
+    model: DiagnosisModel,
+    h: float | None = None,
+) -> tuple[np.ndarray, Evaluation]:
+    """Refine parameter ``i`` from χ² at cur ± h (a parabola's vertex; h defaults to the
+    candidate's typical step)."""
+    h = float(cand.step(model.profile)[i]) if h is None else h
+    lo, hi = cur.copy(), cur.copy()
+    lo[i] -= h
+    hi[i] += h
+    t0 = time.perf_counter()
+    e_lo = ev_at(_clip(cand, lo, model))
+    model.slow_sim_s = time.perf_counter() - t0
+    e_hi = ev_at(_clip(cand, hi, model))
+    c0, cm, cp = ev.chi2, e_lo.chi2, e_hi.chi2
+    curv = cm + cp - 2 * c0
+    best = min(((c0, cur, ev), (cm, lo, e_lo), (cp, hi, e_hi)), key=lambda x: x[0])
+    if curv > 0:
+        x = float(np.clip(0.5 * h * (cm - cp) / curv, -2 * h, 2 * h))
+        v = cur.copy()
+        v[i] += x
+        v = _clip(cand, v, model)
+        e = ev_at(v)
+        if e.chi2 < best[0]:
+            return v, e
+    return best[1], best[2]
 
 
 def _amplitude(model: DiagnosisModel, ev0: Evaluation, ev: Evaluation) -> float:
@@ -250,7 +373,7 @@ def select_effects(
     candidates: list[str],
     values: Values | None = None,
     max_effects: int = 4,
-    n_fit: int = 3,
+    n_fit: int = 2,
     margin: float = 25.0,
     amp_floor: float = 2e-3,
     alt_tol: float | None = None,
@@ -267,7 +390,7 @@ def select_effects(
         Effects already in the model (fixed at these values; refitted with each round's
         winner only through the gains).
     n_fit
-        How many of the best-scoring candidates get a full fit each round.
+        How many of the best candidates after the line search get a full fit each round.
     margin
         Added to the BIC penalty k·ln(n) (Δχ² units).
     amp_floor
@@ -275,7 +398,7 @@ def select_effects(
         rms signal (below it, honest discretisation differences could be the cause).
     alt_tol
         Δχ² within which another candidate counts as an equally good explanation
-        (default 2·ln(n) + 1 % of the winner's Δχ²).
+        (default 2·ln(n) + 0.2 % of the winner's Δχ²).
     """
     vals: Values = dict(values or {})
     say = progress or (lambda _m: None)
@@ -296,6 +419,8 @@ def select_effects(
             break
         scores = []
         for name in list(remaining):
+            if name in PROXIED:
+                continue
             try:
                 res = score_candidate(model, vals, ev, CANDIDATES[name])
             except SIMULATION_ERRORS as err:
@@ -306,17 +431,30 @@ def select_effects(
             say(f"score {name}: Δχ² ≈ {res.score_dchi2:.1f}")
         scores.sort(key=lambda r: -(r.score_dchi2 - r.k * ln_n))
         fitted: list[CandidateResult] = []
-        for res in scores[:n_fit]:
+        for res in scores:
             if res.score_dchi2 - res.k * ln_n < 0.5 * margin and fitted:
+                continue
+            try:
+                fit_candidate(model, vals, ev, res, deadline=deadline, refine=False)
+            except SIMULATION_ERRORS as err:
+                log.append(f"{res.name} left out: fitting it failed in the simulator ({err})")
+                remaining.remove(res.name)
+                continue
+            fitted.append(res)
+            say(f"line search {res.name}: Δχ² = {res.dchi2:.1f}")
+        fitted.sort(key=lambda r: -((r.dchi2 or 0.0) - r.k * ln_n))
+        for res in fitted[:n_fit]:
+            if (res.dchi2 or 0.0) - res.k * ln_n < 0.5 * margin and res is not fitted[0]:
                 continue
             try:
                 fit_candidate(model, vals, ev, res, deadline=deadline)
             except SIMULATION_ERRORS as err:
                 log.append(f"{res.name} left out: fitting it failed in the simulator ({err})")
                 remaining.remove(res.name)
+                fitted.remove(res)
                 continue
-            fitted.append(res)
             say(f"fit {res.name}: Δχ² = {res.dchi2:.1f}, amplitude {res.amplitude_dn:.2f} DN")
+        _refraction_proxy(model, vals, ev, fitted, remaining, deadline, say)
         ok = [
             r for r in fitted
             if r.dchi2 is not None
@@ -334,7 +472,7 @@ def select_effects(
         ok.sort(key=lambda r: -((r.dchi2 or 0.0) - r.k * ln_n))
         best = ok[0]
         assert best.fitted is not None and best.evaluation is not None and best.dchi2 is not None
-        tol = alt_tol if alt_tol is not None else 2 * ln_n + 0.01 * best.dchi2
+        tol = alt_tol if alt_tol is not None else 2 * ln_n + 0.002 * best.dchi2
         best_bic = best.dchi2 - best.k * ln_n
         alts = [
             r for r in fitted
@@ -351,3 +489,51 @@ def select_effects(
         model.set_reference(best.evaluation.pred_dn)
         ev = model.evaluate(vals)
     return Selection(vals, rounds, ev, rejected, log)
+
+
+def _refraction_proxy(
+    model: DiagnosisModel,
+    vals: Values,
+    ev0: Evaluation,
+    fitted: list[CandidateResult],
+    remaining: list[str],
+    deadline: float | None,
+    say: Callable[[str], None],
+) -> None:
+    """Refraction needs the simulator's slow path, but near the axis it acts like a
+    shorter scene gap (z/n at the same mask-to-sensor gap d): when the geometry fit
+    shortens z/d, try n = (z/d)_profile / (z/d)_fit and refine it by a parabola (adds a
+    fitted result to ``fitted``)."""
+    if "refraction" not in remaining:
+        return
+    geo = next((r for r in fitted if r.name == "geometry" and r.fitted is not None), None)
+    g = model.profile.geometry
+    ratio0 = g.scene_to_mask_mm / g.mask_to_sensor_mm
+    if geo is None or geo.fitted is None:
+        return
+    ratio = float(geo.fitted[0] / geo.fitted[1])
+    if ratio > 0.995 * ratio0:
+        return
+    if deadline is not None and deadline - time.perf_counter() < 4.5 * model.slow_sim_s:
+        return
+    cand = CANDIDATES["refraction"]
+    n0 = _clip(cand, np.array([ratio0 / ratio]), model)
+
+    def ev_at(v: np.ndarray) -> Evaluation:
+        t = dict(vals)
+        t["refraction"] = v
+        return model.evaluate(t)
+
+    try:
+        t0 = time.perf_counter()
+        ev = ev_at(n0)
+        model.slow_sim_s = time.perf_counter() - t0
+        cur, ev = _parabola(cand, ev_at, n0, ev, 0, model, h=0.02 * float(n0[0]))
+    except SIMULATION_ERRORS:
+        remaining.remove("refraction")
+        return
+    res = CandidateResult("refraction", 1, 0.0, cur, ev0.chi2 - ev.chi2, cur, ev)
+    res.refined = True
+    res.amplitude_dn = _amplitude(model, ev0, ev)
+    fitted.append(res)
+    say(f"refraction (from the geometry fit): n = {float(cur[0]):.3f}, Δχ² = {res.dchi2:.1f}")
