@@ -11,6 +11,7 @@ from thintact_sdk.recording import RecordingWriter
 from thintact_sdk.sensor import Sensor
 from thintact_sdk.tactile import Sphere, TactileSimulator, random_ball_presses
 from thintact_sdk.tactile.device_calibration import calibrate_recording
+from thintact_sdk.tactile.interpreter import colour_change
 
 
 def _measurement(scene: np.ndarray) -> np.ndarray:
@@ -31,7 +32,7 @@ def test_lut_from_a_recording_of_ball_presses(tmp_path):
     assert done == list(range(1, 9))
     assert lut.meta["source"] == "recording" and lut.meta["slopes_from"] == "ball model"
     test = sim.press(Sphere(2.0), 0.7, (1.0, -1.0))
-    gx, gy = lut.lookup(test.scene - sim.flat().scene)
+    gx, gy = lut.lookup(colour_change(test.scene, sim.flat().scene, None, 1.0, 1.0))
     inside = test.depth_mm > 0.2
     err = np.hypot(gx - test.grad_x, gy - test.grad_y)[inside]
     scale = np.hypot(test.grad_x, test.grad_y)[inside]

@@ -21,7 +21,7 @@ from thintact_sdk.errors import CalibrationError
 from thintact_sdk.profile import Profile
 from thintact_sdk.tactile.grid import TactileParams, bin_image, binned_params, working_factor
 from thintact_sdk.tactile.indenters import Sphere
-from thintact_sdk.tactile.interpreter import fill_masked
+from thintact_sdk.tactile.interpreter import colour_change, fill_masked
 from thintact_sdk.tactile.markers import detect_markers
 from thintact_sdk.tactile.photometric import PhotometricLUT, calibrate_lut
 from thintact_sdk.tactile.simulate import TactileScene, TactileSimulator
@@ -166,6 +166,7 @@ def calibrate_from_presses(
     bins: int = 32,
     meta: dict[str, Any] | None = None,
     max_work_mm: float = 0.13,
+    smooth_px: float = 1.0,
 ) -> PhotometricLUT:
     """Calibrate a LUT from ball presses against a no-contact reference image.
 
@@ -183,8 +184,8 @@ def calibrate_from_presses(
         LUT nodes per colour axis.
     meta
         Extra provenance stored with the LUT.
-    max_work_mm
-        Work on the grid binned as the interpreter does (same default).
+    max_work_mm, smooth_px
+        Work on the grid binned and smoothed as the interpreter does (same defaults).
     """
     full = TactileParams.from_profile(profile)
     factor = working_factor(full, max_work_mm)
@@ -198,7 +199,7 @@ def calibrate_from_presses(
     for press in presses:
         img = bin_image(press.image, factor)
         det = detect_markers(img, params)
-        change = img - background
+        change = colour_change(img, background, det.mask, sigma, smooth_px)
         if press.grad_x is None or press.grad_y is None:
             center, radius_px = find_press_circle(change, det.mask)
             gx, gy, inside = ball_slopes(
@@ -211,6 +212,9 @@ def calibrate_from_presses(
             valid = (inside | flat) & ~det.mask
         else:
             gx, gy = bin_image(press.grad_x, factor), bin_image(press.grad_y, factor)
+            if smooth_px > 0:  # the slopes the smoothed colours stand for
+                gx = cv2.GaussianBlur(gx, (0, 0), smooth_px)
+                gy = cv2.GaussianBlur(gy, (0, 0), smooth_px)
             moving = np.hypot(gx, gy) > 1e-3
             valid = (moving | (rng.random(gx.shape) < 0.1)) & ~det.mask
         feats.append(change)

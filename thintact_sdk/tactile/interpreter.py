@@ -54,6 +54,29 @@ def fill_masked(values: np.ndarray, mask: np.ndarray, sigma_px: float) -> np.nda
     return out
 
 
+def colour_change(
+    image: np.ndarray,
+    background: np.ndarray,
+    marker_mask: np.ndarray | None,
+    marker_sigma_px: float,
+    smooth_px: float,
+) -> np.ndarray:
+    """The photometric-stereo feature: image minus background, marker pixels filled from
+    their neighbours, then a light Gaussian (``smooth_px``) against reconstruction noise.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``N × M × 3`` float32 colour change (display units).
+    """
+    change = np.asarray(image, np.float32) - background
+    if marker_mask is not None and marker_mask.any():
+        change = fill_masked(change, marker_mask, marker_sigma_px)
+    if smooth_px > 0:
+        change = cv2.GaussianBlur(np.ascontiguousarray(change), (0, 0), smooth_px)
+    return change
+
+
 class TactileInterpreter:
     """Turns reconstructed images of one sensor into tactile frames.
 
@@ -73,6 +96,8 @@ class TactileInterpreter:
         Photometric stereo and marker detection run on the scene grid binned to about this
         pixel size (:func:`~thintact_sdk.tactile.grid.working_factor`); the depth map is
         returned on the full grid.
+    smooth_px
+        Gaussian smoothing (working-grid pixels) of the colour change before the LUT.
 
     The first image interpreted becomes the reference (no-contact) frame unless
     :meth:`set_reference` is called first.
@@ -85,11 +110,13 @@ class TactileInterpreter:
         marker_threshold: float = 0.3,
         min_contact_area_mm2: float = 0.1,
         max_work_mm: float = 0.13,
+        smooth_px: float = 1.0,
     ) -> None:
         self.params = TactileParams.from_profile(profile)
         self.factor = working_factor(self.params, max_work_mm)
         self.work = binned_params(self.params, self.factor)
         self.lut = lut
+        self.smooth_px = smooth_px
         self.marker_threshold = marker_threshold
         self.min_contact_area_mm2 = min_contact_area_mm2
         self.tracker = MarkerTracker(max_step_mm=0.45 * self.params.marker_pitch_mm)
@@ -136,10 +163,8 @@ class TactileInterpreter:
             raise RuntimeError("set_reference() before asking for depth")
         if self.lut is None:
             return np.zeros(img.shape[:2], np.float32)
-        gx, gy = self.lut.lookup(img - self.background)
-        if marker_mask is not None and marker_mask.any():
-            g = fill_masked(np.stack([gx, gy], axis=2), marker_mask, self._sigma_px)
-            gx, gy = g[..., 0], g[..., 1]
+        change = colour_change(img, self.background, marker_mask, self._sigma_px, self.smooth_px)
+        gx, gy = self.lut.lookup(change)
         depth = integrate_gradients(gx, gy, self.work.mm_per_px)
         return np.clip(depth, 0.0, None)
 
