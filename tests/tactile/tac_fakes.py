@@ -12,7 +12,7 @@ import thintact_sdk
 from thintact_sdk.bayer import mosaic_from_rgb
 from thintact_sdk.errors import DeviceError
 from thintact_sdk.frames import RawFrame
-from thintact_sdk.interfaces import Camera, CameraCapabilities, Decoder
+from thintact_sdk.interfaces import Camera, CameraCapabilities, Decoder, LightController
 from thintact_sdk.plugin_manager import PluginRegistry
 from thintact_sdk.profile import CameraConfig, DecoderConfig, Profile, SensorSpec, load_profile
 from thintact_sdk.tactile import TactileSimulator
@@ -67,10 +67,46 @@ class BlockDecoder(Decoder):
         )
 
 
+class RecordingLights(LightController):
+    """Remembers what it was told; ``LIGHTS`` holds every instance."""
+
+    def __init__(self, port, settings) -> None:
+        self.port = port
+        self.levels = [0.0] * 10
+        self.opened = False
+        LIGHTS.append(self)
+
+    def open(self) -> None:
+        self.opened = True
+
+    def close(self) -> None:
+        self.opened = False
+
+    @property
+    def led_count(self) -> int:
+        return 10
+
+    def set_intensity(self, index: int, level: float) -> None:
+        self.levels[index] = level
+
+    def set_all(self, levels: list[float]) -> None:
+        self.levels = list(levels)
+
+    def get_intensities(self) -> list[float]:
+        return list(self.levels)
+
+
+LIGHTS: list[RecordingLights] = []
+
+
 class _TestPlugin:
     @thintact_sdk.hookimpl
     def thintact_cameras(self):
         return [thintact_sdk.Component("tac-test-cam", BlockCamera, "test camera")]
+
+    @thintact_sdk.hookimpl
+    def thintact_light_controllers(self):
+        return [thintact_sdk.Component("tac-test-lights", RecordingLights, "test lights")]
 
     @thintact_sdk.hookimpl
     def thintact_decoders(self):

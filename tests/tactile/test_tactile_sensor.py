@@ -12,7 +12,7 @@ import time
 
 import numpy as np
 import pytest
-from tac_fakes import SLOTS, block_profile, make_registry
+from tac_fakes import LIGHTS, SLOTS, block_profile, make_registry
 
 from thintact_sdk.errors import CalibrationError, DeviceError
 from thintact_sdk.frames import TactileFrame
@@ -102,3 +102,15 @@ def test_reading_a_closed_sensor_is_a_clear_error(profile, registry, lut):
     s = Sensor(profile, registry=registry, lut=lut)
     with pytest.raises(DeviceError, match="not open"):
         s.read()
+
+
+def test_leds_are_set_from_the_profile_and_released(profile, registry, lut):
+    from thintact_sdk.profile import LightConfig
+
+    lit = profile.model_copy(update={"light": LightConfig(
+        plugin="tac-test-lights", port="loop://", intensities=[0.5] * 10)}, deep=True)
+    LIGHTS.clear()
+    with Sensor(lit, registry=registry, lut=lut) as s:
+        assert s.light is LIGHTS[0] and LIGHTS[0].opened and LIGHTS[0].port == "loop://"
+        assert LIGHTS[0].get_intensities() == [0.5] * 10
+    assert not LIGHTS[0].opened
