@@ -127,17 +127,39 @@ def figure_fit(d: Diagnosis) -> Any:
     return fig
 
 
+FIGURES = (
+    ("residual_maps", "Residual maps before and after (where the mismatch sits in space)", figure_residual_maps),
+    ("where", "Where the mismatch sits: channel, scene, signal level, radius, spatial frequency; the fit",
+     figure_where),
+    ("fit_row", "The fit along one sensor row", figure_fit),
+)
+
+
+def write_pngs(d: Diagnosis, out_dir: Path) -> list[Path]:
+    """The report's figures as PNG files ``<name>.png`` in ``out_dir``."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for name, _title, make in FIGURES:
+        fig = make(d)
+        p = out_dir / f"{name}.png"
+        fig.savefig(p, dpi=70, bbox_inches="tight")
+        plt.close(fig)
+        paths.append(p)
+    return paths
+
+
 def render_html(d: Diagnosis) -> str:
     """The whole ``report.html`` as a string."""
     import matplotlib
 
     matplotlib.use("Agg")
     rep = d.report
-    figs = [
-        ("Residual maps before and after (where the mismatch sits in space)", figure_residual_maps(d)),
-        ("Where the mismatch sits: channel, scene, signal level, radius, spatial frequency; the fit", figure_where(d)),
-        ("The fit along one sensor row", figure_fit(d)),
-    ]
+    figs = [(title, make(d)) for _name, title, make in FIGURES]
     e = html.escape
     rows = "".join(
         f"<tr><td>{e(f['effect'])}</td><td><code>{e(json.dumps(f['params']))}</code></td>"

@@ -6,14 +6,15 @@ import json
 import os
 from pathlib import Path
 
-from thintact_sdk.diagnose.html import write_html
+from thintact_sdk.diagnose.html import write_html, write_pngs
 from thintact_sdk.diagnose.run import Diagnosis
 from thintact_sdk.errors import ThinTactError
 from thintact_sdk.profile import write_profile
 
 
-def write_outputs(d: Diagnosis, out_dir: str | os.PathLike[str]) -> dict[str, Path]:
-    """Write ``report.json``, ``fitted_profile.json`` and ``report.html`` into ``out_dir``.
+def write_outputs(d: Diagnosis, out_dir: str | os.PathLike[str], png: bool = False) -> dict[str, Path]:
+    """Write ``report.json``, ``fitted_profile.json`` and ``report.html`` into ``out_dir``
+    (and, with ``png``, the figures as ``figures/*.png``).
 
     Raises
     ------
@@ -27,6 +28,8 @@ def write_outputs(d: Diagnosis, out_dir: str | os.PathLike[str]) -> dict[str, Pa
         rep.write_text(json.dumps(d.report, indent=1, ensure_ascii=False) + "\n", encoding="utf-8")
         prof = write_profile(d.fitted_profile, out / "fitted_profile.json")
         page = write_html(d, out / "report.html")
+        if png:
+            write_pngs(d, out / "figures")
     except OSError as err:
         raise ThinTactError(f"cannot write the diagnosis to {out}: {err}") from None
     return {"report": rep, "fitted_profile": prof, "html": page}

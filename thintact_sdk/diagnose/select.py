@@ -269,6 +269,8 @@ def _refine(
 
     iters = 2 * n_iter if cand.channelwise else n_iter  # one simulation per Jacobian
     cur, ev = _levenberg_marquardt(model, cand, ev_at, cur, ev, active, iters, late)
+    if cand.channelwise and not late():
+        cur, ev = _channel_polish(model, cand, ev_at, cur, ev)
     for i in cand.slow_params:
         if deadline is not None and deadline - time.perf_counter() < 3.5 * model.slow_sim_s:
             break
@@ -328,6 +330,36 @@ def _levenberg_marquardt(
         if gain < max(0.5, 2e-6 * ev.chi2):
             break
     return cur, ev
+
+
+def _channel_polish(
+    model: DiagnosisModel,
+    cand: Candidate,
+    ev_at: Callable[[np.ndarray], Evaluation],
+    cur: np.ndarray,
+    ev: Evaluation,
+) -> tuple[np.ndarray, Evaluation]:
+    """Per-channel local scan for channelwise parameters: χ² of each channel depends only
+    on its own parameter, so every trial offsets all channels at once and each channel
+    keeps its best value (robust where χ² is not smooth in the parameter)."""
+    w = model.weights
+    step = cand.step(model.profile)
+
+    def per_channel(e: Evaluation) -> np.ndarray:
+        return np.sum(w * (model.data.measured_dn - e.pred_dn) ** 2, axis=(0, 1, 2))
+
+    best_val = cur.copy()
+    best_chi = per_channel(ev)
+    for frac in (-0.006, -0.003, 0.003, 0.006):
+        trial = _clip(cand, cur + frac * step, model)
+        chi = per_channel(ev_at(trial))
+        better = chi < best_chi
+        best_val = np.where(better, trial, best_val)
+        best_chi = np.where(better, chi, best_chi)
+    if np.allclose(best_val, cur):
+        return cur, ev
+    e = ev_at(best_val)
+    return (best_val, e) if e.chi2 < ev.chi2 else (cur, ev)
 
 
 def _parabola(

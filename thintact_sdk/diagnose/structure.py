@@ -104,15 +104,29 @@ def find_structure(
     w_rel = ndimage.gaussian_filter(info, smooth_px, mode="nearest")
     rel_s = ndimage.gaussian_filter(rel * info, smooth_px, mode="nearest") / np.maximum(w_rel, 1e-12)
     spot = ((np.abs(tm_s) > sigma_thr) & (np.abs(rel_s) > rel_floor)) | (np.abs(ta_s) > 2 * sigma_thr)
+    # compact spots first (elongated components are lines: the line statistics judge them)
+    lab0, n0 = ndimage.label(spot)
+    compact = np.zeros((r, s), bool)
+    for k, sl in enumerate(ndimage.find_objects(lab0)[:n0]):
+        if sl is None:
+            continue
+        h, w = sl[0].stop - sl[0].start, sl[1].stop - sl[1].start
+        if max(h, w) <= 6 * min(h, w):
+            compact[sl] |= lab0[sl] == k + 1
+    keep = ~ndimage.binary_dilation(compact, iterations=3)
     # columns and rows: a line defect is weak per pixel but strong along its length
-    col_t = t_mult.sum(axis=0) / np.sqrt(r)
-    col_rel = (rel * info).sum(axis=0) / np.maximum(info.sum(axis=0), 1e-12)
-    row_t = t_mult.sum(axis=1) / np.sqrt(s)
-    row_rel = (rel * info).sum(axis=1) / np.maximum(info.sum(axis=1), 1e-12)
+    tm_k = np.where(keep, t_mult, 0.0)
+    ri_k = np.where(keep, rel * info, 0.0)
+    in_k = np.where(keep, info, 0.0)
+    col_t = tm_k.sum(axis=0) / np.sqrt(np.maximum(keep.sum(axis=0), 1))
+    col_rel = ri_k.sum(axis=0) / np.maximum(in_k.sum(axis=0), 1e-12)
+    row_t = tm_k.sum(axis=1) / np.sqrt(np.maximum(keep.sum(axis=1), 1))
+    row_rel = ri_k.sum(axis=1) / np.maximum(in_k.sum(axis=1), 1e-12)
     bad_cols = np.flatnonzero((np.abs(col_t) > sigma_thr) & (np.abs(col_rel) > rel_floor))
     bad_rows = np.flatnonzero((np.abs(row_t) > sigma_thr) & (np.abs(row_rel) > rel_floor))
     exc = np.sum(np.where(valid, z * z - 1.0, 0.0), axis=(0, 3))
     total = float(np.sum(np.maximum(exc, 0.0))) or 1.0
+    spot = compact
     lab, n = ndimage.label(spot)
     spots: list[Hotspot] = []
     mask = np.zeros((r, s), bool)

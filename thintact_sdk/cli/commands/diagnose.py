@@ -21,6 +21,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="systematic-error allowance, relative (default 0.001)")
     p.add_argument("--max-effects", type=int, default=4, metavar="K",
                    help="accept at most K effects (default 4)")
+    p.add_argument("--png", action="store_true", help="also write the figures as DIR/figures/*.png")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     p.set_defaults(func=run)
 
@@ -44,7 +45,7 @@ def run(args: argparse.Namespace) -> int:
     opts = DiagnoseOptions(sys_frac=args.sys_frac, time_budget_s=args.time_budget, max_effects=args.max_effects)
     with con.status("diagnosing...") as status:
         d = diagnose(data, options=opts, progress=lambda m: status.update(m))
-    paths = write_outputs(d, args.out)
+    paths = write_outputs(d, args.out, png=args.png)
     rep = d.report
     print(f"baseline: rms {rep['baseline']['rms_dn']:.2f} DN, chi2/dof {rep['baseline']['chi2_per_dof']:.3f} "
           f"(noise rms {rep['noise_rms_dn']:.2f} DN)")

@@ -1,0 +1,57 @@
+"""``thintact diagnose``: exit codes, output files and the exact CONTRACTS §6 report keys."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+from pathlib import Path
+
+import pytest
+
+from thintact_sdk.cli.main import main
+
+REPORT_KEYS = {"noise_rms_dn", "baseline", "located", "findings", "final", "unexplained"}
+
+
+def test_bad_input_is_one_line_and_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    rc = main(["diagnose", str(tmp_path / "missing"), "--out", str(tmp_path / "o")])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2
+    assert err.startswith("thintact: error:") and "\n" not in err
+
+
+def test_recording_without_scenes_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    import numpy as np
+
+    from thintact_sdk.profile import load_profile
+    from thintact_sdk.recording import RecordingWriter
+
+    prof = load_profile("virtual-mini")
+    w = RecordingWriter(tmp_path / "rec", prof)
+    w.add(np.zeros((prof.sensor.rows, prof.sensor.cols, 3), np.uint16), label="touch")
+    rc = main(["diagnose", str(tmp_path / "rec"), "--out", str(tmp_path / "o")])
+    assert rc == 2
+    assert "no frame with a scene" in capsys.readouterr().err
+
+
+def test_cli_writes_the_three_outputs(repo_root: Path, tmp_path: Path) -> None:
+    spec = importlib.util.spec_from_file_location("mcd", repo_root / "tools" / "make_concealed_dataset.py")
+    assert spec is not None and spec.loader is not None
+    tool = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(tool)
+    case = tool.make_case("clean", tmp_path)
+    out = tmp_path / "out"
+    rc = main(["diagnose", str(case / "recording"), "--out", str(out), "--quiet"])
+    assert rc == 0
+    rep = json.loads((out / "report.json").read_text())
+    assert set(rep) == REPORT_KEYS
+    assert set(rep["baseline"]) == {"rms_dn", "chi2_per_dof"}
+    assert set(rep["final"]) == {"rms_dn", "chi2_per_dof"}
+    assert set(rep["located"]) == {"summary", "hotspots"}
+    assert set(rep["unexplained"]) == {"significant", "summary", "hotspots"}
+    for f in rep["findings"]:
+        assert set(f) == {"effect", "params", "rms_dn_after", "chi2_per_dof_after", "evidence", "alternatives"}
+    prof = json.loads((out / "fitted_profile.json").read_text())
+    assert prof["format"] == "thintact-profile/1"
+    html = (out / "report.html").read_text()
+    assert html.count("data:image/png;base64,") >= 3
