@@ -36,6 +36,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="ball presses for the LUT calibration through the path")
     p.add_argument("--marker-presses", type=int, default=6)
     p.add_argument("--latency-frames", type=int, default=30)
+    p.add_argument("--decoder", help="decoder plugin (default: each profile's decoder.plugin)")
     p.add_argument("--skip-latency", action="store_true")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--json", type=Path, help="also write the figures to this JSON file")
@@ -59,7 +60,14 @@ def accuracy(args: argparse.Namespace, out: dict[str, Any]) -> None:
     if profile.camera is None or profile.camera.plugin not in VIRTUAL_CAMERAS:
         raise ThinTactError(f"--profile {args.profile}: the accuracy test needs a virtual camera")
     settings = {"slot": "bench-tactile", "fps": 0, "seed": args.seed}
-    with Sensor(profile, camera_settings=settings) as sensor, _progress() as bar:
+    decoder = None
+    if args.decoder:
+        from thintact_sdk.plugin_manager import get_registry
+
+        dec_settings = dict(profile.decoder.settings) if profile.decoder is not None else {}
+        decoder = get_registry().create("decoder", args.decoder, profile, dec_settings)
+    decoder_name = args.decoder or (profile.decoder.plugin if profile.decoder else "?")
+    with Sensor(profile, camera_settings=settings, decoder=decoder) as sensor, _progress() as bar:
         slot = scene_slot(sensor)
         task = bar.add_task("LUT calibration", total=args.calibration_presses)
         t0 = time.perf_counter()
@@ -78,7 +86,7 @@ def accuracy(args: argparse.Namespace, out: dict[str, Any]) -> None:
     print(f"\nDepth accuracy through the lensless path ({profile.name}: "
           f"{profile.sensor.rows}x{profile.sensor.cols} sensor, {profile.scene.rows}x"
           f"{profile.scene.cols} scene at {profile.scene.pixel_pitch_um / 1000:.3f} mm; decoder "
-          f"{profile.decoder.plugin if profile.decoder else '?'}; LUT from "
+          f"{decoder_name}; LUT from "
           f"{args.calibration_presses} 3 mm ball presses through the same path, {calib_s:.1f} s; "
           f"{args.presses} random presses per row)")
     print(f"{'indenter':16s} {'depth':>6s} {'RMS sensor':>11s} {'RMS scene':>10s} "
@@ -96,20 +104,21 @@ def accuracy(args: argparse.Namespace, out: dict[str, Any]) -> None:
           f"{markers.max_true_mm:.2f} mm, {args.marker_presses} sheared presses in 3 steps); "
           f"shear direction error {markers.direction_error_deg:.1f}° "
           f"(goal ≤ {MARKER_GOAL_MM} mm: {'met' if markers.rms_mm <= MARKER_GOAL_MM else 'NOT met'})")
+    out["decoder"] = decoder_name
     out["depth"] = [r.__dict__ for r in rows]
     out["depth_mean_mm"], out["depth_worst_mm"] = mean, worst
     out["markers"] = markers.__dict__
     out["lut_calibration_s"] = calib_s
 
 
-def _latency_decoder(profile: Any) -> tuple[Any, str]:
+def _latency_decoder(profile: Any, name: str | None = None) -> tuple[Any, str]:
     """The profile's decoder, or, without a calibration bundle, one built from the simulator
     (two-term fit + joint filter, closed form) so the timing has the real structure."""
     from thintact_sdk.errors import CalibrationError
     from thintact_sdk.plugin_manager import get_registry
 
     cfg = profile.decoder
-    name = cfg.plugin if cfg is not None else "thintact-noniterative"
+    name = name or (cfg.plugin if cfg is not None else "thintact-noniterative")
     settings = dict(cfg.settings) if cfg is not None else {}
     try:
         return get_registry().create("decoder", name, profile, settings), "calibration bundle"
@@ -152,7 +161,7 @@ def latency(args: argparse.Namespace, out: dict[str, Any]) -> None:
 
     profile = load_profile(args.latency_profile)
     t0 = time.perf_counter()
-    decoder, how = _latency_decoder(profile)
+    decoder, how = _latency_decoder(profile, args.decoder)
     setup_decoder_s = time.perf_counter() - t0
     tsim = TactileSimulator.for_profile(profile)
     sim = Simulator(profile)

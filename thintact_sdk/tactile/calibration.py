@@ -190,7 +190,7 @@ def calibrate_from_presses(
     full = TactileParams.from_profile(profile)
     factor = working_factor(full, max_work_mm)
     params = binned_params(full, factor)
-    sigma = max(1.0, params.marker_diameter_mm / params.mm_per_px)
+    sigma = max(0.5, 0.3 * params.marker_diameter_mm / params.mm_per_px)
     reference = bin_image(reference, factor)
     ref_det = detect_markers(reference, params)
     background = fill_masked(reference, ref_det.mask, sigma)

@@ -31,6 +31,9 @@ from thintact_sdk.tactile.poisson import integrate_gradients
 def fill_masked(values: np.ndarray, mask: np.ndarray, sigma_px: float) -> np.ndarray:
     """Replace masked pixels by the Gaussian-weighted mean of unmasked neighbours.
 
+    The narrowest Gaussian that reaches enough unmasked neighbours is used: ``sigma_px``
+    first, then 3× and 9× as wide where a hole is too big for it.
+
     Parameters
     ----------
     values
@@ -38,19 +41,25 @@ def fill_masked(values: np.ndarray, mask: np.ndarray, sigma_px: float) -> np.nda
     mask
         ``N × M`` bool, True where ``values`` is not to be trusted.
     sigma_px
-        Gaussian width in pixels (about a marker's diameter).
+        Gaussian width in pixels (about a third of a marker's diameter).
     """
     if not mask.any():
         return values
     keep = (~mask).astype(np.float32)
     v = np.ascontiguousarray(values, np.float32)
-    num = cv2.GaussianBlur(v * (keep[..., None] if v.ndim == 3 else keep), (0, 0), sigma_px)
-    den = cv2.GaussianBlur(keep, (0, 0), sigma_px)
-    if v.ndim == 3:
-        den = den[..., None]
-    filled = num / np.maximum(den, 1e-6)
     out = v.copy()
-    out[mask] = filled[mask]
+    todo = mask.copy()
+    for scale in (1.0, 3.0, 9.0):
+        sigma = sigma_px * scale
+        num = cv2.GaussianBlur(v * (keep[..., None] if v.ndim == 3 else keep), (0, 0), sigma)
+        den = cv2.GaussianBlur(keep, (0, 0), sigma)
+        ok = todo & (den > 0.02) if scale < 9.0 else todo
+        filled = num / np.maximum(den, 1e-6)[..., None] if v.ndim == 3 else num / np.maximum(
+            den, 1e-6)
+        out[ok] = filled[ok]
+        todo &= ~ok
+        if not todo.any():
+            break
     return out
 
 
@@ -120,7 +129,7 @@ class TactileInterpreter:
         self.marker_threshold = marker_threshold
         self.min_contact_area_mm2 = min_contact_area_mm2
         self.tracker = MarkerTracker(max_step_mm=0.45 * self.params.marker_pitch_mm)
-        self._sigma_px = max(1.0, self.work.marker_diameter_mm / self.work.mm_per_px)
+        self._sigma_px = max(0.5, 0.3 * self.work.marker_diameter_mm / self.work.mm_per_px)
         self.background: np.ndarray | None = None
         self.reference_markers_mm = np.zeros((0, 2))
 
