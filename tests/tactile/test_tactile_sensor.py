@@ -114,3 +114,34 @@ def test_leds_are_set_from_the_profile_and_released(profile, registry, lut):
         assert s.light is LIGHTS[0] and LIGHTS[0].opened and LIGHTS[0].port == "loop://"
         assert LIGHTS[0].get_intensities() == [0.5] * 10
     assert not LIGHTS[0].opened
+
+
+def test_same_api_on_a_replayed_recording(tmp_path, profile, lut):
+    """The replay camera plugin plays a recording; the sensor cannot tell the difference."""
+    thintact_replay = pytest.importorskip("thintact_replay")
+    from tac_fakes import GAIN_DN
+
+    from thintact_sdk.errors import EndOfStreamError
+    from thintact_sdk.profile import CameraConfig
+    from thintact_sdk.recording import RecordingWriter
+
+    sim = TactileSimulator.for_profile(profile)
+    rec = RecordingWriter(tmp_path / "presses", profile)
+    scenes = [sim.flat().scene] + [sim.press(Sphere(2.0), d, (0.0, 0.0)).scene for d in (0.3, 0.8)]
+    for i, sc in enumerate(scenes):
+        up = np.kron(sc, np.ones((2, 2, 1), np.float32))
+        rec.add(np.round(64.0 + GAIN_DN * up).astype(np.uint16), label=f"f{i}",
+                timestamp_ns=i * 33_000_000, frame_id=i + 1)
+    reg = make_registry()
+    reg.register(thintact_replay, "replay")
+    replay = profile.model_copy(update={"camera": CameraConfig(
+        plugin="replay", settings={"path": str(tmp_path / "presses"), "rate": "fast"})}, deep=True)
+    with Sensor(replay, registry=reg, lut=lut) as s:
+        frames = [s.read() for _ in range(3)]
+        with pytest.raises(EndOfStreamError):
+            s.read()
+    assert [f.contact for f in frames] == [False, True, True]
+    assert frames[2].depth_mm.max() > frames[1].depth_mm.max()
+    with Sensor(replay, registry=reg, lut=lut) as s, pytest.raises(EndOfStreamError):
+        for _ in s.stream(timeout_s=5.0):
+            pass
