@@ -76,9 +76,62 @@ def axis_fields(
     return out
 
 
+def axis_fields_local(
+    cell_edges_mm: np.ndarray, profiles: np.ndarray, m_mm: np.ndarray, w_mm: float,
+    reach_w: float = 48.0, chunk: int = 2048,
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`axis_fields` with the edges farther than ``reach_w·w`` replaced by their
+    geometric limit ``E(±inf) = ±(1+i)/2``, plus the mean power of what was dropped.
+
+    A far edge at distance ``x`` adds fringes of period ``w²/x`` (finer than ``w/reach_w``),
+    which average out over any pixel but would alias in point samples. Their mean power is
+    kept: ``|E(t) - E(±inf)|² ≈ 1/(π²t²)``, so profiles ``a``, ``b`` gain
+    ``Σ_far jump_a·jump_b · w²/(4π²x²)`` in ``⟨V_a conj(V_b)⟩`` (same edge, same phase).
+
+    Returns
+    -------
+    fields
+        ``(V, J)`` complex fields without the far fringes.
+    tail_power
+        ``(V, V, J)`` mean power of the dropped fringes for each pair of profiles.
+    """
+    n_v, k = profiles.shape
+    ext = np.zeros((n_v, k + 2))
+    ext[:, 1:-1] = profiles
+    jumps = ext[:, :-1] - ext[:, 1:]  # (V, K+1)
+    cum = np.zeros((n_v, k + 2))
+    cum[:, 1:] = np.cumsum(jumps, axis=1)  # cum[:, j] = Σ_{i<j} jump_i
+    reach = reach_w * w_mm
+    n_win = int(math.ceil(2 * reach / float(np.min(np.diff(cell_edges_mm))))) + 2
+    pref = np.exp(-1j * math.pi / 4) / math.sqrt(2)
+    half = (1 + 1j) / 2
+    out = np.empty((n_v, m_mm.size), complex)
+    tail = np.empty((n_v, n_v, m_mm.size))
+    pair = jumps[:, None, :] * jumps[None, :, :]  # (V, V, K+1)
+    for j0 in range(0, m_mm.size, chunk):
+        mm = m_mm[j0:j0 + chunk]
+        dist = cell_edges_mm[None, :] - mm[:, None]  # (J, K+1)
+        far_edge = np.abs(dist) >= reach
+        inv2 = np.where(far_edge, w_mm**2 / (4 * math.pi**2) / np.where(far_edge, dist, 1.0) ** 2,
+                        0.0)
+        tail[:, :, j0:j0 + chunk] = np.einsum("abk,jk->abj", pair, inv2)
+        lo = np.searchsorted(cell_edges_mm, mm - reach)
+        hi = np.searchsorted(cell_edges_mm, mm + reach)
+        far = half * (cum[:, -1][:, None] - cum[:, hi] - cum[:, lo])  # (V, J)
+        idx = lo[:, None] + np.arange(n_win)[None, :]
+        valid = idx < hi[:, None]
+        idx_c = np.minimum(idx, k)
+        t = math.sqrt(2) * (cell_edges_mm[idx_c] - mm[:, None]) / w_mm
+        s_, c_ = fresnel(t)
+        e = np.where(valid, c_ + 1j * s_, 0.0)  # (J, n_win)
+        near = np.einsum("jw,vjw->vj", e, jumps[:, idx_c])
+        out[:, j0:j0 + chunk] = pref * (near + far)
+    return out, tail
+
+
 def axis_intensity_profiles(
     cell_edges_mm: np.ndarray, phi: np.ndarray, m_lo_mm: float, m_hi_mm: float,
-    wavelength_nm: float, z_mm: float, d_mm: float,
+    wavelength_nm: float, z_mm: float, d_mm: float, reach_w: float = 48.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Fine piecewise-constant profiles ``|V_a|², |V_φ|², Re, Im of V_a·conj(V_φ)``.
 
@@ -90,22 +143,30 @@ def axis_intensity_profiles(
         Range of crossing points the device uses.
     wavelength_nm, z_mm, d_mm
         Wavelength and distances.
+    reach_w
+        Edges within ``reach_w·w`` are diffracted exactly; farther ones contribute their
+        geometric limit plus the mean power of their fringes (:func:`axis_fields_local`).
+        Against box-averaged exact fields (10 µm pixels, virtual-mini geometry) the error is
+        below 1e-4 for 48 and 4e-4 for 32.
 
     Returns
     -------
     edges
-        ``(J+1,)`` fine cell edges (mm), step ≤ w/16 and ≤ δ/8.
+        ``(J+1,)`` fine cell edges (mm), step ≤ w/(4·reach_w) (the finest kept fringe
+        sampled four times per period) and ≤ δ/8.
     values
-        ``(4, J)`` profile values at the fine cell centres.
+        ``(4, J)`` profile values at the fine cell centres (fields from
+        :func:`axis_fields_local`, so fringes finer than the step are not aliased).
     """
     w = fresnel_width_mm(wavelength_nm, z_mm, d_mm)
     feature = float(np.min(np.diff(cell_edges_mm)))
-    step = min(w / 16, feature / 8)
+    step = min(w / (4 * reach_w), feature / 8)
     n = int(math.ceil((m_hi_mm - m_lo_mm) / step)) + 2
     edges = m_lo_mm - step + np.arange(n + 1) * step
     centres = (edges[1:] + edges[:-1]) / 2
     profiles = np.stack([np.ones_like(phi, dtype=float), np.asarray(phi, float)])
-    va, vp = axis_fields(cell_edges_mm, profiles, centres, w)
+    (va, vp), tail = axis_fields_local(cell_edges_mm, profiles, centres, w, reach_w)
     cross = va * np.conj(vp)
-    values = np.stack([np.abs(va) ** 2, np.abs(vp) ** 2, cross.real, cross.imag])
+    values = np.stack([np.abs(va) ** 2 + tail[0, 0], np.abs(vp) ** 2 + tail[1, 1],
+                       cross.real + tail[0, 1], cross.imag])
     return edges, values
