@@ -211,6 +211,7 @@ def build_separable_kernel(kp: KernelParams) -> SeparableKernel:
                     terms.append(SeparableTerm(coef * my[v, ll], mx[v, ll], part))
             by_wavelength[lam] = compress_terms(terms, kp.compress_tol)
         per_channel.append(by_wavelength[lam])
+    info["terms"] = float(max(len(t) for t in per_channel))
     return SeparableKernel(per_channel, info)
 
 
