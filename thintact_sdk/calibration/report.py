@@ -33,7 +33,8 @@ def _matrices_figure(outcome: CalibrationOutcome, profile: Profile) -> str:
 
     sm = outcome.bundle.system_matrices
     names = profile.sensor.channels
-    fig, axes = plt.subplots(sm.channels, 4, figsize=(13, 2.8 * sm.channels), squeeze=False)
+    fig, axes = plt.subplots(sm.channels, 4, figsize=(15, 3.0 * sm.channels), squeeze=False,
+                             layout="constrained")
     for c in range(sm.channels):
         for k, key in enumerate(("Po", "Pc", "Qo", "Qc")):
             a = np.asarray(getattr(sm, key)[c], np.float64)
@@ -67,7 +68,8 @@ def _validation_figure(outcome: CalibrationOutcome) -> str | None:
     val = outcome.validation
     if not val:
         return None
-    fig, axes = plt.subplots(len(val), 2, figsize=(6, 2.6 * len(val)), squeeze=False)
+    fig, axes = plt.subplots(len(val), 2, figsize=(6, 2.6 * len(val)), squeeze=False,
+                             layout="constrained")
     for i, v in enumerate(val):
         axes[i][0].imshow(np.clip(v.truth, 0, 1))
         axes[i][0].set_title(f"{v.label}: displayed", fontsize=9)
