@@ -48,6 +48,7 @@ class CandidateResult:
     evaluation: Evaluation | None = None
     amplitude_dn: float = 0.0  # rms change of the prediction caused by the fitted effect
     refined: bool = False  # Levenberg-Marquardt done (not only the line search)
+    joint: Values = field(default_factory=dict)  # refitted values of earlier effects
 
 
 @dataclass
@@ -185,6 +186,7 @@ def fit_candidate(
     n_iter: int = 6,
     deadline: float | None = None,
     refine: bool = True,
+    jointly: tuple[str, ...] = (),
 ) -> CandidateResult:
     """Fit ``res.name`` with the gains profiled; fills ``dchi2``, ``fitted``,
     ``evaluation`` and ``amplitude_dn``.
@@ -205,7 +207,13 @@ def fit_candidate(
     else:
         cur, ev = _line_search(model, cand, values, ev0, res, deadline)
     if refine:
-        cur, ev = _refine(model, cand, values, cur, ev, n_iter, deadline)
+        joint = tuple(
+            n for n in jointly if n in values and CANDIDATES[n].domain in ("optical", "post", "dn")
+            and n != "saturation" and n != cand.name
+        )
+        new_vals, ev = _refine(model, cand, values, cur, ev, n_iter, deadline, joint)
+        cur = new_vals.pop(cand.name)
+        res.joint = new_vals
         res.refined = True
     res.fitted = cur
     res.evaluation = ev
@@ -256,60 +264,88 @@ def _refine(
     ev: Evaluation,
     n_iter: int,
     deadline: float | None,
-) -> tuple[np.ndarray, Evaluation]:
-    active = [i for i in range(cand.k) if i not in cand.slow_params]
-
-    def ev_at(v: np.ndarray) -> Evaluation:
-        t = dict(values)
-        t[cand.name] = v
-        return model.evaluate(t)
+    jointly: tuple[str, ...] = (),
+) -> tuple[Values, Evaluation]:
+    """Levenberg-Marquardt on the candidate's cheap parameters together with those of the
+    effects named in ``jointly`` (accepted earlier: their values may move too), then the
+    channel polish and the slow parameters; returns the new values of all of them."""
 
     def late() -> bool:
         return deadline is not None and time.perf_counter() > deadline
 
-    iters = 2 * n_iter if cand.channelwise else n_iter  # one simulation per Jacobian
-    cur, ev = _levenberg_marquardt(model, cand, ev_at, cur, ev, active, iters, late)
+    vals = dict(values)
+    vals[cand.name] = cur
+    iters = 2 * n_iter if cand.channelwise and not jointly else n_iter
+    vals, ev = _levenberg_marquardt(model, (cand.name, *jointly), vals, ev, iters, late)
+    cur = vals[cand.name]
+
+    def ev_at(v: np.ndarray) -> Evaluation:
+        t = dict(vals)
+        t[cand.name] = v
+        return model.evaluate(t)
+
     if cand.channelwise and not late():
         cur, ev = _channel_polish(model, cand, ev_at, cur, ev)
     for i in cand.slow_params:
         if deadline is not None and deadline - time.perf_counter() < 3.5 * model.slow_sim_s:
             break
         cur, ev = _parabola(cand, ev_at, cur, ev, i, model)
-    return cur, ev
+    vals[cand.name] = cur
+    if cand.slow_params and not np.allclose(cur[list(cand.slow_params)], 0.0):
+        # one joint step over every parameter (each simulation on the slow path)
+        if deadline is None or deadline - time.perf_counter() > (cand.k + 2) * model.slow_sim_s:
+            vals, ev = _levenberg_marquardt(model, (cand.name,), vals, ev, 1, late, include_slow=True)
+    return {n: vals[n] for n in (cand.name, *jointly)}, ev
 
 
 def _levenberg_marquardt(
     model: DiagnosisModel,
-    cand: Candidate,
-    ev_at: Callable[[np.ndarray], Evaluation],
-    cur: np.ndarray,
+    names: tuple[str, ...],
+    vals: Values,
     ev: Evaluation,
-    active: list[int],
     n_iter: int,
     late: Callable[[], bool],
-) -> tuple[np.ndarray, Evaluation]:
+    include_slow: bool = False,
+) -> tuple[Values, Evaluation]:
+    """Joint LM over the cheap parameters (all with ``include_slow``) of the effects
+    ``names`` (finite differences; a channelwise effect's parameters share one simulation)."""
     prof = model.profile
-    step = cand.step(prof) * 0.01
-    upper = cand.upper(prof)
+    slots: list[tuple[str, int]] = []
+    for n in names:
+        c = CANDIDATES[n]
+        slots += [(n, i) for i in range(c.k) if include_slow or i not in c.slow_params]
+    if not slots:
+        return vals, ev
     lam = 1e-3
     w = model.weights
+    vals = dict(vals)
     for _ in range(n_iter):
         if late():
             break
-        cols = []
-        if cand.channelwise:
-            hstep = np.where(cur + step <= upper, step, -step)
-            diff = ev_at(cur + hstep).pred_dn - ev.pred_dn
-            for i in active:
-                ci = np.zeros_like(diff)
-                ci[..., i] = diff[..., i] / hstep[i]
-                cols.append(ci.ravel())
-        else:
-            for i in active:
-                v = cur.copy()
-                hi = step[i] if cur[i] + step[i] <= upper[i] else -step[i]
-                v[i] += hi
-                cols.append(((ev_at(v).pred_dn - ev.pred_dn) / hi).ravel())
+        cols: list[np.ndarray] = []
+        for n in names:
+            c = CANDIDATES[n]
+            cur = vals[n]
+            step = c.step(prof) * 0.01
+            upper = c.upper(prof)
+            act = [i for i in range(c.k) if include_slow or i not in c.slow_params]
+            if c.channelwise:
+                hstep = np.where(cur + step <= upper, step, -step)
+                trial = dict(vals)
+                trial[n] = cur + hstep
+                diff = model.evaluate(trial).pred_dn - ev.pred_dn
+                for i in act:
+                    ci = np.zeros_like(diff)
+                    ci[..., i] = diff[..., i] / hstep[i]
+                    cols.append(ci.ravel())
+            else:
+                for i in act:
+                    v = cur.copy()
+                    hi = step[i] if cur[i] + step[i] <= upper[i] else -step[i]
+                    v[i] += hi
+                    trial = dict(vals)
+                    trial[n] = v
+                    cols.append(((model.evaluate(trial).pred_dn - ev.pred_dn) / hi).ravel())
         j = np.stack(cols)
         wr = (w * (model.data.measured_dn - ev.pred_dn)).ravel()
         g = j @ wr
@@ -317,19 +353,24 @@ def _levenberg_marquardt(
         gain = 0.0
         for _try in range(4):
             a = hm + lam * np.diag(np.diag(hm) + 1e-12)
-            delta = np.zeros(cand.k)
-            delta[active] = np.linalg.lstsq(a, g, rcond=None)[0]
-            new = _clip(cand, cur + delta, model)
-            ev_new = ev_at(new)
+            delta = np.linalg.lstsq(a, g, rcond=None)[0]
+            new = dict(vals)
+            for n in names:
+                new[n] = vals[n].copy()
+            for (n, i), dv in zip(slots, delta, strict=True):
+                new[n][i] += dv
+            for n in names:
+                new[n] = _clip(CANDIDATES[n], new[n], model)
+            ev_new = model.evaluate(new)
             if ev_new.chi2 < ev.chi2:
                 gain = ev.chi2 - ev_new.chi2
-                cur, ev = new, ev_new
+                vals, ev = new, ev_new
                 lam = max(lam / 5, 1e-6)
                 break
             lam *= 10
         if gain < max(0.5, 2e-6 * ev.chi2):
             break
-    return cur, ev
+    return vals, ev
 
 
 def _channel_polish(
@@ -445,6 +486,7 @@ def select_effects(
     sig = (ev.pred_dn - model.black)[model.fit_mask]
     signal_rms = float(np.sqrt(np.mean(sig * sig))) if sig.size else 1.0
     remaining = [c for c in candidates if c not in vals]
+    accepted_names: tuple[str, ...] = ()
     while remaining and len(rounds) < max_effects:
         if deadline is not None and time.perf_counter() > deadline:
             log.append("time budget reached: selection stopped")
@@ -476,10 +518,10 @@ def select_effects(
             say(f"line search {res.name}: Δχ² = {res.dchi2:.1f}")
         fitted.sort(key=lambda r: -((r.dchi2 or 0.0) - r.k * ln_n))
         for res in fitted[:n_fit]:
-            if (res.dchi2 or 0.0) - res.k * ln_n < 0.5 * margin and res is not fitted[0]:
+            if (res.dchi2 or 0.0) - res.k * ln_n < 0.5 * margin:
                 continue
             try:
-                fit_candidate(model, vals, ev, res, deadline=deadline)
+                fit_candidate(model, vals, ev, res, deadline=deadline, jointly=accepted_names)
             except SIMULATION_ERRORS as err:
                 log.append(f"{res.name} left out: fitting it failed in the simulator ({err})")
                 remaining.remove(res.name)
@@ -511,7 +553,12 @@ def select_effects(
             if r is not best and r.dchi2 is not None and r.dchi2 - r.k * ln_n > best_bic - tol
             and r.dchi2 > r.k * ln_n + margin
         ]
+        vals.update(best.joint)
+        for rnd in rounds:
+            if rnd.name in best.joint:
+                rnd.vector = best.joint[rnd.name]
         vals[best.name] = best.fitted
+        accepted_names = (*accepted_names, best.name)
         threshold = best.k * ln_n + margin
         rounds.append(
             Round(best.name, best.fitted, best.dchi2, threshold, best.k, best.amplitude_dn, alts, scores, best.evaluation)
