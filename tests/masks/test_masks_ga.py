@@ -114,3 +114,22 @@ def test_fitness_improves_over_generations_on_a_tiny_device(tiny_profile) -> Non
     assert np.all(np.diff(best) >= 0)  # elitism
     assert best[-1] > best[0]
     assert state.best_fitness == pytest.approx(ev.fitness(state.best_phi))
+
+
+def test_interrupted_run_resumes_to_the_same_result(tmp_path) -> None:
+    target = np.random.default_rng(11).choice([-1, 1], 50).astype(np.int8)
+    fn = _quadratic_fitness(target)
+    config = GAConfig(population=10, generations=5, seed=2)
+    full = run_ga(50, config, fn, tmp_path / "full")
+
+    def stop_after_two(state) -> None:
+        if state.generation == 2:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        run_ga(50, config, fn, tmp_path / "cut", progress=stop_after_two)
+    saved = load_checkpoint(tmp_path / "cut")
+    assert saved is not None and saved.generation == 2
+    resumed = run_ga(50, config, fn, tmp_path / "cut")
+    np.testing.assert_array_equal(resumed.population, full.population)
+    assert resumed.best_history == full.best_history
