@@ -40,18 +40,16 @@ class SeparableKernel:
 
     terms: list[list[SeparableTerm]]
     info: dict[str, float] = field(default_factory=dict)
-    _stacked: dict[tuple[int, str], tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
+    _plans: dict[tuple[int, str], _Plan] = field(default_factory=dict)
 
-    def stacked(self, channel: int, dtype: str = "float64") -> tuple[np.ndarray, np.ndarray]:
-        """``(P_cat: R × K·N, Q_cat: K·S × M)`` for one GEMM per frame batch."""
+    def plan(self, channel: int, dtype: str = "float64") -> _Plan:
+        """How a channel's terms are applied: smooth terms (numerically low-rank ``P`` and
+        ``Q``, e.g. the open half when the aperture edge is out of view) through their
+        truncated SVDs, the others stacked for one GEMM per frame batch."""
         key = (id(self.terms[channel]), dtype)
-        if key not in self._stacked:
-            ts = self.terms[channel]
-            p_cat = np.concatenate([t.P for t in ts], axis=1)
-            q_cat = np.concatenate([t.Q for t in ts], axis=0)
-            self._stacked[key] = (np.ascontiguousarray(p_cat, dtype=dtype),
-                                  np.ascontiguousarray(q_cat, dtype=dtype))
-        return self._stacked[key]
+        if key not in self._plans:
+            self._plans[key] = _Plan.build(self.terms[channel], dtype)
+        return self._plans[key]
 
     def apply(self, scenes: np.ndarray, dtype: str = "float64") -> np.ndarray:
         """``F × N × M × C`` scenes → ``F × R × S × C`` float64 signal (simulator units);
@@ -62,20 +60,71 @@ class SeparableKernel:
         for ch in range(c):
             groups.setdefault(id(self.terms[ch]), []).append(ch)
         for chans in groups.values():
-            p_cat, q_cat = self.stacked(chans[0], dtype)
-            k = len(self.terms[chans[0]])
-            r = p_cat.shape[0]
-            s = q_cat.shape[0] // k
             x = np.ascontiguousarray(scenes[..., chans].transpose(0, 3, 1, 2), dtype=dtype)
-            b = x.shape[0] * x.shape[1]
-            w = x.reshape(b * n, m) @ q_cat.T  # (B·N, K·S)
-            w = w.reshape(b, n, k, s).transpose(0, 2, 1, 3).reshape(b, k * n, s)
-            y = np.matmul(p_cat, w)  # (B, R, S)
+            y = self.plan(chans[0], dtype).apply(x.reshape(-1, n, m))
+            r, s = y.shape[1:]
             if out is None:
                 out = np.empty((f, r, s, c))
             out[..., chans] = y.reshape(f, len(chans), r, s).transpose(0, 2, 3, 1)
         assert out is not None
         return out
+
+
+LOW_RANK_TOL = 1e-10
+"""Relative singular-value cut for applying a smooth term through its truncated SVD."""
+
+
+@dataclass
+class _Plan:
+    p_cat: np.ndarray | None  # (R, K·N) dense terms
+    q_cat: np.ndarray | None  # (K·S, M)
+    k_dense: int
+    low_rank: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]  # Up, Bp, Uq, Bq
+    rows: int
+    cols: int
+
+    @classmethod
+    def build(cls, terms: list[SeparableTerm], dtype: str) -> _Plan:
+        dense: list[SeparableTerm] = []
+        low: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
+        for t in terms:
+            fac = _low_rank(t) if t.P.size >= 100_000 else None
+            if fac is None:
+                dense.append(t)
+            else:
+                low.append(tuple(np.ascontiguousarray(a, dtype=dtype) for a in fac))  # type: ignore[arg-type]
+        p_cat = q_cat = None
+        if dense:
+            p_cat = np.ascontiguousarray(np.concatenate([t.P for t in dense], axis=1), dtype=dtype)
+            q_cat = np.ascontiguousarray(np.concatenate([t.Q for t in dense], axis=0), dtype=dtype)
+        return cls(p_cat, q_cat, len(dense), low, terms[0].P.shape[0], terms[0].Q.shape[0])
+
+    def apply(self, x: np.ndarray) -> np.ndarray:
+        """``(B, N, M)`` → ``(B, R, S)``."""
+        b, n, m = x.shape
+        y = np.zeros((b, self.rows, self.cols), dtype=x.dtype)
+        if self.p_cat is not None and self.q_cat is not None:
+            k, s = self.k_dense, self.cols
+            w = x.reshape(b * n, m) @ self.q_cat.T  # (B·N, K·S)
+            w = w.reshape(b, n, k, s).transpose(0, 2, 1, 3).reshape(b, k * n, s)
+            y += np.matmul(self.p_cat, w)
+        for up, bp, uq, bq in self.low_rank:
+            core = np.matmul(np.matmul(bp, x), bq.T)  # (B, a, b)
+            y += np.matmul(np.matmul(up, core), uq.T)
+        return y
+
+
+def _low_rank(t: SeparableTerm) -> tuple[np.ndarray, ...] | None:
+    """``(Up, Bp, Uq, Bq)`` with ``P ≈ Up Bp``, ``Q ≈ Uq Bq`` when both are numerically of
+    low rank (under a quarter of their smaller side), else None."""
+    out: list[np.ndarray] = []
+    for mat in (t.P, t.Q):
+        u, sv, vt = np.linalg.svd(mat, full_matrices=False)
+        rank = int(np.sum(sv > LOW_RANK_TOL * sv[0])) if sv[0] > 0 else 0
+        if rank == 0 or rank > min(mat.shape) // 4:
+            return None
+        out += [u[:, :rank] * sv[:rank], vt[:rank]]
+    return tuple(out)
 
 
 def axis_term_matrices(
