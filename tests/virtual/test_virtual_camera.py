@@ -108,3 +108,19 @@ def test_unknown_scene_is_user_error(profile):
 
     with pytest.raises(ThinTactError, match="unknown scene"):
         _camera(profile, scenes="nope")
+
+
+def test_dn_effects_apply_at_the_current_exposure(profile):
+    prof = profile.with_physics({"sensor_gamma": {"gamma": 0.8}, "saturation": {"level_dn": 1500.0}})
+    cam = _camera(prof, scenes="white", noise=False)
+    full = bin_bayer(cam.read().data)
+    assert full.max() == 1500.0
+    cam.set_exposure_us(2500)
+    quarter = bin_bayer(cam.read().data).astype(float) - 64
+    sim = Simulator(prof)
+    gain = signal_scale_dn(prof, {}) * 0.25
+    want = np.round(sim.predict_dn(np.ones((50, 64, 3)), gain)) - 64
+    assert np.array_equal(quarter, want)
+    lin = Simulator(profile).predict_signal_dn(np.ones((50, 64, 3)), gain)
+    fs = 4095 - 64
+    assert np.allclose(quarter, np.round(fs * (lin / fs) ** 0.8), atol=1.0)
