@@ -51,7 +51,8 @@ class DepthRow:
         Mean over presses of the per-image RMS depth error through the sensor, mm.
     rms_scene_mm
         The same presses interpreted straight from the simulated scene (no lensless
-        imaging): the photometric-stereo share of the error, mm.
+        imaging) with a LUT calibrated on simulated scenes: the photometric-stereo share of
+        the error, mm.
     presses
         Number of presses (random positions and rotations).
     """
@@ -141,7 +142,9 @@ def evaluate_depth(
     thr = sim.params.contact_threshold_mm
     rng = np.random.default_rng(seed)
     set_reference(sensor, show, sim)
-    scene_interp = TactileInterpreter(profile, sensor.lut)  # type: ignore[attr-defined]
+    from thintact_sdk.tactile.calibration import scene_level_lut
+
+    scene_interp = TactileInterpreter(profile, scene_level_lut(profile, seed=seed))
     scene_interp.set_reference(sim.flat().scene)
     rows: list[DepthRow] = []
     total, done = len(indenters) * len(depths_mm) * presses, 0
