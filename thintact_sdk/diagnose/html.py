@@ -86,8 +86,9 @@ def figure_where(d: Diagnosis) -> Any:
     axes[1, 1].set_ylabel("residual power / noise power")
     for ax in axes.ravel()[:5]:
         ax.axhline(1.0, color="k", lw=0.8, ls="--")
-        ax.set_yscale("log")
         ax.legend(fontsize=8)
+    for ax in (axes[0, 2], axes[1, 0], axes[1, 1]):
+        ax.set_yscale("log")
     axes[0, 0].set_ylabel("χ² per value")
     _history_axes(axes[1, 2], d.history)
     fig.tight_layout()
@@ -147,7 +148,7 @@ def write_pngs(d: Diagnosis, out_dir: Path) -> list[Path]:
     for name, _title, make in FIGURES:
         fig = make(d)
         p = out_dir / f"{name}.png"
-        fig.savefig(p, dpi=70, bbox_inches="tight")
+        fig.savefig(p, dpi=55, bbox_inches="tight")
         plt.close(fig)
         paths.append(p)
     return paths

@@ -34,7 +34,7 @@ def describe_effect(name: str, params: dict[str, Any], p: Profile) -> str:
         drop = 1.0 - math.cos(math.radians(th)) ** e
         return (
             f"The pixels respond less to oblique light than the model assumed: an extra cos^{e:.2f} "
-            f"of the angle of incidence, {drop:+.0%} at the steepest ray ({th:.0f}°)."
+            f"of the angle of incidence, {drop:.0%} less signal at the steepest ray ({th:.0f}°)."
         )
     if name == "refraction":
         n = float(params["n_scene_side"])
