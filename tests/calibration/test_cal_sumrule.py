@@ -27,7 +27,7 @@ def test_dark_level_is_measured_without_a_dark_frame(tmp_path: Path) -> None:
     offset = (6.0 + 4.0 * xx / 80 + 2.0 * yy / 64)[..., None]  # black shift + smooth stray light
     write_slit_recording(tmp_path / "r", prof, sm_true, None, [make_scene("white", 24, 32)], dark=False,
                          offset_dn=offset)
-    errs, coll = _errors(Recording(tmp_path / "r"), sm_true)
+    errs, coll = _errors(Recording(tmp_path / "r"), sm_true, "off")
     assert coll.dark_source.startswith("measured from the white frame")  # type: ignore[attr-defined]
     want = prof.noise.black_level_dn + offset[..., 0]
     assert np.abs(coll.dark_dn[..., 1] - want).max() < 0.5  # DN rounding of 25 frames  # type: ignore[attr-defined]
@@ -56,6 +56,6 @@ def test_equal_gains_are_left_alone(tmp_path: Path) -> None:
     prof = synthetic_profile()
     sm_true = synthetic_matrices()
     write_slit_recording(tmp_path / "e", prof, sm_true, np.random.default_rng(1), [make_scene("white", 24, 32)])
-    _, coll = _errors(Recording(tmp_path / "e"), sm_true)
+    _, coll = _errors(Recording(tmp_path / "e"), sm_true, "auto")
     gains = coll.frame_gains  # type: ignore[attr-defined]
     assert not gains["horizontal"]["applied"] and not gains["vertical"]["applied"]

@@ -123,7 +123,7 @@ def main(argv: list[str] | None = None) -> int:
           f"{profile.scene.rows}x{profile.scene.cols}; validation {', '.join(DEFAULT_VALIDATION)}")
     rows: list[dict[str, Any]] = []
     for case in cases:
-        methods = [("paper", "off"), ("lsq", "off"), ("lsq", "auto")]
+        methods = [("paper", "off"), ("lsq", "off")]
         with tempfile.TemporaryDirectory() as tmp:
             for r in run_case(profile, case, methods, Path(tmp)):
                 rows.append(r)

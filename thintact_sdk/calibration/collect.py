@@ -123,7 +123,7 @@ def collect_slits(
     recording: Recording,
     rank: int = DEFAULT_RANK,
     progress: Progress | None = None,
-    frame_gains: str = "auto",
+    frame_gains: str = "off",
 ) -> SlitCollection:
     """Find the slit, dark and validation frames of ``recording`` and compress the slits.
 
@@ -136,9 +136,10 @@ def collect_slits(
     progress
         Optional callback, see :data:`Progress`.
     frame_gains
-        ``"auto"``, ``"on"`` or ``"off"``: correct per-frame gains from the white frame
+        ``"off"``, ``"auto"`` or ``"on"``: correct per-frame gains from the white frame
         (:mod:`~thintact_sdk.calibration.sumrule`); ``auto`` applies them only when they
         explain most of the white-fit residual. Needs a white frame and complete unit slits.
+        Ill-conditioned under noise (see the module), hence off by default.
 
     Without a dark frame, the dark level is measured from the white frame and the slit sums
     when the recording allows it, else the profile's black level is used.

@@ -45,8 +45,10 @@ class CalibrationOptions:
     rank
         Rank kept per slit image.
     frame_gains
-        ``auto``, ``on`` or ``off``: per-slit-frame gains from the white frame (unrecorded
-        exposure or brightness drift, :mod:`thintact_sdk.calibration.sumrule`).
+        ``off`` (default), ``auto`` or ``on``: per-slit-frame gains from the white frame
+        (unrecorded exposure or brightness drift, :mod:`thintact_sdk.calibration.sumrule`).
+        The fit is exact on clean data but ill-conditioned (neighbouring slits look alike),
+        so noise leaks into it: use it only on well-averaged recordings.
     tau
         Tikhonov τ stored in the bundle (DN²); None chooses it on simulated data.
     filter_steps
@@ -64,7 +66,7 @@ class CalibrationOptions:
     max_iter: int = 50
     tol: float = 1e-7
     rank: int = DEFAULT_RANK
-    frame_gains: str = "auto"
+    frame_gains: str = "off"
     tau: float | None = None
     filter_steps: int = 100
     filter_scenes: int = 32

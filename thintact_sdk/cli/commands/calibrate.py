@@ -46,9 +46,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="lsq: joint least squares per slit (default); paper: Algorithm 1 verbatim")
     p.add_argument("--max-iter", type=int, default=50, help="refinement iterations (Algorithm 3)")
     p.add_argument("--tau", type=float, help="Tikhonov tau in DN² (default: chosen on simulated data)")
-    p.add_argument("--frame-gains", choices=["auto", "on", "off"], default="auto",
+    p.add_argument("--frame-gains", choices=["off", "auto", "on"], default="off",
                    help="per-slit-frame gains from the white frame (unrecorded exposure or "
-                   "brightness drift); auto applies them when they explain the white frame")
+                   "brightness drift); only for well-averaged recordings (noise leaks in)")
     p.add_argument("--filter-steps", type=int, default=100, help="Adam steps of the filter training")
     p.add_argument("--camera-set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a camera setting (value parsed as JSON when possible)")
