@@ -61,8 +61,9 @@ def _check_value(effect: str, name: str, spec: ParamSpec, value: Any) -> Any:
         raise PhysicsError(f"physics.{effect}.{name}: values must be finite")
     lo, hi = spec.bounds
     if np.any(arr < lo) or np.any(arr > hi):
+        unit = "" if spec.unit == "1" else f" {spec.unit}"
         raise PhysicsError(
-            f"physics.{effect}.{name}: {value!r} outside the physical range [{lo}, {hi}] {spec.unit}"
+            f"physics.{effect}.{name}: {value!r} outside the physical range [{lo}, {hi}]{unit}"
         )
     return arr.tolist() if spec.shape else float(arr)
 
