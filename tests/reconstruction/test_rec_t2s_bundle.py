@@ -117,3 +117,39 @@ def test_bundle_save_load_and_find_latest(tmp_path) -> None:
         find_latest(tmp_path / "nothing")
     with pytest.raises(CalibrationError, match="source must be"):
         CalibrationBundle.create(profile, sm, jf, tau=1.0, source="guess")
+
+
+class _FakeSimulator:
+    """Stands in for Simulator: open/coding terms with a known best two-term fit."""
+
+    def __init__(self, exact: bool) -> None:
+        rng = np.random.default_rng(7)
+        self.profile = None
+        self.po, self.qo = rng.random((9, 4)), rng.random((10, 5))
+        self.pc, self.qc = rng.standard_normal((9, 4)), rng.standard_normal((10, 5))
+        self.extra = None if exact else (0.01 * rng.random((9, 4)), rng.random((10, 5)))
+
+    def open_coding_terms(self, channel: int):
+        open_terms = [(self.po, self.qo)] + ([self.extra] if self.extra else [])
+        return open_terms, [(self.pc, self.qc)]
+
+
+def test_two_term_fit_is_exact_for_two_separable_terms_and_reports_its_error() -> None:
+    sm = SystemMatrices.two_term_fit(_FakeSimulator(exact=True), scale_dn=4.0, channels=[0, 1])
+    assert sm.channels == 2 and max(sm.meta["fit_relative_error"]) < 1e-7
+    x = np.random.default_rng(8).random((4, 5, 2))
+    want = 4.0 * (np.einsum("rn,nmc,sm->rsc", _FakeSimulator(True).po, x, _FakeSimulator(True).qo)
+                  + np.einsum("rn,nmc,sm->rsc", _FakeSimulator(True).pc, x, _FakeSimulator(True).qc))
+    np.testing.assert_allclose(sm.forward(x), want, rtol=1e-9)
+    approx = SystemMatrices.two_term_fit(_FakeSimulator(exact=False), channels=[0])
+    assert 1e-4 < approx.meta["fit_relative_error"][0] < 0.05
+
+
+def test_direct_generation_shapes_and_scale() -> None:
+    profile = load_profile("virtual-mini")
+    one = SystemMatrices.direct(profile)
+    two = SystemMatrices.direct(profile, scale_dn=4.0)
+    assert one.Po.shape == (3, 128, 50) and one.Qc.shape == (3, 160, 64)
+    x = np.ones((50, 64, 3))
+    np.testing.assert_allclose(two.forward(x), 4.0 * one.forward(x), rtol=1e-9)
+    assert two.meta["source"] == "direct" and two.meta["profile_hash"] == profile.content_hash()
