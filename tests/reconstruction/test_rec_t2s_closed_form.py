@@ -85,3 +85,22 @@ def test_iterate_reproduces_the_iterative_decoder() -> None:
     plain = T2SIterativeDecoder(sm, 30.0, iterations=100, backend=be).decode(y)
     fast = closed.iterate(y, iterations=100)
     np.testing.assert_allclose(fast, plain, atol=1e-4 * np.abs(plain).max())
+
+
+def test_set_tau_equals_a_fresh_decoder() -> None:
+    from thintact_decoders import NonIterativeDecoder
+
+    from thintact_sdk.imaging.recon_synthetic import frequency_split_matrices
+
+    sm = _low_rank_open_matrices(8)
+    y = sm.forward(np.random.default_rng(9).random((*sm.scene_shape, 2)))
+    dec = T2SClosedFormDecoder(sm, 1.0, ArrayBackend("numpy", "float64"))
+    dec.set_tau(25.0)
+    fresh = T2SClosedFormDecoder(sm, 25.0, ArrayBackend("numpy", "float64"))
+    np.testing.assert_allclose(dec.decode(y), fresh.decode(y), rtol=1e-6, atol=1e-9)
+    sm2, jf = frequency_split_matrices((40, 44), (12, 14), (6, 7), seed=4)
+    y2 = sm2.forward(np.random.default_rng(1).random((12, 14, 3)))
+    ni = NonIterativeDecoder(sm2, jf, 1.0, ArrayBackend("numpy", "float64"))
+    ni.set_tau(5.0)
+    np.testing.assert_allclose(ni.decode(y2), NonIterativeDecoder(sm2, jf, 5.0, ArrayBackend(
+        "numpy", "float64")).decode(y2), rtol=1e-6, atol=1e-9)

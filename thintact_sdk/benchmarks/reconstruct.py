@@ -110,18 +110,19 @@ def _quality(decode: Callable[[np.ndarray], np.ndarray], dev: _Device) -> dict[s
     return out
 
 
-def _best_tau(make: Callable[[float], Callable[[np.ndarray], np.ndarray]], dev: _Device) -> float:
-    """τ (from a coarse grid × the coding power) maximising mean PSNR over the GelSight and USAF
-    frames (the white frame is kept for the uniformity figure)."""
+def _best_tau(dec: Any, dev: _Device) -> float:
+    """τ (coarse grid × the coding power) maximising mean PSNR over the USAF and GelSight frames
+    (the white frame is kept for the uniformity figure); leaves ``dec`` set to it."""
     from thintact_sdk.imaging.metrics import psnr
 
     best = (-np.inf, dev.unit)
     for rel in (0.1, 0.3, 1.0, 3.0):
-        decode = make(rel * dev.unit)
-        value = np.mean([psnr(np.clip(decode(y), 0, 1), x)
+        dec.set_tau(rel * dev.unit)
+        value = np.mean([psnr(np.clip(dec.decode(y), 0, 1), x)
                          for x, y in zip(dev.scenes[1:], dev.signal[1:], strict=True)])
         if value > best[0]:
             best = (float(value), rel * dev.unit)
+    dec.set_tau(best[1])
     return best[1]
 
 
@@ -146,8 +147,8 @@ def run(args: argparse.Namespace) -> int:
         dev = _Device(profile, args.train_scenes, say)
         black = profile.noise.black_level_dn
         say("choosing tau")
-        tau_ni = _best_tau(lambda t: NonIterativeDecoder(dev.sm, dev.filter, t).decode, dev)
-        tau_cf = _best_tau(lambda t: T2SClosedFormDecoder(dev.sm, t).decode, dev)
+        tau_ni = _best_tau(NonIterativeDecoder(dev.sm, dev.filter, dev.unit), dev)
+        tau_cf = _best_tau(T2SClosedFormDecoder(dev.sm, dev.unit), dev)
         result: dict[str, Any] = {
             "profile": profile.name,
             "sensor": list(dev.sm.sensor_shape), "scene": list(dev.sm.scene_shape),
@@ -220,11 +221,13 @@ def _mask_compare(profile: Any, dev: _Device, result: dict[str, Any], args: argp
         d["mask"]["phi_rows"] = [int(v) for v in mask.phi_rows]
     ga_profile = profile_from_dict(d, where="GA design")
     ga = _Device(ga_profile, args.train_scenes, say)
-    tau_ni = _best_tau(lambda t: NonIterativeDecoder(ga.sm, ga.filter, t).decode, ga)
-    tau_cf = _best_tau(lambda t: T2SClosedFormDecoder(ga.sm, t).decode, ga)
+    ni = NonIterativeDecoder(ga.sm, ga.filter, ga.unit)
+    cf = T2SClosedFormDecoder(ga.sm, ga.unit)
+    _best_tau(ni, ga)
+    _best_tau(cf, ga)
     out["ga"] = {
-        "thintact-noniterative": _quality(NonIterativeDecoder(ga.sm, ga.filter, tau_ni).decode, ga),
-        "t2s-closed-form": _quality(T2SClosedFormDecoder(ga.sm, tau_cf).decode, ga),
+        "thintact-noniterative": _quality(ni.decode, ga),
+        "t2s-closed-form": _quality(cf.decode, ga),
         "design": {k: record.get(k) for k in ("design", "K", "feature_um") if k in record},
     }
     return out

@@ -130,13 +130,14 @@ def make_virtual_bundle(
     val_scenes = [make_scene(name, n, m, i) for name, i in VALIDATION_SCENES]
     val_y, _ = simulate_measurements(sim, scale, val_scenes, profile.noise, opts.seed + 1)
     unit = coding_power(sm)
-    tau, table = choose_tau(lambda t: NonIterativeDecoder(sm, jf, t).decode, unit, val_y, val_scenes)
-    tau_cf, table_cf = choose_tau(lambda t: T2SClosedFormDecoder(sm, t).decode, unit, val_y, val_scenes)
+    ni, cf = NonIterativeDecoder(sm, jf, unit), T2SClosedFormDecoder(sm, unit)
+    tau, table = choose_tau(ni, unit, val_y, val_scenes)
+    tau_cf, table_cf = choose_tau(cf, unit, val_y, val_scenes)
     say("validation")
     labels = [f"{name}{'' if name != 'gelsight' else '-' + str(i)}" for name, i in VALIDATION_SCENES]
     decoders = {
-        "": NonIterativeDecoder(sm, jf, tau).decode,
-        "t2s_closed_form_": T2SClosedFormDecoder(sm, tau_cf).decode,
+        "": ni.decode,
+        "t2s_closed_form_": cf.decode,
         "iterative800_": T2SIterativeDecoder(sm, tau_cf, iterations=800).decode,
         "flatcam_": FlatCamDecoder(sm, tau).decode,
     }
@@ -159,17 +160,17 @@ def make_virtual_bundle(
 
 
 def choose_tau(
-    make_decode: Callable[[float], Callable[[np.ndarray], np.ndarray]],
-    unit: float,
-    measurements: np.ndarray,
-    scenes: Sequence[np.ndarray],
+    decoder: Any, unit: float, measurements: np.ndarray, scenes: Sequence[np.ndarray]
 ) -> tuple[float, dict[str, float]]:
-    """τ from ``TAU_GRID_REL × unit`` maximising the mean PSNR; returns it and the table."""
+    """τ from ``TAU_GRID_REL × unit`` maximising the mean PSNR of ``decoder`` (which has
+    ``set_tau``); leaves the decoder at that τ and returns it with the table."""
     table: dict[str, float] = {}
     best = (-np.inf, unit)
     for rel in TAU_GRID_REL:
-        value = float(np.mean(evaluate(make_decode(rel * unit), measurements, scenes)[0]))
+        decoder.set_tau(rel * unit)
+        value = float(np.mean(evaluate(decoder.decode, measurements, scenes)[0]))
         table[f"{rel * unit:.4g}"] = round(value, 2)
         if value > best[0]:
             best = (value, rel * unit)
+    decoder.set_tau(best[1])
     return best[1], table

@@ -116,10 +116,18 @@ class NonIterativeDecoder(Decoder):
         self.filter_info["folded"] = self.folded
         self._big_left = self.xp.asarray(big_left, gemm=True)
         self._right = self.xp.asarray(right, gemm=True)
-        self._inv_denom = self.xp.asarray(np.stack([s.inv_denom for s in solvers]))
+        self._sig2 = np.stack([np.outer(s.singular_values_p**2, s.singular_values_q**2) for s in solvers])
+        self._inv_denom = self.xp.asarray(1.0 / (self._sig2 + self.tau))
         self._vp = self.xp.asarray(np.stack([s.vp for s in solvers]))
         self._vqt = self.xp.asarray(np.stack([s.vqt for s in solvers]))
         self._unit_core: Any = None
+
+    def set_tau(self, tau: float) -> None:
+        """Change τ without recomputing the SVDs (the black-level constant is unaffected)."""
+        if tau <= 0:
+            raise ValueError("tau must be > 0")
+        self.tau = float(tau)
+        self._inv_denom = self.xp.asarray(1.0 / (self._sig2 + self.tau))
 
     # -- precomputation ----------------------------------------------------------------
     def _fold(

@@ -80,10 +80,10 @@ class T2SClosedFormDecoder(Decoder):
         kp = max(len(v[1]) for v in svds)
         kq = max(len(v[4]) for v in svds)
         self._kp, self._kq = kp, kq
-        k = kp * kq
         per: dict[str, list[np.ndarray]] = {key: [] for key in (
             "left", "right", "den", "vp", "vqt", "uq", "scale", "a", "b", "a2", "b2", "small", "sig2")}
         self.info: dict[str, Any] = {"open_rank": [], "dropped_open_sv": []}
+        self._parts: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
         for c in range(sm.channels):
             up, sp, vpo = _pad(*svds[c][:3], kp)
             uq, sq, vqo = _pad(*svds[c][3:], kq)
@@ -91,20 +91,14 @@ class T2SClosedFormDecoder(Decoder):
             # scene images of F and G expressed in the SVD bases of Pc, Qc (separable there)
             a, b = sol.vp.T @ vpo, sol.vqt @ vqo  # kP × kp, kQ × kq
             a2, b2 = (sol.left @ up) * sp, (sol.right.T @ uq) * sq  # Vpᵀ Pcᵀ u s, Vqᵀ Qcᵀ u s
-            a_all, b_all = np.concatenate([a, a2], 1), np.concatenate([b, b2], 1)
-            x1 = np.einsum("ab,bj,bl->ajl", sol.inv_denom, b_all, b_all)
-            t = np.einsum("ai,ak,ajl->ijkl", a_all, a_all, x1)  # ⟨ω_ij, Hc⁻¹ ω_kl⟩
-            blocks = [[t[:kp, :kq, :kp, :kq], t[:kp, :kq, kp:, kq:]],
-                      [t[kp:, kq:, :kp, :kq], t[kp:, kq:, kp:, kq:]]]
-            gram = np.block([[blk.reshape(k, k) for blk in row] for row in blocks])
-            d = np.outer(sp**2, sq**2).ravel()
-            eye = np.eye(k)
-            mmid_inv = np.block([[np.zeros((k, k)), eye], [eye, -np.diag(d)]])
-            per["small"].append(np.linalg.inv(mmid_inv + gram))
+            sig2 = np.outer(sol.singular_values_p**2, sol.singular_values_q**2)
+            part = (np.concatenate([a, a2], 1), np.concatenate([b, b2], 1), np.outer(sp**2, sq**2), sig2)
+            self._parts.append(part)
+            per["small"].append(_small_inverse(part, kp, kq, self.tau))
             per["left"].append(np.concatenate([sol.left, up.T], axis=0))  # (kP + kp) × R
             per["right"].append(sol.right)
             per["den"].append(sol.inv_denom)
-            per["sig2"].append(np.outer(sol.singular_values_p**2, sol.singular_values_q**2))
+            per["sig2"].append(sig2)
             per["vp"].append(sol.vp)
             per["vqt"].append(sol.vqt)
             per["uq"].append(uq)
@@ -128,6 +122,16 @@ class T2SClosedFormDecoder(Decoder):
         self._a, self._b, self._a2, self._b2, self._small = st["a"], st["b"], st["a2"], st["b2"], st["small"]
         self._sig2 = st["sig2"]  # σ_P,i² σ_Q,j² of Pc, Qc
         self._unit: Any = None
+
+    def set_tau(self, tau: float) -> None:
+        """Change τ without recomputing any SVD (only the 2K × 2K system and ``1/(σ² + τ)``)."""
+        if tau <= 0:
+            raise ValueError("tau must be > 0")
+        self.tau = float(tau)
+        xp = self.xp
+        self._den = xp.asarray(np.stack([1.0 / (p[3] + self.tau) for p in self._parts]))
+        self._small = xp.asarray(np.stack([_small_inverse(p, self._kp, self._kq, self.tau)
+                                           for p in self._parts]))
 
     def _linear(self, y: Any) -> tuple[Any, Any]:
         """``(Σ_P U_Pᵀ Y U_Q Σ_Q, Eᵀ Y)`` for channel-first ``y`` (GEMM precision)."""
@@ -211,6 +215,26 @@ class T2SClosedFormDecoder(Decoder):
         """Reconstruct from raw binned DN (black level included), black removed in the solve."""
         self._check(raw)
         return self._solve(self.xp.channels_first(raw, gemm=True), float(black_level_dn))
+
+
+def _small_inverse(
+    part: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray], kp: int, kq: int, tau: float
+) -> np.ndarray:
+    """``(Mmid⁻¹ + Wᵀ Hc⁻¹ W)⁻¹`` for one channel from its separable coefficient images.
+
+    ``part = (A_all: kP × 2kp, B_all: kQ × 2kq, D: kp × kq, σ²: kP × kQ)``.
+    """
+    a_all, b_all, d, sig2 = part
+    k = kp * kq
+    inv_denom = 1.0 / (sig2 + tau)
+    x1 = np.einsum("ab,bj,bl->ajl", inv_denom, b_all, b_all, optimize=True)
+    t = np.einsum("ai,ak,ajl->ijkl", a_all, a_all, x1, optimize=True)  # ⟨ω_ij, Hc⁻¹ ω_kl⟩
+    blocks = [[t[:kp, :kq, :kp, :kq], t[:kp, :kq, kp:, kq:]],
+              [t[kp:, kq:, :kp, :kq], t[kp:, kq:, kp:, kq:]]]
+    gram = np.block([[blk.reshape(k, k) for blk in row] for row in blocks])
+    eye = np.eye(k)
+    mmid_inv = np.block([[np.zeros((k, k)), eye], [eye, -np.diag(d.ravel())]])
+    return np.linalg.inv(mmid_inv + gram)
 
 
 def _pad(u: np.ndarray, s: np.ndarray, v: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
