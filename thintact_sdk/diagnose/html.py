@@ -148,8 +148,14 @@ def write_pngs(d: Diagnosis, out_dir: Path) -> list[Path]:
     for name, _title, make in FIGURES:
         fig = make(d)
         p = out_dir / f"{name}.png"
-        fig.savefig(p, dpi=55, bbox_inches="tight")
+        buf = io.BytesIO()
+        fig.savefig(buf, format="png", dpi=60, bbox_inches="tight")
         plt.close(fig)
+        buf.seek(0)
+        from PIL import Image
+
+        # a 64-colour palette keeps the files small enough for the docs
+        Image.open(buf).convert("RGB").quantize(64).save(p, optimize=True)
         paths.append(p)
     return paths
 
