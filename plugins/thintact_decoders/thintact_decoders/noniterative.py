@@ -29,18 +29,44 @@ from thintact_sdk.imaging.tikhonov import TikhonovSolver
 from thintact_sdk.interfaces import Decoder
 
 
-def filter_structure(jf: JointFilter, tol: float = 1e-6) -> tuple[int, int, int]:
-    """``(kr, ks, rank)``: the support block of Φf and the numerical rank of Φs (all channels)."""
+def low_rank_factors(phi_s: np.ndarray, max_rank: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray, float]:
+    """Randomised SVD of one ``R × S`` Φs with ``max_rank + 4`` probes.
+
+    Returns ``(us: R × k, vt: k × S, residual)`` with ``Φs ≈ us @ vt`` (singular values folded
+    into ``us``) and ``residual = ‖Φs − us vt‖_F / ‖Φs‖_F`` of the full probe space (0 up to
+    rounding when rank(Φs) ≤ max_rank + 4).
+    """
+    a = np.asarray(phi_s, np.float64)
+    omega = np.random.default_rng(seed).standard_normal((a.shape[1], max_rank + 4))
+    q, _ = np.linalg.qr(a @ omega)
+    b = q.T @ a
+    norm = float(np.linalg.norm(a))
+    residual = float(np.linalg.norm(a - q @ b)) / norm if norm > 0 else 0.0
+    ub, sb, vt = np.linalg.svd(b, full_matrices=False)
+    return (q @ ub) * sb, vt, residual
+
+
+def filter_structure(
+    jf: JointFilter, max_rank: int = 8, tol: float = 1e-6
+) -> tuple[int, int, int, list[tuple[np.ndarray, np.ndarray]]]:
+    """``(kr, ks, rank, factors)``: Φf's support block, Φs's numerical rank (all channels; a value
+    above ``max_rank`` means "not low-rank") and per channel the factors ``(us, vt)`` of Φs."""
     nz = np.abs(jf.phi_f) > 0
     rows = np.flatnonzero(nz.any(axis=(0, 2)))
     cols = np.flatnonzero(nz.any(axis=(0, 1)))
     kr = int(rows[-1]) + 1 if rows.size else 1
     ks = int(cols[-1]) + 1 if cols.size else 1
     rank = 0
+    factors = []
     for c in range(jf.channels):
-        s = np.linalg.svd(jf.phi_s[c].astype(np.float64), compute_uv=False)
-        rank = max(rank, int(np.sum(s > tol * s[0])) if s[0] > 0 else 0)
-    return kr, ks, max(rank, 1)
+        us, vt, residual = low_rank_factors(jf.phi_s[c], max_rank)
+        sv = np.linalg.norm(us, axis=0)
+        rank_c = int(np.sum(sv > tol * sv[0])) if sv[0] > 0 else 0
+        if residual > tol:
+            rank_c = max_rank + 1
+        rank = max(rank, rank_c)
+        factors.append((us, vt))
+    return kr, ks, max(rank, 1), factors
 
 
 class NonIterativeDecoder(Decoder):
@@ -94,7 +120,7 @@ class NonIterativeDecoder(Decoder):
         self._jf = joint_filter
         big_left = left
         if joint_filter is not None:
-            kr, ks, rank = filter_structure(joint_filter)
+            kr, ks, rank, factors = filter_structure(joint_filter, max_rank)
             r, s = self.sensor_shape
             foldable = kr * ks <= (r * s) // 4 and rank <= max_rank
             if fold == "approx":
@@ -105,7 +131,7 @@ class NonIterativeDecoder(Decoder):
             if fold != "never" and foldable:
                 self.folded = True
                 big_left, self._lcat, self._rcat, self._phif = self._fold(left, right, joint_filter,
-                                                                          kr, ks, rank)
+                                                                          kr, ks, rank, factors)
                 self._ek_t = self.xp.asarray(dct_matrix(s)[:ks].T, gemm=True)  # S × ks
                 self.kr, self.rank = kr, rank
             elif self.xp.name == "torch":
@@ -131,17 +157,18 @@ class NonIterativeDecoder(Decoder):
 
     # -- precomputation ----------------------------------------------------------------
     def _fold(
-        self, left: np.ndarray, right: np.ndarray, jf: JointFilter, kr: int, ks: int, rank: int
+        self, left: np.ndarray, right: np.ndarray, jf: JointFilter, kr: int, ks: int, rank: int,
+        factors: list[tuple[np.ndarray, np.ndarray]],
     ) -> tuple[np.ndarray, Any, Any, Any]:
         r, s = self.sensor_shape
         dk = dct_matrix(r)[:kr]  # kr × R
         ek = dct_matrix(s)[:ks]  # ks × S
         lcats, rcats = [], []
         for c in range(self.channels):
-            u, sv, vt = np.linalg.svd(jf.phi_s[c].astype(np.float64), full_matrices=False)
+            us, vt = factors[c]
             ls, rs = [], []
             for j in range(rank):
-                uj = u[:, j] * sv[j]
+                uj = us[:, j]
                 ls.append((left[c] * uj[None, :]) @ dk.T)  # kP × kr
                 rs.append((ek * vt[j][None, :]) @ right[c])  # ks × kQ
             lcats.append(np.concatenate(ls, axis=1))  # kP × (rank·kr)
