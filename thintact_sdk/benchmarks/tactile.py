@@ -60,15 +60,24 @@ def accuracy(args: argparse.Namespace, out: dict[str, Any]) -> None:
     if profile.camera is None or profile.camera.plugin not in VIRTUAL_CAMERAS:
         raise ThinTactError(f"--profile {args.profile}: the accuracy test needs a virtual camera")
     settings = {"slot": "bench-tactile", "fps": 0, "seed": args.seed}
-    decoder = None
-    if args.decoder:
-        from thintact_sdk.plugin_manager import get_registry
+    from thintact_sdk.errors import CalibrationError
+    from thintact_sdk.plugin_manager import get_registry
 
-        dec_settings = dict(profile.decoder.settings) if profile.decoder is not None else {}
-        decoder = get_registry().create("decoder", args.decoder, profile, dec_settings)
     decoder_name = args.decoder or (profile.decoder.plugin if profile.decoder else "?")
+    dec_settings = dict(profile.decoder.settings) if profile.decoder is not None else {}
+    decoder_note = "calibration bundle"
+    try:
+        decoder = get_registry().create("decoder", decoder_name, profile, dec_settings)
+    except CalibrationError as err:
+        decoder = None
+        decoder_note = f"no bundle ({err}); "
     with Sensor(profile, camera_settings=settings, decoder=decoder) as sensor, _progress() as bar:
         slot = scene_slot(sensor)
+        if decoder is None:
+            decoder_name = args.decoder or "t2s-closed-form"
+            sensor._decoder, tau = _simulator_decoder(sensor, slot, decoder_name)
+            decoder_note += f"in-memory two-term fit of the simulator, tau {tau:g} chosen on " \
+                            "4 calibration-ball presses"
         task = bar.add_task("LUT calibration", total=args.calibration_presses)
         t0 = time.perf_counter()
         sensor._lut = calibrate_virtual(
@@ -86,7 +95,7 @@ def accuracy(args: argparse.Namespace, out: dict[str, Any]) -> None:
     print(f"\nDepth accuracy through the lensless path ({profile.name}: "
           f"{profile.sensor.rows}x{profile.sensor.cols} sensor, {profile.scene.rows}x"
           f"{profile.scene.cols} scene at {profile.scene.pixel_pitch_um / 1000:.3f} mm; decoder "
-          f"{decoder_name}; LUT from "
+          f"{decoder_name} from a {decoder_note}; LUT from "
           f"{args.calibration_presses} 3 mm ball presses through the same path, {calib_s:.1f} s; "
           f"{args.presses} random presses per row)")
     print(f"{'indenter':16s} {'depth':>6s} {'RMS sensor':>11s} {'RMS scene':>10s} "
@@ -104,11 +113,49 @@ def accuracy(args: argparse.Namespace, out: dict[str, Any]) -> None:
           f"{markers.max_true_mm:.2f} mm, {args.marker_presses} sheared presses in 3 steps); "
           f"shear direction error {markers.direction_error_deg:.1f}° "
           f"(goal ≤ {MARKER_GOAL_MM} mm: {'met' if markers.rms_mm <= MARKER_GOAL_MM else 'NOT met'})")
-    out["decoder"] = decoder_name
+    out["decoder"] = f"{decoder_name} ({decoder_note})"
     out["depth"] = [r.__dict__ for r in rows]
     out["depth_mean_mm"], out["depth_worst_mm"] = mean, worst
     out["markers"] = markers.__dict__
     out["lut_calibration_s"] = calib_s
+
+
+def _simulator_decoder(sensor: Any, slot: Any, name: str) -> tuple[Any, float]:
+    """A decoder for a virtual sensor without a calibration bundle: the two-term fit of its
+    simulator (REC's ``SystemMatrices.two_term_fit``), no filter (the closed-form T2S
+    decoder needs none), and the Tikhonov τ that best reconstructs the membrane (markers
+    included) in a few calibration-ball presses (not the test presses)."""
+    from thintact_sdk.imaging.calibration_bundle import CalibrationBundle
+    from thintact_sdk.imaging.simulator import Simulator, white_level_gain
+    from thintact_sdk.imaging.t2s import SystemMatrices
+    from thintact_sdk.plugin_manager import get_registry
+    from thintact_sdk.tactile import TactileSimulator, random_ball_presses
+
+    profile = sensor.profile
+    sim = Simulator(profile)
+    try:
+        from thintact_virtual.bench import signal_scale_dn
+
+        scale = signal_scale_dn(profile, sensor.camera_settings)
+    except ImportError:
+        scale = white_level_gain(sim)
+    sm = SystemMatrices.two_term_fit(sim, scale_dn=scale)
+    flat = TactileSimulator.for_profile(profile).flat().scene
+    shots = []
+    for scene in [flat] + [s.scene for s, _ in random_ball_presses(profile, 4, seed=97)]:
+        slot.set(scene)
+        shots.append((scene, sensor.read_measurement()))
+    slot.set(None)
+    best: tuple[float, float, Any] | None = None
+    for tau in (1000.0, 2500.0, 5000.0, 10000.0, 20000.0):
+        bundle = CalibrationBundle.create(profile, sm, None, tau=tau, source="simulator")
+        dec = get_registry().create("decoder", name, profile, {"bundle": bundle, "tau": tau})
+        err = np.mean([np.mean((np.asarray(dec.decode(m.signal())) - sc) ** 2)
+                       for sc, m in shots])
+        if best is None or err < best[0]:
+            best = (float(err), tau, dec)
+    assert best is not None
+    return best[2], best[1]
 
 
 def _latency_decoder(profile: Any, name: str | None = None) -> tuple[Any, str]:

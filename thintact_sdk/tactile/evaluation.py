@@ -77,13 +77,16 @@ class MarkerResult:
     max_true_mm
         Largest true displacement in the test, mm.
     direction_error_deg
-        Mean absolute error of the shear direction, degrees.
+        Mean absolute error of the shear direction, degrees (180 when no shear was seen).
+    direction_errors_deg
+        The same per press.
     """
 
     rms_mm: float
     tracked_fraction: float
     max_true_mm: float
     direction_error_deg: float
+    direction_errors_deg: list[float]
 
 
 def depth_rms(estimate_mm: np.ndarray, truth_mm: np.ndarray, threshold_mm: float) -> float:
@@ -220,4 +223,5 @@ def evaluate_markers(
     show(None)
     all_err = np.concatenate(errors) if errors else np.zeros((0, 2))
     rms = float(np.sqrt(np.mean(all_err**2))) if len(all_err) else float("nan")
-    return MarkerResult(rms, tracked / max(expected, 1), max_true, float(np.mean(dir_err)))
+    return MarkerResult(rms, tracked / max(expected, 1), max_true, float(np.mean(dir_err)),
+                        [round(e, 1) for e in dir_err])

@@ -222,25 +222,33 @@ def mean_shear(
     """Mean displacement of the markers that move, and its direction (paper: the test-tube
     insertion steers against it).
 
+    A marker "moves" when its displacement exceeds both ``moving_mm`` and three times the
+    median displacement of all markers (most markers are away from the contact, so the
+    median measures the tracking noise).
+
     Parameters
     ----------
     displacements_mm
         ``K × 2`` (dx, dy) in mm, NaN rows (lost markers) ignored.
     moving_mm
-        Markers that moved less than this are left out (far from the contact); with none
-        moving, or a mean smaller than this, there is no shear (direction NaN).
+        Smallest displacement that counts as motion; with no marker moving, or a mean
+        shorter than half of it, there is no shear (direction NaN).
 
     Returns
     -------
     (mean_mm, direction_rad)
-        ``(2,)`` mean displacement in mm and ``atan2(dy, dx)`` in radians.
+        ``(2,)`` mean displacement of the moving markers in mm and ``atan2(dy, dx)`` in
+        radians.
     """
     d = np.asarray(displacements_mm, np.float64).reshape(-1, 2)
     d = d[np.isfinite(d).all(axis=1)]
-    d = d[np.hypot(d[:, 0], d[:, 1]) >= moving_mm]
     if len(d) == 0:
         return np.zeros(2), float("nan")
-    mean = d.mean(axis=0)
-    if float(np.hypot(*mean)) < moving_mm:
+    mag = np.hypot(d[:, 0], d[:, 1])
+    moving = mag >= max(moving_mm, 3.0 * float(np.median(mag)))
+    if not moving.any():
+        return np.zeros(2), float("nan")
+    mean = d[moving].mean(axis=0)
+    if float(np.hypot(*mean)) < 0.5 * moving_mm:
         return mean, float("nan")
     return mean, float(np.arctan2(mean[1], mean[0]))
