@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-import importlib.util
 import json
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -34,12 +34,8 @@ def test_recording_without_scenes_is_refused(tmp_path: Path, capsys: pytest.Capt
     assert "no frame with a scene" in capsys.readouterr().err
 
 
-def test_cli_writes_the_three_outputs(repo_root: Path, tmp_path: Path) -> None:
-    spec = importlib.util.spec_from_file_location("mcd", repo_root / "tools" / "make_concealed_dataset.py")
-    assert spec is not None and spec.loader is not None
-    tool = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(tool)
-    case = tool.make_case("clean", tmp_path)
+def test_cli_writes_the_three_outputs(concealed_case: Any, tmp_path: Path) -> None:
+    case = concealed_case("clean")
     out = tmp_path / "out"
     rc = main(["diagnose", str(case / "recording"), "--out", str(out), "--quiet"])
     assert rc == 0

@@ -8,15 +8,10 @@ The default run takes a handful of representative cases; the full matrix is mark
 
 from __future__ import annotations
 
-import importlib.util
-import json
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
-
-from thintact_sdk.diagnose import diagnose, load_diagnosis_data
 
 #: absolute tolerance per (effect, parameter) on the recovered value
 TOLERANCE: dict[tuple[str, str], float] = {
@@ -38,35 +33,6 @@ TOLERANCE: dict[tuple[str, str], float] = {
     ("veiling_glare", "fraction"): 0.003,
     ("stray_light", "mean_dn"): 3.0,
 }
-
-
-def _load_tool(repo_root: Path) -> Any:
-    spec = importlib.util.spec_from_file_location(
-        "make_concealed_dataset", repo_root / "tools" / "make_concealed_dataset.py"
-    )
-    assert spec is not None and spec.loader is not None
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
-
-
-@pytest.fixture(scope="session")
-def concealed(repo_root: Path, tmp_path_factory: pytest.TempPathFactory) -> Any:
-    """``make(case) -> (report, truth, diagnosis)``, each case rendered and diagnosed once."""
-    tool = _load_tool(repo_root)
-    root = tmp_path_factory.mktemp("concealed")
-    done: dict[str, Any] = {}
-
-    def make(case: str) -> Any:
-        if case not in done:
-            case_dir = tool.make_case(case, root)
-            truth = json.loads((case_dir / "truth.json").read_text())
-            d = diagnose(load_diagnosis_data(case_dir / "recording"))
-            done[case] = (d.report, truth, d)
-        return done[case]
-
-    make.cases = list(tool.CASES)  # type: ignore[attr-defined]
-    return make
 
 
 def param_errors(effect: str, got: dict[str, Any], want: dict[str, Any], scale: float = 1.0) -> list[str]:
