@@ -38,10 +38,11 @@ def toy_simulate(profile, scenes: np.ndarray) -> np.ndarray:  # noqa: ANN001
         x = np.linspace(-1, 1, S)[None, :]
         fac = (1.0 / (1.0 + 0.3 * (x * x + y * y))) ** (0.5 * phys["pixel_angular_response"]["exponent"])
         out = out * fac[None, :, :, None]
-    if "sensor_blur" in phys:
-        s = phys["sensor_blur"]["sigma_um"] / profile.sensor.pixel_pitch_um
-        if s > 0:
-            out = ndimage.gaussian_filter(out, (0, s, s, 0), mode="nearest")
+    for blur in ("sensor_blur", "scene_blur"):  # the toy makes the two indistinguishable
+        if blur in phys:
+            s = phys[blur]["sigma_um"] / profile.sensor.pixel_pitch_um
+            if s > 0:
+                out = ndimage.gaussian_filter(out, (0, s, s, 0), mode="nearest")
     return out
 
 
@@ -90,3 +91,12 @@ def test_toy_flags_a_dark_spot_where_it_is() -> None:
     h = un["hotspots"][0]
     assert h["row0"] <= 30 < h["row1"] and h["col0"] <= 12 < h["col1"]
     assert d.report["findings"] == []
+
+
+def test_toy_names_an_indistinguishable_effect_as_alternative() -> None:
+    opts = DiagnoseOptions(candidates=["sensor_blur", "scene_blur", "pixel_angular_response"])
+    d = diagnose(_data({"sensor_blur": {"sigma_um": 12.0}}), toy_simulate, toy_variance, opts)
+    f = d.report["findings"]
+    assert len(f) == 1
+    assert {f[0]["effect"], *f[0]["alternatives"]} == {"sensor_blur", "scene_blur"}
+    assert "To tell" in f[0]["evidence"]
