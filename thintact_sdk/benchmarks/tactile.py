@@ -35,7 +35,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--calibration-presses", type=int, default=12,
                    help="ball presses for the LUT calibration through the path")
     p.add_argument("--marker-presses", type=int, default=6)
-    p.add_argument("--latency-frames", type=int, default=30)
+    p.add_argument("--latency-frames", type=int, default=20)
     p.add_argument("--decoder", help="decoder plugin (default: each profile's decoder.plugin)")
     p.add_argument("--skip-latency", action="store_true")
     p.add_argument("--seed", type=int, default=0)
@@ -158,9 +158,11 @@ def _simulator_decoder(sensor: Any, slot: Any, name: str) -> tuple[Any, float]:
     return best[2], best[1]
 
 
-def _latency_decoder(profile: Any, name: str | None = None) -> tuple[Any, str]:
-    """The profile's decoder, or, without a calibration bundle, one built from the simulator
-    (two-term fit + joint filter, closed form) so the timing has the real structure."""
+def _latency_decoder(profile: Any, name: str | None = None) -> tuple[Any, Any, str]:
+    """``(decoder, system_matrices or None, how)``: the profile's decoder from its bundle, or,
+    without one, the closed-form Tikhonov decoder (``flatcam``: the paper's solve without
+    the joint filter) on the paper's directly generated matrices (seconds to build; the
+    simulator fit of a 1024×1280 device takes minutes)."""
     from thintact_sdk.errors import CalibrationError
     from thintact_sdk.plugin_manager import get_registry
 
@@ -168,31 +170,20 @@ def _latency_decoder(profile: Any, name: str | None = None) -> tuple[Any, str]:
     name = name or (cfg.plugin if cfg is not None else "thintact-noniterative")
     settings = dict(cfg.settings) if cfg is not None else {}
     try:
-        return get_registry().create("decoder", name, profile, settings), "calibration bundle"
+        return get_registry().create("decoder", name, profile, settings), None, "calibration bundle"
     except CalibrationError:
         pass
     from thintact_sdk.imaging.calibration_bundle import CalibrationBundle
+    from thintact_sdk.imaging.t2s import SystemMatrices
 
-    cache = Path.home() / ".cache" / "thintact-sdk" / "bench-bundles" / profile.content_hash()[:16]
-    try:
-        bundle = CalibrationBundle.load(cache)
-        how = f"simulator-built bundle (cached in {cache})"
-    except CalibrationError:
-        from thintact_sdk.imaging.filter_training import train_joint_filter, training_scenes
-        from thintact_sdk.imaging.simulator import Simulator, white_level_gain
-        from thintact_sdk.imaging.t2s import SystemMatrices
-
-        sim = Simulator(profile)
-        sm = SystemMatrices.two_term_fit(sim, scale_dn=white_level_gain(sim))
-        scenes = training_scenes(profile.scene.rows, profile.scene.cols, count=4)
-        jf = train_joint_filter(sm, scenes, low_block="auto", phi_s_rank=2, steps=0,
-                                closed_form_rounds=1)
-        tau = float(settings.get("tau", 0.01))
-        bundle = CalibrationBundle.create(profile, sm, jf, tau=tau, source="simulator")
-        bundle.save(cache)
-        how = "simulator-built bundle (two-term fit, closed-form filter; now cached)"
-    settings["bundle"] = bundle
-    return get_registry().create("decoder", name, profile, settings), how
+    nz = profile.noise
+    sm = SystemMatrices.direct(profile, scale_dn=0.6 * (nz.saturation_dn - nz.black_level_dn))
+    tau = float(settings.get("tau", 0.01)) * float(np.linalg.norm(sm.Pc[0], 2) *
+                                                   np.linalg.norm(sm.Qc[0], 2)) ** 2
+    bundle = CalibrationBundle.create(profile, sm, None, tau=tau, source="simulator")
+    decoder = get_registry().create("decoder", "flatcam", profile, {"bundle": bundle})
+    return decoder, sm, ("no bundle: flatcam closed-form Tikhonov (no joint filter) on the "
+                         "directly generated matrices")
 
 
 def latency(args: argparse.Namespace, out: dict[str, Any]) -> None:
@@ -201,25 +192,30 @@ def latency(args: argparse.Namespace, out: dict[str, Any]) -> None:
     from thintact_sdk.capture import to_measurement
     from thintact_sdk.frames import RawFrame
     from thintact_sdk.imaging.noise import signal_to_dn
-    from thintact_sdk.imaging.simulator import Simulator, white_level_gain
     from thintact_sdk.profile import load_profile
     from thintact_sdk.sensor import Sensor
     from thintact_sdk.tactile import Sphere, TactileSimulator, scene_level_lut
 
     profile = load_profile(args.latency_profile)
     t0 = time.perf_counter()
-    decoder, how = _latency_decoder(profile, args.decoder)
+    decoder, sm, how = _latency_decoder(profile, args.decoder)
     setup_decoder_s = time.perf_counter() - t0
     tsim = TactileSimulator.for_profile(profile)
-    sim = Simulator(profile)
-    gain = white_level_gain(sim)
     rng = np.random.default_rng(args.seed)
     scenes = [tsim.flat().scene] + [
         tsim.press(Sphere(2.0), d, (x, 0.0)).scene for d, x in ((0.5, -2.0), (0.8, 1.0))
     ]
+    if sm is None:  # the bundle's device: its matrices are in the decoder's bundle
+        from thintact_sdk.imaging.simulator import Simulator, white_level_gain
+
+        sim = Simulator(profile)
+        gain = white_level_gain(sim)
+        signals = [sim.forward(sc) * gain for sc in scenes]
+    else:
+        signals = [sm.forward(sc) for sc in scenes]
     raws = []
-    for i, sc in enumerate(scenes):
-        dn = signal_to_dn(sim.forward(sc) * gain, profile.noise, rng)
+    for i, sig in enumerate(signals):
+        dn = signal_to_dn(np.clip(sig, 0, None), profile.noise, rng)
         raws.append(RawFrame(mosaic_from_rgb(dn.astype(np.uint16)), 0, i + 1, "BayerRG12"))
     lut = scene_level_lut(profile)
     sensor = Sensor(profile, lut=lut, decoder=decoder)
@@ -241,7 +237,7 @@ def latency(args: argparse.Namespace, out: dict[str, Any]) -> None:
     fps = _streamed_fps(profile, raws, sensor, args.latency_frames)
     print(f"\nLatency raw Bayer {2 * profile.sensor.rows}x{2 * profile.sensor.cols} → tactile "
           f"frame on {profile.name} ({profile.scene.rows}x{profile.scene.cols} scene; decoder "
-          f"{type(decoder).__name__} from a {how}, set up in {setup_decoder_s:.1f} s; tactile "
+          f"{type(decoder).__name__} from {how}, set up in {setup_decoder_s:.1f} s; tactile "
           f"work grid {sensor.interpreter.work.rows}x{sensor.interpreter.work.cols}; "
           f"{args.latency_frames} frames)")
     print(f"median {med['total']:.1f} ms (bin {med['bin']:.1f}, decode {med['decode']:.1f}, "
@@ -255,8 +251,10 @@ def latency(args: argparse.Namespace, out: dict[str, Any]) -> None:
     out["stream"] = fps
 
 
-def _streamed_fps(profile: Any, raws: list[Any], sensor: Any, frames: int) -> dict[str, float]:
-    """Tactile frames per second from Sensor.stream on a camera replaying ``raws`` at 30 fps."""
+def _streamed_fps(profile: Any, raws: list[Any], sensor: Any, frames: int,
+                  budget_s: float = 10.0) -> dict[str, float]:
+    """Tactile frames per second from Sensor.stream on a camera replaying ``raws`` at 30 fps
+    (``frames`` frames or ``budget_s`` seconds, whichever comes first)."""
     import thintact_sdk
     from thintact_sdk.interfaces import Camera, CameraCapabilities
     from thintact_sdk.plugin_manager import PluginRegistry
@@ -308,6 +306,8 @@ def _streamed_fps(profile: Any, raws: list[Any], sensor: Any, frames: int) -> di
                 t0 = time.perf_counter()
             else:
                 n += 1
+                if time.perf_counter() - t0 > budget_s:
+                    break
         elapsed = time.perf_counter() - (t0 or time.perf_counter())
     return {
         "fps": n / elapsed if elapsed > 0 else float("nan"),
