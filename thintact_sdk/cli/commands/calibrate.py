@@ -198,4 +198,11 @@ def _wizard(args: argparse.Namespace, options: Any, console: Console) -> Any:
                 reference_exposure_us=REFERENCE_EXPOSURE_US,
             )
         except ThinTactError as err:
-            raise type(err)(f"{err} (captured frames are kept in {bundle_dir / 'capture'}; run again to resume)") from None
+            if not (bundle_dir / "capture" / "manifest.json").is_file():
+                raise
+            hint = f"{err} (captured frames are kept in {bundle_dir / 'capture'}; run again to resume)"
+            try:
+                wrapped = type(err)(hint)
+            except TypeError:
+                raise err from None
+            raise wrapped from None
