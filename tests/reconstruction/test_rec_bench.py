@@ -1,0 +1,30 @@
+"""``thintact bench reconstruct`` end to end on the small virtual device."""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+from thintact_sdk.benchmarks import reconstruct
+
+
+def test_bench_reconstruct_runs_on_virtual_mini(capsys) -> None:
+    parser = argparse.ArgumentParser()
+    reconstruct.add_arguments(parser)
+    args = parser.parse_args(["--json", "--profile", "virtual-mini", "--repeats", "2",
+                              "--train-scenes", "8", "--iterative-probe", "2"])
+    assert reconstruct.run(args) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["profile"] == "virtual-mini"
+    keys = set(out["latency_ms"])
+    assert {"thintact-noniterative [numpy-float32]", "t2s-closed-form [torch-bfloat16]"} <= keys
+    assert all(v > 0 for v in out["latency_ms"].values())
+    q = out["quality"]
+    for name in ("white", "usaf", "gelsight"):
+        assert q["t2s-iterative-800"][name]["psnr_db"] > 5
+    # the closed form solves the same problem as iterative-800, to convergence
+    assert q["t2s-closed-form [numpy-float32]"]["gelsight"]["psnr_db"] >= \
+        q["t2s-iterative-800"]["gelsight"]["psnr_db"] - 0.1
+    assert out["iterative800"]["latency_ms_extrapolated"] > 0  # timings themselves are load-dependent
+    assert "mls" in out["mask_compare"] and "ga" in out["mask_compare"]
+    assert "cores" in out["machine"]
