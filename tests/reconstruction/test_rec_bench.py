@@ -5,9 +5,12 @@ from __future__ import annotations
 import argparse
 import json
 
+import pytest
+
 from thintact_sdk.benchmarks import reconstruct
 
 
+@pytest.mark.slow
 def test_bench_reconstruct_runs_on_virtual_mini(capsys) -> None:
     parser = argparse.ArgumentParser()
     reconstruct.add_arguments(parser)
