@@ -70,7 +70,7 @@ def accuracy(args: argparse.Namespace, out: dict[str, Any]) -> None:
         decoder = get_registry().create("decoder", decoder_name, profile, dec_settings)
     except CalibrationError as err:
         decoder = None
-        decoder_note = f"no bundle ({err}); "
+        decoder_note = f"{err}; instead: "
     with Sensor(profile, camera_settings=settings, decoder=decoder) as sensor, _progress() as bar:
         slot = scene_slot(sensor)
         if decoder is None:
@@ -95,7 +95,7 @@ def accuracy(args: argparse.Namespace, out: dict[str, Any]) -> None:
     print(f"\nDepth accuracy through the lensless path ({profile.name}: "
           f"{profile.sensor.rows}x{profile.sensor.cols} sensor, {profile.scene.rows}x"
           f"{profile.scene.cols} scene at {profile.scene.pixel_pitch_um / 1000:.3f} mm; decoder "
-          f"{decoder_name} from a {decoder_note}; LUT from "
+          f"{decoder_name} ({decoder_note}); LUT from "
           f"{args.calibration_presses} 3 mm ball presses through the same path, {calib_s:.1f} s; "
           f"{args.presses} random presses per row)")
     print(f"{'indenter':16s} {'depth':>6s} {'RMS sensor':>11s} {'RMS scene':>10s} "
@@ -237,7 +237,7 @@ def latency(args: argparse.Namespace, out: dict[str, Any]) -> None:
     fps = _streamed_fps(profile, raws, sensor, args.latency_frames)
     print(f"\nLatency raw Bayer {2 * profile.sensor.rows}x{2 * profile.sensor.cols} → tactile "
           f"frame on {profile.name} ({profile.scene.rows}x{profile.scene.cols} scene; decoder "
-          f"{type(decoder).__name__} from {how}, set up in {setup_decoder_s:.1f} s; tactile "
+          f"{type(decoder).__name__} ({how}), set up in {setup_decoder_s:.1f} s; tactile "
           f"work grid {sensor.interpreter.work.rows}x{sensor.interpreter.work.cols}; "
           f"{args.latency_frames} frames)")
     print(f"median {med['total']:.1f} ms (bin {med['bin']:.1f}, decode {med['decode']:.1f}, "

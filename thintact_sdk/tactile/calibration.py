@@ -205,9 +205,8 @@ def calibrate_from_presses(
             gx, gy, inside = ball_slopes(
                 img.shape[:2], center, radius_px, ball_radius_mm / params.mm_per_px
             )
-            _, outer_r = center, 1.6 * radius_px
             rr, cc = np.mgrid[0 : img.shape[0], 0 : img.shape[1]]
-            far = (rr - center[0]) ** 2 + (cc - center[1]) ** 2 > outer_r**2
+            far = (rr - center[0]) ** 2 + (cc - center[1]) ** 2 > (1.6 * radius_px) ** 2
             flat = far & (rng.random(far.shape) < 0.1)
             valid = (inside | flat) & ~det.mask
         else:
