@@ -108,12 +108,21 @@ def run_case(profile: Profile, case: Case, methods: list[tuple[str, str]], work:
     return rows
 
 
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    """The benchmark's options (shared by ``thintact bench calibration`` and ``python -m``)."""
+    p.add_argument("--profile", default="virtual-mini")
+    p.add_argument("--cases", nargs="*", help="case names (default all: " + ", ".join(c.name for c in CASES).replace("%", "%%") + ")")
+    p.add_argument("--json", metavar="FILE", help="also write the rows as JSON")
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m thintact_sdk.calibration.benchmark", description=__doc__)
-    p.add_argument("--profile", default="virtual-mini")
-    p.add_argument("--cases", nargs="*", help="case names (default all)")
-    p.add_argument("--json", metavar="FILE", help="also write the rows as JSON")
-    args = p.parse_args(argv)
+    add_arguments(p)
+    return run(p.parse_args(argv))
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run the cases of ``args`` and print one row per case and method."""
     from thintact_sdk.machine import machine_summary
 
     profile = load_profile(args.profile)
