@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import pkgutil
 import sys
 from collections.abc import Sequence
@@ -62,9 +63,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ThinTactError as err:
         print(f"thintact: error: {err}", file=sys.stderr)
         return EXIT_USAGE
+    except OSError as err:  # a file or device the user named cannot be used
+        print(f"thintact: error: {err.strerror or err}: {err.filename or ''}".rstrip(": "), file=sys.stderr)
+        return EXIT_USAGE
     except KeyboardInterrupt:
         print("thintact: interrupted", file=sys.stderr)
         return 130
+    except Exception as err:  # noqa: BLE001 - a bug: say so in one line, traceback on request
+        if os.environ.get("THINTACT_DEBUG"):
+            raise
+        print(f"thintact: internal error: {type(err).__name__}: {err} "
+              "(set THINTACT_DEBUG=1 for the traceback and please report it)", file=sys.stderr)
+        return 1
     return int(rc or 0)
 
 
