@@ -183,8 +183,8 @@ def test_ball_model_calibration_without_simulator_slopes(profile, sim):
     inside = test.depth_mm > 0.2
     err = np.hypot(gx - test.grad_x, gy - test.grad_y)[inside]
     scale = np.hypot(test.grad_x, test.grad_y)[inside]
-    # the ideal-cap model ignores elastomer smoothing: about 0.64 of the slope scale remains
-    assert float(np.sqrt(np.mean(err**2))) < 0.75 * float(np.sqrt(np.mean(scale**2)))
+    # smoothed-cap fit + one refinement round: about 0.22 of the slope scale remains
+    assert float(np.sqrt(np.mean(err**2))) < 0.35 * float(np.sqrt(np.mean(scale**2)))
 
 
 def test_lut_round_trip(tmp_path: Path, lut):

@@ -3,8 +3,10 @@
 Two sources of ground-truth slopes:
 
 * a ball of known radius pressed where the image says (real sensors, recordings): the
-  contact circle is found in the colour change, and inside it the surface is the ball's
-  cap, ∂d/∂x = −x/√(R² − r²) (x, r from the circle centre);
+  press centre is found in the colour change, the press depth by fitting the slope
+  magnitude of the ball's cap smoothed by the elastomer (``tactile.elastomer_sigma_mm``)
+  to the colour-change magnitude, then refined once through the LUT (integrate its slopes
+  to depth, refit the depth, recalibrate);
 * the tactile simulator's own slopes (virtual sensors): the press is commanded, so the
   ground truth is known exactly, elastomer smoothing included.
 """
@@ -16,6 +18,7 @@ from typing import Any
 
 import cv2
 import numpy as np
+from scipy.ndimage import gaussian_filter
 
 from thintact_sdk.errors import CalibrationError
 from thintact_sdk.profile import Profile
@@ -24,6 +27,7 @@ from thintact_sdk.tactile.indenters import Sphere
 from thintact_sdk.tactile.interpreter import colour_change, fill_masked
 from thintact_sdk.tactile.markers import detect_markers
 from thintact_sdk.tactile.photometric import PhotometricLUT, calibrate_lut
+from thintact_sdk.tactile.poisson import integrate_gradients
 from thintact_sdk.tactile.simulate import TactileScene, TactileSimulator
 
 CALIBRATION_BALL_RADIUS_MM = 1.5
@@ -167,6 +171,7 @@ def calibrate_from_presses(
     meta: dict[str, Any] | None = None,
     max_work_mm: float = 0.13,
     smooth_px: float = 1.0,
+    refine_rounds: int = 1,
 ) -> PhotometricLUT:
     """Calibrate a LUT from ball presses against a no-contact reference image.
 
@@ -186,6 +191,11 @@ def calibrate_from_presses(
         Extra provenance stored with the LUT.
     max_work_mm, smooth_px
         Work on the grid binned and smoothed as the interpreter does (same defaults).
+    refine_rounds
+        Ball-model presses only: rounds of self-consistent refinement. Each round integrates
+        the current LUT's slopes to depth, fits the press depth of a ball cap smoothed by the
+        elastomer (``tactile.elastomer_sigma_mm``) to it, and recalibrates with that model's
+        slopes over the whole image (the ideal cap ignores the smoothing and the rim).
     """
     full = TactileParams.from_profile(profile)
     factor = working_factor(full, max_work_mm)
@@ -194,7 +204,11 @@ def calibrate_from_presses(
     reference = bin_image(reference, factor)
     ref_det = detect_markers(reference, params)
     background = fill_masked(reference, ref_det.mask, sigma)
-    feats, gxs, gys, valids = [], [], [], []
+    feats: list[np.ndarray] = []
+    gxs: list[np.ndarray] = []
+    gys: list[np.ndarray] = []
+    valids: list[np.ndarray] = []
+    ball: list[tuple[int, tuple[float, float], np.ndarray]] = []
     rng = np.random.default_rng(0)
     for press in presses:
         img = bin_image(press.image, factor)
@@ -202,13 +216,16 @@ def calibrate_from_presses(
         change = colour_change(img, background, det.mask, sigma, smooth_px)
         if press.grad_x is None or press.grad_y is None:
             center, radius_px = find_press_circle(change, det.mask)
-            gx, gy, inside = ball_slopes(
-                img.shape[:2], center, radius_px, ball_radius_mm / params.mm_per_px
-            )
+            model = fit_ball_to_change(change, center, ball_radius_mm, params, smooth_px)
+            gy, gx = np.gradient(model, params.mm_per_px)
+            if smooth_px > 0:
+                gx = cv2.GaussianBlur(gx.astype(np.float32), (0, 0), smooth_px)
+                gy = cv2.GaussianBlur(gy.astype(np.float32), (0, 0), smooth_px)
             rr, cc = np.mgrid[0 : img.shape[0], 0 : img.shape[1]]
             far = (rr - center[0]) ** 2 + (cc - center[1]) ** 2 > (1.6 * radius_px) ** 2
             flat = far & (rng.random(far.shape) < 0.1)
-            valid = (inside | flat) & ~det.mask
+            valid = ~det.mask & (~far | flat)
+            ball.append((len(feats), center, valid))
         else:
             gx, gy = bin_image(press.grad_x, factor), bin_image(press.grad_y, factor)
             if smooth_px > 0:  # the slopes the smoothed colours stand for
@@ -229,7 +246,95 @@ def calibrate_from_presses(
         "work_mm_per_px": params.mm_per_px,
     }
     info.update(meta or {})
-    return calibrate_lut(feats, gxs, gys, valids, bins=bins, meta=info)
+    lut = calibrate_lut(feats, gxs, gys, valids, bins=bins, meta=info)
+    for _ in range(refine_rounds if ball else 0):
+        for k, center, trusted in ball:
+            gx, gy = lut.lookup(feats[k])
+            depth = integrate_gradients(gx, gy, params.mm_per_px)
+            model = fit_smoothed_ball(depth, center, ball_radius_mm, params)
+            my, mx = np.gradient(model, params.mm_per_px)
+            if smooth_px > 0:
+                mx = cv2.GaussianBlur(mx.astype(np.float32), (0, 0), smooth_px)
+                my = cv2.GaussianBlur(my.astype(np.float32), (0, 0), smooth_px)
+            gxs[k], gys[k], valids[k] = mx, my, trusted
+        lut = calibrate_lut(feats, gxs, gys, valids, bins=bins, meta=info)
+        lut.meta["refine_rounds"] = refine_rounds
+    return lut
+
+
+def smoothed_ball_depth(
+    shape: tuple[int, int], center_rc: tuple[float, float], press_mm: float,
+    ball_radius_mm: float, params: TactileParams,
+) -> np.ndarray:
+    """Depth (mm, ``N × M``) of a ball pressed ``press_mm`` at ``center_rc`` (px), smoothed by
+    the elastomer Gaussian (``params.elastomer_sigma_mm``), as the tactile simulator does."""
+    rr, cc = np.mgrid[0 : shape[0], 0 : shape[1]].astype(np.float64)
+    r2 = ((rr - center_rc[0]) ** 2 + (cc - center_rc[1]) ** 2) * params.mm_per_px**2
+    cap = np.sqrt(np.clip(ball_radius_mm**2 - r2, 0.0, None)) - (ball_radius_mm - press_mm)
+    rigid = np.clip(cap, 0.0, None)
+    sigma_px = params.elastomer_sigma_mm / params.mm_per_px
+    return gaussian_filter(rigid, sigma_px, mode="constant") if sigma_px > 0 else rigid
+
+
+def _press_depths(ball_radius_mm: float) -> np.ndarray:
+    return np.arange(0.05, min(1.5, 0.95 * ball_radius_mm) + 1e-9, 0.025)
+
+
+def fit_ball_to_change(
+    change: np.ndarray, center_rc: tuple[float, float], ball_radius_mm: float,
+    params: TactileParams, smooth_px: float = 1.0,
+) -> np.ndarray:
+    """First estimate of a ball press from the image alone: the smoothed ball cap whose
+    slope magnitude, times a free scale, best matches the colour-change magnitude (for
+    moderate slopes the colour change grows about linearly with the slope).
+
+    Returns
+    -------
+    numpy.ndarray
+        ``N × M`` model depth in mm.
+    """
+    mag = np.linalg.norm(change, axis=2)
+    rr, cc = np.mgrid[0 : mag.shape[0], 0 : mag.shape[1]]
+    dist_mm = np.hypot(rr - center_rc[0], cc - center_rc[1]) * params.mm_per_px
+    best: tuple[float, np.ndarray] | None = None
+    for press in _press_depths(ball_radius_mm):
+        model = smoothed_ball_depth(mag.shape, center_rc, float(press), ball_radius_mm, params)
+        gy, gx = np.gradient(model, params.mm_per_px)
+        slope = np.hypot(gx, gy).astype(np.float32)
+        if smooth_px > 0:
+            slope = cv2.GaussianBlur(slope, (0, 0), smooth_px)
+        a = np.sqrt(max(2 * ball_radius_mm * press - press**2, 1e-6))
+        w = dist_mm < 2.0 * a + 3 * params.elastomer_sigma_mm
+        ss = float((slope[w] ** 2).sum())
+        if ss <= 0:
+            continue
+        k = float((slope[w] * mag[w]).sum()) / ss
+        err = float(((mag[w] - k * slope[w]) ** 2).sum()) / max(int(w.sum()), 1)
+        if best is None or err < best[0]:
+            best = (err, model)
+    if best is None:
+        raise CalibrationError("cannot fit the ball press: press the ball deeper")
+    return best[1]
+
+
+def fit_smoothed_ball(
+    depth_mm: np.ndarray, center_rc: tuple[float, float], ball_radius_mm: float,
+    params: TactileParams,
+) -> np.ndarray:
+    """The smoothed ball-cap depth map whose press depth best fits ``depth_mm`` (least squares
+    within 2.5 contact radii of the centre; press depths 0.05-1.5 mm in 0.025 mm steps)."""
+    best: tuple[float, np.ndarray] | None = None
+    rr, cc = np.mgrid[0 : depth_mm.shape[0], 0 : depth_mm.shape[1]]
+    dist_mm = np.hypot(rr - center_rc[0], cc - center_rc[1]) * params.mm_per_px
+    for press in _press_depths(ball_radius_mm):
+        model = smoothed_ball_depth(depth_mm.shape, center_rc, float(press), ball_radius_mm, params)
+        a = np.sqrt(max(2 * ball_radius_mm * press - press**2, 1e-6))
+        window = dist_mm < 2.5 * a + 2 * params.elastomer_sigma_mm
+        err = float(np.mean((model[window] - depth_mm[window]) ** 2))
+        if best is None or err < best[0]:
+            best = (err, model)
+    assert best is not None
+    return best[1]
 
 
 def scene_level_lut(profile: Profile, presses: int = 12, seed: int = 0) -> PhotometricLUT:
