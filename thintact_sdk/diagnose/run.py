@@ -250,7 +250,7 @@ def _diagnose(
         else:
             ev_r = _evaluate_full(model, accepted)
             view = _view(model, data, ev_r.pred_dn, accepted)
-        findings.append(_finding(rnd, fit_model, sub, prof, view))
+        findings.append(_finding(rnd, fit_model, sub, prof, view, ev1.beta))
         history.append((f"+ {rnd.name}", view.stats.rms_dn, view.stats.chi2_per_dof))
         phys[rnd.name] = profile_params(rnd.name, findings[-1]["params"])
     fitted = prof.with_physics(phys)
@@ -293,10 +293,17 @@ def subset_frames(data: DiagnosisData, n: int) -> DiagnosisData:
 
 
 def _finding(
-    rnd: Round, model: DiagnosisModel, data: DiagnosisData, prof: Profile, view: ModelView
+    rnd: Round,
+    model: DiagnosisModel,
+    data: DiagnosisData,
+    prof: Profile,
+    view: ModelView,
+    final_beta: np.ndarray,
 ) -> dict[str, Any]:
-    """One ``findings`` entry; ``view`` is the whole recording with effects up to ``rnd``."""
-    params = contract_params(rnd.name, rnd.vector, model, rnd.evaluation.beta)
+    """One ``findings`` entry; ``view`` is the whole recording with effects up to ``rnd``;
+    closed-form terms (stray light) are reported from the final fit (``final_beta``), where
+    every accepted effect is in the model."""
+    params = contract_params(rnd.name, rnd.vector, model, final_beta)
     ev_txt = (
         f"{describe_effect(rnd.name, params, prof)} Adding it lowers χ² by {rnd.dchi2:.0f} "
         f"(with a {model.sys_frac:.1%} systematic allowance), above the {rnd.threshold:.0f} that "

@@ -275,7 +275,7 @@ def _refine(
 
     vals = dict(values)
     vals[cand.name] = cur
-    iters = 2 * n_iter if cand.channelwise and not jointly else n_iter
+    iters = n_iter + 2 if cand.channelwise and not jointly else n_iter
     vals, ev = _levenberg_marquardt(model, (cand.name, *jointly), vals, ev, iters, late)
     cur = vals[cand.name]
 
@@ -495,6 +495,8 @@ def select_effects(
         for name in list(remaining):
             if name in PROXIED:
                 continue
+            if deadline is not None and time.perf_counter() > deadline:
+                break
             try:
                 res = score_candidate(model, vals, ev, CANDIDATES[name])
             except SIMULATION_ERRORS as err:
@@ -508,6 +510,8 @@ def select_effects(
         for res in scores:
             if res.score_dchi2 - res.k * ln_n < 0.5 * margin and fitted:
                 continue
+            if fitted and deadline is not None and time.perf_counter() > deadline:
+                break
             try:
                 fit_candidate(model, vals, ev, res, deadline=deadline, refine=False)
             except SIMULATION_ERRORS as err:
@@ -520,8 +524,13 @@ def select_effects(
         for res in fitted[:n_fit]:
             if (res.dchi2 or 0.0) - res.k * ln_n < 0.5 * margin:
                 continue
+            # one fit may use at most 40 % of the time left, so later rounds still happen
+            fit_deadline = None
+            if deadline is not None:
+                now = time.perf_counter()
+                fit_deadline = now + 0.4 * max(deadline - now, 0.0)
             try:
-                fit_candidate(model, vals, ev, res, deadline=deadline, jointly=accepted_names)
+                fit_candidate(model, vals, ev, res, deadline=fit_deadline, jointly=accepted_names)
             except SIMULATION_ERRORS as err:
                 log.append(f"{res.name} left out: fitting it failed in the simulator ({err})")
                 remaining.remove(res.name)
