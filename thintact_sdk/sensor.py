@@ -211,6 +211,11 @@ class Sensor:
             self._decoder = self.registry.create("decoder", cfg.plugin, self.profile, cfg.settings)
         return self._decoder
 
+    @decoder.setter
+    def decoder(self, decoder: Decoder) -> None:
+        """Use another decoder from now on (e.g. one built for a benchmark)."""
+        self._decoder = decoder
+
     @property
     def lut(self) -> PhotometricLUT:
         """The photometric-stereo LUT in use (loaded or built on first use)."""
@@ -218,6 +223,13 @@ class Sensor:
             cam = self.profile.camera.plugin if self.profile.camera is not None else None
             self._lut = lut_for_profile(self.profile, allow_simulated=cam in VIRTUAL_CAMERAS)
         return self._lut
+
+    @lut.setter
+    def lut(self, lut: PhotometricLUT) -> None:
+        """Use another LUT from now on (e.g. one just calibrated); keeps the reference."""
+        self._lut = lut
+        if self._interpreter is not None:
+            self._interpreter.lut = lut
 
     @property
     def interpreter(self) -> TactileInterpreter:

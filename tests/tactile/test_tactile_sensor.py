@@ -145,3 +145,15 @@ def test_same_api_on_a_replayed_recording(tmp_path, profile, lut):
     with Sensor(replay, registry=reg, lut=lut) as s, pytest.raises(EndOfStreamError):
         for _ in s.stream(timeout_s=5.0):
             pass
+
+
+def test_lut_and_decoder_can_be_swapped(profile, registry, lut):
+    from tac_fakes import BlockDecoder
+
+    with Sensor(profile, registry=registry, lut=lut) as s:
+        s.read()
+        other = scene_level_lut(profile, presses=4, seed=1)
+        s.lut = other
+        assert s.interpreter.lut is other
+        s.decoder = BlockDecoder()
+        assert s.read().image.shape == (100, 128, 3)

@@ -24,8 +24,8 @@ def test_press_through_the_lensless_path():
         except CalibrationError:
             from thintact_sdk.benchmarks.tactile import _simulator_decoder
 
-            finger._decoder, _ = _simulator_decoder(finger, slot, "t2s-closed-form")
-        finger._lut = calibrate_virtual(finger, presses=8)
+            finger.decoder, _ = _simulator_decoder(finger, slot, "t2s-closed-form")
+        finger.lut = calibrate_virtual(finger, presses=8)
         sim = TactileSimulator.for_profile(finger.profile)
         set_reference(finger, slot.set, sim)
         flat = finger.read()

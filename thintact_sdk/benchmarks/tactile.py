@@ -75,12 +75,12 @@ def accuracy(args: argparse.Namespace, out: dict[str, Any]) -> None:
         slot = scene_slot(sensor)
         if decoder is None:
             decoder_name = args.decoder or "t2s-closed-form"
-            sensor._decoder, tau = _simulator_decoder(sensor, slot, decoder_name)
+            sensor.decoder, tau = _simulator_decoder(sensor, slot, decoder_name)
             decoder_note += f"in-memory two-term fit of the simulator, tau {tau:g} chosen on " \
                             "4 calibration-ball presses"
         task = bar.add_task("LUT calibration", total=args.calibration_presses)
         t0 = time.perf_counter()
-        sensor._lut = calibrate_virtual(
+        sensor.lut = calibrate_virtual(
             sensor, args.calibration_presses, seed=args.seed,
             progress=lambda i, n: bar.update(task, completed=i, total=n),
         )
