@@ -169,8 +169,10 @@ def make_case(name: str, out_dir: Path, seed: int = 0) -> Path:
     if rec_dir.exists():
         shutil.rmtree(rec_dir)  # a fresh recording, never appended to an old one
     writer = RecordingWriter(rec_dir, prof)
+    # a saturating pixel clips its final value (after the noise), like a real ADC
+    level = spec["physics"].get("saturation", {}).get("level_dn")
     for i, (lab, sc) in enumerate(zip(labels, scenes, strict=True)):
-        dn = signal_to_dn(signal[i], prof.noise, rng)
+        dn = signal_to_dn(signal[i], prof.noise, rng, saturation_dn=level)
         writer.add(np.round(dn).astype(np.uint16), scene=sc, label=lab)
     truth = {
         "case": name,

@@ -164,18 +164,35 @@ def score_candidate(
 def _score_saturation(
     model: DiagnosisModel, values: Values, ev0: Evaluation, cand: Candidate
 ) -> CandidateResult:
-    """A clip below the declared saturation shows as a pile-up of equal values at the top."""
+    """A clip below the declared saturation: try the top of the measured histogram (a
+    pile-up of equal values when the clip acts after the noise) and high quantiles (when
+    it acts before), keep the best and refine it by a parabola. No simulation needed."""
     m = model.data.measured_dn[model.fit_mask]
-    top = float(m.max()) if m.size else 0.0
-    pile = int(np.sum(m >= top - 0.5))
     null = cand.null(model.profile)
-    if pile < max(20, int(2e-4 * m.size)) or top >= null[0] - 0.5:
+    if m.size == 0:
         return CandidateResult(cand.name, 1, 0.0, null)
-    trial = dict(values)
-    trial[cand.name] = np.array([top])
-    ev = model.evaluate(trial)
-    d = ev0.chi2 - ev.chi2
-    return CandidateResult(cand.name, 1, d, np.array([top]), d, np.array([top]), ev, refined=True)
+    top = float(m.max())
+    levels = {top, *(float(np.quantile(m, q)) for q in (0.9999, 0.999, 0.997, 0.99))}
+    levels = {lv for lv in levels if lv < null[0] - 0.5 and lv > model.black + 1.0}
+    best_d, best_v, best_ev = 0.0, null, None
+
+    def ev_at(v: np.ndarray) -> Evaluation:
+        trial = dict(values)
+        trial[cand.name] = v
+        return model.evaluate(trial)
+
+    for lv in sorted(levels):
+        e = ev_at(np.array([lv]))
+        if ev0.chi2 - e.chi2 > best_d:
+            best_d, best_v, best_ev = ev0.chi2 - e.chi2, np.array([lv]), e
+    if best_ev is None:
+        return CandidateResult(cand.name, 1, 0.0, null)
+    if best_v[0] == top and int(np.sum(m >= top - 0.5)) >= 20:
+        # a pile-up of equal values: the clip level is read off directly
+        return CandidateResult(cand.name, 1, best_d, best_v, best_d, best_v, best_ev, refined=True)
+    v, e = _parabola(cand, ev_at, best_v, best_ev, 0, model, h=max(2.0, 0.002 * float(best_v[0])))
+    d = ev0.chi2 - e.chi2
+    return CandidateResult(cand.name, 1, d, v, d, v, e, refined=True)
 
 
 def fit_candidate(
