@@ -120,9 +120,14 @@ def ball_slopes(
 
 
 def find_press_circle(
-    change: np.ndarray, marker_mask: np.ndarray | None = None, threshold: float | None = None
+    change: np.ndarray, marker_mask: np.ndarray | None = None, blur_px: float = 3.0
 ) -> tuple[tuple[float, float], float]:
     """Locate a ball press in a colour-change image.
+
+    The colour-change magnitude is blurred (a press is a bright ring or disc, background
+    clutter is thinner or weaker), its maximum seeds the press, and the region above half
+    that maximum connected to it, holes filled, gives the centre (magnitude-weighted
+    centroid) and the radius (of the circle with its area).
 
     Parameters
     ----------
@@ -130,36 +135,37 @@ def find_press_circle(
         ``N × M × 3`` colour minus background.
     marker_mask
         Pixels to ignore (markers).
-    threshold
-        Colour-change magnitude that counts as contact; default: 6 × the median magnitude
-        plus 0.02.
+    blur_px
+        Gaussian blur of the magnitude, px.
 
     Returns
     -------
     ((row, col), radius_px)
-        Centre and radius of the circle with the contact blob's area.
 
     Raises
     ------
     CalibrationError
-        When no contact blob is found.
+        When no press stands out.
     """
+    from scipy.ndimage import binary_fill_holes, label
+
     mag = np.linalg.norm(change, axis=2).astype(np.float32)
     if marker_mask is not None:
         mag = fill_masked(mag, marker_mask, 2.0)
-    mag = cv2.GaussianBlur(mag, (0, 0), 1.0)
-    if threshold is None:
-        threshold = 6.0 * float(np.median(mag)) + 0.02
-    blob = (mag > threshold).astype(np.uint8)
-    blob = cv2.morphologyEx(blob, cv2.MORPH_CLOSE, np.ones((5, 5), np.uint8))
-    n, labels, stats, cent = cv2.connectedComponentsWithStats(blob)
-    if n < 2:
+    blurred = cv2.GaussianBlur(mag, (0, 0), blur_px)
+    peak = float(blurred.max())
+    if peak <= 3.0 * float(np.median(blurred)) or peak < 1e-3:
         raise CalibrationError("no press found in the frame: press the ball into the membrane")
-    i = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
-    area = float(stats[i, cv2.CC_STAT_AREA])
+    labels, _ = label(blurred > 0.5 * peak)
+    seed = np.unravel_index(int(np.argmax(blurred)), blurred.shape)
+    region = binary_fill_holes(labels == labels[seed])
+    area = float(region.sum())
     if area < 20:
         raise CalibrationError(f"press too small ({area:.0f} px): press the ball deeper")
-    return (float(cent[i][1]), float(cent[i][0])), float(np.sqrt(area / np.pi))
+    rr, cc = np.nonzero(region)
+    w = blurred[rr, cc]
+    centre = (float((w * rr).sum() / w.sum()), float((w * cc).sum() / w.sum()))
+    return centre, float(np.sqrt(area / np.pi))
 
 
 def calibrate_from_presses(

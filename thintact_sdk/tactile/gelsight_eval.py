@@ -119,3 +119,49 @@ def evaluate_gelsight(
         depth_peak_mm=float(np.mean(peaks)),
         lut=lut,
     )
+
+
+def evaluate_gelsight_image_only(
+    path: str | Path, train: list[int] | None = None, bins: int = 24,
+    elastomer_sigma_mm: float = 0.25,
+) -> tuple[float, float]:
+    """The device-calibration path on real data: a LUT from the ``train`` presses using only
+    the images and the ball radius (no annotations: press found in the image, smoothed-cap
+    fit, one refinement; :func:`thintact_sdk.tactile.calibration.calibrate_from_presses`),
+    tested against the annotated-cap slopes of the other presses.
+
+    Returns
+    -------
+    (grad_rms, grad_rms_zero)
+        Slope RMS error inside 0.9 of the test circles, and that of "always flat".
+    """
+    from thintact_sdk.profile import SceneSpec, TactileConfig, load_profile
+    from thintact_sdk.tactile.calibration import BallPress, calibrate_from_presses
+    from thintact_sdk.tactile.interpreter import colour_change
+
+    pack = load_pack(path)
+    n = len(pack["imgs"])
+    train = list(range(0, n, 2)) if train is None else list(train)
+    test = [i for i in range(n) if i not in set(train)]
+    rows, cols = pack["f0"].shape[:2]
+    profile = load_profile("virtual-finger").model_copy(
+        update={
+            "name": "taxim-gelsight",
+            "scene": SceneSpec(rows=rows, cols=cols, pixel_pitch_um=GELSIGHT_MM_PER_PX * 1000),
+            "tactile": TactileConfig.model_validate(
+                {"mm_per_px": GELSIGHT_MM_PER_PX, "elastomer_sigma_mm": elastomer_sigma_mm}),
+        },
+        deep=True,
+    )
+    f0 = pack["f0"].astype(np.float32) / 255.0
+    presses = [BallPress(pack["imgs"][i].astype(np.float32) / 255.0) for i in train]
+    lut = calibrate_from_presses(profile, f0, presses, GELSIGHT_BALL_RADIUS_MM, bins)
+    err, zero = [], []
+    for i in test:
+        img = pack["imgs"][i].astype(np.float32) / 255.0
+        gx, gy = lut.lookup(colour_change(img, f0, None, 1.0, 1.0))
+        tx, ty, inside = _slopes(pack, i, 0.9)
+        err.append(np.hypot(gx - tx, gy - ty)[inside])
+        zero.append(np.hypot(tx, ty)[inside])
+    return (float(np.sqrt(np.mean(np.concatenate(err) ** 2))),
+            float(np.sqrt(np.mean(np.concatenate(zero) ** 2))))
