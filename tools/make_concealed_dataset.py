@@ -60,9 +60,9 @@ CASES: dict[str, dict[str, Any]] = {
     "stray_light": {"physics": {"stray_light": {"mean_dn": [40.0, 30.0, 20.0]}}},
     # below the per-pixel noise: only the aggregate over all pixels and frames reveals them
     "subnoise_leakage": {"physics": {"mask_leakage": {"transmittance": 0.006}}, "subnoise": True},
-    "subnoise_sensor_blur": {"physics": {"sensor_blur": {"sigma_um": 3.0}}, "subnoise": True},
+    "subnoise_sensor_blur": {"physics": {"sensor_blur": {"sigma_um": 5.0}}, "subnoise": True},
     "subnoise_stray_light": {"physics": {"stray_light": {"mean_dn": [8.0, 6.0, 5.0]}}, "subnoise": True},
-    "subnoise_glare": {"physics": {"veiling_glare": {"fraction": 0.006}}, "subnoise": True},
+    "subnoise_glare": {"physics": {"veiling_glare": {"fraction": 0.01}}, "subnoise": True},
     # pairs
     "pair_diffraction_shift": {
         "physics": {

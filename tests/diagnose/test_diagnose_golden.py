@@ -16,7 +16,7 @@ from thintact_sdk.profile import read_profile_file
 from thintact_sdk.recording import RecordingWriter
 
 
-@pytest.mark.parametrize("device", ["mini"])
+@pytest.mark.parametrize("device", ["mini", pytest.param("wide", marks=pytest.mark.slow)])
 def test_independent_clean_baseline_reports_nothing(golden_dir: Path, tmp_path: Path, device: str) -> None:
     gdir = golden_dir / device
     prof = read_profile_file(gdir / "profile.json").with_physics({})

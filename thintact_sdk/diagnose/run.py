@@ -63,7 +63,7 @@ class DiagnoseOptions:
 
     sys_frac: float = 1e-3
     margin: float = 25.0
-    amp_floor: float = 2e-3
+    amp_floor: float = 6e-4
     max_effects: int = 4
     time_budget_s: float = 85.0
     candidates: list[str] | None = None

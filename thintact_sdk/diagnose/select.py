@@ -465,7 +465,7 @@ def select_effects(
     max_effects: int = 4,
     n_fit: int = 2,
     margin: float = 25.0,
-    amp_floor: float = 2e-3,
+    amp_floor: float = 6e-4,
     alt_tol: float | None = None,
     deadline: float | None = None,
     progress: Callable[[str], None] | None = None,
