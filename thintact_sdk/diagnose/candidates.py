@@ -240,7 +240,6 @@ def _build() -> dict[str, Candidate]:
                   _const(*([0.0] * n_stray)), _const(*([5.0] * n_stray)), _const(*([-inf] * n_stray)),
                   _const(*([inf] * n_stray)), _stray_to, _stray_from, signed=(True,) * n_stray)
     )
-    _ = inf
     return {c.name: c for c in cands}
 
 
