@@ -66,6 +66,10 @@ def accuracy(args: argparse.Namespace, out: dict[str, Any]) -> None:
     decoder_name = args.decoder or (profile.decoder.plugin if profile.decoder else "?")
     dec_settings = dict(profile.decoder.settings) if profile.decoder is not None else {}
     decoder_note = "calibration bundle"
+    if "tau" in dec_settings:
+        # τ is in DN² of the bundle's matrices; a profile value written in other units (the
+        # shipped virtual profiles say 0.001) would override the bundle's calibrated τ
+        decoder_note += f"; the profile's decoder.settings.tau {dec_settings.pop('tau')} ignored"
     try:
         decoder = get_registry().create("decoder", decoder_name, profile, dec_settings)
     except CalibrationError as err:
