@@ -542,8 +542,9 @@ def select_effects(
             if (res.dchi2 or 0.0) - res.k * ln_n < 0.5 * margin:
                 continue
             # one fit may use at most 40 % of the time left, so later rounds still happen
-            fit_deadline = None
-            if deadline is not None:
+            # (a fit on the simulator's slow path needs every second it can get)
+            fit_deadline = deadline
+            if deadline is not None and not CANDIDATES[res.name].slow_params:
                 now = time.perf_counter()
                 fit_deadline = now + 0.4 * max(deadline - now, 0.0)
             try:
