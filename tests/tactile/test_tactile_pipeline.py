@@ -212,6 +212,7 @@ def test_fine_grids_are_processed_binned_and_returned_full(profile):
 
     fine = profile.model_copy(
         update={
+            "name": "tac-fine-grid",
             "scene": SceneSpec(rows=200, cols=256, pixel_pitch_um=63.0),
             "tactile": TactileConfig(mm_per_px=0.063),
         },
@@ -225,3 +226,16 @@ def test_fine_grids_are_processed_binned_and_returned_full(profile):
     frame = interp.interpret(s.scene)
     assert frame.depth_mm.shape == (200, 256)
     assert _depth_rms(frame.depth_mm, s.depth_mm) < 0.06
+
+
+def test_a_stored_lut_for_another_grid_is_refused(tmp_path, monkeypatch, profile, lut):
+    from thintact_sdk.profile import SceneSpec, TactileConfig
+    from thintact_sdk.tactile import load_device_lut, save_device_lut
+
+    monkeypatch.setenv("THINTACT_CALIBRATION_PATH", str(tmp_path))
+    save_device_lut(lut, profile)
+    assert load_device_lut(profile) is not None
+    coarse = profile.model_copy(update={"scene": SceneSpec(rows=50, cols=64, pixel_pitch_um=252.0),
+                                        "tactile": TactileConfig(mm_per_px=0.252)}, deep=True)
+    with pytest.raises(CalibrationError, match="calibrate-tactile"):
+        load_device_lut(coarse)

@@ -69,7 +69,21 @@ def load_device_lut(profile: Profile, root: Path | None = None) -> PhotometricLU
                 f"{profile.resolve_path(profile.tactile.lut)} does not exist"
             )
         return None
-    return PhotometricLUT.load(p)
+    lut = PhotometricLUT.load(p)
+    from thintact_sdk.tactile.grid import TactileParams, binned_params, working_factor
+
+    params = TactileParams.from_profile(profile)
+    work_mm = binned_params(params, working_factor(params)).mm_per_px
+    stored = lut.meta.get("work_mm_per_px")
+    if stored is not None and abs(float(stored) - work_mm) > 0.01 * work_mm:
+        from thintact_sdk.errors import CalibrationError
+
+        raise CalibrationError(
+            f"tactile LUT {p} was calibrated on {float(stored):.4f} mm pixels but profile "
+            f"{profile.name!r} works on {work_mm:.4f} mm pixels; run `thintact "
+            f"calibrate-tactile --profile {profile.name}` again"
+        )
+    return lut
 
 
 def lut_for_profile(profile: Profile, allow_simulated: bool | None = None) -> PhotometricLUT:
