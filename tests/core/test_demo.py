@@ -1,0 +1,30 @@
+"""The README's main job: ``thintact demo`` on the built-in virtual sensor."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from thintact_sdk.cli.main import main
+
+
+@pytest.mark.timeout(300)
+def test_demo_runs_end_to_end_and_is_accurate(tmp_path: Path) -> None:
+    assert main(["demo", "--out", str(tmp_path)]) == 0
+    png = tmp_path / "demo.png"
+    assert png.stat().st_size > 50_000
+    summary = json.loads((tmp_path / "demo.json").read_text())
+    assert summary["profile"] == "virtual-finger"
+    assert summary["psnr_db"] > 18.0
+    assert summary["contact"] is True
+    assert summary["depth_rms_error_mm"] < 0.08
+    assert 0.3 < summary["depth_max_mm"]["estimated"] < 1.0
+    assert summary["markers_tracked"] >= 40
+    assert summary["marker_displacement_rms_error_mm"] < 0.1
+
+
+def test_demo_refuses_a_real_camera_profile(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["demo", "--profile", "thintact-paper"]) == 2
+    assert "virtual" in capsys.readouterr().err
