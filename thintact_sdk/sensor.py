@@ -121,6 +121,9 @@ class Sensor:
         Plugin registry (default: the process-wide one).
     read_timeout_s
         How long a read waits for the camera.
+    reference_frames
+        The mean of the first this-many frames (after opening or :meth:`reset_reference`)
+        is the no-contact reference; keep the membrane free meanwhile.
     """
 
     def __init__(
@@ -131,10 +134,12 @@ class Sensor:
         decoder: Decoder | None = None,
         registry: PluginRegistry | None = None,
         read_timeout_s: float = 2.0,
+        reference_frames: int = 4,
     ) -> None:
         self.profile = profile
         self.camera_settings = dict(camera_settings or {})
         self.read_timeout_s = read_timeout_s
+        self.reference_frames = reference_frames
         self._registry = registry
         self._lut = lut
         self._decoder = decoder
@@ -235,11 +240,13 @@ class Sensor:
     def interpreter(self) -> TactileInterpreter:
         """The tactile interpreter (reference frame, marker tracker) of this sensor."""
         if self._interpreter is None:
-            self._interpreter = TactileInterpreter(self.profile, self.lut)
+            self._interpreter = TactileInterpreter(
+                self.profile, self.lut, reference_frames=self.reference_frames
+            )
         return self._interpreter
 
     def reset_reference(self) -> None:
-        """Make the next frame the no-contact reference (background and markers)."""
+        """Make the next ``reference_frames`` frames the no-contact reference."""
         self._interpreter = None
 
     def _camera(self) -> Camera:
@@ -291,7 +298,7 @@ class Sensor:
         return frame
 
     def read(self) -> TactileFrame:
-        """The next tactile frame (the first one read becomes the no-contact reference)."""
+        """The next tactile frame (the first ``reference_frames`` make the reference)."""
         return self.process(self.read_raw())
 
     # -- streaming -------------------------------------------------------------------

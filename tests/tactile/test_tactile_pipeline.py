@@ -239,3 +239,21 @@ def test_a_stored_lut_for_another_grid_is_refused(tmp_path, monkeypatch, profile
                                         "tactile": TactileConfig(mm_per_px=0.252)}, deep=True)
     with pytest.raises(CalibrationError, match="calibrate-tactile"):
         load_device_lut(coarse)
+
+
+def test_reference_is_the_mean_of_the_first_frames(profile, sim, lut):
+    rng = np.random.default_rng(0)
+    flat = sim.flat().scene
+    interp = TactileInterpreter(profile, lut, reference_frames=4)
+    noisy = [flat + rng.normal(0, 0.03, flat.shape).astype(np.float32) for _ in range(4)]
+    for img in noisy:
+        interp.interpret(img)
+    from thintact_sdk.tactile.grid import bin_image
+
+    expected = bin_image(np.mean(noisy, axis=0), interp.factor)
+    membrane = bin_image(flat, interp.factor).min(axis=2) > 0.45  # markers are filled in
+    same = np.abs(interp.background - expected)[membrane].max(axis=1) < 1e-5
+    assert same.mean() > 0.8  # the rest are marker rims, filled in too
+    before = interp.background.copy()
+    interp.interpret(noisy[0])  # accumulation is over: the reference stays
+    np.testing.assert_array_equal(interp.background, before)

@@ -46,11 +46,12 @@ def _clean_slots(tmp_path, monkeypatch):
 def test_read_gives_depth_and_contact(profile, registry, lut):
     press = TactileSimulator.for_profile(profile).press(Sphere(2.0), 0.75, (1.0, 0.5))
     with Sensor(profile, registry=registry, lut=lut) as s:
-        first = s.read()
-        assert isinstance(first, TactileFrame) and not first.contact
+        first = [s.read() for _ in range(s.reference_frames)]  # the reference frames
+        assert isinstance(first[0], TactileFrame) and not any(f.contact for f in first)
+        assert s.interpreter._ref_count == s.reference_frames == 4
         SLOTS["tac-block"] = press.scene
         frame = s.read()
-        assert frame.frame_id == first.frame_id + 1
+        assert frame.frame_id == first[-1].frame_id + 1
         assert frame.contact and frame.latency_ms is not None
         m = press.depth_mm > 0.1
         assert float(np.sqrt(np.mean((frame.depth_mm - press.depth_mm)[m] ** 2))) < 0.06

@@ -107,6 +107,9 @@ class TactileInterpreter:
         returned on the full grid.
     smooth_px
         Gaussian smoothing (working-grid pixels) of the colour change before the LUT.
+    reference_frames
+        Without :meth:`set_reference`, the mean of the first this-many images becomes the
+        reference (reconstruction noise in the reference would bias every frame).
 
     The first image interpreted becomes the reference (no-contact) frame unless
     :meth:`set_reference` is called first.
@@ -120,6 +123,7 @@ class TactileInterpreter:
         min_contact_area_mm2: float = 0.1,
         max_work_mm: float = 0.13,
         smooth_px: float = 1.0,
+        reference_frames: int = 1,
     ) -> None:
         self.params = TactileParams.from_profile(profile)
         self.factor = working_factor(self.params, max_work_mm)
@@ -132,6 +136,9 @@ class TactileInterpreter:
         self._sigma_px = max(0.5, 0.3 * self.work.marker_diameter_mm / self.work.mm_per_px)
         self.background: np.ndarray | None = None
         self.reference_markers_mm = np.zeros((0, 2))
+        self.reference_frames = max(1, int(reference_frames))
+        self._ref_sum: np.ndarray | None = None
+        self._ref_count = 0
 
     @classmethod
     def for_profile(cls, profile: Profile, **options: Any) -> TactileInterpreter:
@@ -146,6 +153,14 @@ class TactileInterpreter:
     def has_reference(self) -> bool:
         return self.background is not None
 
+    def _accumulate_reference(self, image: np.ndarray) -> None:
+        acc = image.astype(np.float64)
+        self._ref_sum = acc if self._ref_sum is None else self._ref_sum + acc
+        self._ref_count += 1
+        total, count = self._ref_sum, self._ref_count
+        self.set_reference((total / count).astype(np.float32))
+        self._ref_sum, self._ref_count = total, count  # set_reference ends accumulation
+
     def set_reference(self, image: np.ndarray) -> None:
         """Use ``image`` (``N × M × 3``, no contact) as background and marker reference."""
         img = bin_image(self._check(image), self.factor)
@@ -153,6 +168,7 @@ class TactileInterpreter:
         self.background = fill_masked(img, det.mask, self._sigma_px)
         self.reference_markers_mm = det.positions_mm
         self.tracker.reset(det.positions_mm)
+        self._ref_sum, self._ref_count = None, self.reference_frames
 
     def _check(self, image: np.ndarray) -> np.ndarray:
         img = np.asarray(image, np.float32)
@@ -195,8 +211,8 @@ class TactileInterpreter:
         """Interpret one reconstructed image (``N × M × 3`` display units)."""
         t0 = time.perf_counter()
         full = self._check(image)
-        if self.background is None:
-            self.set_reference(full)
+        if self.background is None or 0 < self._ref_count < self.reference_frames:
+            self._accumulate_reference(full)
         img = bin_image(full, self.factor)
         det = detect_markers(img, self.work, self.marker_threshold)
         depth = upsample(self._work_depth(img, det.mask), self.factor)
