@@ -121,7 +121,7 @@ def test_dust_speck_flagged_where_it_is(concealed: Any) -> None:
         pytest.param(
             "pair_diffraction_shift",
             marks=pytest.mark.xfail(
-                reason="two slow-to-simulate effects: within the default 85 s budget the joint "
+                reason="two slow-to-simulate effects: within the default 75 s budget the joint "
                 "refit of the wavelengths with the mask shift does not converge (with 240 s: "
                 "shift within 0.1 um, blue wavelength exact, red/green 10 %/3 % low)",
                 strict=False,

@@ -65,7 +65,7 @@ class DiagnoseOptions:
     margin: float = 25.0
     amp_floor: float = 6e-4
     max_effects: int = 4
-    time_budget_s: float = 85.0
+    time_budget_s: float = 75.0
     candidates: list[str] | None = None
     fit_frames: int = 12
     blas_threads: int | None = 1

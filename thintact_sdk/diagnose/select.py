@@ -635,6 +635,8 @@ def _refraction_proxy(
         ev = ev_at(n0)
         model.slow_sim_s = time.perf_counter() - t0
         cur, ev = _parabola(cand, ev_at, n0, ev, 0, model, h=0.02 * float(n0[0]))
+        if deadline is None or deadline - time.perf_counter() > 3.5 * model.slow_sim_s:
+            cur, ev = _parabola(cand, ev_at, cur, ev, 0, model, h=0.004 * float(cur[0]))
     except SIMULATION_ERRORS:
         remaining.remove("refraction")
         return

@@ -15,8 +15,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("recording", metavar="RECORDING", help="thintact-recording/1 directory")
     p.add_argument("--out", required=True, metavar="DIR", help="output directory")
-    p.add_argument("--time-budget", type=float, default=85.0, metavar="S",
-                   help="seconds allowed for naming effects (default 85; the whole run stays under 120 s)")
+    p.add_argument("--time-budget", type=float, default=75.0, metavar="S",
+                   help="seconds allowed for naming effects (default 75; the whole run stays under 120 s)")
     p.add_argument("--sys-frac", type=float, default=1e-3, metavar="F",
                    help="systematic-error allowance, relative (default 0.001)")
     p.add_argument("--max-effects", type=int, default=4, metavar="K",
