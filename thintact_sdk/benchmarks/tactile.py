@@ -37,6 +37,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--marker-presses", type=int, default=6)
     p.add_argument("--latency-frames", type=int, default=20)
     p.add_argument("--decoder", help="decoder plugin (default: each profile's decoder.plugin)")
+    p.add_argument("--tau", type=float,
+                   help="Tikhonov tau (DN²) for the accuracy decoder instead of the bundle's")
     p.add_argument("--skip-latency", action="store_true")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--json", type=Path, help="also write the figures to this JSON file")
@@ -66,9 +68,12 @@ def accuracy(args: argparse.Namespace, out: dict[str, Any]) -> None:
     decoder_name = args.decoder or (profile.decoder.plugin if profile.decoder else "?")
     dec_settings = dict(profile.decoder.settings) if profile.decoder is not None else {}
     decoder_note = "calibration bundle"
-    if "tau" in dec_settings:
-        # τ is in DN² of the bundle's matrices; a profile value written in other units (the
-        # shipped virtual profiles say 0.001) would override the bundle's calibrated τ
+    if args.tau is not None:
+        dec_settings["tau"] = args.tau
+        decoder_note += f", tau {args.tau:g} from --tau"
+    elif "tau" in dec_settings:
+        # τ is in DN² of the bundle's matrices; a profile value written in other units
+        # would override the bundle's calibrated τ
         decoder_note += f"; the profile's decoder.settings.tau {dec_settings.pop('tau')} ignored"
     try:
         decoder = get_registry().create("decoder", decoder_name, profile, dec_settings)
