@@ -123,7 +123,8 @@ class Sensor:
         How long a read waits for the camera.
     reference_frames
         The mean of the first this-many frames (after opening or :meth:`reset_reference`)
-        is the no-contact reference; keep the membrane free meanwhile.
+        is the no-contact reference; keep the membrane free meanwhile. 4 halves the
+        reconstruction noise the reference adds to every depth map.
     """
 
     def __init__(
@@ -134,7 +135,7 @@ class Sensor:
         decoder: Decoder | None = None,
         registry: PluginRegistry | None = None,
         read_timeout_s: float = 2.0,
-        reference_frames: int = 4,
+        reference_frames: int = 1,
     ) -> None:
         self.profile = profile
         self.camera_settings = dict(camera_settings or {})
