@@ -116,7 +116,7 @@ def _best_tau(dec: Any, dev: _Device) -> float:
     from thintact_sdk.imaging.metrics import psnr
 
     best = (-np.inf, dev.unit)
-    for rel in (0.1, 0.3, 1.0, 3.0):
+    for rel in (0.01, 0.03, 0.1, 0.3, 1.0, 3.0):
         dec.set_tau(rel * dev.unit)
         value = np.mean([psnr(np.clip(dec.decode(y), 0, 1), x)
                          for x, y in zip(dev.scenes[1:], dev.signal[1:], strict=True)])
