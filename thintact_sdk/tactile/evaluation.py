@@ -171,8 +171,11 @@ def evaluate_depth(
     return rows
 
 
-def _marker_errors(interp: TactileInterpreter, frame_disp: np.ndarray, truth: TactileScene
-                   ) -> tuple[np.ndarray, int]:
+def marker_errors(interp: TactileInterpreter, frame_disp: np.ndarray, truth: TactileScene
+                  ) -> tuple[np.ndarray, int]:
+    """Per-marker displacement errors (``K' × 2`` mm) of a tracked frame against the truth,
+    matching each tracked reference marker to the nearest true one (not by index: a marker
+    missed in the reference shifts the order), and how many markers were compared."""
     ref = interp.reference_markers_mm
     if len(ref) == 0:
         return np.zeros((0, 2)), 0
@@ -208,7 +211,7 @@ def evaluate_markers(
             truth = sim.press(Sphere(2.0), 0.5, center, 0.0, tuple(shear * s / steps))
             show(truth.scene)
             frame = sensor.read()  # type: ignore[attr-defined]
-        err, n_ok = _marker_errors(interp, frame.marker_displacements_mm, truth)
+        err, n_ok = marker_errors(interp, frame.marker_displacements_mm, truth)
         errors.append(err)
         tracked += n_ok
         expected += len(truth.marker_reference_mm)
