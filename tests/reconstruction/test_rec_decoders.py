@@ -112,3 +112,13 @@ def test_decoders_load_through_the_plugin_registry(synthetic, tmp_path) -> None:
         reg.create("decoder", "flatcam", profile, {})
     with pytest.raises(CalibrationError, match="sensor"):
         reg.create("decoder", "flatcam", load_profile("virtual-finger"), {"calibration": str(bundle_dir)})
+
+
+def test_iterative_direct_gradient_gives_the_same_iterates(synthetic) -> None:
+    sm, _, _, y = synthetic
+    be = ArrayBackend("numpy", "float64")
+    gram = T2SIterativeDecoder(sm, 1e-3, iterations=30, backend=be).decode(y)
+    direct = T2SIterativeDecoder(sm, 1e-3, iterations=30, backend=be, gradient="direct").decode(y)
+    np.testing.assert_allclose(direct, gram, atol=1e-5 * np.abs(gram).max())
+    with pytest.raises(ValueError, match="gradient"):
+        T2SIterativeDecoder(sm, 1e-3, gradient="fast")

@@ -74,6 +74,7 @@ def make_iterative(profile: Profile, settings: dict[str, Any]) -> T2SIterativeDe
     return T2SIterativeDecoder(
         bundle.system_matrices, _tau(bundle.tau, settings, profile),
         iterations=int(settings.get("iterations", 800)), backend=_backend(settings),
+        gradient=str(settings.get("gradient", "gram")),
     )
 
 

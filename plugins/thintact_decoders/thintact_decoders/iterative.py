@@ -35,6 +35,9 @@ class T2SIterativeDecoder(Decoder):
         :class:`ArrayBackend` (default numpy float32).
     power_iterations
         Iterations of the power method for λ_max(AᵀA).
+    gradient
+        ``"gram"`` (default, precomputed Gram matrices) or ``"direct"`` (forward then adjoint
+        products with the R × S measurement, as in Adams et al.; same iterates, more flops).
     """
 
     name = "t2s-iterative"
@@ -46,9 +49,13 @@ class T2SIterativeDecoder(Decoder):
         iterations: int = 800,
         backend: ArrayBackend | None = None,
         power_iterations: int = 50,
+        gradient: str = "gram",
     ) -> None:
         if iterations < 1:
             raise ValueError("iterations must be >= 1")
+        if gradient not in ("gram", "direct"):
+            raise ValueError(f"gradient must be 'gram' or 'direct', got {gradient!r}")
+        self.gradient = gradient
         self.xp = backend or ArrayBackend("numpy")
         self.tau = float(tau)
         self.iterations = int(iterations)
@@ -86,6 +93,11 @@ class T2SIterativeDecoder(Decoder):
         xp = self.xp
         return xp.swap(self._po) @ y_cf @ self._qo + xp.swap(self._pc) @ y_cf @ self._qc
 
+    def forward_cf(self, x: Any) -> Any:
+        """``A X = Po X Qoᵀ + Pc X Qcᵀ`` for channel-first ``C × N × M`` X."""
+        xp = self.xp
+        return self._po @ x @ xp.swap(self._qo) + self._pc @ x @ xp.swap(self._qc)
+
     def solve(self, y_cf: Any, iterations: int | None = None) -> Any:
         """Run Nesterov from 0 on channel-first ``y_cf``; returns ``C × N × M`` (backend array)."""
         xp = self.xp
@@ -95,7 +107,10 @@ class T2SIterativeDecoder(Decoder):
         z = x
         t = 1.0
         for _ in range(self.iterations if iterations is None else iterations):
-            grad = 2.0 * (self._gram(z) - b) + (2.0 * self.tau) * z
+            if self.gradient == "gram":
+                grad = 2.0 * (self._gram(z) - b) + (2.0 * self.tau) * z
+            else:
+                grad = 2.0 * self.adjoint(self.forward_cf(z) - y_cf) + (2.0 * self.tau) * z
             x_new = z - step * grad
             t_new = (1.0 + np.sqrt(1.0 + 4.0 * t * t)) / 2.0
             z = x_new + ((t - 1.0) / t_new) * (x_new - x)
