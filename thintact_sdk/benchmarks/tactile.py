@@ -190,7 +190,10 @@ def _latency_decoder(profile: Any, name: str | None = None) -> tuple[Any, Any, s
     tau = float(settings.get("tau", 0.01)) * float(np.linalg.norm(sm.Pc[0], 2) *
                                                    np.linalg.norm(sm.Qc[0], 2)) ** 2
     bundle = CalibrationBundle.create(profile, sm, None, tau=tau, source="simulator")
-    decoder = get_registry().create("decoder", "flatcam", profile, {"bundle": bundle})
+    # the profile's decoder settings (backend, gemm_dtype, ...) apply; tau was used above
+    fallback = {k: v for k, v in settings.items() if k != "tau"}
+    fallback["bundle"] = bundle
+    decoder = get_registry().create("decoder", "flatcam", profile, fallback)
     return decoder, sm, ("no bundle: flatcam closed-form Tikhonov (no joint filter) on the "
                          "directly generated matrices")
 
