@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from thintact_decoders.backend import ArrayBackend
+from thintact_decoders.shapes import check_measurement_shape
 from thintact_sdk.imaging.t2s import SystemMatrices
 from thintact_sdk.imaging.tikhonov import TikhonovSolver
 from thintact_sdk.interfaces import Decoder
@@ -54,9 +55,7 @@ class FlatCamDecoder(Decoder):
 
     def decode(self, signal: np.ndarray) -> np.ndarray:
         """Reconstruct ``N × M × C`` float32 from ``R × S × C`` DN above black."""
-        want = (*self.sensor_shape, self.channels)
-        if signal.shape != want:
-            raise ValueError(f"measurement must be {want[0]}×{want[1]}×{want[2]}, got {signal.shape}")
+        check_measurement_shape(signal, self.sensor_shape, self.channels)
         xp = self.xp
         y = xp.channels_first(signal, gemm=True)
         core = xp.cast(self._left @ y @ self._right, gemm=False) * self._inv_denom

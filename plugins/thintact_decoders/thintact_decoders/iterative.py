@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from thintact_decoders.backend import ArrayBackend
+from thintact_decoders.shapes import check_measurement_shape
 from thintact_sdk.imaging.t2s import SystemMatrices
 from thintact_sdk.interfaces import Decoder
 
@@ -119,7 +120,5 @@ class T2SIterativeDecoder(Decoder):
 
     def decode(self, signal: np.ndarray) -> np.ndarray:
         """Reconstruct ``N × M × C`` float32 from ``R × S × C`` DN above black."""
-        want = (*self.sensor_shape, self.channels)
-        if signal.shape != want:
-            raise ValueError(f"measurement must be {want[0]}×{want[1]}×{want[2]}, got {signal.shape}")
+        check_measurement_shape(signal, self.sensor_shape, self.channels)
         return self.xp.channels_last(self.solve(self.xp.channels_first(signal)))

@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from thintact_decoders.backend import ArrayBackend
+from thintact_decoders.shapes import check_measurement_shape
 from thintact_sdk.imaging.dct import dct2, dct_matrix, idct2
 from thintact_sdk.imaging.recon_filter import JointFilter
 from thintact_sdk.imaging.t2s import SystemMatrices
@@ -229,9 +230,7 @@ class NonIterativeDecoder(Decoder):
         return self._unit_core
 
     def _check(self, signal: np.ndarray) -> None:
-        want = (*self.sensor_shape, self.channels)
-        if signal.shape != want:
-            raise ValueError(f"measurement must be {want[0]}×{want[1]}×{want[2]}, got {signal.shape}")
+        check_measurement_shape(signal, self.sensor_shape, self.channels)
 
     def decode(self, signal: np.ndarray) -> np.ndarray:
         """Reconstruct ``N × M × C`` float32 (display units) from ``R × S × C`` DN above black."""
