@@ -462,12 +462,7 @@ class Simulator(ImagingModel):
         ph = self.physics
         if "scene_blur" not in ph and "sensor_blur" not in ph:
             return None, None
-        from scipy.ndimage import gaussian_filter1d
-
-        def blur_matrix(n: int, sigma_px: float) -> np.ndarray:
-            if sigma_px <= 0:
-                return np.eye(n)
-            return gaussian_filter1d(np.eye(n), sigma_px, axis=0, mode="reflect")
+        from thintact_sdk.physics._blur import blur_matrix
 
         s_sc = ph.get("scene_blur", {}).get("sigma_um", 0.0) / self.profile.scene.pixel_pitch_um
         s_se = ph.get("sensor_blur", {}).get("sigma_um", 0.0) / self.profile.sensor.pixel_pitch_um

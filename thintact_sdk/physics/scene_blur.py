@@ -1,14 +1,15 @@
 """``scene_blur``: Gaussian blur in the scene plane (diffuser, elastomer scattering).
 
-Edges are mirrored (``reflect``), so a uniform scene stays uniform: light scattered out of
+The blur is integrated over the pixels (see :mod:`thintact_sdk.physics._blur`). Edges are
+mirrored (``reflect``), so a uniform scene stays uniform: light scattered out of
 the field is balanced by light scattered in from a similarly lit surround.
 """
 
 from __future__ import annotations
 
 import numpy as np
-from scipy.ndimage import gaussian_filter
 
+from thintact_sdk.physics._blur import blur_pixels
 from thintact_sdk.physics._spec import EffectSpec, ParamSpec
 
 SPEC = EffectSpec(
@@ -23,5 +24,4 @@ def apply(scenes: np.ndarray, sigma_um: float, pitch_um: float) -> np.ndarray:
     """Blur ``F × N × M × C`` scenes by ``sigma_um`` (scene pixel pitch ``pitch_um``)."""
     if sigma_um <= 0:
         return scenes
-    s = sigma_um / pitch_um
-    return gaussian_filter(np.asarray(scenes, float), sigma=(0, s, s, 0), mode="reflect")
+    return blur_pixels(scenes, sigma_um / pitch_um, axes=(1, 2))

@@ -1,13 +1,14 @@
 """``sensor_blur``: Gaussian blur in the sensor plane (optical / electrical pixel crosstalk).
 
-Edges are mirrored (``reflect``).
+The blur is integrated over the pixels (see :mod:`thintact_sdk.physics._blur`). Edges are
+mirrored (``reflect``).
 """
 
 from __future__ import annotations
 
 import numpy as np
-from scipy.ndimage import gaussian_filter
 
+from thintact_sdk.physics._blur import blur_pixels
 from thintact_sdk.physics._spec import EffectSpec, ParamSpec
 
 SPEC = EffectSpec(
@@ -22,5 +23,4 @@ def apply(signal: np.ndarray, sigma_um: float, pitch_um: float) -> np.ndarray:
     """Blur ``F × R × S × C`` signals by ``sigma_um`` (sensor pixel pitch ``pitch_um``)."""
     if sigma_um <= 0:
         return signal
-    s = sigma_um / pitch_um
-    return gaussian_filter(np.asarray(signal, float), sigma=(0, s, s, 0), mode="reflect")
+    return blur_pixels(signal, sigma_um / pitch_um, axes=(1, 2))
