@@ -33,10 +33,10 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
 
     import numpy as np
-    from thintact_masks.blas import blas_threads
     from thintact_masks.fitness import FitnessEvaluator, FitnessSettings
     from thintact_masks.ga import GAConfig, GAState, run_ga
 
+    from thintact_sdk.blas import blas_threads
     from thintact_sdk.machine import machine_summary
     from thintact_sdk.profile import load_profile
 

@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from thintact_sdk.blas import blas_threads
 from thintact_sdk.diagnose.candidates import CANDIDATES, STRAY_TERMS
 from thintact_sdk.diagnose.data import DiagnosisData
 from thintact_sdk.diagnose.locate import Location, locate
@@ -29,7 +30,6 @@ from thintact_sdk.diagnose.stats import (
     valid_pixels,
 )
 from thintact_sdk.diagnose.structure import Structure, find_structure
-from thintact_sdk.diagnose.threads import blas_threads
 from thintact_sdk.diagnose.words import describe_effect, tell_apart
 from thintact_sdk.profile import Profile
 

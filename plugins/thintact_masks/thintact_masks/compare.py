@@ -9,8 +9,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from thintact_masks.blas import blas_threads
 from thintact_masks.fitness import FitnessEvaluator, FitnessSettings
+from thintact_sdk.blas import blas_threads
 from thintact_sdk.imaging.direct_generation import direct_system_matrices
 from thintact_sdk.interfaces import Mask
 from thintact_sdk.profile import Profile

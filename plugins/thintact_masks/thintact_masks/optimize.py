@@ -8,12 +8,12 @@ from typing import Any
 
 import numpy as np
 
-from thintact_masks.blas import blas_threads
 from thintact_masks.design_io import design_record, plot_fitness, write_json_atomic
 from thintact_masks.devices import scaled_profile
 from thintact_masks.fitness import FitnessEvaluator, FitnessSettings
 from thintact_masks.ga import GAConfig, ProgressFn, run_ga
 from thintact_masks.mls import MLSDesigner, random_phi
+from thintact_sdk.blas import blas_threads
 from thintact_sdk.interfaces import Mask
 from thintact_sdk.profile import Profile
 

@@ -1,9 +1,11 @@
 """Limit the threads of the OpenBLAS libraries numpy and scipy loaded (no extra dependency).
 
-The GA evaluates many small eigen-decompositions (N ≤ 512). Multi-threaded OpenBLAS gains
-little at that size and loses badly on a busy machine (measured 10-20× slower with 2
-threads under load than with 1), so the fitness runs single-threaded BLAS and, where more
-cores are wanted, evaluates several individuals at once instead.
+Work made of many small matrix products (the GA's eigen-decompositions with N ≤ 512, the
+diagnosis's repeated small simulations) gains little from threaded OpenBLAS and loses badly
+on a busy machine, where threads spin-wait for each other: measured 10-30× slower with 2
+threads under load than with 1 (2.7 s vs 0.1 s for one 12-frame diagnosis simulation).
+numpy exposes no thread control, so this calls each loaded OpenBLAS's own setter through
+ctypes when it is found, and changes nothing otherwise.
 """
 
 from __future__ import annotations
@@ -33,7 +35,7 @@ def _loaded_openblas() -> list[tuple[Any, Any]]:
                     paths.append(path)
     except OSError:
         return []
-    found = []
+    found: list[tuple[Any, Any]] = []
     for path in paths:
         try:
             lib = ctypes.CDLL(path)
@@ -48,15 +50,16 @@ def _loaded_openblas() -> list[tuple[Any, Any]]:
 
 
 @contextmanager
-def blas_threads(n: int) -> Iterator[int]:
+def blas_threads(n: int | None) -> Iterator[int]:
     """Run the block with every loaded OpenBLAS limited to ``n`` threads, then restore.
 
-    Yields the number of libraries it could control (0: no OpenBLAS found, nothing changed).
+    ``n`` None or 0 leaves the threads as they are. Yields the number of libraries it
+    controls (0: none found or nothing asked, nothing changed).
     """
-    libs = _loaded_openblas()
+    libs = _loaded_openblas() if n else []
     before = [int(get()) for _, get in libs]
     for setter, _ in libs:
-        setter(ctypes.c_int(int(n)))
+        setter(ctypes.c_int(int(n or 0)))
     try:
         yield len(libs)
     finally:
