@@ -5,11 +5,12 @@ Also compares direct generation with the exact physics (the simulator's two-term
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
-from thintact_masks.fitness import FitnessEvaluator, FitnessSettings
+from thintact_masks.fitness import Evaluation, FitnessEvaluator, FitnessSettings
 from thintact_sdk.blas import blas_threads
 from thintact_sdk.imaging.direct_generation import direct_system_matrices
 from thintact_sdk.interfaces import Mask
@@ -46,9 +47,9 @@ class MaskScore:
         return dict(self.__dict__)
 
 
-def score_masks(profile: Profile, masks: dict[str, Mask],
-                settings: FitnessSettings | None = None) -> list[MaskScore]:
-    """Score every mask on ``profile`` (each with its own K; φ_rows is taken as φ)."""
+def _score_each(profile: Profile, masks: dict[str, Mask], settings: FitnessSettings | None,
+                evaluate: Callable[[FitnessEvaluator, Mask], Evaluation]) -> list[MaskScore]:
+    """Score every mask with ``evaluate`` (one evaluator per K, single-threaded BLAS)."""
     out = []
     evaluators: dict[int, FitnessEvaluator] = {}
     with blas_threads(1):
@@ -56,11 +57,17 @@ def score_masks(profile: Profile, masks: dict[str, Mask],
             ev = evaluators.get(mask.K)
             if ev is None:
                 ev = evaluators[mask.K] = FitnessEvaluator(profile, mask.K, settings)
-            e = ev.evaluate(np.asarray(mask.phi))
+            e = evaluate(ev, mask)
             p = e.parts
             out.append(MaskScore(name, e.fitness, p["uniformity_white"], p["psnr_white"],
                                  p["psnr_usaf"], p["ssim_white"], p["ssim_usaf"]))
     return out
+
+
+def score_masks(profile: Profile, masks: dict[str, Mask],
+                settings: FitnessSettings | None = None) -> list[MaskScore]:
+    """Score every mask on ``profile`` (each with its own K; φ_rows is taken as φ)."""
+    return _score_each(profile, masks, settings, lambda ev, mask: ev.evaluate(np.asarray(mask.phi)))
 
 
 def simulator_coding_matrices(profile: Profile, phi: np.ndarray,
@@ -90,19 +97,8 @@ def score_masks_exact(profile: Profile, masks: dict[str, Mask],
     """Like :func:`score_masks`, but with the coding matrices of the exact simulator instead
     of direct generation: checks that a design's advantage is not an artefact of the
     direct-generation approximation."""
-    out = []
-    evaluators: dict[int, FitnessEvaluator] = {}
-    with blas_threads(1):
-        for name, mask in masks.items():
-            ev = evaluators.get(mask.K)
-            if ev is None:
-                ev = evaluators[mask.K] = FitnessEvaluator(profile, mask.K, settings)
-            pc, qc = simulator_coding_matrices(profile, np.asarray(mask.phi))
-            e = ev.evaluate_matrices(pc, qc)
-            p = e.parts
-            out.append(MaskScore(name, e.fitness, p["uniformity_white"], p["psnr_white"],
-                                 p["psnr_usaf"], p["ssim_white"], p["ssim_usaf"]))
-    return out
+    return _score_each(profile, masks, settings, lambda ev, mask: ev.evaluate_matrices(
+        *simulator_coding_matrices(profile, np.asarray(mask.phi))))
 
 
 def direct_vs_simulator(profile: Profile, d_stripe_px: float | None = None,
