@@ -12,32 +12,86 @@ from thintact_sdk.imaging.simulator import Simulator
 from thintact_sdk.profile import read_profile_file
 
 
-def _fit(golden_dir, name):
+# The golden renderer's mask sits 1/8 um lower in x and in y than CONTRACTS §1 puts it (its
+# pattern is T(m + 0.125 um), as a 0.25 um raster sampled at its cell centres would give). The
+# offset is invisible in extended scenes (< 1e-3 either way) but a single scene row or column
+# throws a 6.6 um penumbra, so there it costs 3.5e-3. Measured by a free fit on both devices:
+# mini (-0.1249, -0.1250) um, wide (-0.1211, -0.1208) um; with it every frame is < 1.7e-4.
+GOLDEN_MASK_OFFSET_UM = -0.125
+
+
+def _profile(golden_dir, name, offset_um=(0.0, 0.0)):
+    prof = read_profile_file(golden_dir / name / "profile.json")
+    if offset_um == (0.0, 0.0):
+        return prof
+    return prof.model_copy(update={"physics": {"mask_misalignment": {
+        "angle_deg": 0.0, "dx_um": offset_um[0], "dy_um": offset_um[1]}}})
+
+
+def _errors(golden_dir, name, offset_um=(0.0, 0.0), frames=None):
+    """Relative RMS per frame and channel after one gain per frame and channel."""
     d = golden_dir / name
-    prof = read_profile_file(d / "profile.json")
     scenes = np.load(d / "scenes.npy")
     gold = np.load(d / "irradiance.npy")
-    labels = json.loads((d / "labels.json").read_text())
-    y = Simulator(prof).forward_batch(scenes)
-    gain = np.array([y[..., c].ravel() @ gold[..., c].ravel() / (y[..., c].ravel() @ y[..., c].ravel())
-                     for c in range(3)])
-    return labels, [rel_rms(y[f] * gain, gold[f]) for f in range(len(labels))]
+    frames = list(range(len(scenes))) if frames is None else frames
+    y = Simulator(_profile(golden_dir, name, offset_um)).forward_batch(scenes[frames])
+    errs = np.empty((len(frames), 3))
+    for i, f in enumerate(frames):
+        for c in range(3):
+            a, b = gold[f, ..., c], y[i, ..., c]
+            errs[i, c] = rel_rms(b * (a.ravel() @ b.ravel()) / (b.ravel() @ b.ravel()), a)
+    return errs
+
+
+def _labels(golden_dir, name):
+    return json.loads((golden_dir / name / "labels.json").read_text())
 
 
 def test_wide_matches_golden_every_frame(golden_dir):
-    labels, errs = _fit(golden_dir, "wide")
-    for lab, e in zip(labels, errs, strict=True):
+    labels = _labels(golden_dir, "wide")
+    errs = _errors(golden_dir, "wide")
+    for lab, e in zip(labels, errs.max(axis=1), strict=True):
         assert e < 1e-3, f"{lab}: {e:.2e}"
 
 
-def test_mini_matches_golden(golden_dir):
-    """Every extended-scene frame of golden-mini to < 0.1 %. The four single-slit frames
-    differ by 0.35-0.4 %: the difference sits on shadow-edge pixels, where a converged
-    brute force agrees with this simulator (see the next test), not with the golden file."""
-    labels, errs = _fit(golden_dir, "mini")
-    for lab, e in zip(labels, errs, strict=True):
-        limit = 5e-3 if lab.startswith("slit") else 1e-3
-        assert e < limit, f"{lab}: {e:.2e}"
+def test_mini_matches_golden_on_extended_scenes(golden_dir):
+    """Every extended-scene frame of golden-mini to < 0.1 % with the contract's mask exactly
+    where §1 puts it. The single-slit frames need the golden renderer's offset (below)."""
+    labels = _labels(golden_dir, "mini")
+    errs = _errors(golden_dir, "mini")
+    for lab, e in zip(labels, errs.max(axis=1), strict=True):
+        if lab.startswith("slit"):
+            assert 2e-3 < e < 6e-3, f"{lab}: {e:.2e} (the offset's signature changed)"
+        else:
+            assert e < 1e-3, f"{lab}: {e:.2e}"
+
+
+@pytest.mark.parametrize("name", ["mini", "wide"])
+def test_golden_renderer_mask_offset_is_recovered_per_axis(golden_dir, name):
+    """The offset is found, independently along x (vertical slits) and along y (horizontal
+    slits), from a parabola through the slit frames' squared error at three trial offsets."""
+    labels = _labels(golden_dir, name)
+    for axis, prefix in ((0, "slit_v"), (1, "slit_h")):
+        frames = [i for i, lab in enumerate(labels) if lab.startswith(prefix)]
+        trials = np.array([-0.25, -0.0625, 0.125])
+        sq = []
+        for t in trials:
+            off = [0.0, 0.0]
+            off[axis] = float(t)
+            sq.append(float(np.sum(_errors(golden_dir, name, tuple(off), frames) ** 2)))
+        a, b, _ = np.polyfit(trials, sq, 2)
+        assert a > 0
+        assert -b / (2 * a) == pytest.approx(GOLDEN_MASK_OFFSET_UM, abs=0.012), (axis, sq)
+
+
+@pytest.mark.parametrize("name", ["mini", "wide"])
+def test_every_golden_frame_matches_with_the_renderer_offset(golden_dir, name):
+    """With the golden renderer's 1/8 um mask offset every frame of both devices, slits
+    included, is far inside the 0.1 % criterion."""
+    labels = _labels(golden_dir, name)
+    errs = _errors(golden_dir, name, (GOLDEN_MASK_OFFSET_UM, GOLDEN_MASK_OFFSET_UM))
+    for lab, e in zip(labels, errs.max(axis=1), strict=True):
+        assert e < 3e-4, f"{lab}: {e:.2e}"
 
 
 def test_mini_slit_edge_pixel_against_converged_quadrature(golden_dir):
