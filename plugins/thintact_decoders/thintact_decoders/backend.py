@@ -3,7 +3,7 @@
 Algorithms use only ``@``, ``*``, ``+``, ``-``, ``/``, ``reshape`` and the methods below.
 ``ArrayBackend("numpy")`` runs on numpy/OpenBLAS; ``ArrayBackend("torch")`` on torch tensors
 (CUDA when present unless ``device`` says otherwise). ``gemm_dtype`` may be ``"bfloat16"``
-(torch only) for the large products, trading a measured amount of accuracy for speed.
+(torch only) for the large products (the first and the last of every closed-form solve), trading a measured amount of accuracy for speed.
 """
 
 from __future__ import annotations
@@ -126,6 +126,12 @@ class ArrayBackend:
             return buf
         t = self._torch.from_numpy(buf).to(self.device)
         return t.to(self.gemm_dtype if gemm else self.dtype)
+
+    def synthesise(self, vp: Any, coef: Any, vqt: Any) -> np.ndarray:
+        """``vp @ coef @ vqt`` (``C × N × kP``, ``C × kP × kQ``, ``C × kQ × M``; ``vp``/``vqt`` in
+        GEMM precision) → ``N × M × C`` float32 numpy: the last products of every closed-form
+        decoder, in GEMM precision like the first ones."""
+        return self.channels_last(vp @ self.cast(coef, gemm=True) @ vqt)
 
     def channels_last(self, a: Any) -> np.ndarray:
         """``C × N × M`` on this backend → ``N × M × C`` float32 numpy."""

@@ -50,8 +50,8 @@ class FlatCamDecoder(Decoder):
         self._left = xp.asarray(np.stack([s.left for s in solvers]), gemm=True)
         self._right = xp.asarray(np.stack([s.right for s in solvers]), gemm=True)
         self._inv_denom = xp.asarray(np.stack([s.inv_denom for s in solvers]))
-        self._vp = xp.asarray(np.stack([s.vp for s in solvers]))
-        self._vqt = xp.asarray(np.stack([s.vqt for s in solvers]))
+        self._vp = xp.asarray(np.stack([s.vp for s in solvers]), gemm=True)
+        self._vqt = xp.asarray(np.stack([s.vqt for s in solvers]), gemm=True)
 
     def decode(self, signal: np.ndarray) -> np.ndarray:
         """Reconstruct ``N × M × C`` float32 from ``R × S × C`` DN above black."""
@@ -59,4 +59,4 @@ class FlatCamDecoder(Decoder):
         xp = self.xp
         y = xp.channels_first(signal, gemm=True)
         core = xp.cast(self._left @ y @ self._right, gemm=False) * self._inv_denom
-        return xp.channels_last(self._vp @ core @ self._vqt)
+        return xp.synthesise(self._vp, core, self._vqt)

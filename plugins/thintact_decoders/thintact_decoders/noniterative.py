@@ -145,8 +145,8 @@ class NonIterativeDecoder(Decoder):
         self._right = self.xp.asarray(right, gemm=True)
         self._sig2 = np.stack([np.outer(s.singular_values_p**2, s.singular_values_q**2) for s in solvers])
         self._inv_denom = self.xp.asarray(1.0 / (self._sig2 + self.tau))
-        self._vp = self.xp.asarray(np.stack([s.vp for s in solvers]))
-        self._vqt = self.xp.asarray(np.stack([s.vqt for s in solvers]))
+        self._vp = self.xp.asarray(np.stack([s.vp for s in solvers]), gemm=True)
+        self._vqt = self.xp.asarray(np.stack([s.vqt for s in solvers]), gemm=True)
         self._unit_core: Any = None
 
     def set_tau(self, tau: float) -> None:
@@ -212,7 +212,7 @@ class NonIterativeDecoder(Decoder):
         if black_dn:
             core = core - black_dn * self._black_core()
         core = core * self._inv_denom
-        return xp.channels_last(self._vp @ core @ self._vqt)
+        return xp.synthesise(self._vp, core, self._vqt)
 
     def _black_core(self) -> Any:
         if self._unit_core is None:

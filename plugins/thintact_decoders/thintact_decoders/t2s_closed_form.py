@@ -117,8 +117,8 @@ class T2SClosedFormDecoder(Decoder):
         self._left = xp.asarray(np.stack(per["left"]), gemm=True)
         self._right = xp.asarray(np.stack(per["right"]), gemm=True)
         self._uq = xp.asarray(np.stack(per["uq"]), gemm=True)  # C × S × kq
-        st = {key: xp.asarray(np.stack(per[key])) for key in ("den", "vp", "vqt", "scale", "a", "b",
-                                                             "a2", "b2", "small", "sig2")}
+        st = {key: xp.asarray(np.stack(per[key]), gemm=key in ("vp", "vqt"))
+              for key in ("den", "vp", "vqt", "scale", "a", "b", "a2", "b2", "small", "sig2")}
         self._den, self._vp, self._vqt, self._scale = st["den"], st["vp"], st["vqt"], st["scale"]
         self._a, self._b, self._a2, self._b2, self._small = st["a"], st["b"], st["a2"], st["b2"], st["small"]
         self._sig2 = st["sig2"]  # σ_P,i² σ_Q,j² of Pc, Qc
@@ -161,7 +161,7 @@ class T2SClosedFormDecoder(Decoder):
         cf = xp.contiguous(coef[:, :k]).reshape(c, self._kp, self._kq)
         cg = xp.contiguous(coef[:, k:]).reshape(c, self._kp, self._kq)
         xi = xi0 - self._den * (a @ cf @ xp.swap(b) + a2 @ cg @ xp.swap(b2))
-        return xp.channels_last(self._vp @ xi @ self._vqt)
+        return xp.synthesise(self._vp, xi, self._vqt)
 
     def _normal_op(self, xi: Any) -> Any:
         """``AᵀA`` in SVD coefficients: ``(σ_P² σ_Qᵀ²) ⊙ ξ + W Mmid Wᵀ ξ`` (τ excluded)."""
@@ -200,7 +200,7 @@ class T2SClosedFormDecoder(Decoder):
             t_new = (1.0 + np.sqrt(1.0 + 4.0 * t * t)) / 2.0
             z = x_new + ((t - 1.0) / t_new) * (x_new - x)
             x, t = x_new, t_new
-        return xp.channels_last(self._vp @ x @ self._vqt)
+        return xp.synthesise(self._vp, x, self._vqt)
 
     def _check(self, signal: np.ndarray) -> None:
         check_measurement_shape(signal, self.sensor_shape, self.channels)
