@@ -11,7 +11,6 @@ from tests.simulator.sim_helpers import rel_rms
 from thintact_sdk.imaging.simulator import Simulator
 from thintact_sdk.profile import read_profile_file
 
-
 # The golden renderer's mask sits 1/8 um lower in x and in y than CONTRACTS §1 puts it (its
 # pattern is T(m + 0.125 um), as a 0.25 um raster sampled at its cell centres would give). The
 # offset is invisible in extended scenes (< 1e-3 either way) but a single scene row or column
