@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import make_profile
+from mask_profiles import make_profile
 
 from thintact_sdk.imaging.direct_generation import (
     SIGMOID_SOFTNESS,

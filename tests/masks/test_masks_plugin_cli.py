@@ -6,7 +6,7 @@ import json
 
 import numpy as np
 import pytest
-from conftest import make_profile
+from mask_profiles import make_profile
 
 from thintact_sdk.cli.main import main
 from thintact_sdk.interfaces import MaskDesigner
