@@ -28,18 +28,15 @@ def _profile(golden_dir, name, offset_um=(0.0, 0.0)):
 
 
 def _errors(golden_dir, name, offset_um=(0.0, 0.0), frames=None):
-    """Relative RMS per frame and channel after one gain per frame and channel."""
+    """Relative RMS per frame and channel after one gain per channel (shared by the frames)."""
     d = golden_dir / name
     scenes = np.load(d / "scenes.npy")
-    gold = np.load(d / "irradiance.npy")
     frames = list(range(len(scenes))) if frames is None else frames
+    gold = np.load(d / "irradiance.npy")[frames]
     y = Simulator(_profile(golden_dir, name, offset_um)).forward_batch(scenes[frames])
-    errs = np.empty((len(frames), 3))
-    for i, f in enumerate(frames):
-        for c in range(3):
-            a, b = gold[f, ..., c], y[i, ..., c]
-            errs[i, c] = rel_rms(b * (a.ravel() @ b.ravel()) / (b.ravel() @ b.ravel()), a)
-    return errs
+    gain = np.einsum("frsc,frsc->c", gold, y) / np.einsum("frsc,frsc->c", y, y)
+    return np.array([[rel_rms(y[i, ..., c] * gain[c], gold[i, ..., c]) for c in range(3)]
+                     for i in range(len(frames))])
 
 
 def _labels(golden_dir, name):
