@@ -3,7 +3,8 @@
 Algorithms use only ``@``, ``*``, ``+``, ``-``, ``/``, ``reshape`` and the methods below.
 ``ArrayBackend("numpy")`` runs on numpy/OpenBLAS; ``ArrayBackend("torch")`` on torch tensors
 (CUDA when present unless ``device`` says otherwise). ``gemm_dtype`` may be ``"bfloat16"``
-(torch only) for the large products (the first and the last of every closed-form solve), trading a measured amount of accuracy for speed.
+(torch only) for the large products (the first and the last of every closed-form solve),
+trading a measured amount of accuracy for speed.
 """
 
 from __future__ import annotations
