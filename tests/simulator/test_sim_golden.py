@@ -15,7 +15,7 @@ from thintact_sdk.profile import read_profile_file
 # pattern is T(m + 0.125 um), as a 0.25 um raster sampled at its cell centres would give). The
 # offset is invisible in extended scenes (< 1e-3 either way) but a single scene row or column
 # throws a 6.6 um penumbra, so there it costs 3.5e-3. Measured by a free fit on both devices:
-# mini (-0.1249, -0.1250) um, wide (-0.1211, -0.1208) um; with it every frame is < 1.7e-4.
+# mini (-0.1249, -0.1250) um, wide (-0.1211, -0.1208) um; with it every frame is <= 1.71e-4.
 GOLDEN_MASK_OFFSET_UM = -0.125
 
 
