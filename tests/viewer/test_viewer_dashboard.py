@@ -97,3 +97,15 @@ def test_server_serves_page_frames_and_stats_on_loopback(finger):
         assert _get(server.url + "reset", data=b"")[0] == 200
         with pytest.raises(urllib.error.HTTPError, match="404"):
             _get(server.url + "nothing-here")
+
+
+def test_raw_preview_keeps_the_bayer_phase():
+    from thintact_sdk.bayer import bin_bayer
+    from thintact_sdk.viewer.panels import preview_mosaic
+
+    mosaic = np.random.default_rng(1).integers(0, 4096, (2048, 2560), dtype=np.uint16)
+    small = preview_mosaic(mosaic, max_cols=320)
+    assert small.shape == (512, 640)  # every 4th 2 x 2 cell
+    np.testing.assert_array_equal(bin_bayer(small, "GRBG"), bin_bayer(mosaic, "GRBG")[::4, ::4])
+    assert preview_mosaic(mosaic[:512, :640], max_cols=320) is not None
+    np.testing.assert_array_equal(preview_mosaic(mosaic[:512, :640], 320), mosaic[:512, :640])

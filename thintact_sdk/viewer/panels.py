@@ -20,7 +20,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from thintact_sdk.capture import to_measurement
+from thintact_sdk.bayer import bin_bayer
+from thintact_sdk.capture import binning_pattern
 from thintact_sdk.frames import RawFrame, TactileFrame
 from thintact_sdk.profile import Profile
 from thintact_sdk.tactile.grid import TactileParams
@@ -89,9 +90,29 @@ def _rgb(image: np.ndarray) -> np.ndarray:
     return np.repeat(image[..., None], 3, axis=2) if image.ndim == 2 else image[..., :3]
 
 
+def preview_mosaic(data: np.ndarray, max_cols: int = PANEL_W) -> np.ndarray:
+    """Every s-th 2 × 2 Bayer cell of an ``H × W`` mosaic, so that binning it gives at most
+    about ``max_cols`` columns (the CFA phase is kept; other arrays are returned as they are).
+    """
+    h, w = data.shape[:2]
+    step = max(1, (w // 2) // max_cols)
+    if data.ndim != 2 or step == 1 or h % 2 or w % 2:
+        return data
+    cells = data.reshape(h // 2, 2, w // 2, 2)[::step, :, ::step, :]
+    return cells.reshape(cells.shape[0] * 2, cells.shape[2] * 2)
+
+
 def raw_panel(raw: RawFrame, profile: Profile) -> np.ndarray:
-    """The binned measurement above black level, stretched to its 0.5–99.5 percentiles."""
-    signal = to_measurement(raw, profile).signal()
+    """The binned measurement above black level, stretched to its 0.5–99.5 percentiles.
+
+    Binned from a subsampled mosaic (:func:`preview_mosaic`): the panel shows at most
+    :data:`PANEL_W` columns, so a paper-size frame costs no more than a small one.
+    """
+    data = raw.data[..., :3] if raw.data.ndim == 3 else raw.data
+    pattern = binning_pattern(raw, profile)
+    small = data if pattern == "none" else preview_mosaic(data)
+    binned = small if pattern == "none" else bin_bayer(small, pattern)
+    signal = binned.astype(np.float32) - np.float32(profile.noise.black_level_dn)
     lo, hi = (float(v) for v in np.percentile(signal, [0.5, 99.5]))
     return _fit(_rgb(_to_uint8(signal, lo, hi)))
 
