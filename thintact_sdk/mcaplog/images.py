@@ -97,13 +97,22 @@ def image_message(array: np.ndarray, encoding: str, stamp: int, frame_id: str) -
     }
 
 
+RECONSTRUCTION_ENCODINGS = ("rgb8", "32FC3")
+
+
+def check_reconstruction_encoding(encoding: str) -> None:
+    """Raise RecordingError unless ``encoding`` is one of :data:`RECONSTRUCTION_ENCODINGS`."""
+    if encoding not in RECONSTRUCTION_ENCODINGS:
+        raise RecordingError(
+            f"reconstruction encoding must be 'rgb8' or '32FC3', not {encoding!r}")
+
+
 def reconstruction_array(image: np.ndarray, encoding: str) -> np.ndarray:
     """The reconstruction (``N × M × 3`` float32 display units) as stored for ``encoding``."""
     if encoding == "rgb8":
         return np.round(np.clip(image, 0.0, 1.0) * 255.0).astype(np.uint8)
-    if encoding == "32FC3":
-        return np.asarray(image, np.float32)
-    raise RecordingError(f"reconstruction encoding must be 'rgb8' or '32FC3', not {encoding!r}")
+    check_reconstruction_encoding(encoding)
+    return np.asarray(image, np.float32)
 
 
 def decode_image(msg: Any) -> np.ndarray:

@@ -11,7 +11,7 @@ from __future__ import annotations
 import os
 import struct
 from collections.abc import Iterable, Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -33,54 +33,31 @@ class LogMessage:
     message: Any
 
 
-@dataclass
-class _Scan:
-    """What a front-to-back read of a (possibly torn) file found."""
+def _records(path: Path, torn: list[str], open_chunks: bool) -> Iterator[Any]:
+    """Every complete record of ``path`` in file order, stopping at a torn tail.
 
-    schemas: dict[int, Any] = field(default_factory=dict)
-    channels: dict[int, Any] = field(default_factory=dict)
-    messages: list[Any] = field(default_factory=list)
-    metadata: dict[str, dict[str, str]] = field(default_factory=dict)
-    attachments: dict[str, bytes] = field(default_factory=dict)
-    complete_chunks: int = 0
-    torn: str | None = None
-
-
-def _scan(path: Path, topics: set[str] | None, keep_messages: bool) -> _Scan:
-    """Read every complete record of ``path`` in order, stopping at a torn tail."""
+    With ``open_chunks`` each chunk (its CRC checked) is replaced by the records inside it.
+    Why reading stopped early, if it did, is appended to ``torn``.
+    """
     from mcap.exceptions import McapError
-    from mcap.records import Attachment, Channel, Chunk, Message, Metadata, Schema
+    from mcap.records import Chunk
     from mcap.stream_reader import StreamReader, breakup_chunk
 
-    scan = _Scan()
-
-    def take(record: Any) -> None:
-        if isinstance(record, Schema):
-            scan.schemas[record.id] = record
-        elif isinstance(record, Channel):
-            scan.channels[record.id] = record
-        elif isinstance(record, Message) and keep_messages:
-            channel = scan.channels.get(record.channel_id)
-            if channel is not None and (topics is None or channel.topic in topics):
-                scan.messages.append(record)
-
     with open(path, "rb") as f:
-        reader = StreamReader(f, emit_chunks=True)
-        try:
-            for record in reader.records:
-                if isinstance(record, Chunk):
-                    for inner in breakup_chunk(record, validate_crc=True):
-                        take(inner)
-                    scan.complete_chunks += 1
-                elif isinstance(record, Metadata):
-                    scan.metadata[record.name] = dict(record.metadata)
-                elif isinstance(record, Attachment):
-                    scan.attachments[record.name] = bytes(record.data)
+        records = StreamReader(f, emit_chunks=True).records
+        while True:
+            try:
+                record = next(records)
+                if open_chunks and isinstance(record, Chunk):
+                    inner = breakup_chunk(record, validate_crc=True)
                 else:
-                    take(record)
-        except (McapError, struct.error, ValueError, EOFError) as err:
-            scan.torn = f"{type(err).__name__}: {err}"
-    return scan
+                    inner = [record]
+            except StopIteration:
+                return
+            except (McapError, struct.error, ValueError, EOFError) as err:
+                torn.append(f"{type(err).__name__}: {err}")
+                return
+            yield from inner
 
 
 class McapLog:
@@ -140,8 +117,16 @@ class McapLog:
                     f"{self.path} has no summary (its writer was killed or ran out of disk); "
                     "open it with recover=True to read it up to its last complete chunk"
                 )
-            scan = _scan(self.path, None, keep_messages=False)
-            self.metadata, self.attachments, self.torn = scan.metadata, scan.attachments, scan.torn
+            from mcap.records import Attachment, Metadata
+
+            torn: list[str] = []
+            self.metadata, self.attachments = {}, {}
+            for record in _records(self.path, torn, open_chunks=False):
+                if isinstance(record, Metadata):
+                    self.metadata[record.name] = dict(record.metadata)
+                elif isinstance(record, Attachment):
+                    self.attachments[record.name] = bytes(record.data)
+            self.torn = torn[0] if torn else None
 
     @property
     def complete(self) -> bool:
@@ -149,7 +134,11 @@ class McapLog:
         return self.summary is not None
 
     def messages(self, topics: Iterable[str] | None = None) -> Iterator[LogMessage]:
-        """Every message on ``topics`` (default all) in log-time order, ROS 2 decoded."""
+        """Every message on ``topics`` (default all), ROS 2 decoded.
+
+        In log-time order; a torn log is read in file order, which is log-time order for
+        the logs :class:`~thintact_sdk.mcaplog.McapLogWriter` writes (one stream, in time).
+        """
         from mcap.reader import make_reader
         from mcap_ros2.decoder import DecoderFactory
 
@@ -162,16 +151,26 @@ class McapLog:
                     yield LogMessage(channel.topic, schema.name if schema else "",
                                      message.log_time, message.sequence, decoded)
             return
-        scan = _scan(self.path, wanted, keep_messages=True)
+        from mcap.records import Channel, Message, Schema
+
         factory = DecoderFactory()
-        for message in sorted(scan.messages, key=lambda m: m.log_time):
-            channel = scan.channels[message.channel_id]
-            schema = scan.schemas.get(channel.schema_id)
-            decode = factory.decoder_for(channel.message_encoding, schema)
-            if decode is None:
-                raise RecordingError(f"{self.path}: no ROS 2 decoder for topic {channel.topic}")
-            yield LogMessage(channel.topic, schema.name if schema else "", message.log_time,
-                             message.sequence, decode(message.data))
+        schemas_by_id: dict[int, Any] = {}
+        channels: dict[int, Any] = {}
+        for record in _records(self.path, [], open_chunks=True):
+            if isinstance(record, Schema):
+                schemas_by_id[record.id] = record
+            elif isinstance(record, Channel):
+                channels[record.id] = record
+            elif isinstance(record, Message):
+                chan = channels.get(record.channel_id)
+                if chan is None or (wanted is not None and chan.topic not in wanted):
+                    continue
+                schema_rec = schemas_by_id.get(chan.schema_id)
+                decode = factory.decoder_for(chan.message_encoding, schema_rec)
+                if decode is None:
+                    raise RecordingError(f"{self.path}: no ROS 2 decoder for topic {chan.topic}")
+                yield LogMessage(chan.topic, schema_rec.name if schema_rec else "",
+                                 record.log_time, record.sequence, decode(record.data))
 
     def message_counts(self) -> dict[str, int]:
         """Messages per topic (from the summary statistics, else by reading the file)."""

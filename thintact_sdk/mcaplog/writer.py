@@ -120,7 +120,7 @@ class McapLogWriter:
         if compression not in COMPRESSIONS:
             raise RecordingError(f"compression must be one of {', '.join(COMPRESSIONS)}, "
                                  f"not {compression!r}")
-        images.reconstruction_array(np.zeros((1, 1, 3), np.float32), image_encoding)
+        images.check_reconstruction_encoding(image_encoding)
         self.profile = profile
         self.image_encoding = image_encoding
         self.frame_id = profile.name
