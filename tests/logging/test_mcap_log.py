@@ -35,6 +35,8 @@ def test_standard_readers_decode_every_topic_with_camera_stamps(tmp_path):
     path = tmp_path / "log.mcap"
     stats = _write(path)
     assert stats.finished and stats.frames == N
+    with open(path, "rb") as f:  # uncompressed chunks by default
+        assert {ci.compression for ci in make_reader(f).get_summary().chunk_indexes} == {""}
     msgs = _decoded(path)
     by_topic: dict[str, list] = {}
     for schema, topic, message, decoded in msgs:
@@ -78,7 +80,7 @@ def test_standard_readers_decode_every_topic_with_camera_stamps(tmp_path):
 
 def test_summary_chunk_index_and_statistics(tmp_path):
     path = tmp_path / "log.mcap"
-    _write(path, chunk_bytes=200_000)
+    _write(path, chunk_bytes=200_000, compression="lz4")
     with open(path, "rb") as f:
         summary = make_reader(f).get_summary()
     assert summary is not None

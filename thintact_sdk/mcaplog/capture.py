@@ -34,7 +34,7 @@ def record_mcap(
     tactile: bool = True,
     timeout_s: float = 5.0,
     settings: dict[str, Any] | None = None,
-    compression: str = "lz4",
+    compression: str = "none",
     image_encoding: str = "rgb8",
     chunk_bytes: int = DEFAULT_CHUNK_BYTES,
     progress: bool = True,

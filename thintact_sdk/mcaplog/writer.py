@@ -8,7 +8,7 @@
         log.write_raw(raw)
         log.write_tactile(finger.process(raw))
 
-The file is chunked (``lz4`` by default) with a chunk index, message indexes and summary
+The file is chunked (uncompressed by default) with a chunk index, message indexes and summary
 statistics. Every chunk goes to the operating system as soon as it is complete, so a
 killed process or a full disk leaves a file readable up to its last complete chunk
 (:func:`thintact_sdk.mcaplog.reader.read_log` with ``recover=True``).
@@ -32,7 +32,7 @@ from thintact_sdk.mcaplog import images, schemas
 from thintact_sdk.mcaplog.attachments import calibration_files, media_type, profile_attachment
 from thintact_sdk.profile import Profile
 
-COMPRESSIONS = ("lz4", "zstd", "none")
+COMPRESSIONS = ("none", "lz4", "zstd")
 DEFAULT_CHUNK_BYTES = 4 * 2**20
 CLOCK = "host monotonic clock, ns (time.monotonic_ns); wall time = stamp + wall_minus_clock_ns"
 
@@ -87,8 +87,9 @@ class McapLogWriter:
         The sensor's profile: attached as ``profile.json``; its name is every header's
         ``frame_id``.
     compression
-        Chunk compression: ``"lz4"`` (default: fast enough for the paper camera),
-        ``"zstd"`` (smaller, slower) or ``"none"``.
+        Chunk compression: ``"none"`` (default: raw sensor noise barely compresses, and
+        compression costs throughput, docs/logging.md), ``"lz4"`` or ``"zstd"`` (a third
+        smaller on raw frames, ten times slower).
     chunk_bytes
         Uncompressed size at which a chunk is closed and written (default 4 MiB).
     image_encoding
@@ -109,7 +110,7 @@ class McapLogWriter:
         output: str | os.PathLike[str] | IO[bytes],
         profile: Profile,
         *,
-        compression: str = "lz4",
+        compression: str = "none",
         chunk_bytes: int = DEFAULT_CHUNK_BYTES,
         image_encoding: str = "rgb8",
         attach_calibration: bool = True,

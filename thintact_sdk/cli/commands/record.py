@@ -88,8 +88,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                       help="thintact-recording/1 directory (default) or an MCAP file")
     mcap.add_argument("--no-tactile", action="store_true",
                       help="MCAP: raw frames only (no reconstruction, depth, markers, contact)")
-    mcap.add_argument("--compression", choices=("lz4", "zstd", "none"), default="lz4",
-                      help="MCAP chunk compression (default lz4)")
+    mcap.add_argument("--compression", choices=("none", "lz4", "zstd"), default="none",
+                      help="MCAP chunk compression (default none: raw frames barely compress)")
     mcap.add_argument("--image-encoding", choices=("rgb8", "32FC3"), default="rgb8",
                       help="MCAP reconstruction encoding (default rgb8; 32FC3 is exact)")
     p.set_defaults(func=run)
