@@ -93,6 +93,11 @@ class TactileFrame:
         Direction of the mean marker displacement (atan2(y, x)), NaN without shear.
     timestamp_ns, frame_id
         Of the raw frame this was computed from.
+    force_n
+        Estimated contact force, shape ``(3,)`` float, newtons ``[Fx, Fy, Fz]`` (shear x, y
+        and normal), or None when the pipeline does not estimate it.
+    slip_ratio
+        Fraction of the contact region that slips (0..1), or None when not estimated.
     """
 
     image: np.ndarray
@@ -106,3 +111,5 @@ class TactileFrame:
     shear_direction_rad: float = float("nan")
     latency_ms: float | None = None
     meta: dict[str, Any] = field(default_factory=dict)
+    force_n: np.ndarray | None = None
+    slip_ratio: float | None = None

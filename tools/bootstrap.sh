@@ -3,7 +3,8 @@
 #   - a virtual environment in .venv with the core, every plugin in plugins/ (editable,
 #     registered through their entry points exactly like third-party plugins) and dev tools,
 #     all pinned by constraints.txt (torch pinned to the CPU build);
-#   - Xvfb (Debian package) for the display tests, when running as root with apt.
+#   - Xvfb (Debian package) for the display tests and Chromium for the viewer's browser
+#     test, when running as root with apt.
 # Re-running is cheap: pip runs only when pyproject/constraints changed.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -36,5 +37,15 @@ if ! command -v Xvfb >/dev/null 2>&1; then
       || echo "[bootstrap] warning: could not install Xvfb; display tests will be skipped"
   else
     echo "[bootstrap] warning: Xvfb missing and not root; display tests will be skipped"
+  fi
+fi
+
+if ! command -v chromium >/dev/null 2>&1 && ! command -v chromium-browser >/dev/null 2>&1; then
+  if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
+    echo "[bootstrap] installing Chromium for the viewer's browser test"
+    (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium >/dev/null) \
+      || echo "[bootstrap] warning: could not install Chromium; the viewer's browser test will be skipped"
+  else
+    echo "[bootstrap] warning: Chromium missing and not root; the viewer's browser test will be skipped"
   fi
 fi

@@ -50,6 +50,10 @@ a ground-truth scene reported by the camera (the virtual camera) is saved with i
 
 Dropped frames (gaps in the camera's frame ids) are never silent: gaps are reported as they
 happen, the total at the end, and --fail-on-drop makes any drop an error (exit status 2).
+
+--format mcap writes an MCAP log (--out FILE.mcap) with ROS 2 message encodings instead:
+the raw frames and, unless --no-tactile, each frame's reconstruction, depth, markers and
+contact (topics, types and how to open it: docs/logging.md).
 """
 
 MAX_GAP_NOTES = 10
@@ -65,7 +69,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--profile", required=True, help="profile name or file")
     p.add_argument("--frames", type=int, required=True, metavar="N", help="frames to record")
-    p.add_argument("--out", required=True, metavar="DIR", help="recording directory to create")
+    p.add_argument("--out", required=True, metavar="DIR", help="recording directory (or .mcap file with --format mcap) to create")
     p.add_argument("--raw", action="store_true", help="also keep the raw mosaics (raw/*.npy)")
     p.add_argument("--timeout", type=float, default=5.0, metavar="S",
                    help="longest wait for one frame in seconds (default 5)")
@@ -79,6 +83,15 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--buffer-mb", type=float, default=512.0, metavar="MB",
                    help="memory for frames waiting to be written (default 512)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    mcap = p.add_argument_group("MCAP logs (--format mcap, docs/logging.md)")
+    mcap.add_argument("--format", choices=("recording", "mcap"), default="recording",
+                      help="thintact-recording/1 directory (default) or an MCAP file")
+    mcap.add_argument("--no-tactile", action="store_true",
+                      help="MCAP: raw frames only (no reconstruction, depth, markers, contact)")
+    mcap.add_argument("--compression", choices=("none", "lz4", "zstd"), default="none",
+                      help="MCAP chunk compression (default none: raw frames barely compress)")
+    mcap.add_argument("--image-encoding", choices=("rgb8", "32FC3"), default="rgb8",
+                      help="MCAP reconstruction encoding (default rgb8; 32FC3 is exact)")
     p.set_defaults(func=run)
 
 
@@ -364,15 +377,34 @@ class _Progress:
             print(f"warning: {message}", file=sys.stderr)
 
 
+def _record_mcap(args: argparse.Namespace, profile: Profile, out: Path) -> RecordSummary:
+    """``--format mcap``: the options that only make sense for a recording directory fail."""
+    from thintact_sdk.mcaplog.capture import record_mcap
+
+    for flag, given in (("--raw", args.raw), ("--append", args.append),
+                        ("--no-scenes", args.no_scenes)):
+        if given:
+            raise ThinTactError(f"{flag} applies to --format recording only; an MCAP log "
+                                "always holds the raw frames and is never appended to")
+    return record_mcap(
+        profile, args.frames, out, tactile=not args.no_tactile, timeout_s=args.timeout,
+        settings=parse_settings(args.set), compression=args.compression,
+        image_encoding=args.image_encoding, progress=not args.quiet, buffer_mb=args.buffer_mb,
+    )
+
+
 def run(args: argparse.Namespace) -> int:
     profile = load_profile(args.profile)
     out = Path(args.out)
-    summary = record(
-        profile, args.frames, out,
-        keep_raw=args.raw, timeout_s=args.timeout, settings=parse_settings(args.set),
-        append=args.append, scenes=not args.no_scenes, progress=not args.quiet,
-        buffer_mb=args.buffer_mb,
-    )
+    if args.format == "mcap":
+        summary = _record_mcap(args, profile, out)
+    else:
+        summary = record(
+            profile, args.frames, out,
+            keep_raw=args.raw, timeout_s=args.timeout, settings=parse_settings(args.set),
+            append=args.append, scenes=not args.no_scenes, progress=not args.quiet,
+            buffer_mb=args.buffer_mb,
+        )
     fps = f"{summary.frames / summary.elapsed_s:.1f}" if summary.elapsed_s > 0 else "n/a"
     cam_fps = f"{summary.camera_fps:.1f}" if summary.camera_fps else "n/a"
     print(f"recorded {summary.frames} frame(s) to {out} in {summary.elapsed_s:.2f} s "
@@ -384,5 +416,7 @@ def run(args: argparse.Namespace) -> int:
         msg = f"the camera dropped {summary.dropped} frame(s) ({where})"
         if args.fail_on_drop:
             raise DeviceError(msg + "; the recording is kept but incomplete")
-        print(f"warning: {msg}; the manifest marks them (dropped_before)", file=sys.stderr)
+        where_marked = ("the frames' sequence numbers show the gaps" if args.format == "mcap"
+                        else "the manifest marks them (dropped_before)")
+        print(f"warning: {msg}; {where_marked}", file=sys.stderr)
     return 0

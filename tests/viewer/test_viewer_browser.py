@@ -1,0 +1,83 @@
+"""The viewer as a person sees it: headless Chromium screenshots of the page while the
+virtual finger is pressed at two places. Skipped where Chromium is not installed
+(``tools/bootstrap.sh`` installs it on Debian as root)."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import uuid
+
+import cv2
+import numpy as np
+import pytest
+
+import thintact_sdk as thintact
+from thintact_sdk.tactile import Sphere, TactileSimulator
+from thintact_sdk.tactile.device_calibration import scene_slot
+from thintact_sdk.viewer import LiveView, ViewerServer
+from thintact_sdk.viewer.page import HEADER_PX
+from thintact_sdk.viewer.panels import dashboard_size, panel_boxes
+
+BROWSER = shutil.which("chromium") or shutil.which("chromium-browser")
+
+
+def screenshot(url: str, out, profile_dir) -> np.ndarray:
+    """A 1000 × 640 px screenshot of ``url`` by headless Chromium, RGB."""
+    width, height = dashboard_size()
+    cmd = [BROWSER, "--headless", "--no-sandbox", "--disable-gpu",
+           "--disable-background-networking", "--disable-component-update", "--disable-sync",
+           "--no-first-run", f"--user-data-dir={profile_dir}", "--force-device-scale-factor=1",
+           f"--window-size={width + 40},{height + HEADER_PX + 30}", f"--screenshot={out}", url]
+    subprocess.run(cmd, check=True, capture_output=True, timeout=120)
+    image = cv2.imread(str(out), cv2.IMREAD_COLOR)
+    assert image is not None, f"no screenshot at {out}"
+    return image[..., ::-1]
+
+
+def _panel(shot: np.ndarray, name: str) -> np.ndarray:
+    x, y, w, h = panel_boxes()[name]
+    return shot[HEADER_PX + y:HEADER_PX + y + h, x:x + w].astype(int)
+
+
+@pytest.mark.skipif(BROWSER is None, reason="chromium is not installed")
+def test_screenshots_show_the_panels_following_the_press(tmp_path):
+    pytest.importorskip("thintact_virtual")
+    slot_key = f"view-{uuid.uuid4().hex[:8]}"
+    with thintact.open("virtual-finger", camera_settings={"slot": slot_key, "fps": 0}) as finger:
+        slot = scene_slot(finger)
+        sim = TactileSimulator.for_profile(finger.profile)
+        slot.set(sim.flat().scene)  # the first frame is the no-contact reference
+        live = LiveView(finger)
+        shots = []
+        with ViewerServer(port=0) as server:
+            server.start(live)
+            for k, centre in enumerate([(-2.5, -1.5), (2.5, 1.5)]):
+                before = live.wait_frame(-1, 120.0)
+                assert before is not None, live.error
+                slot.set(sim.press(Sphere(2.0), 0.8, centre, 0.0, shear_mm=(0.15, 0.05)).scene)
+                pressed = live.wait_frame(live.wait_frame(before.seq, 60.0).seq, 60.0)
+                assert pressed is not None and pressed.contact, live.error
+                shots.append(screenshot(server.url, tmp_path / f"shot{k}.png", tmp_path / "chromium"))
+            stats = live.stats()
+        slot.set(None)
+    if os.environ.get("THINTACT_KEEP_SCREENSHOTS"):
+        for k in range(2):
+            shutil.copy(tmp_path / f"shot{k}.png", os.environ["THINTACT_KEEP_SCREENSHOTS"] + f"-{k}.png")
+    first, second = shots
+    for name in panel_boxes():
+        for shot in shots:
+            assert _panel(shot, name).std() > 8, f"panel {name!r} is not visible"
+    # the press moved from the upper left to the lower right: the depth and marker panels follow
+    for name in ("depth map", "reconstruction", "marker displacements"):
+        moved = np.abs(_panel(first, name) - _panel(second, name)).max(axis=2) > 40
+        assert moved.sum() > 500, f"panel {name!r} did not change between the screenshots"
+    depth_a, depth_b = _panel(first, "depth map"), _panel(second, "depth map")
+    w = depth_a.shape[1]
+    assert depth_a[:, : w // 2].sum() > depth_a[:, w // 2:].sum()  # bright where pressed
+    assert depth_b[:, w // 2:].sum() > depth_b[:, : w // 2].sum()
+    # the red CONTACT banner is on the page
+    banner = _panel(second, "contact and shear")[12:44]
+    assert np.sum(np.all(np.abs(banner - [230, 70, 60]) < 40, axis=2)) > 3000
+    assert stats["served_fps"] is not None and stats["latency_ms"] > 0
