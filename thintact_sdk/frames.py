@@ -93,6 +93,14 @@ class TactileFrame:
         Direction of the mean marker displacement (atan2(y, x)), NaN without shear.
     timestamp_ns, frame_id
         Of the raw frame this was computed from.
+    force_n
+        ``(3,)`` float64 force the object applies to the membrane, newtons [F_x, F_y, F_z]
+        (x with columns, y with rows, z into the elastomer), from the linear elastic model
+        of :mod:`thintact_sdk.tactile.force`; zeros without contact, F_x/F_y NaN when no
+        marker is in the contact. None where not computed.
+    slip_ratio
+        Share of the loaded contact that slips, in [0, 1] (0 stuck, 1 sliding;
+        :mod:`thintact_sdk.tactile.slip`); None without contact or where not computed.
     """
 
     image: np.ndarray
@@ -106,3 +114,5 @@ class TactileFrame:
     shear_direction_rad: float = float("nan")
     latency_ms: float | None = None
     meta: dict[str, Any] = field(default_factory=dict)
+    force_n: np.ndarray | None = None
+    slip_ratio: float | None = None
