@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import threading
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -18,7 +19,10 @@ from thintact_sdk.errors import (
     ThinTactError,
     UnsupportedFeatureError,
 )
+from thintact_sdk.frames import TactileFrame
 from thintact_sdk.group import SensorGroup
+from thintact_sdk.profile import load_profile
+from thintact_sdk.sensor import Sensor
 
 
 def _group(*sensors, **options):
@@ -160,3 +164,28 @@ def test_the_group_closes_what_it_opened_and_only_that():
         g.read()
     assert not mine.is_open and theirs.is_open
     theirs.close()
+
+
+def test_two_lens_fingers_give_paired_tactile_frames(tmp_path):
+    import cv2
+
+    data = Path(thintact.__file__).parent / "data" / "gelsight" / "gelsight_ball_presses.npz"
+    with np.load(data, allow_pickle=False) as z:
+        frames = [z["f0"]] + list(z["imgs"][:3])
+    sensors = []
+    for side in ("left", "right"):
+        folder = tmp_path / side
+        folder.mkdir()
+        for i, rgb in enumerate(frames):
+            big = np.repeat(np.repeat(rgb, 2, axis=0), 2, axis=1)[..., ::-1]
+            cv2.imwrite(str(folder / f"img_{i:04d}.png"), np.ascontiguousarray(big))
+        sensors.append(Sensor(load_profile("gelsight-mini"), camera_settings={
+            "device": str(folder / "img_%04d.png"), "fps": 30.0, "loop": True}))
+    with thintact.open_group(sensors, names=["left", "right"], max_skew_ms=20.0) as g:
+        pairs = list(g.stream(max_frames=8))
+    assert all(p.complete and p.skew_ms <= 20.0 for p in pairs)
+    for p in pairs:
+        left, right = p.frames["left"], p.frames["right"]
+        assert isinstance(left, TactileFrame) and isinstance(right, TactileFrame)
+        assert left.depth_mm.shape == (120, 160)
+    assert any(p.frames["left"].contact for p in pairs)
