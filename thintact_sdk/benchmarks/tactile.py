@@ -352,8 +352,8 @@ def force_slip(args: argparse.Namespace, out: dict[str, Any]) -> None:
     print(f"  normal force: relative RMS error {ev.normal_rel_rms:.1%} over "
           f"{ev.normal_range_n[0]:.2f}–{ev.normal_range_n[1]:.2f} N")
     print(f"  shear force: relative RMS error {ev.shear_rel_rms:.1%} over "
-          f"{ev.shear_range_n[0]:.2f}–{ev.shear_range_n[1]:.2f} N, direction RMS "
-          f"{ev.shear_direction_deg:.0f}°")
+          f"{ev.shear_range_n[0]:.2f}–{ev.shear_range_n[1]:.2f} N, direction error median "
+          f"{ev.shear_direction_median_deg:.0f}°, RMS {ev.shear_direction_deg:.0f}°")
     print(f"  slip ratio: MAE {ev.slip_mae:.2f}, RMS {ev.slip_rms:.2f}; incipient slip (true "
           f"0.2–0.8) flagged in {ev.slip_incipient_detected:.0%}, false alarms without "
           f"shear {ev.slip_false_alarm:.0%}")

@@ -129,8 +129,8 @@ class ForceSlipEvaluation:
         where the true shear exceeds 10 % of μP).
     normal_range_n, shear_range_n
         (min, max) true forces of the test presses (N).
-    shear_direction_deg
-        RMS error of the shear direction (degrees).
+    shear_direction_deg, shear_direction_median_deg
+        RMS and median absolute error of the shear direction (degrees).
     slip_mae, slip_rms
         Mean absolute and RMS error of the slip ratio.
     slip_incipient_detected
@@ -151,6 +151,7 @@ class ForceSlipEvaluation:
     normal_range_n: tuple[float, float]
     shear_range_n: tuple[float, float]
     shear_direction_deg: float
+    shear_direction_median_deg: float
     slip_mae: float
     slip_rms: float
     slip_incipient_detected: float
@@ -235,10 +236,12 @@ def evaluate_force_slip(
         fz, fxy = cn * raw[2], ct * raw[:2]
         n_err.append((fz - truth[2]) / truth[2])
         t_shear = float(np.hypot(*truth[:2]))
+        dir_err = float("nan")
         if t_shear > 0.1 * truth[2]:
             s_err.append((float(np.hypot(*fxy)) - t_shear) / t_shear)
             ang = np.arctan2(fxy[1], fxy[0]) - np.arctan2(truth[1], truth[0])
-            d_err.append(np.rad2deg(np.angle(np.exp(1j * ang))))
+            dir_err = float(np.rad2deg(np.angle(np.exp(1j * ang))))
+            d_err.append(dir_err)
         est_slip = float("nan") if slip is None else slip
         if np.isfinite(est_slip):
             slip_err.append(est_slip - press.slip_ratio)
@@ -250,7 +253,8 @@ def evaluate_force_slip(
             alarms += int(est_slip >= 0.15)
         rows.append({"indenter": ind.name, "depth_mm": depth, "fz_true_n": float(truth[2]),
                      "fz_est_n": float(fz), "shear_true_n": t_shear,
-                     "shear_est_n": float(np.hypot(*fxy)), "slip_true": press.slip_ratio,
+                     "shear_est_n": float(np.hypot(*fxy)), "shear_direction_error_deg": dir_err,
+                     "slip_true": press.slip_ratio,
                      "slip_est": est_slip})
     rms = lambda v: float(np.sqrt(np.mean(np.square(v)))) if len(v) else float("nan")  # noqa: E731
     fz_true = [float(r["fz_true_n"]) for r in rows]
@@ -261,6 +265,7 @@ def evaluate_force_slip(
         normal_range_n=(min(fz_true), max(fz_true)),
         shear_range_n=(min(sh_true), max(sh_true)) if sh_true else (0.0, 0.0),
         shear_direction_deg=rms(d_err),
+        shear_direction_median_deg=float(np.median(np.abs(d_err))) if d_err else float("nan"),
         slip_mae=float(np.mean(np.abs(slip_err))) if slip_err else float("nan"),
         slip_rms=rms(slip_err),
         slip_incipient_detected=detected / incipient if incipient else float("nan"),

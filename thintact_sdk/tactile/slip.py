@@ -4,14 +4,16 @@ Under a tangential load below sliding, the centre of the contact sticks to the o
 moves with it rigidly while an annulus at the rim slips and lags behind (Cattaneo–Mindlin;
 the slip region grows inwards until gross sliding). As in the vision-based incipient-slip
 literature (Yuan et al., ICRA 2015, GelSight shear and slip; Dong et al., IROS 2017), the
-displacement field is compared with the rigid motion of the stuck centre:
+displacement field is compared with the rigid motion of the stuck part:
 
 1. the loaded core is the region deeper than half the peak depth
    (:func:`thintact_sdk.tactile.force.loaded_core`);
-2. the stick motion δ is the median displacement of the markers at the deepest part of
-   the core (depth ≥ 80 % of the peak; else the marker nearest the peak);
-3. the marker displacements are interpolated linearly over the core's pixels, and a pixel
-   slips where its displacement departs from δ by more than ``tolerance · |δ|``;
+2. the shear direction ŝ is that of the mean displacement of the core's markers; the stick
+   motion δ is the ``stick_quantile`` (75 %) of their displacements along ŝ: the stuck part
+   moves furthest, the slipping rim lags (a high quantile rather than the maximum, against
+   tracking noise and the normal-load pull of the markers towards the contact);
+3. the along-ŝ displacements of all tracked markers are interpolated linearly over the
+   core's pixels, and a pixel slips where it lags δ by more than ``tolerance · δ``;
 4. ``slip_ratio`` = slipping area / core area: 0 = stuck, → 1 = gross sliding.
 """
 
@@ -24,6 +26,7 @@ from thintact_sdk.tactile.force import loaded_core, markers_in
 
 MIN_SHEAR_MM = 0.05
 STICK_TOLERANCE = 0.2
+STICK_QUANTILE = 0.75
 
 
 def estimate_slip_ratio(
@@ -33,6 +36,7 @@ def estimate_slip_ratio(
     reference_mm: np.ndarray,
     displacements_mm: np.ndarray,
     tolerance: float = STICK_TOLERANCE,
+    stick_quantile: float = STICK_QUANTILE,
     min_shear_mm: float = MIN_SHEAR_MM,
 ) -> float | None:
     """Fraction of the loaded contact that slips, in [0, 1].
@@ -46,15 +50,18 @@ def estimate_slip_ratio(
     reference_mm, displacements_mm
         ``K × 2`` marker reference centres and displacements (mm, NaN where lost).
     tolerance
-        Relative departure from the stick motion that counts as slip.
+        Relative lag behind the stick motion that counts as slip.
+    stick_quantile
+        Quantile of the core markers' along-shear displacement taken as the stick motion.
     min_shear_mm
-        Below this stick motion there is no tangential load: the ratio is 0.
+        Below this mean displacement of the core's markers there is no tangential load:
+        the ratio is 0.
 
     Returns
     -------
     float or None
-        None when it cannot be told: no contact, or fewer than 3 tracked markers in and
-        around the core.
+        None when it cannot be told: no contact, fewer than 2 tracked markers in the core,
+        or fewer than 3 tracked markers in all.
     """
     core = loaded_core(depth_mm, mm_per_px, threshold_mm)
     if core is None:
@@ -63,27 +70,19 @@ def estimate_slip_ratio(
     disp = np.asarray(displacements_mm, np.float64).reshape(-1, 2)
     tracked = np.isfinite(disp).all(axis=1)
     inside = markers_in(core.mask, ref, mm_per_px) & tracked
-    if inside.sum() < 3:
+    if inside.sum() < 2 or tracked.sum() < 3:
         return None
-    depth = np.asarray(depth_mm, np.float64)
-    deep = markers_in(depth >= 0.8 * depth.max(), ref, mm_per_px) & tracked
-    if deep.any():
-        stick = np.median(disp[deep], axis=0)
-    else:
-        rows, cols = depth.shape
-        pr, pc = np.unravel_index(int(np.argmax(depth)), depth.shape)
-        peak = np.array([(pc - (cols - 1) / 2) * mm_per_px, (pr - (rows - 1) / 2) * mm_per_px])
-        cand = np.flatnonzero(inside)
-        stick = disp[cand[np.argmin(np.hypot(*(ref[cand] - peak).T))]]
-    size = float(np.hypot(*stick))
+    mean = disp[inside].mean(axis=0)
+    size = float(np.hypot(*mean))
     if size < min_shear_mm:
         return 0.0
+    along = disp[tracked] @ (mean / size)
+    stick = float(np.quantile(disp[inside] @ (mean / size), stick_quantile))
+    rows, cols = core.mask.shape
     rr, cc = np.nonzero(core.mask)
-    rows, cols = depth.shape
     pix = np.stack([(cc - (cols - 1) / 2) * mm_per_px, (rr - (rows - 1) / 2) * mm_per_px], 1)
-    field = griddata(ref[tracked], disp[tracked], pix, method="linear")
-    holes = ~np.isfinite(field).all(axis=1)
+    field = griddata(ref[tracked], along, pix, method="linear")
+    holes = ~np.isfinite(field)
     if holes.any():
-        field[holes] = griddata(ref[tracked], disp[tracked], pix[holes], method="nearest")
-    departs = np.hypot(*(field - stick).T) > tolerance * size
-    return float(np.clip(departs.mean(), 0.0, 1.0))
+        field[holes] = griddata(ref[tracked], along, pix[holes], method="nearest")
+    return float(np.clip(np.mean(field < (1.0 - tolerance) * stick), 0.0, 1.0))
