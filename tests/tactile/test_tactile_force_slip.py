@@ -128,3 +128,11 @@ def test_bench_force_slip_rows(capsys):
     assert fs["presses"] == 4 and len(fs["rows"]) == 4
     assert fs["normal_rel_rms"] < 0.5
     assert "normal force: relative RMS error" in capsys.readouterr().out
+
+
+def test_evaluation_refuses_a_field_too_small_for_its_presses():
+    from thintact_sdk.errors import ThinTactError
+    from thintact_sdk.tactile.loaded_press import evaluate_force_slip
+
+    with pytest.raises(ThinTactError, match="use virtual-finger"):
+        evaluate_force_slip(load_profile("virtual-mini"), presses=2)

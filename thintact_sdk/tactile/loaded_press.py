@@ -24,12 +24,15 @@ from scipy.ndimage import map_coordinates
 
 from thintact_sdk.tactile.elastic import Elastomer, solve_normal_contact, tangential_displacement
 from thintact_sdk.tactile.force import ForceModel, fit_gain
+from thintact_sdk.tactile.grid import TactileParams
 from thintact_sdk.tactile.indenters import Indenter
 from thintact_sdk.tactile.interpreter import TactileInterpreter
 from thintact_sdk.tactile.simulate import TactileScene, TactileSimulator
 from thintact_sdk.tactile.slip import estimate_slip_ratio
 
 CLEARANCE_MM = 50.0
+PRESS_MARGIN_MM = 5.0
+"""Simulated presses keep their centre this far inside the field (mm)."""
 
 
 @dataclass
@@ -160,16 +163,29 @@ class ForceSlipEvaluation:
     rows: list[dict[str, float | str]]
 
 
+def _press_area(p: TactileParams) -> tuple[float, float]:
+    """Half width and height (mm) of the region press centres are drawn from."""
+    half_w = p.cols / 2 * p.mm_per_px - PRESS_MARGIN_MM
+    half_h = p.rows / 2 * p.mm_per_px - PRESS_MARGIN_MM
+    if half_w < 0 or half_h < 0:
+        from thintact_sdk.errors import ThinTactError
+
+        raise ThinTactError(
+            f"the force/slip evaluation presses indenters up to 16 mm wide, centred "
+            f"{PRESS_MARGIN_MM:g} mm inside the field; this profile's field is "
+            f"{p.cols * p.mm_per_px:.1f} × {p.rows * p.mm_per_px:.1f} mm (use virtual-finger)"
+        )
+    return half_w, half_h
+
+
 def _press_set(sim: TactileSimulator, elastomer: Elastomer, count: int, seed: int,
                indenters: Sequence[Indenter]) -> list[tuple[Indenter, float, LoadedPress]]:
     rng = np.random.default_rng(seed)
-    p = sim.params
+    half_w, half_h = _press_area(sim.params)
     out = []
     for k in range(count):
         ind = indenters[k % len(indenters)]
         depth = float(rng.uniform(0.3, 1.0))
-        half_w = p.cols / 2 * p.mm_per_px - 5.0
-        half_h = p.rows / 2 * p.mm_per_px - 5.0
         centre = (float(rng.uniform(-half_w, half_w)), float(rng.uniform(-half_h, half_h)))
         stick = 1.0 if k % 4 == 0 else float(rng.uniform(0.05, 0.95))
         press = simulate_loaded_press(sim, elastomer, ind, depth, centre,
@@ -212,6 +228,7 @@ def evaluate_force_slip(
     assert isinstance(profile, Profile)
     el = elastomer or Elastomer.from_profile(profile)
     sim = TactileSimulator.for_profile(profile)
+    _press_area(sim.params)
     interp = TactileInterpreter(profile, scene_level_lut(profile))
     balls = [Sphere(3.0), Sphere(5.0), Sphere(8.0)]
     others = [Sphere(4.0), Cylinder(), ChamferedPrism(), Sphere(6.0)]
