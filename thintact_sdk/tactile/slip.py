@@ -12,21 +12,47 @@ displacement field is compared with the rigid motion of the stuck part:
    motion δ is the ``stick_quantile`` (75 %) of their displacements along ŝ: the stuck part
    moves furthest, the slipping rim lags (a high quantile rather than the maximum, against
    tracking noise and the normal-load pull of the markers towards the contact);
-3. the along-ŝ displacements of all tracked markers are interpolated linearly over the
-   core's pixels, and a pixel slips where it lags δ by more than ``tolerance · δ``;
+3. the along-ŝ displacements of all tracked markers are interpolated over the core's
+   pixels (inverse-distance weights of the 3 nearest markers), and a pixel slips where it lags δ by more than ``tolerance · δ``;
 4. ``slip_ratio`` = slipping area / core area: 0 = stuck, → 1 = gross sliding.
 """
 
 from __future__ import annotations
 
 import numpy as np
-from scipy.interpolate import griddata
+from scipy.spatial import cKDTree
 
 from thintact_sdk.tactile.force import loaded_core, markers_in
 
 MIN_SHEAR_MM = 0.05
 STICK_TOLERANCE = 0.2
 STICK_QUANTILE = 0.75
+
+
+def interpolate_markers(
+    positions_mm: np.ndarray, values: np.ndarray, points_mm: np.ndarray, neighbours: int = 3
+) -> np.ndarray:
+    """Inverse-square-distance weighted mean of the ``neighbours`` nearest markers' values.
+
+    Parameters
+    ----------
+    positions_mm
+        ``K × 2`` marker positions (mm).
+    values
+        ``K`` values at the markers.
+    points_mm
+        ``P × 2`` where to interpolate (mm).
+
+    Returns
+    -------
+    numpy.ndarray
+        ``P`` float64 values (a point on a marker takes its value).
+    """
+    k = min(neighbours, len(positions_mm))
+    dist, idx = cKDTree(positions_mm).query(points_mm, k=k)
+    dist, idx = np.asarray(dist).reshape(len(points_mm), k), np.asarray(idx).reshape(len(points_mm), k)
+    w = 1.0 / np.maximum(dist, 1e-6) ** 2
+    return np.asarray((w * np.asarray(values)[idx]).sum(axis=1) / w.sum(axis=1), np.float64)
 
 
 def estimate_slip_ratio(
@@ -81,8 +107,5 @@ def estimate_slip_ratio(
     rows, cols = core.mask.shape
     rr, cc = np.nonzero(core.mask)
     pix = np.stack([(cc - (cols - 1) / 2) * mm_per_px, (rr - (rows - 1) / 2) * mm_per_px], 1)
-    field = griddata(ref[tracked], along, pix, method="linear")
-    holes = ~np.isfinite(field)
-    if holes.any():
-        field[holes] = griddata(ref[tracked], along, pix[holes], method="nearest")
+    field = interpolate_markers(ref[tracked], along, pix)
     return float(np.clip(np.mean(field < (1.0 - tolerance) * stick), 0.0, 1.0))
