@@ -414,7 +414,7 @@ class SensorGroup:
                 m.status.state = "stalled"
                 m.status.stalls += 1
                 if not m.status.error:
-                    m.status.error = f"no frame for {self.stall_after_s:.2f} s"
+                    m.status.error = f"no frame for {limit:.2f} s"
 
     def _try_pair(self) -> GroupFrame | None:
         """Pair the pending frames (call with the lock held); None when not yet possible."""
@@ -423,24 +423,21 @@ class SensorGroup:
         active = [m for m in self.members if m.status.state == "running"]
         if not active or any(not m.pending for m in active):
             return None
-        while True:
-            anchor = min(m.pending[-1].timestamp_ns for m in active)
-            chosen: dict[str, int] = {}
-            for m in active:
-                stamps = np.array([f.timestamp_ns for f in m.pending], np.int64)
-                chosen[m.name] = int(np.argmin(np.abs(stamps - anchor)))
-            picked = {m.name: m.pending[chosen[m.name]] for m in active}
-            stamps_ns = [f.timestamp_ns for f in picked.values()]
-            if max(stamps_ns) - min(stamps_ns) <= self.max_skew_ns:
-                break
+        anchor = min(m.pending[-1].timestamp_ns for m in active)
+        chosen: dict[str, int] = {}
+        for m in active:
+            stamps = np.array([f.timestamp_ns for f in m.pending], np.int64)
+            chosen[m.name] = int(np.argmin(np.abs(stamps - anchor)))
+        picked = {m.name: m.pending[chosen[m.name]] for m in active}
+        stamps_ns = [f.timestamp_ns for f in picked.values()]
+        if max(stamps_ns) - min(stamps_ns) > self.max_skew_ns:
             # some member's nearest frame is later than anchor + max skew: the slowest
             # member's frames (all at or before the anchor) can never be paired, since
             # partners only get newer; drop them and wait for its next frame
-            for m in active:
-                if m.pending[-1].timestamp_ns == anchor:
-                    m.status.unpaired += len(m.pending)
-                    m.pending.clear()
-                    return None
+            slowest = next(m for m in active if m.pending[-1].timestamp_ns == anchor)
+            slowest.status.unpaired += len(slowest.pending)
+            slowest.pending.clear()
+            return None
         for m in active:
             k = chosen[m.name]
             m.status.unpaired += k

@@ -189,3 +189,17 @@ def test_two_lens_fingers_give_paired_tactile_frames(tmp_path):
         assert isinstance(left, TactileFrame) and isinstance(right, TactileFrame)
         assert left.depth_mm.shape == (120, 160)
     assert any(p.frames["left"].contact for p in pairs)
+
+
+def test_a_member_silent_from_the_start_is_stalled_after_startup_s():
+    silent = threading.Event()
+    silent.set()
+    with _group(scripted_sensor(fps=100), scripted_sensor(fps=100, stall=silent),
+                names=["a", "b"], startup_s=0.3) as g:
+        t0 = time.monotonic()
+        pair = g.read(timeout_s=0.1)  # waits up to startup_s for b's first frame, not longer
+        waited = time.monotonic() - t0
+        st = g.status()["b"]
+    assert pair.missing == {"b": "stalled"} and pair.frames["a"] is not None
+    assert 0.25 < waited < 1.5
+    assert st.captured == 0 and st.stalls == 1
