@@ -94,3 +94,14 @@ def test_trigger_features_are_written_in_sfnc_order():
     del nm.TriggerSoftware
     with pytest.raises(UnsupportedFeatureError, match="no TriggerSoftware"):
         fire_software_trigger(nm)
+
+
+@pytest.mark.skipif(VIKY is None, reason="genicam wheel without viky.cti")
+def test_a_refused_trigger_leaves_the_camera_streaming():
+    with _viky_sensor("2") as sensor:
+        cam = sensor.camera
+        with pytest.raises(UnsupportedFeatureError, match="no TriggerMode"):
+            cam.set_trigger("Software")
+        with pytest.raises(UnsupportedFeatureError, match="no TriggerSoftware"):
+            cam.fire_trigger()
+        assert sensor.read_raw().data.shape == (256, 320)  # acquisition was restarted
