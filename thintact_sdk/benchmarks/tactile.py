@@ -336,7 +336,7 @@ def _streamed_fps(profile: Any, raws: list[Any], sensor: Any, frames: int,
 def force_slip(args: argparse.Namespace, out: dict[str, Any]) -> None:
     """Force and slip estimates against the elastic ground truth (scene level)."""
     from thintact_sdk.profile import load_profile
-    from thintact_sdk.tactile.force import NORMAL_GAIN, SHEAR_GAIN
+    from thintact_sdk.tactile.force import NORMAL_FILL_GAIN, NORMAL_GAIN, SHEAR_GAIN
     from thintact_sdk.tactile.loaded_press import evaluate_force_slip
 
     profile = load_profile(args.profile)
@@ -345,10 +345,11 @@ def force_slip(args: argparse.Namespace, out: dict[str, Any]) -> None:
     elapsed = time.perf_counter() - t0
     print(f"\nForce and slip ({profile.name}, scene level; truth: half-space contact solution "
           f"(Boussinesq + Cattaneo–Mindlin, E 0.3 MPa, ν 0.48, μ 1) of each simulated press; "
-          f"gains fitted on {ev.presses} ball presses, tested on {ev.presses} other presses "
-          f"(spheres 4/6 mm, cylinder, chamfered prism), {elapsed:.0f} s)")
-    print(f"  fitted gains c_n {ev.normal_gain:.3f} (shipped {NORMAL_GAIN}), "
-          f"c_t {ev.shear_gain:.2f} (shipped {SHEAR_GAIN})")
+          f"gains fitted on {ev.presses} presses (balls R 3/8 mm, cylinder R 2.5 mm, prism "
+          f"5x3 mm), tested on {ev.presses} others (balls R 4/6 mm, cylinder R 1.5 mm, prism "
+          f"6x4 mm), {elapsed:.0f} s)")
+    print(f"  fitted gains c_0 {ev.normal_gain:.3f}, c_1 {ev.normal_fill_gain:.3f}, "
+          f"c_t {ev.shear_gain:.2f} (shipped {NORMAL_GAIN}, {NORMAL_FILL_GAIN}, {SHEAR_GAIN})")
     print(f"  normal force: relative RMS error {ev.normal_rel_rms:.1%} over "
           f"{ev.normal_range_n[0]:.2f}–{ev.normal_range_n[1]:.2f} N")
     print(f"  shear force: relative RMS error {ev.shear_rel_rms:.1%} over "

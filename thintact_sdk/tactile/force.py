@@ -6,8 +6,11 @@ dimensionless gains fitted on simulated presses whose forces the half-space solu
 
 * normal: ``F_z = c_n · E* · V / a`` — E* = E/(1 − ν²), V the indentation volume (mm³,
   depth integrated over the contact), a = √(A/π) the radius of the loaded core (the
-  region deeper than half the peak depth: for a ball, exactly Hertz's contact circle). A
-  Hertzian ball gives c_n = 16/(9π) ≈ 0.57, a flat punch 2/π ≈ 0.64;
+  region deeper than half the peak depth: for a ball, exactly Hertz's contact circle). The
+  shape constant c_n depends on how the pressure is spread (a Hertzian ball gives
+  16/(9π) ≈ 0.57, a flat punch 2/π ≈ 0.64), so it is taken linear in the contact's fill
+  ratio φ = V / (A_touch · d_peak) (0.5 for a paraboloid cap, → 1 for a flat punch):
+  ``c_n = c_0 + c_1 · φ``;
 * shear: ``(F_x, F_y) = c_t · G · a · δ`` — G = E/(2(1 + ν)), δ the mean displacement
   (mm) of the markers in the loaded core; Mindlin's stuck circle gives c_t = 8/(2 − ν).
 
@@ -27,9 +30,12 @@ from numpy.typing import ArrayLike
 from thintact_sdk.profile import Profile
 from thintact_sdk.tactile.elastic import Elastomer
 
-NORMAL_GAIN = 0.455
-"""c_n fitted on 12 simulated ball presses (R 3/5/8 mm; `thintact bench tactile`)."""
-SHEAR_GAIN = 5.42
+NORMAL_GAIN = -0.373
+"""c_0 of c_n = c_0 + c_1·φ, fitted on 12 simulated presses (balls, cylinder, prism;
+``thintact bench tactile``)."""
+NORMAL_FILL_GAIN = 1.488
+"""c_1 of c_n = c_0 + c_1·φ, fitted on the same presses."""
+SHEAR_GAIN = 5.84
 """c_t fitted on the same presses (docs/tactile.md, "Force and slip")."""
 
 
@@ -45,11 +51,15 @@ class LoadedCore:
         √(area/π) of ``mask`` (mm).
     volume_mm3
         Depth integrated over every pixel deeper than the contact threshold (mm³).
+    fill
+        ``volume / (touching area · peak depth)``: 0.5 for a paraboloid cap, → 1 for a
+        flat punch.
     """
 
     mask: np.ndarray
     radius_mm: float
     volume_mm3: float
+    fill: float
 
 
 def loaded_core(depth_mm: np.ndarray, mm_per_px: float, threshold_mm: float) -> LoadedCore | None:
@@ -62,7 +72,8 @@ def loaded_core(depth_mm: np.ndarray, mm_per_px: float, threshold_mm: float) -> 
     mask = touching & (d >= 0.5 * peak)
     area = float(mask.sum()) * mm_per_px**2
     volume = float(d[touching].sum()) * mm_per_px**2
-    return LoadedCore(mask, float(np.sqrt(area / np.pi)), volume)
+    fill = volume / (float(touching.sum()) * mm_per_px**2 * peak)
+    return LoadedCore(mask, float(np.sqrt(area / np.pi)), volume, fill)
 
 
 def markers_in(mask: np.ndarray, reference_mm: np.ndarray, mm_per_px: float) -> np.ndarray:
@@ -85,24 +96,31 @@ class ForceModel:
     ----------
     elastomer
         Gel material (E, ν): calibrate E on a real unit.
-    normal_gain, shear_gain
-        c_n and c_t (dimensionless, see module docstring).
+    normal_gain, normal_fill_gain, shear_gain
+        c_0, c_1 and c_t (dimensionless, see module docstring).
     """
 
     elastomer: Elastomer = Elastomer()
     normal_gain: float = NORMAL_GAIN
+    normal_fill_gain: float = NORMAL_FILL_GAIN
     shear_gain: float = SHEAR_GAIN
 
     @classmethod
     def from_profile(cls, profile: Profile) -> ForceModel:
-        """Material from ``tactile.elastomer_*``; gains from ``tactile.force_normal_gain`` /
-        ``force_shear_gain`` when a calibration stored them."""
+        """Material from ``tactile.elastomer_*``; gains from ``tactile.force_normal_gain``,
+        ``force_normal_fill_gain`` and ``force_shear_gain`` when a calibration stored them."""
         extra = (profile.tactile.model_extra or {}) if profile.tactile is not None else {}
         return cls(
             Elastomer.from_profile(profile),
             float(extra.get("force_normal_gain", NORMAL_GAIN)),
+            float(extra.get("force_normal_fill_gain", NORMAL_FILL_GAIN)),
             float(extra.get("force_shear_gain", SHEAR_GAIN)),
         )
+
+    def normal_features(self, core: LoadedCore) -> tuple[float, float]:
+        """``(E*·V/a, φ·E*·V/a)`` in N: F_z = c_0 · first + c_1 · second."""
+        base = self.elastomer.contact_modulus_mpa * core.volume_mm3 / core.radius_mm
+        return base, base * min(max(core.fill, 0.0), 1.0)
 
     def estimate(
         self,
@@ -131,7 +149,8 @@ class ForceModel:
         core = loaded_core(depth_mm, mm_per_px, threshold_mm)
         if core is None or core.radius_mm <= 0:
             return np.zeros(3)
-        fz = self.normal_gain * self.elastomer.contact_modulus_mpa * core.volume_mm3 / core.radius_mm
+        base, filled = self.normal_features(core)
+        fz = max(0.0, self.normal_gain * base + self.normal_fill_gain * filled)
         disp = np.asarray(displacements_mm, np.float64).reshape(-1, 2)
         inside = markers_in(core.mask, reference_mm, mm_per_px) & np.isfinite(disp).all(axis=1)
         if not inside.any():
@@ -139,6 +158,20 @@ class ForceModel:
         shift = disp[inside].mean(axis=0)
         fxy = self.shear_gain * self.elastomer.shear_modulus_mpa * core.radius_mm * shift
         return np.array([fxy[0], fxy[1], fz])
+
+
+def fit_gains(features: ArrayLike, truth: ArrayLike) -> np.ndarray:
+    """Least-squares gains c of ``truth ≈ features @ c`` (``P × G`` features, ``P`` truths)."""
+    f = np.asarray(features, np.float64)
+    t = np.asarray(truth, np.float64).ravel()
+    f = f.reshape(len(t), -1)
+    ok = np.isfinite(f).all(axis=1) & np.isfinite(t)
+    if ok.sum() < f.shape[1]:
+        from thintact_sdk.errors import CalibrationError
+
+        raise CalibrationError(
+            f"{int(ok.sum())} presses with contact for {f.shape[1]} force gains; press more")
+    return np.linalg.lstsq(f[ok], t[ok], rcond=None)[0]
 
 
 def fit_gain(features: ArrayLike, truth: ArrayLike) -> float:

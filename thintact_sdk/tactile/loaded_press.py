@@ -23,7 +23,7 @@ import numpy as np
 from scipy.ndimage import map_coordinates
 
 from thintact_sdk.tactile.elastic import Elastomer, solve_normal_contact, tangential_displacement
-from thintact_sdk.tactile.force import ForceModel, fit_gain
+from thintact_sdk.tactile.force import ForceModel, fit_gain, fit_gains, loaded_core
 from thintact_sdk.tactile.grid import TactileParams
 from thintact_sdk.tactile.indenters import Indenter
 from thintact_sdk.tactile.interpreter import TactileInterpreter
@@ -125,8 +125,8 @@ class ForceSlipEvaluation:
 
     Attributes
     ----------
-    normal_gain, shear_gain
-        Gains fitted on the calibration presses.
+    normal_gain, normal_fill_gain, shear_gain
+        Gains c_0, c_1, c_t fitted on the calibration presses.
     normal_rel_rms, shear_rel_rms
         RMS of (estimate − truth) / truth over the test presses (normal; shear magnitude
         where the true shear exceeds 10 % of μP).
@@ -148,6 +148,7 @@ class ForceSlipEvaluation:
     """
 
     normal_gain: float
+    normal_fill_gain: float
     shear_gain: float
     normal_rel_rms: float
     shear_rel_rms: float
@@ -197,19 +198,25 @@ def _press_set(sim: TactileSimulator, elastomer: Elastomer, count: int, seed: in
 
 def _unit_gain_estimates(
     interp: TactileInterpreter, press: LoadedPress, elastomer: Elastomer
-) -> tuple[np.ndarray, float | None]:
-    """Force with unit gains (the features c_n, c_t multiply) and slip of one press."""
+) -> tuple[np.ndarray, np.ndarray, float | None]:
+    """The normal features (c_0, c_1 multiply them), the shear with unit gain (c_t
+    multiplies it) and the slip ratio of one press."""
     frame = interp.interpret(press.scene.scene)
     p = interp.params
     args = (frame.depth_mm, p.mm_per_px, p.contact_threshold_mm, interp.tracker.reference_mm,
             frame.marker_displacements_mm)
-    return ForceModel(elastomer, 1.0, 1.0).estimate(*args), estimate_slip_ratio(*args)
+    model = ForceModel(elastomer, 0.0, 0.0, 1.0)
+    core = loaded_core(frame.depth_mm, p.mm_per_px, p.contact_threshold_mm)
+    normal = np.array(model.normal_features(core) if core is not None else (0.0, 0.0))
+    return normal, model.estimate(*args)[:2], estimate_slip_ratio(*args)
 
 
 def evaluate_force_slip(
     profile: object, presses: int = 12, seed: int = 0, elastomer: Elastomer | None = None,
 ) -> ForceSlipEvaluation:
-    """Fit c_n, c_t on simulated presses and test them (and the slip signal) on others.
+    """Fit c_0, c_1, c_t on simulated presses (balls of 3 and 8 mm radius, a 2.5 mm cylinder,
+    a 5 × 3 mm prism) and test them and the slip signal on other presses (balls of 4 and
+    6 mm, the default cylinder and prism).
 
     The scenes are interpreted directly (scene level, no lensless decoding) with the
     profile's simulated LUT, so the figures measure the mechanics model, not the imaging.
@@ -230,27 +237,27 @@ def evaluate_force_slip(
     sim = TactileSimulator.for_profile(profile)
     _press_area(sim.params)
     interp = TactileInterpreter(profile, scene_level_lut(profile))
-    balls = [Sphere(3.0), Sphere(5.0), Sphere(8.0)]
+    shapes = [Sphere(3.0), Cylinder(2.5, 6.0), Sphere(8.0), ChamferedPrism(5.0, 3.0, 0.7)]
     others = [Sphere(4.0), Cylinder(), ChamferedPrism(), Sphere(6.0)]
 
     def measure(items: list[tuple[Indenter, float, LoadedPress]]) -> list[tuple[Any, ...]]:
         res = []
         for ind, depth, press in items:
             interp.set_reference(sim.flat().scene)
-            raw, slip = _unit_gain_estimates(interp, press, el)
-            res.append((ind, depth, press, raw, slip, press.force_n))
+            normal, shear, slip = _unit_gain_estimates(interp, press, el)
+            res.append((ind, depth, press, normal, shear, slip, press.force_n))
         return res
 
-    train = measure(_press_set(sim, el, presses, seed, balls))
+    train = measure(_press_set(sim, el, presses, seed, shapes))
     test = measure(_press_set(sim, el, presses, seed + 1000, others))
-    cn = fit_gain([r[3][2] for r in train], [r[5][2] for r in train])
-    sheared = [r for r in train if np.hypot(*r[5][:2]) > 0.1 * 1.0 * r[5][2]]
-    ct = fit_gain([np.hypot(*r[3][:2]) for r in sheared], [np.hypot(*r[5][:2]) for r in sheared])
+    c0, c1 = fit_gains([r[3] for r in train], [r[6][2] for r in train])
+    sheared = [r for r in train if np.hypot(*r[6][:2]) > 0.1 * r[6][2]]
+    ct = fit_gain([np.hypot(*r[4]) for r in sheared], [np.hypot(*r[6][:2]) for r in sheared])
     rows: list[dict[str, float | str]] = []
     n_err, s_err, d_err, slip_err = [], [], [], []
     detected, incipient, alarms, unloaded = 0, 0, 0, 0
-    for ind, depth, press, raw, slip, truth in test:
-        fz, fxy = cn * raw[2], ct * raw[:2]
+    for ind, depth, press, normal, shear, slip, truth in test:
+        fz, fxy = max(0.0, c0 * normal[0] + c1 * normal[1]), ct * shear
         n_err.append((fz - truth[2]) / truth[2])
         t_shear = float(np.hypot(*truth[:2]))
         dir_err = float("nan")
@@ -277,7 +284,7 @@ def evaluate_force_slip(
     fz_true = [float(r["fz_true_n"]) for r in rows]
     sh_true = [float(r["shear_true_n"]) for r in rows if float(r["shear_true_n"]) > 0]
     return ForceSlipEvaluation(
-        normal_gain=cn, shear_gain=ct,
+        normal_gain=float(c0), normal_fill_gain=float(c1), shear_gain=ct,
         normal_rel_rms=rms(n_err), shear_rel_rms=rms(s_err),
         normal_range_n=(min(fz_true), max(fz_true)),
         shear_range_n=(min(sh_true), max(sh_true)) if sh_true else (0.0, 0.0),
