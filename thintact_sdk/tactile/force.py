@@ -35,6 +35,8 @@ NORMAL_GAIN = -0.373
 ``thintact bench tactile``)."""
 NORMAL_FILL_GAIN = 1.488
 """c_1 of c_n = c_0 + c_1·φ, fitted on the same presses."""
+FILL_RANGE = (0.5, 1.0)
+"""Fill ratios φ the normal model is applied over (clamped)."""
 SHEAR_GAIN = 5.84
 """c_t fitted on the same presses (docs/tactile.md, "Force and slip")."""
 
@@ -118,9 +120,13 @@ class ForceModel:
         )
 
     def normal_features(self, core: LoadedCore) -> tuple[float, float]:
-        """``(E*·V/a, φ·E*·V/a)`` in N: F_z = c_0 · first + c_1 · second."""
+        """``(E*·V/a, φ·E*·V/a)`` in N: F_z = c_0 · first + c_1 · second.
+
+        φ is clamped to [0.5, 1] (paraboloid cap to flat punch): the gains were fitted on
+        0.54–0.75, and a pointed contact (a cone: φ = 1/3) is outside what they describe.
+        """
         base = self.elastomer.contact_modulus_mpa * core.volume_mm3 / core.radius_mm
-        return base, base * min(max(core.fill, 0.0), 1.0)
+        return base, base * min(max(core.fill, FILL_RANGE[0]), FILL_RANGE[1])
 
     def estimate(
         self,
