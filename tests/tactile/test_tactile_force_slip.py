@@ -136,3 +136,18 @@ def test_evaluation_refuses_a_field_too_small_for_its_presses():
 
     with pytest.raises(ThinTactError, match="use virtual-finger"):
         evaluate_force_slip(load_profile("virtual-mini"), presses=2)
+
+
+def test_a_pointed_contact_is_clamped_to_the_paraboloid_shape_constant():
+    from thintact_sdk.tactile.force import loaded_core
+
+    yy, xx = np.mgrid[-30:30, -30:30] * 0.1
+    cone = np.clip(0.6 - 0.3 * np.hypot(xx, yy), 0.0, None)  # fill ratio ≈ 1/3
+    core = loaded_core(cone, 0.1, 0.1)
+    assert core.fill < 0.45
+    model = ForceModel(EL)
+    base, filled = model.normal_features(core)
+    assert filled == pytest.approx(0.5 * base)
+    f = model.estimate(cone, 0.1, 0.1, np.zeros((0, 2)), np.zeros((0, 2)))
+    assert f[2] == pytest.approx((model.normal_gain + 0.5 * model.normal_fill_gain) * base)
+    assert f[2] > 0
