@@ -40,9 +40,13 @@ from thintact_sdk.profile import Profile, load_profile  # noqa: E402
 __version__ = "0.1.0"
 
 if TYPE_CHECKING:
+    from collections.abc import Sequence
+
+    from thintact_sdk.group import SensorGroup
     from thintact_sdk.sensor import Sensor
 
-__all__ = ["Component", "Profile", "ThinTactError", "__version__", "hookimpl", "load_profile", "open"]
+__all__ = ["Component", "Profile", "ThinTactError", "__version__", "hookimpl", "load_profile", "open",
+           "open_group"]
 
 
 def open(profile: str | Profile, **options: Any) -> Sensor:  # noqa: A001 - the public verb
@@ -55,3 +59,14 @@ def open(profile: str | Profile, **options: Any) -> Sensor:  # noqa: A001 - the 
     sensor = Sensor(load_profile(profile), **options)
     sensor.open()
     return sensor
+
+
+def open_group(sensors: Sequence[str | Profile | Sensor], **options: Any) -> SensorGroup:
+    """Open several sensors whose frames are paired by time (two fingers).
+
+    Returns an opened :class:`thintact_sdk.group.SensorGroup`; see
+    :func:`thintact_sdk.group.open_group` for the options and guarantees.
+    """
+    from thintact_sdk.group import open_group as _open_group
+
+    return _open_group(sensors, **options)

@@ -94,10 +94,13 @@ class TactileFrame:
     timestamp_ns, frame_id
         Of the raw frame this was computed from.
     force_n
-        Estimated contact force, shape ``(3,)`` float, newtons ``[Fx, Fy, Fz]`` (shear x, y
-        and normal), or None when the pipeline does not estimate it.
+        ``(3,)`` float64 force the object applies to the membrane, newtons [F_x, F_y, F_z]
+        (x with columns, y with rows, z into the elastomer), from the linear elastic model
+        of :mod:`thintact_sdk.tactile.force`; zeros without contact, F_x/F_y NaN when no
+        marker is in the contact. None where not computed.
     slip_ratio
-        Fraction of the contact region that slips (0..1), or None when not estimated.
+        Share of the loaded contact that slips, in [0, 1] (0 stuck, 1 sliding;
+        :mod:`thintact_sdk.tactile.slip`); None without contact or where not computed.
     """
 
     image: np.ndarray

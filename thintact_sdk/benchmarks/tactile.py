@@ -40,6 +40,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--tau", type=float,
                    help="Tikhonov tau (DN²) for the accuracy decoder instead of the bundle's")
     p.add_argument("--skip-latency", action="store_true")
+    p.add_argument("--force-presses", type=int, default=12,
+                   help="simulated presses to fit and (as many again) to test force/slip")
+    p.add_argument("--skip-force", action="store_true", help="skip the force/slip rows")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--json", type=Path, help="also write the figures to this JSON file")
 
@@ -330,6 +333,35 @@ def _streamed_fps(profile: Any, raws: list[Any], sensor: Any, frames: int,
     }
 
 
+def force_slip(args: argparse.Namespace, out: dict[str, Any]) -> None:
+    """Force and slip estimates against the elastic ground truth (scene level)."""
+    from thintact_sdk.profile import load_profile
+    from thintact_sdk.tactile.force import NORMAL_FILL_GAIN, NORMAL_GAIN, SHEAR_GAIN
+    from thintact_sdk.tactile.loaded_press import evaluate_force_slip
+
+    profile = load_profile(args.profile)
+    t0 = time.perf_counter()
+    ev = evaluate_force_slip(profile, presses=args.force_presses, seed=args.seed)
+    elapsed = time.perf_counter() - t0
+    print(f"\nForce and slip ({profile.name}, scene level; truth: half-space contact solution "
+          f"(Boussinesq + Cattaneo–Mindlin, E 0.3 MPa, ν 0.48, μ 1) of each simulated press; "
+          f"gains fitted on {ev.presses} presses (balls R 3/8 mm, cylinder R 2.5 mm, prism "
+          f"5x3 mm), tested on {ev.presses} others (balls R 4/6 mm, cylinder R 1.5 mm, prism "
+          f"6x4 mm), {elapsed:.0f} s)")
+    print(f"  fitted gains c_0 {ev.normal_gain:.3f}, c_1 {ev.normal_fill_gain:.3f}, "
+          f"c_t {ev.shear_gain:.2f} (shipped {NORMAL_GAIN}, {NORMAL_FILL_GAIN}, {SHEAR_GAIN})")
+    print(f"  normal force: relative RMS error {ev.normal_rel_rms:.1%} over "
+          f"{ev.normal_range_n[0]:.2f}–{ev.normal_range_n[1]:.2f} N")
+    print(f"  shear force: relative RMS error {ev.shear_rel_rms:.1%} over "
+          f"{ev.shear_range_n[0]:.2f}–{ev.shear_range_n[1]:.2f} N, direction error median "
+          f"{ev.shear_direction_median_deg:.0f}°, RMS {ev.shear_direction_deg:.0f}°")
+    print(f"  slip ratio: MAE {ev.slip_mae:.2f}, RMS {ev.slip_rms:.2f}; incipient slip (true "
+          f"0.2–0.8) flagged in {ev.slip_incipient_detected:.0%}, false alarms without "
+          f"shear {ev.slip_false_alarm:.0%}")
+    out["force_slip"] = {k: v for k, v in ev.__dict__.items()}
+    out["force_slip"]["seconds"] = elapsed
+
+
 def run(args: argparse.Namespace) -> int:
     from thintact_sdk.machine import machine_summary
 
@@ -337,6 +369,8 @@ def run(args: argparse.Namespace) -> int:
     out: dict[str, Any] = {"machine": machine_summary()}
     t0 = time.perf_counter()
     accuracy(args, out)
+    if not args.skip_force:
+        force_slip(args, out)
     if not args.skip_latency:
         latency(args, out)
     out["wall_s"] = time.perf_counter() - t0

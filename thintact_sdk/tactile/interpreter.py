@@ -16,6 +16,7 @@ import numpy as np
 
 from thintact_sdk.frames import TactileFrame
 from thintact_sdk.profile import Profile
+from thintact_sdk.tactile.force import ForceModel
 from thintact_sdk.tactile.grid import (
     TactileParams,
     bin_image,
@@ -26,6 +27,7 @@ from thintact_sdk.tactile.grid import (
 from thintact_sdk.tactile.markers import MarkerTracker, detect_markers, mean_shear
 from thintact_sdk.tactile.photometric import PhotometricLUT
 from thintact_sdk.tactile.poisson import integrate_gradients
+from thintact_sdk.tactile.slip import estimate_slip_ratio
 
 
 def fill_masked(values: np.ndarray, mask: np.ndarray, sigma_px: float) -> np.ndarray:
@@ -133,6 +135,7 @@ class TactileInterpreter:
         self.marker_threshold = marker_threshold
         self.min_contact_area_mm2 = min_contact_area_mm2
         self.tracker = MarkerTracker(max_step_mm=0.45 * self.params.marker_pitch_mm)
+        self.force_model = ForceModel.from_profile(profile)
         self._sigma_px = max(0.5, 0.3 * self.work.marker_diameter_mm / self.work.mm_per_px)
         self.background: np.ndarray | None = None
         self.reference_markers_mm = np.zeros((0, 2))
@@ -226,6 +229,8 @@ class TactileInterpreter:
         }
         if self.lut is None:
             meta["depth"] = "no LUT"
+        loads = (depth, self.params.mm_per_px, self.params.contact_threshold_mm,
+                 self.tracker.reference_mm, disp)
         return TactileFrame(
             image=full,
             depth_mm=depth,
@@ -237,4 +242,6 @@ class TactileInterpreter:
             frame_id=int(frame_id),
             shear_direction_rad=direction,
             meta=meta,
+            force_n=self.force_model.estimate(*loads),
+            slip_ratio=estimate_slip_ratio(*loads) if contact else None,
         )

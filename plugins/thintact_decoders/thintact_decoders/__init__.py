@@ -1,4 +1,5 @@
-"""ThinTact decoders plugin: ``thintact-noniterative``, ``t2s-iterative``, ``flatcam``, ``t2s-closed-form``.
+"""ThinTact decoders plugin: ``thintact-noniterative``, ``t2s-iterative``, ``flatcam``, ``t2s-closed-form``,
+and ``identity`` for lens-based sensors (:mod:`thintact_decoders.identity`).
 
 Every factory is ``factory(profile, settings) -> Decoder``. The calibration bundle comes from
 ``settings["bundle"]`` / ``settings["calibration"]`` / ``profile.decoder.calibration`` or, for
@@ -19,6 +20,7 @@ from typing import Any
 import thintact_sdk
 from thintact_decoders.backend import ArrayBackend
 from thintact_decoders.flatcam import FlatCamDecoder
+from thintact_decoders.identity import IdentityDecoder, make_identity
 from thintact_decoders.iterative import T2SIterativeDecoder
 from thintact_decoders.loading import resolve_bundle
 from thintact_decoders.noniterative import NonIterativeDecoder
@@ -29,6 +31,7 @@ from thintact_sdk.profile import Profile
 __all__ = [
     "ArrayBackend",
     "FlatCamDecoder",
+    "IdentityDecoder",
     "NonIterativeDecoder",
     "T2SClosedFormDecoder",
     "T2SIterativeDecoder",
@@ -106,4 +109,6 @@ def thintact_decoders() -> list[thintact_sdk.Component]:
                                "FlatCam closed form, coding term only after mean removal (baseline)"),
         thintact_sdk.Component("t2s-closed-form", make_t2s_closed_form,
                                "exact full-T2S Tikhonov without iterations (low-rank open term, Woodbury)"),
+        thintact_sdk.Component("identity", make_identity,
+                               "lens-based sensors (DIGIT, GelSight Mini): the camera image, scaled and resampled"),
     ]

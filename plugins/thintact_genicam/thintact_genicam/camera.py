@@ -46,6 +46,8 @@ from thintact_genicam.features import (
     read_feature,
 )
 from thintact_genicam.producers import quiet_harvesters, resolve_producer
+from thintact_genicam.shared import acquire_harvester, release_harvester
+from thintact_genicam.trigger import fire_software_trigger, set_trigger
 from thintact_sdk.capture import FrameGapCounter, bit_depth_problem
 from thintact_sdk.errors import (
     DeviceError,
@@ -106,23 +108,17 @@ class GenICamCamera(Camera):
         self._gain_db: float | None = None
         self._reconnects = 0
         self._reconnected = False
+        self._trigger_source: str | None = None
         self._is_open = False
 
     # -- lifecycle --------------------------------------------------------------------
     def open(self) -> None:
         """Load the producer, open the device, apply the settings and start streaming."""
-        from harvesters.core import Harvester
-
         if self._ia is not None:
             self._release()  # opening again restarts cleanly
         quiet_harvesters()
-        h = Harvester()
+        h = acquire_harvester(self.cti)  # shared: two cameras of one producer (two fingers)
         try:
-            try:
-                h.add_file(str(self.cti), check_existence=True, check_validity=True)
-                h.update()
-            except Exception as err:  # noqa: BLE001
-                raise DeviceError(f"GenTL producer {self.cti} failed to load: {err}") from None
             devices = list(h.device_info_list)
             if not devices:
                 raise DeviceNotFoundError(
@@ -145,12 +141,14 @@ class GenICamCamera(Camera):
                     f"offered (serial, id): {offered}"
                 ) from None
         except BaseException:
-            h.reset()
+            release_harvester(self.cti, h)
             raise
         self._harvester, self._ia = h, ia
         try:
             ia.num_buffers = max(self.num_buffers, int(ia.min_num_buffers))
             self._apply_all()
+            if self._trigger_source is not None:  # a reconnect keeps the trigger
+                set_trigger(ia.remote_device.node_map, self._trigger_source)
             ia.start()
         except BaseException:
             self._release()
@@ -186,7 +184,7 @@ class GenICamCamera(Camera):
         for step in (
             lambda: ia.stop() if ia is not None else None,
             lambda: ia.destroy() if ia is not None else None,
-            lambda: h.reset() if h is not None else None,
+            lambda: release_harvester(self.cti, h) if h is not None else None,
         ):
             try:
                 step()
@@ -250,6 +248,28 @@ class GenICamCamera(Camera):
         """Set ``Gain`` (dB)."""
         self._gain_db = self._set_while_streaming("Gain", gain_db)
         self.features["Gain"] = gain_db
+
+    def set_trigger(self, source: str | None) -> None:
+        """Wait for a trigger from ``source`` (``"Software"``, ``"Line0"``, ...) before each
+        frame; ``None`` returns to free running. Acquisition is stopped while the trigger
+        features are written (many devices lock them while streaming).
+
+        Raises
+        ------
+        UnsupportedFeatureError
+            When the device has no ``TriggerMode`` or does not offer ``source``.
+        """
+        nm = self._node_map()
+        self._ia.stop()
+        try:
+            set_trigger(nm, source)
+        finally:
+            self._ia.start()
+        self._trigger_source = source
+
+    def fire_trigger(self) -> None:
+        """Issue one software trigger (``TriggerSoftware``)."""
+        fire_software_trigger(self._node_map())
 
     def read(self, timeout_s: float = 2.0) -> RawFrame:
         """The next frame; waits at most ``timeout_s``.
