@@ -34,6 +34,8 @@ from thintact_sdk.capture import (
     create_camera,
     to_measurement,
 )
+from thintact_sdk.cli.argtypes import positive_float, positive_int
+from thintact_sdk.cli.output_path import add_force_argument, claim_output
 from thintact_sdk.errors import DeviceError, EndOfStreamError, RecordingError, ThinTactError
 from thintact_sdk.frames import RawFrame
 from thintact_sdk.profile import Profile, load_profile
@@ -64,21 +66,24 @@ def register(sub: argparse._SubParsersAction) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("--profile", required=True, help="profile name or file")
-    p.add_argument("--frames", type=int, required=True, metavar="N", help="frames to record")
+    p.add_argument("--frames", type=positive_int, required=True, metavar="N", help="frames to record (>= 1)")
     p.add_argument("--out", required=True, metavar="DIR", help="recording directory to create")
     p.add_argument("--raw", action="store_true", help="also keep the raw mosaics (raw/*.npy)")
-    p.add_argument("--timeout", type=float, default=5.0, metavar="S",
+    p.add_argument("--timeout", type=positive_float, default=5.0, metavar="S",
                    help="longest wait for one frame in seconds (default 5)")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a camera setting (YAML value), e.g. --set fps=0")
-    p.add_argument("--append", action="store_true", help="add frames to an existing recording")
+    p.add_argument("--append", action="store_true",
+                   help="add frames to an existing recording of the same device (resume)")
     p.add_argument("--fail-on-drop", action="store_true",
                    help="exit with an error if the camera dropped any frame")
     p.add_argument("--no-scenes", action="store_true",
                    help="do not save ground-truth scenes reported by the camera")
-    p.add_argument("--buffer-mb", type=float, default=512.0, metavar="MB",
+    p.add_argument("--buffer-mb", type=positive_float, default=512.0, metavar="MB",
                    help="memory for frames waiting to be written (default 512)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_force_argument(p, "a new recording into an existing non-empty directory that is not "
+                       "a recording (an existing recording needs --append)")
     p.set_defaults(func=run)
 
 
@@ -364,9 +369,20 @@ class _Progress:
             print(f"warning: {message}", file=sys.stderr)
 
 
+def claim_recording_dir(path: str, append: bool, force: bool) -> Path:
+    """``record``'s ``--out``: a recording there is resumed with ``--append`` and refused
+    without it (``--force`` never discards recorded frames); otherwise the shared policy."""
+    if str(path).strip() and (Path(path) / "manifest.json").is_file():
+        if not append:
+            raise RecordingError(f"{path} already holds a recording; choose a new --out or pass "
+                                 "--append to add frames to it")
+        return Path(path)
+    return claim_output(path, "directory", force=force)
+
+
 def run(args: argparse.Namespace) -> int:
+    out = claim_recording_dir(args.out, args.append, args.force)
     profile = load_profile(args.profile)
-    out = Path(args.out)
     summary = record(
         profile, args.frames, out,
         keep_raw=args.raw, timeout_s=args.timeout, settings=parse_settings(args.set),
