@@ -125,6 +125,7 @@ def _offline(args: argparse.Namespace, options: Any, console: Console) -> Any:
         raise CalibrationError("--from-recording needs --out DIR (the bundle directory to write)")
     out = claim_output(args.out, "directory", force=args.force)
     rec = Recording(args.from_recording)
+    rec.check_frames()  # a NaN, negative or unreadable frame is named before any work
     with _progress(args.no_progress, console) as prog:
         task = prog.add_task("slit frames", total=None, label="")
 
