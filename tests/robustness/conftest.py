@@ -16,9 +16,6 @@ sys.path.insert(0, str(Path(__file__).parent))
 
 import rob_kit  # noqa: E402
 
-FUZZ_OUTCOMES: dict[str, Counter[str]] = {}
-"""``{fuzz target: Counter(outcome)}``, filled by the fuzz tests, printed at the end."""
-
 
 @pytest.fixture(scope="session")
 def tiny(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
@@ -49,11 +46,11 @@ def bundle_copy(tiny: dict[str, Any], tmp_path: Path) -> Path:
 
 
 def pytest_terminal_summary(terminalreporter: Any) -> None:
-    if not FUZZ_OUTCOMES:
+    if not rob_kit.FUZZ_OUTCOMES:
         return
     terminalreporter.section("fuzz outcomes")
     total: Counter[str] = Counter()
-    for target, counts in sorted(FUZZ_OUTCOMES.items()):
+    for target, counts in sorted(rob_kit.FUZZ_OUTCOMES.items()):
         total.update(counts)
         terminalreporter.write_line(f"{target:28s} {sum(counts.values()):5d} inputs  {dict(counts)}")
     terminalreporter.write_line(f"{'all':28s} {sum(total.values()):5d} inputs  {dict(total)}")

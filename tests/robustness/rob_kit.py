@@ -7,6 +7,7 @@ milliseconds and a diagnosis a second or two, so the fuzz tests can run many inp
 from __future__ import annotations
 
 import json
+from collections import Counter
 from pathlib import Path
 from typing import Any
 
@@ -15,6 +16,9 @@ import numpy as np
 from thintact_sdk.profile import Profile, profile_from_dict
 
 K = 40
+
+FUZZ_OUTCOMES: dict[str, Counter[str]] = {}
+"""``{fuzz target: Counter(outcome)}``, filled by the fuzz tests, printed at the end of the run."""
 
 
 def tiny_profile_dict() -> dict[str, Any]:

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from rich.console import Console
@@ -21,6 +22,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 
 from thintact_sdk.cli.argtypes import positive_float
 from thintact_sdk.cli.output_path import add_force_argument, claim_output
+from thintact_sdk.errors import RecordingError
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -38,6 +40,19 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
+def _check_unique_outputs(rec: Any) -> None:
+    """Refuse frames whose estimates would land in the same ``DIR/<stem>.npy`` file."""
+    seen: dict[str, int] = {}
+    for i, fr in enumerate(rec.frames):
+        stem = Path(fr.measurement).stem
+        if stem in seen:
+            raise RecordingError(
+                f"recording {rec.root}: frames {seen[stem]} and {i} would both be written as "
+                f"{stem}.npy (their measurement files share a name); one would overwrite the other"
+            )
+        seen[stem] = i
+
+
 def run(args: argparse.Namespace) -> int:
     from thintact_sdk.calibration.collect import dark_level, frame_exposure_us
     from thintact_sdk.calibration.validation import make_decoder
@@ -48,6 +63,7 @@ def run(args: argparse.Namespace) -> int:
     console = Console(stderr=True)
     out = claim_output(args.out, "directory", force=args.force)
     rec = Recording(args.recording)
+    _check_unique_outputs(rec)
     rec.check_frames()
     profile = rec.profile
     bundle = CalibrationBundle.load(args.calibration)
@@ -79,7 +95,8 @@ def run(args: argparse.Namespace) -> int:
             if not np.isfinite(estimate).all():
                 raise CalibrationError(
                     f"frame {i} ({fr.label or fr.measurement}): the decoder returned NaN/Inf "
-                    f"values; check the calibration {args.calibration}"
+                    f"values (measurement {float(meas.min()):.4g}..{float(meas.max()):.4g} DN, "
+                    f"calibration {args.calibration}); nothing was written for it"
                 )
             np.save(out / f"{Path(fr.measurement).stem}.npy", estimate)
             prog.advance(task)
