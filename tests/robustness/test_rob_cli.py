@@ -208,3 +208,25 @@ def test_simulate_on_an_empty_scenes_file(content: Any, tiny: dict[str, Any], tm
                  "--out", str(tmp_path / "y.npy")]) == 2
     one_error(capfd, str(scenes))
     assert not (tmp_path / "y.npy").exists()
+
+
+@pytest.mark.parametrize(("value", "needle"), [(0, "reads 0 DN at every pixel"), (500, "reads 500 DN"),
+                                               (4095, "every pixel is saturated")])
+def test_diagnose_refuses_dead_and_saturated_frames(value: int, needle: str, tiny: dict[str, Any],
+                                                    rec_copy: Path, tmp_path: Path, capfd: Any) -> None:
+    np.save(rec_copy / "measurements" / "001.npy", np.full((24, 30, 3), value, np.uint16))
+    assert main(["diagnose", str(rec_copy), "--out", str(tmp_path / "o"), "--quiet"]) == 2
+    line = one_error(capfd, "frame 1 (f1)", needle)
+    assert "no structure" not in line.lower()
+    assert not (tmp_path / "o").exists()
+
+
+def test_diagnose_never_writes_a_report_with_nan_figures() -> None:
+    from thintact_sdk.cli.commands.diagnose import _check_finite
+    from thintact_sdk.errors import ThinTactError
+
+    good = {"noise_rms_dn": 2.0, "baseline": {"rms_dn": 3.0, "chi2_per_dof": 1.2},
+            "final": {"rms_dn": 2.1, "chi2_per_dof": 1.0}}
+    _check_finite(good)
+    with pytest.raises(ThinTactError, match=r"non-finite baseline.rms_dn, baseline.chi2_per_dof"):
+        _check_finite({**good, "baseline": {"rms_dn": float("nan"), "chi2_per_dof": float("nan")}})

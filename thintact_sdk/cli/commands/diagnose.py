@@ -4,7 +4,9 @@ simulation, which effects of the vocabulary are missing, fitted (CONTRACTS §6).
 from __future__ import annotations
 
 import argparse
+import math
 import time
+from typing import Any
 
 from thintact_sdk.cli.argtypes import non_negative_float, non_negative_int, positive_float
 from thintact_sdk.cli.output_path import add_force_argument, claim_output
@@ -30,6 +32,20 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
+def _check_finite(report: dict[str, Any]) -> None:
+    """Refuse to write a report whose headline figures are NaN/Inf (never a silent NaN)."""
+    from thintact_sdk.errors import ThinTactError
+
+    figures = {"noise_rms_dn": report.get("noise_rms_dn")}
+    for part in ("baseline", "final"):
+        for key in ("rms_dn", "chi2_per_dof"):
+            figures[f"{part}.{key}"] = report.get(part, {}).get(key)
+    bad = [k for k, v in figures.items() if not (isinstance(v, int | float) and math.isfinite(v))]
+    if bad:
+        raise ThinTactError(f"the diagnosis gave non-finite {', '.join(bad)} (too few usable "
+                            "pixels: saturated or masked?); nothing was written")
+
+
 def run(args: argparse.Namespace) -> int:
     from rich.console import Console
 
@@ -47,8 +63,9 @@ def run(args: argparse.Namespace) -> int:
     opts = DiagnoseOptions(sys_frac=args.sys_frac, time_budget_s=args.time_budget, max_effects=args.max_effects)
     with con.status("diagnosing...") as status:
         d = diagnose(data, options=opts, progress=lambda m: status.update(m))
-    paths = write_outputs(d, out, png=args.png)
     rep = d.report
+    _check_finite(rep)
+    paths = write_outputs(d, out, png=args.png)
     print(f"baseline: rms {rep['baseline']['rms_dn']:.2f} DN, chi2/dof {rep['baseline']['chi2_per_dof']:.3f} "
           f"(noise rms {rep['noise_rms_dn']:.2f} DN)")
     for f in rep["findings"]:
