@@ -351,8 +351,7 @@ class RecordingWriter:
         self.frames: list[RecordingFrame] = []
         mpath = self.root / "manifest.json"
         if mpath.is_file():
-            existing = Recording(self.root, allow_empty=True)
-            _check_same_device(existing.profile, profile, self.root)
+            existing = check_appendable(self.root, profile)
             self.frames = list(existing.frames)
             remove_partial_writes(self.root)
         self.root.mkdir(parents=True, exist_ok=True)
@@ -418,6 +417,14 @@ class RecordingWriter:
             "frames": [f.to_json() for f in self.frames],
         }
         atomic_write_bytes(self.root / "manifest.json", (json.dumps(manifest, indent=1) + "\n").encode())
+
+
+def check_appendable(root: str | os.PathLike[str], profile: Profile) -> Recording:
+    """The existing recording at ``root``, after checking that frames of ``profile`` may be
+    appended to it (same device physics and grids); raises RecordingError naming both."""
+    existing = Recording(root, allow_empty=True)
+    _check_same_device(existing.profile, profile, Path(root))
+    return existing
 
 
 def _check_same_device(existing: Profile, new: Profile, root: Path) -> None:

@@ -230,3 +230,15 @@ def test_diagnose_never_writes_a_report_with_nan_figures() -> None:
     _check_finite(good)
     with pytest.raises(ThinTactError, match=r"non-finite baseline.rms_dn, baseline.chi2_per_dof"):
         _check_finite({**good, "baseline": {"rms_dn": float("nan"), "chi2_per_dof": float("nan")}})
+
+
+def test_record_append_of_another_device_is_refused_before_the_camera_opens(
+        tiny: dict[str, Any], rec_copy: Path, capfd: Any, monkeypatch: Any) -> None:
+    import thintact_sdk.cli.commands.record as record_cmd
+
+    monkeypatch.setattr(record_cmd, "create_camera", lambda *a, **k: pytest.fail("camera opened"))
+    manifest_before = (rec_copy / "manifest.json").read_text()
+    assert main(["record", "--profile", "virtual-mini", "--frames", "1", "--out", str(rec_copy),
+                 "--append", "--quiet"]) == 2
+    one_error(capfd, "'robust-tiny' (sensor 24×30×3", "'virtual-mini' (sensor 128×160×3")
+    assert (rec_copy / "manifest.json").read_text() == manifest_before

@@ -39,7 +39,7 @@ from thintact_sdk.cli.output_path import add_force_argument, claim_output
 from thintact_sdk.errors import DeviceError, EndOfStreamError, RecordingError, ThinTactError
 from thintact_sdk.frames import RawFrame
 from thintact_sdk.profile import Profile, load_profile
-from thintact_sdk.recording import RecordingWriter
+from thintact_sdk.recording import RecordingWriter, check_appendable
 
 CLI_DESCRIPTION = """\
 Capture N frames from the profile's camera into a thintact-recording/1 directory.
@@ -168,8 +168,10 @@ def record(
     """
     if frames <= 0:
         raise ThinTactError("--frames must be at least 1")
-    if (out / "manifest.json").is_file() and not append:
-        raise RecordingError(f"{out} already holds a recording; choose a new --out or pass --append")
+    if (out / "manifest.json").is_file():
+        if not append:
+            raise RecordingError(f"{out} already holds a recording; choose a new --out or pass --append")
+        check_appendable(out, profile)  # before the camera is opened
     save_raw = None
     if keep_raw:
         try:
