@@ -29,8 +29,8 @@ def tiny(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     profile_file = root / "robust-tiny.json"
     shutil.copy(rec / "profile.json", profile_file)
     np.save(root / "scenes.npy", scenes)
-    return {"profile": profile, "scenes": scenes, "meas": meas, "recording": rec,
-            "bundle": bundle, "profile_file": profile_file, "scenes_file": root / "scenes.npy"}
+    return rob_kit.Kit(profile=profile, scenes=scenes, meas=meas, recording=rec, bundle=bundle,
+                       profile_file=profile_file, scenes_file=root / "scenes.npy")
 
 
 @pytest.fixture

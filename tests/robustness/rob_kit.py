@@ -21,6 +21,13 @@ FUZZ_OUTCOMES: dict[str, Counter[str]] = {}
 """``{fuzz target: Counter(outcome)}``, filled by the fuzz tests, printed at the end of the run."""
 
 
+class Kit(dict):  # type: ignore[type-arg]
+    """The tiny device's fixtures (a dict with a short repr, for readable failure reports)."""
+
+    def __repr__(self) -> str:
+        return f"<tiny device kit: {', '.join(self)}>"
+
+
 def tiny_profile_dict() -> dict[str, Any]:
     """A valid ``thintact-profile/1`` dict of a 24×30-pixel device."""
     rng = np.random.default_rng(7)

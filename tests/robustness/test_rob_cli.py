@@ -242,3 +242,20 @@ def test_record_append_of_another_device_is_refused_before_the_camera_opens(
                  "--append", "--quiet"]) == 2
     one_error(capfd, "'robust-tiny' (sensor 24×30×3", "'virtual-mini' (sensor 128×160×3")
     assert (rec_copy / "manifest.json").read_text() == manifest_before
+
+
+def test_claim_output_policy(tmp_path: Path) -> None:
+    from thintact_sdk.cli.output_path import claim_output
+    from thintact_sdk.errors import OutputError
+
+    (tmp_path / "f.npy").write_bytes(b"x")
+    (tmp_path / "empty").mkdir()
+    assert claim_output(tmp_path / "new", "directory") == tmp_path / "new"
+    assert claim_output(tmp_path / "empty", "directory") == tmp_path / "empty"
+    assert claim_output(tmp_path / "f.npy", "file", force=True) == tmp_path / "f.npy"
+    for path, kind, needle in [("", "file", "is empty"), (tmp_path / "empty", "file", "is a directory"),
+                               (tmp_path / "f.npy", "directory", "is a file"),
+                               (tmp_path / "f.npy", "file", "already exists"),
+                               (tmp_path, "directory", "not empty")]:
+        with pytest.raises(OutputError, match=needle):
+            claim_output(path, kind)  # type: ignore[arg-type]

@@ -14,6 +14,7 @@ import json
 import os
 import shutil
 import tempfile
+import warnings
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -58,15 +59,18 @@ def _shapes(full: tuple[int, ...]) -> list[tuple[int, ...]]:
 
 def _array(dtype: str, shape: tuple[int, ...], inject: float | None, base: np.ndarray | None,
            seed: int) -> np.ndarray:
-    if base is not None and shape == base.shape:
+    """An array of ``dtype`` and ``shape``: ``base``'s values when the shape matches, else
+    random ones at ``base``'s scale; ``inject`` written at one position."""
+    numeric = base is not None and base.dtype.kind in "uif" and base.size > 0
+    if numeric and base is not None and shape == base.shape:
         arr = base.astype(np.float64)
     else:
-        arr = np.random.default_rng(seed).uniform(0, 1, shape) * (200 if base is not None and base.max() > 1 else 1)
+        scale = 200.0 if numeric and base is not None and float(base.max()) > 1 else 1.0
+        arr = np.random.default_rng(seed).uniform(0, 1, shape) * scale
     if inject is not None and arr.size:
         arr.flat[seed % arr.size] = inject
-    with np.errstate(all="ignore"):
-        if dtype == "<U3":
-            return arr.astype("<U3")
+    with np.errstate(all="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore")
         return arr.astype(dtype)
 
 

@@ -23,10 +23,11 @@ from thintact_sdk.errors import OutputError
 OutputKind = Literal["file", "directory"]
 
 
-def add_force_argument(parser: argparse.ArgumentParser, what: str = "the output") -> None:
-    """Add the shared ``--force`` flag (overwrite an existing output)."""
+def add_force_argument(parser: argparse.ArgumentParser, what: str = "over an existing output") -> None:
+    """Add the shared ``--force`` flag; ``what`` completes "allow writing ..." in its help."""
     parser.add_argument("--force", action="store_true",
-                        help=f"write {what} even if it already exists (files of the same name are replaced)")
+                        help=f"allow writing {what} (files of the same name are replaced, "
+                        "nothing else is deleted)")
 
 
 def claim_output(

@@ -31,7 +31,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--bins", type=int_range(4, 256), default=32, help="LUT nodes per colour axis (4..256)")
     p.add_argument("--out", help="LUT file (default: the device's folder under "
                    "$THINTACT_CALIBRATION_PATH or ./calibrations, never the checkout's)")
-    add_force_argument(p, "the LUT")
+    add_force_argument(p, "over an existing LUT")
     p.set_defaults(func=run)
 
 

@@ -55,7 +55,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     s.add_argument("design", metavar="DESIGN.json")
     s.add_argument("--out", required=True, metavar="PNG")
     s.add_argument("--cell-px", type=int, default=1, help="image pixels per mask cell")
-    add_force_argument(s, "--out")
+    add_force_argument(s, "over an existing --out file")
     s.set_defaults(func=run_show)
 
     c = msub.add_parser("compare", help="white uniformity, PSNR, SSIM and fitness of designs "
@@ -76,14 +76,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     d.add_argument("--feature-um", type=float, required=True)
     d.add_argument("--seed", type=int, default=0)
     d.add_argument("--out", required=True, metavar="DESIGN.json")
-    add_force_argument(d, "--out")
+    add_force_argument(d, "over an existing --out file")
     d.set_defaults(func=run_design)
 
     a = msub.add_parser("apply", help="write a copy of a profile that uses a design's phi")
     a.add_argument("design", metavar="DESIGN.json")
     a.add_argument("--profile", required=True)
     a.add_argument("--out", required=True, metavar="PROFILE.yaml")
-    add_force_argument(a, "--out")
+    add_force_argument(a, "over an existing --out file")
     a.set_defaults(func=run_apply)
 
 

@@ -31,7 +31,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--gain", type=positive_float, default=None,
                    help="DN per simulator unit (with --noise); default puts the brightest "
                         "all-white pixel at 60%% of (saturation - black)")
-    add_force_argument(p, "--out")
+    add_force_argument(p, "over an existing --out file")
     p.set_defaults(func=run)
 
 
