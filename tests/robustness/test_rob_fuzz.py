@@ -368,7 +368,7 @@ def slit_recording(tiny: dict[str, Any], tmp_path_factory: pytest.TempPathFactor
     return rob_kit.write_recording(tmp_path_factory.mktemp("slits") / "rec", tiny["profile"], stack, meas)
 
 
-@settings(FUZZ, max_examples=8 * SCALE)
+@settings(FUZZ, max_examples=5 * SCALE)
 @given(draws=_draws(["--filter-steps", "--max-iter", "--tau", "--frame-gains", "--method"]))
 def test_fuzz_calibrate_from_recording_arguments(draws: dict[str, Any], tiny: dict[str, Any],
                                                  slit_recording: Path, capfd: Any) -> None:
