@@ -53,3 +53,8 @@ class UnsupportedFeatureError(DeviceError):
 
 class EndOfStreamError(DeviceError):
     """A finite frame source (a replayed recording, a video file) has no more frames."""
+
+
+class OutputError(ThinTactError):
+    """An output path the user named cannot be used: empty, the wrong kind, or already
+    holding data that would be overwritten without ``--force``."""

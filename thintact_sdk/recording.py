@@ -10,12 +10,21 @@ Layout::
 Frames may omit ``scene``; scene and measurement files may also be 8/16-bit PNG or TIFF.
 Every file the writer produces is written atomically (temp file + rename) and the
 manifest is rewritten after each frame, so a killed writer leaves a valid recording
-holding every frame completed before the kill.
+holding every frame completed before the kill; the temp files such a kill leaves behind
+are never listed in the manifest and are removed when the recording is opened for writing.
+
+Reading is strict, so that nothing downstream computes on bad data: every file a manifest
+names must lie inside the recording directory (no ``..``, absolute paths or symlinks out),
+measurements must be finite, non-negative numbers (not bool or text), ``R × S × C`` with the
+profile's channels, scenes finite display values in [0, 1], and per-frame metadata
+(``frame_id``, ``timestamp_ns``, ``exposure_us`` ...) of the right type and sign. Each
+violation is a :class:`~thintact_sdk.errors.RecordingError` naming the frame and field.
 """
 
 from __future__ import annotations
 
 import json
+import math
 import os
 import tempfile
 from collections.abc import Iterator
@@ -26,10 +35,16 @@ from typing import Any
 import numpy as np
 
 from thintact_sdk.errors import ProfileError, RecordingError
-from thintact_sdk.profile import Profile, read_profile_file, write_profile
+from thintact_sdk.profile import Profile, read_profile_file
 
 RECORDING_FORMAT = "thintact-recording/1"
 _IMAGE_SUFFIXES = (".png", ".tif", ".tiff")
+_NUMERIC_KINDS = "uif"
+"""dtype kinds a scene or measurement may have (unsigned, signed integer, float)."""
+_COUNT_FIELDS = ("frame_id", "timestamp_ns", "device_timestamp_ns", "dropped_before")
+"""Per-frame metadata that must be a non-negative integer when present."""
+SCENE_TOLERANCE = 1e-6
+"""Scene values may exceed [0, 1] by this much (float rounding), no more."""
 
 
 @dataclass
@@ -101,6 +116,9 @@ def read_array(path: Path, is_scene: bool) -> np.ndarray:
             arr = np.load(path, allow_pickle=False)
         except (ValueError, OSError, EOFError) as err:
             raise RecordingError(f"cannot read {path} (truncated or not a .npy file): {err}") from None
+        if not isinstance(arr, np.ndarray) or arr.dtype.kind not in _NUMERIC_KINDS:
+            kind = arr.dtype if isinstance(arr, np.ndarray) else type(arr).__name__
+            raise RecordingError(f"{path}: dtype {kind} is not a number array (uint, int or float)")
         if is_scene:
             arr = arr.astype(np.float32, copy=False)
         return arr
@@ -118,92 +136,231 @@ class Recording:
         The recording directory.
     profile
         Optional profile to use instead of the recording's own.
+    allow_empty
+        Accept a manifest without frames (a writer resuming a recording); readers leave it
+        False so that an empty recording is an error, not an empty result.
+
+    Raises
+    ------
+    RecordingError
+        When the manifest is missing or malformed, names a file outside the directory, or a
+        frame's metadata has the wrong type (the frame and field are named).
     """
 
-    def __init__(self, root: str | os.PathLike[str], profile: Profile | None = None) -> None:
+    def __init__(
+        self, root: str | os.PathLike[str], profile: Profile | None = None, *, allow_empty: bool = False
+    ) -> None:
         self.root = Path(root)
         mpath = self.root / "manifest.json"
         if not mpath.is_file():
             raise RecordingError(f"{self.root} is not a recording: no manifest.json")
         try:
             manifest = json.loads(mpath.read_text(encoding="utf-8"))
-        except json.JSONDecodeError as err:
+        except (json.JSONDecodeError, UnicodeDecodeError) as err:
             raise RecordingError(f"{mpath}: invalid JSON ({err})") from None
+        if not isinstance(manifest, dict):
+            raise RecordingError(f"{mpath}: expected a JSON object, got {type(manifest).__name__}")
         if manifest.get("format") != RECORDING_FORMAT:
             raise RecordingError(
                 f"{mpath}: format {manifest.get('format')!r} is not {RECORDING_FORMAT!r}"
             )
         self.manifest = manifest
         if profile is None:
-            ppath = self.root / manifest.get("profile", "profile.json")
+            prel = manifest.get("profile", "profile.json")
+            if not isinstance(prel, str) or not prel:
+                raise RecordingError(f"{mpath}: 'profile' must be a file name, got {prel!r}")
+            ppath = self._inside(prel, "manifest field 'profile'")
             try:
                 profile = read_profile_file(ppath)
-            except ProfileError as err:
+            except (ProfileError, UnicodeDecodeError) as err:
                 raise RecordingError(f"recording {self.root}: {err}") from None
         self.profile = profile
         frames = manifest.get("frames")
         if not isinstance(frames, list):
             raise RecordingError(f"{mpath}: 'frames' must be a list")
-        self.frames: list[RecordingFrame] = []
-        for i, fr in enumerate(frames):
-            if not isinstance(fr, dict) or "measurement" not in fr:
-                raise RecordingError(f"{mpath}: frame {i} has no 'measurement'")
-            extra = {k: v for k, v in fr.items() if k not in ("scene", "measurement", "label")}
-            self.frames.append(RecordingFrame(fr["measurement"], fr.get("scene"), fr.get("label"), extra))
+        if not frames and not allow_empty:
+            raise RecordingError(f"recording {self.root} holds no frames")
+        self.frames: list[RecordingFrame] = [self._frame(i, fr, mpath) for i, fr in enumerate(frames)]
+
+    def _inside(self, rel: str, what: str) -> Path:
+        """``root / rel`` after checking that it stays inside the recording directory."""
+        if Path(rel).is_absolute() or "\x00" in rel:
+            raise RecordingError(f"recording {self.root}: {what} {rel!r} must be a path relative "
+                                 "to the recording directory")
+        path = self.root / rel
+        try:
+            inside = path.resolve().is_relative_to(self.root.resolve())
+        except (OSError, RuntimeError, ValueError) as err:  # symlink loops, bad names
+            raise RecordingError(f"recording {self.root}: {what} {rel!r}: {err}") from None
+        if not inside:
+            raise RecordingError(f"recording {self.root}: {what} {rel!r} points outside the "
+                                 "recording directory (.. or a symlink); refused")
+        return path
+
+    def _frame(self, i: int, fr: object, mpath: Path) -> RecordingFrame:
+        """Manifest entry ``i`` checked field by field."""
+        if not isinstance(fr, dict):
+            raise RecordingError(f"{mpath}: frame {i} is not an object")
+        where = f"{mpath}: frame {i}"
+        meas = fr.get("measurement")
+        if not isinstance(meas, str) or not meas:
+            raise RecordingError(f"{where}: 'measurement' must be a file name, got {meas!r}")
+        self._inside(meas, f"frame {i} 'measurement'")
+        scene = fr.get("scene")
+        if scene is not None:
+            if not isinstance(scene, str) or not scene:
+                raise RecordingError(f"{where}: 'scene' must be a file name or absent, got {scene!r}")
+            self._inside(scene, f"frame {i} 'scene'")
+        label = fr.get("label")
+        if label is not None and not isinstance(label, str):
+            raise RecordingError(f"{where}: 'label' must be a string, got {label!r}")
+        extra = {k: v for k, v in fr.items() if k not in ("scene", "measurement", "label")}
+        for key in _COUNT_FIELDS:
+            v = extra.get(key)
+            if v is not None and (not isinstance(v, int) or isinstance(v, bool) or v < 0):
+                raise RecordingError(f"{where}: {key!r} must be a non-negative integer, got {v!r}")
+        exposure = extra.get("exposure_us")
+        if exposure is not None and not (_is_number(exposure) and exposure > 0):
+            raise RecordingError(f"{where}: 'exposure_us' must be a positive number of microseconds, "
+                                 f"got {exposure!r}")
+        for key in ("gain_db", "saturated_fraction"):
+            v = extra.get(key)
+            if v is not None and not _is_number(v):
+                raise RecordingError(f"{where}: {key!r} must be a finite number, got {v!r}")
+        return RecordingFrame(meas, scene, label, extra)
 
     def __len__(self) -> int:
         return len(self.frames)
 
+    def _name(self, i: int) -> str:
+        fr = self.frames[i]
+        return f"frame {i} ({fr.label})" if fr.label else f"frame {i}"
+
     def measurement(self, i: int) -> np.ndarray:
-        """Frame ``i``'s measurement, ``R × S × C`` raw DN as stored (uint16 or float32)."""
-        arr = read_array(self.root / self.frames[i].measurement, is_scene=False)
-        exp = (self.profile.sensor.rows, self.profile.sensor.cols)
-        if arr.shape[:2] != exp:
+        """Frame ``i``'s measurement, ``R × S × C`` raw DN as stored (uint16 or float32).
+
+        Raises
+        ------
+        RecordingError
+            When the file is unreadable, not numeric, of the wrong shape or channel count,
+            or holds NaN, Inf or negative values (the frame is named).
+        """
+        rel = self.frames[i].measurement
+        path = self._inside(rel, f"frame {i} 'measurement'")
+        try:
+            arr = read_array(path, is_scene=False)
+        except RecordingError as err:
+            raise RecordingError(f"{self._name(i)}: {err}") from None
+        sensor = self.profile.sensor
+        exp = (sensor.rows, sensor.cols)
+        n_ch = len(sensor.channels)
+        if arr.ndim not in (2, 3) or arr.shape[:2] != exp:
             raise RecordingError(
-                f"{self.frames[i].measurement}: shape {arr.shape} does not match the profile's "
+                f"{self._name(i)}: {rel}: shape {arr.shape} does not match the profile's "
                 f"sensor {exp[0]}×{exp[1]}"
             )
+        channels = arr.shape[2] if arr.ndim == 3 else 1
+        if channels != n_ch:
+            raise RecordingError(
+                f"{self._name(i)}: {rel}: {channels} channel(s), the profile's sensor has {n_ch} "
+                f"({', '.join(sensor.channels)})"
+            )
+        _check_values(arr, f"{self._name(i)}: {rel}", low=0.0, high=None)
         return arr
 
     def scene(self, i: int) -> np.ndarray | None:
-        """Frame ``i``'s scene, ``N × M × C`` float32 in [0, 1], or None for unknown scenes."""
+        """Frame ``i``'s scene, ``N × M × C`` float32 in [0, 1], or None for unknown scenes.
+
+        Raises
+        ------
+        RecordingError
+            When the file is unreadable, not numeric, of the wrong shape, or holds values
+            outside [0, 1] (NaN and Inf included); the frame is named.
+        """
         s = self.frames[i].scene
         if s is None:
             return None
-        arr = read_array(self.root / s, is_scene=True)
+        path = self._inside(s, f"frame {i} 'scene'")
+        try:
+            arr = read_array(path, is_scene=True)
+        except RecordingError as err:
+            raise RecordingError(f"{self._name(i)}: {err}") from None
         exp = (self.profile.scene.rows, self.profile.scene.cols)
-        if arr.shape[:2] != exp:
+        n_ch = len(self.profile.sensor.channels)
+        channels = arr.shape[2] if arr.ndim == 3 else 1
+        if arr.ndim not in (2, 3) or arr.shape[:2] != exp or channels not in (1, n_ch):
             raise RecordingError(
-                f"{s}: shape {arr.shape} does not match the profile's scene {exp[0]}×{exp[1]}"
+                f"{self._name(i)}: {s}: shape {arr.shape} does not match the profile's scene "
+                f"{exp[0]}×{exp[1]} with 1 or {n_ch} channel(s)"
             )
+        _check_values(arr, f"{self._name(i)}: {s}", low=0.0, high=1.0 + SCENE_TOLERANCE)
         return arr
+
+    def check_frames(self) -> None:
+        """Read every frame once so that a bad one is refused before any output is written."""
+        for i in range(len(self)):
+            self.scene(i)
+            self.measurement(i)
 
     def __iter__(self) -> Iterator[tuple[RecordingFrame, np.ndarray | None, np.ndarray]]:
         for i, fr in enumerate(self.frames):
             yield fr, self.scene(i), self.measurement(i)
 
 
+def _is_number(value: object) -> bool:
+    """A JSON number (not bool) that is finite."""
+    return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def _check_values(arr: np.ndarray, what: str, low: float, high: float | None) -> None:
+    """Refuse NaN/Inf and values outside ``[low, high]`` (counts given in the message)."""
+    if arr.dtype.kind == "f":
+        bad = ~np.isfinite(arr)
+        if bad.any():
+            raise RecordingError(f"{what}: {int(bad.sum())} NaN/Inf value(s) (first at index "
+                                 f"{tuple(int(v) for v in np.argwhere(bad)[0])}); refused")
+    if arr.size == 0:
+        raise RecordingError(f"{what}: empty array")
+    lo, hi = float(arr.min()), float(arr.max())
+    if lo < low:
+        raise RecordingError(f"{what}: negative value {lo:g}; refused")
+    if high is not None and hi > high:
+        raise RecordingError(f"{what}: value {hi:g} above {high:g}; scenes are display values in [0, 1]")
+
+
+def remove_partial_writes(root: Path) -> None:
+    """Delete the temp files of atomic writes that a killed writer left (never complete files)."""
+    for sub in (root, root / "scenes", root / "measurements"):
+        if sub.is_dir():
+            for tmp in sub.glob(".*.tmp"):
+                tmp.unlink(missing_ok=True)
+
+
 class RecordingWriter:
     """Writes a ``thintact-recording/1`` directory frame by frame, atomically.
 
     Opening an existing recording appends to it (resume): frames already in its manifest
-    are kept and :meth:`has_label` tells a resuming writer what is already done.
+    are kept and :meth:`has_label` tells a resuming writer what is already done. The
+    existing recording must have been made with the same device physics and grids
+    (:meth:`Profile.content_hash`), else a :class:`RecordingError` names both profiles.
     """
 
     def __init__(self, root: str | os.PathLike[str], profile: Profile) -> None:
         self.root = Path(root)
-        self.root.mkdir(parents=True, exist_ok=True)
-        (self.root / "scenes").mkdir(exist_ok=True)
-        (self.root / "measurements").mkdir(exist_ok=True)
         self.profile = profile
         self.frames: list[RecordingFrame] = []
         mpath = self.root / "manifest.json"
         if mpath.is_file():
-            existing = Recording(self.root, profile=profile)
+            existing = check_appendable(self.root, profile)
             self.frames = list(existing.frames)
+            remove_partial_writes(self.root)
+        self.root.mkdir(parents=True, exist_ok=True)
+        (self.root / "scenes").mkdir(exist_ok=True)
+        (self.root / "measurements").mkdir(exist_ok=True)
         ppath = self.root / "profile.json"
         if not ppath.is_file():
-            write_profile(profile, ppath)
+            text = json.dumps(profile.contract_dict(), indent=1) + "\n"
+            atomic_write_bytes(ppath, text.encode("utf-8"))
         self._write_manifest()
 
     def has_label(self, label: str) -> bool:
@@ -234,6 +391,10 @@ class RecordingWriter:
             JSON-serialisable per-frame metadata (timestamp_ns, frame_id, exposure_us, ...).
         """
         idx = len(self.frames)
+        what = f"frame {idx} ({label})" if label else f"frame {idx}"
+        if measurement.dtype.kind not in _NUMERIC_KINDS:
+            raise RecordingError(f"{what}: measurement dtype {measurement.dtype} is not numeric")
+        _check_values(measurement, f"{what}: measurement", low=0.0, high=None)
         safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in (label or f"frame{idx}"))
         stem = f"{idx:03d}_{safe}" if idx < 1000 else f"{idx:06d}_{safe}"
         mrel = f"measurements/{stem}.npy"
@@ -256,3 +417,27 @@ class RecordingWriter:
             "frames": [f.to_json() for f in self.frames],
         }
         atomic_write_bytes(self.root / "manifest.json", (json.dumps(manifest, indent=1) + "\n").encode())
+
+
+def check_appendable(root: str | os.PathLike[str], profile: Profile) -> Recording:
+    """The existing recording at ``root``, after checking that frames of ``profile`` may be
+    appended to it (same device physics and grids); raises RecordingError naming both."""
+    existing = Recording(root, allow_empty=True)
+    _check_same_device(existing.profile, profile, Path(root))
+    return existing
+
+
+def _check_same_device(existing: Profile, new: Profile, root: Path) -> None:
+    """Refuse appending frames of another device (other grids or physics) to a recording."""
+    if existing.content_hash() == new.content_hash():
+        return
+
+    def describe(p: Profile) -> str:
+        return (f"{p.name!r} (sensor {p.sensor.rows}×{p.sensor.cols}×{len(p.sensor.channels)}, "
+                f"scene {p.scene.rows}×{p.scene.cols})")
+
+    raise RecordingError(
+        f"{root} was recorded with profile {describe(existing)}; appending frames of profile "
+        f"{describe(new)} would mix devices (their sensor, scene, mask, geometry, noise or physics "
+        "fields differ); record into a new directory"
+    )

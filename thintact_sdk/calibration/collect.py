@@ -200,6 +200,8 @@ def collect_slits(
             out.frame_scale[i] = scale
         for c in range(min(n_ch, len(r))):
             role = r[c]
+            if role.kind in ("hslit", "vslit") and role.profile is not None:
+                _check_alive(raw, c, i, recording)
             if role.kind == "hslit" and role.profile is not None:
                 target = h[c]
                 image = compress(signal[..., c], rank, seed=i)
@@ -231,6 +233,21 @@ def collect_slits(
     if frame_gains != "off" and white is not None:
         _white_gains(recording, out, white, h_set is not None, v_set is not None, frame_gains)
     return out
+
+
+def _check_alive(raw: np.ndarray, c: int, i: int, recording: Recording) -> None:
+    """Refuse a slit frame whose channel ``c`` is constant (all zero, or one value): a dead
+    frame (camera not exposing, display off, lens cap) carries no slit and would corrupt
+    the solve."""
+    channel = raw[..., c] if raw.ndim == 3 else raw
+    lo, hi = float(channel.min()), float(channel.max())
+    if hi <= lo:
+        fr = recording.frames[i]
+        raise CalibrationError(
+            f"recording {recording.root}: slit frame {i} ({fr.label or fr.measurement}) is dead in "
+            f"channel {recording.profile.sensor.channels[c]}: every pixel reads {lo:g} DN; re-record "
+            "that slit (camera exposing? display on?)"
+        )
 
 
 def _white_gains(

@@ -28,7 +28,7 @@ from thintact_sdk.imaging.calibration_bundle import META_FILE, timestamp_name
 from thintact_sdk.imaging.t2s import SystemMatrices
 from thintact_sdk.interfaces import Camera, Display
 from thintact_sdk.profile import Profile
-from thintact_sdk.recording import Recording, RecordingWriter
+from thintact_sdk.recording import Recording, RecordingWriter, remove_partial_writes
 
 CAPTURE_DIR = "capture"
 StepProgress = Callable[[int, int, str], None]
@@ -83,7 +83,7 @@ def new_bundle_dir(profile: Profile, base: Path | None = None) -> Path:
 
 def _check_same_profile(capture: Path, profile: Profile) -> None:
     try:
-        rec = Recording(capture)
+        rec = Recording(capture, allow_empty=True)
     except Exception as err:  # noqa: BLE001 - any unreadable capture is reported the same way
         raise CalibrationError(f"cannot resume from {capture}: {err}") from None
     if rec.profile.content_hash() != profile.content_hash():
@@ -91,14 +91,6 @@ def _check_same_profile(capture: Path, profile: Profile) -> None:
             f"the capture in {capture} was made with a different profile (its physics fields "
             "differ); start a new calibration with --restart or another --out"
         )
-
-
-def _remove_partial_writes(capture_dir: Path) -> None:
-    """Delete temp files of atomic writes a killed run left behind (never complete frames)."""
-    for sub in (capture_dir, capture_dir / "scenes", capture_dir / "measurements"):
-        if sub.is_dir():
-            for tmp in sub.glob(".*.tmp"):
-                tmp.unlink(missing_ok=True)
 
 
 def _restore_exposure(camera: Camera, writer: RecordingWriter) -> float | None:
@@ -210,7 +202,7 @@ def run_wizard(
     capture_dir = bundle_dir / CAPTURE_DIR
     if (capture_dir / "manifest.json").is_file():
         _check_same_profile(capture_dir, profile)
-        _remove_partial_writes(capture_dir)
+        remove_partial_writes(capture_dir)
     bundle_dir.mkdir(parents=True, exist_ok=True)
     (bundle_dir / "wizard.json").write_text(
         json.dumps({"frames": ws.frames, "flush": ws.flush, "exposure_target": ws.exposure_target}) + "\n",

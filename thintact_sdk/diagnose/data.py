@@ -79,6 +79,7 @@ def load_diagnosis_data(root: str | os.PathLike[str]) -> DiagnosisData:
                 f"frame {i} ({fr.label or fr.measurement}): {m.shape[2]} measurement / "
                 f"{sc.shape[2]} scene channels, the profile has {n_ch}"
             )
+        _check_alive(sc, m, i, fr.label or fr.measurement, prof)
         scenes.append(sc.astype(np.float64))
         meas.append(m.astype(np.float64))
         labels.append(fr.label or f"frame{i}")
@@ -87,4 +88,28 @@ def load_diagnosis_data(root: str | os.PathLike[str]) -> DiagnosisData:
             f"recording {root} has no frame with a scene: diagnosis compares measurements "
             "with simulated scenes"
         )
-    return DiagnosisData(prof, labels, np.stack(scenes), np.stack(meas), skipped)
+    measured = np.stack(meas)
+    if not np.any(measured < prof.noise.saturation_dn):
+        raise RecordingError(
+            f"recording {root}: every pixel of every frame is at or above saturation_dn "
+            f"{prof.noise.saturation_dn:g}; nothing can be compared with the simulation"
+        )
+    return DiagnosisData(prof, labels, np.stack(scenes), measured, skipped)
+
+
+def _check_alive(scene: np.ndarray, meas: np.ndarray, i: int, name: str, prof: Profile) -> None:
+    """Refuse a frame that shows a lit scene but whose measurement is one constant value (a
+    dead camera, a lens cap, a frame of zeros): it would be diagnosed as a missing effect."""
+    if float(scene.max()) <= 0.0:
+        return  # a dark frame of a noiseless camera may be constant
+    lo, hi = float(meas.min()), float(meas.max())
+    if hi <= lo and lo >= prof.noise.saturation_dn:
+        raise RecordingError(
+            f"frame {i} ({name}): every pixel is saturated ({lo:g} DN >= saturation_dn "
+            f"{prof.noise.saturation_dn:g}); lower the exposure or the display brightness"
+        )
+    if hi <= lo:
+        raise RecordingError(
+            f"frame {i} ({name}): the measurement reads {lo:g} DN at every pixel although its "
+            f"scene is lit; a dead frame (camera not exposing, lens cap?) cannot be diagnosed"
+        )

@@ -16,6 +16,7 @@ A bundle directory holds
 from __future__ import annotations
 
 import json
+import math
 import os
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
@@ -111,8 +112,9 @@ class CalibrationBundle:
     # -- convenience -------------------------------------------------------------------
     @property
     def tau(self) -> float:
-        """Tikhonov weight τ stored in the bundle."""
-        return float(self.meta.get("tau", 0.0))
+        """Tikhonov weight τ stored in the bundle (DN²; 0.0 when the bundle has none)."""
+        value = self.meta.get("tau")
+        return float(value) if value is not None else 0.0
 
     def matches_profile(self, profile: Profile) -> bool:
         """Whether the bundle was made for this profile's physics (``profile_hash`` equal)."""
@@ -154,11 +156,12 @@ class CalibrationBundle:
             raise CalibrationError(f"{d} is not a calibration bundle: no {META_FILE}")
         try:
             meta = json.loads(meta_path.read_text(encoding="utf-8"))
-        except (OSError, json.JSONDecodeError) as err:
-            raise CalibrationError(f"cannot read {meta_path}: {err}") from None
+        except (OSError, json.JSONDecodeError, UnicodeDecodeError) as err:
+            raise CalibrationError(f"{meta_path} is not a calibration bundle: cannot read it ({err})") from None
         if not isinstance(meta, dict) or meta.get("format") != CALIBRATION_FORMAT:
             got = meta.get("format") if isinstance(meta, dict) else type(meta).__name__
             raise CalibrationError(f"{meta_path}: format {got!r}, expected {CALIBRATION_FORMAT!r}")
+        _check_meta(meta, meta_path)
         sm = SystemMatrices.load(d / MATRICES_FILE)
         jf = JointFilter.load(d / FILTER_FILE) if (d / FILTER_FILE).is_file() else None
         if jf is not None and (jf.sensor_shape != sm.sensor_shape or jf.channels != sm.channels):
@@ -167,6 +170,30 @@ class CalibrationBundle:
                 f"{sm.channels}×{sm.sensor_shape}"
             )
         return cls(sm, jf, meta, d)
+
+
+POSITIVE_META_FIELDS = ("tau", "tau_t2s_closed_form", "exposure_us")
+"""``calibration.json`` fields that, when present and not null, must be finite numbers > 0
+(τ in DN², exposure in us)."""
+
+
+def _check_meta(meta: dict[str, Any], meta_path: Path) -> None:
+    """Refuse ``calibration.json`` fields of the wrong type or sign, naming file and field."""
+    for key in POSITIVE_META_FIELDS:
+        value = meta.get(key)
+        if value is None:
+            continue
+        number = isinstance(value, int | float) and not isinstance(value, bool)
+        if not (number and math.isfinite(value) and value > 0):
+            raise CalibrationError(
+                f"{meta_path}: field {key!r} is {value!r}, which is invalid: it must be a finite "
+                "number > 0 (or null when unknown)"
+            )
+    for key in ("profile", "profile_hash"):
+        if key in meta and not isinstance(meta[key], str):
+            raise CalibrationError(f"{meta_path}: field {key!r} must be a string, got {meta[key]!r}")
+    if "metrics" in meta and not isinstance(meta["metrics"], dict):
+        raise CalibrationError(f"{meta_path}: field 'metrics' must be an object")
 
 
 def find_latest(device_dir: str | os.PathLike[str]) -> Path:

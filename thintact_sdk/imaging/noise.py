@@ -14,6 +14,11 @@ from thintact_sdk.profile import NoiseSpec
 QUANTISATION_VARIANCE_DN2 = 1.0 / 12.0
 """Variance of rounding to integers (uniform over one DN)."""
 
+MAX_POISSON_ELECTRONS = 1e18
+"""Expected photo-electrons are capped here before the Poisson draw (numpy's limit is about
+9.2e18). Far above any saturation level, so the clipped output is unchanged; it only keeps an
+absurd gain (``simulate --gain 1e20``) from failing inside numpy."""
+
 
 def signal_to_dn(
     signal_dn: np.ndarray,
@@ -46,7 +51,7 @@ def signal_to_dn(
     top = noise.saturation_dn if saturation_dn is None else min(saturation_dn, noise.saturation_dn)
     if rng is None:
         return np.clip(noise.black_level_dn + sig, 0.0, top)
-    electrons = rng.poisson(np.clip(sig, 0.0, None) * noise.electrons_per_dn)
+    electrons = rng.poisson(np.clip(sig * noise.electrons_per_dn, 0.0, MAX_POISSON_ELECTRONS))
     dn = noise.black_level_dn + electrons / noise.electrons_per_dn
     if noise.read_noise_dn > 0:
         dn = dn + rng.normal(0.0, noise.read_noise_dn, size=sig.shape)

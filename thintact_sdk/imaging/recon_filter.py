@@ -91,16 +91,12 @@ class JointFilter:
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> JointFilter:
         """Read a file written by :meth:`save`; raises CalibrationError when unusable."""
+        from thintact_sdk.imaging.npz_io import read_npz
+
         p = Path(path)
-        if not p.is_file():
-            raise CalibrationError(f"filter file not found: {p}")
-        try:
-            with np.load(p, allow_pickle=False) as z:
-                if "phi_f" not in z.files or "phi_s" not in z.files:
-                    raise CalibrationError(f"{p}: needs arrays phi_f and phi_s")
-                phi_f, phi_s = z["phi_f"], z["phi_s"]
-                meta = json.loads(str(z["meta_json"])) if "meta_json" in z.files else {}
-        except (OSError, ValueError) as err:
-            raise CalibrationError(f"cannot read filter {p}: {err}") from None
+        arrays, meta = read_npz(p, "filter", ("phi_f", "phi_s"))
         meta.pop("format", None)
-        return cls(phi_f, phi_s, meta)
+        try:
+            return cls(arrays["phi_f"], arrays["phi_s"], meta)
+        except CalibrationError as err:
+            raise CalibrationError(f"{p}: {err}") from None

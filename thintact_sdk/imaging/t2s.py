@@ -163,22 +163,17 @@ class SystemMatrices:
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> SystemMatrices:
         """Read a file written by :meth:`save`; raises CalibrationError when unusable."""
+        from thintact_sdk.imaging.npz_io import read_npz
+
         p = Path(path)
-        if not p.is_file():
-            raise CalibrationError(f"system matrices file not found: {p}")
-        try:
-            with np.load(p, allow_pickle=False) as z:
-                missing = [k for k in _KEYS if k not in z.files]
-                if missing:
-                    raise CalibrationError(f"{p}: missing arrays {', '.join(missing)}")
-                arrays = {k: z[k] for k in _KEYS}
-                meta = json.loads(str(z["meta_json"])) if "meta_json" in z.files else {}
-        except (OSError, ValueError) as err:
-            raise CalibrationError(f"cannot read system matrices {p}: {err}") from None
+        arrays, meta = read_npz(p, "system matrices", _KEYS)
         fmt = meta.pop("format", SYSTEM_MATRICES_FORMAT)
         if fmt != SYSTEM_MATRICES_FORMAT:
             raise CalibrationError(f"{p}: unknown format {fmt!r}; expected {SYSTEM_MATRICES_FORMAT!r}")
-        return cls(meta=meta, **arrays)
+        try:
+            return cls(meta=meta, **arrays)
+        except CalibrationError as err:
+            raise CalibrationError(f"{p}: {err}") from None
 
     # -- constructors ------------------------------------------------------------------
     @classmethod

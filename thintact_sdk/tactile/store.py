@@ -3,8 +3,9 @@
 Same roots as the decoders' calibration bundles: the first directory of
 ``$THINTACT_CALIBRATION_PATH`` (``os.pathsep``-separated) when set, else ``./calibrations``
 when that directory exists in the working directory, else the ``calibrations/`` directory
-of the source checkout the SDK runs from. A LUT is looked up in all of them, in that order,
-and written to the first.
+of the source checkout the SDK runs from. A LUT is looked up in all of them, in that order.
+New LUTs are written under :func:`user_calibrations_root` (never into the checkout's shipped
+``calibrations/`` unless that is the working directory's own).
 """
 
 from __future__ import annotations
@@ -33,6 +34,14 @@ def calibrations_root() -> Path:
     return calibration_roots()[0]
 
 
+def user_calibrations_root() -> Path:
+    """Where a new calibration is written: the first directory of ``$THINTACT_CALIBRATION_PATH``
+    when set, else ``./calibrations`` (created on write), so that the LUTs shipped with the
+    source checkout are never replaced by a calibration run elsewhere."""
+    env = [d for d in os.environ.get("THINTACT_CALIBRATION_PATH", "").split(os.pathsep) if d]
+    return Path(env[0]).expanduser() if env else Path.cwd() / "calibrations"
+
+
 def device_lut_path(profile: Profile, root: Path | None = None) -> Path:
     """``<root>/<profile.name>/tactile/lut.npz`` (whether or not it exists)."""
     return (root or calibrations_root()) / profile.name / "tactile" / LUT_NAME
@@ -53,8 +62,9 @@ def find_lut(profile: Profile, root: Path | None = None) -> Path | None:
 
 
 def save_device_lut(lut: PhotometricLUT, profile: Profile, root: Path | None = None) -> Path:
-    """Store ``lut`` as the device's LUT; returns the ``.npz`` path."""
-    return lut.save(device_lut_path(profile, root))
+    """Store ``lut`` as the device's LUT (under ``root``, default
+    :func:`user_calibrations_root`); returns the ``.npz`` path."""
+    return lut.save(device_lut_path(profile, root or user_calibrations_root()))
 
 
 def load_device_lut(profile: Profile, root: Path | None = None) -> PhotometricLUT | None:

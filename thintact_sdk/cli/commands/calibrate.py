@@ -21,6 +21,8 @@ from rich.progress import (
     TimeRemainingColumn,
 )
 
+from thintact_sdk.cli.argtypes import non_negative_int, positive_float, positive_int
+from thintact_sdk.cli.output_path import add_force_argument, claim_output
 from thintact_sdk.errors import ThinTactError
 
 REFERENCE_EXPOSURE_US = 10_000.0
@@ -39,17 +41,19 @@ def register(sub: argparse._SubParsersAction) -> None:
     src.add_argument("--from-recording", metavar="DIR", help="calibrate from a thintact-recording/1 directory")
     p.add_argument("--out", metavar="DIR", help="bundle directory (default calibrations/<device>/<timestamp>)")
     p.add_argument("--restart", action="store_true", help="wizard: start a new capture instead of resuming")
-    p.add_argument("--frames", type=int, help="frames averaged per pattern (default 100; 8 for virtual cameras)")
-    p.add_argument("--flush", type=int, default=1,
+    p.add_argument("--frames", type=positive_int,
+                   help="frames averaged per pattern, >= 1 (default 100; 8 for virtual cameras)")
+    p.add_argument("--flush", type=non_negative_int, default=1,
                    help="frames dropped after each pattern change (default 1)")
     p.add_argument("--method", choices=["lsq", "paper"], default="lsq",
                    help="lsq: joint least squares per slit (default); paper: Algorithm 1 verbatim")
-    p.add_argument("--max-iter", type=int, default=50, help="refinement iterations (Algorithm 3)")
-    p.add_argument("--tau", type=float, help="Tikhonov tau in DN² (default: chosen on simulated data)")
+    p.add_argument("--max-iter", type=positive_int, default=50, help="refinement iterations (Algorithm 3)")
+    p.add_argument("--tau", type=positive_float,
+                   help="Tikhonov tau in DN², > 0 (default: chosen on simulated data)")
     p.add_argument("--frame-gains", choices=["off", "auto", "on"], default="off",
                    help="per-slit-frame gains from the white frame (unrecorded exposure or "
                    "brightness drift); only for well-averaged recordings (noise leaks in)")
-    p.add_argument("--filter-steps", type=int, default=100, help="Adam steps of the filter training")
+    p.add_argument("--filter-steps", type=non_negative_int, default=100, help="Adam steps of the filter training")
     p.add_argument("--camera-set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a camera setting (value parsed as JSON when possible)")
     p.add_argument("--no-registration-check", action="store_true",
@@ -57,6 +61,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--compare-reference", action="store_true",
                    help="virtual devices: compare with the simulator's two-term fit")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    add_force_argument(p, "the bundle into an existing non-empty --out (an unfinished wizard "
+                       "capture there is resumed without it)")
     p.set_defaults(func=run)
 
 
@@ -115,9 +121,11 @@ def _offline(args: argparse.Namespace, options: Any, console: Console) -> Any:
     from thintact_sdk.errors import CalibrationError
     from thintact_sdk.recording import Recording
 
-    if not args.out:
+    if args.out is None:
         raise CalibrationError("--from-recording needs --out DIR (the bundle directory to write)")
+    out = claim_output(args.out, "directory", force=args.force)
     rec = Recording(args.from_recording)
+    rec.check_frames()  # a NaN, negative or unreadable frame is named before any work
     with _progress(args.no_progress, console) as prog:
         task = prog.add_task("slit frames", total=None, label="")
 
@@ -125,7 +133,7 @@ def _offline(args: argparse.Namespace, options: Any, console: Console) -> Any:
             prog.update(task, completed=done, total=total, label=label)
 
         return calibrate_recording(
-            rec, Path(args.out), options, source="recording", progress=on_frame,
+            rec, out, options, source="recording", progress=on_frame,
             status=lambda s: console.print(f"[dim]{s}[/dim]"),
             reference=_reference(rec.profile, {}) if args.compare_reference else None,
             reference_exposure_us=REFERENCE_EXPOSURE_US,
@@ -144,6 +152,21 @@ def _reference(profile: Any, camera_settings: dict[str, Any]) -> Any:
     settings = dict(profile.camera.settings) if profile.camera is not None else {}
     settings.update(camera_settings)
     return SystemMatrices.two_term_fit(Simulator(profile), scale_dn=signal_scale_dn(profile, settings))
+
+
+def _wizard_out(args: argparse.Namespace) -> Path:
+    """The wizard's ``--out``: an unfinished capture there is resumed (the documented resume,
+    unless ``--restart``); anything else that exists needs ``--force``."""
+    from thintact_sdk.calibration.wizard import CAPTURE_DIR
+    from thintact_sdk.imaging.calibration_bundle import META_FILE
+
+    if not args.out.strip():
+        return claim_output(args.out, "directory")  # refuses the empty path
+    out = Path(args.out)
+    unfinished = (out / CAPTURE_DIR / "manifest.json").is_file() and not (out / META_FILE).is_file()
+    if unfinished and not args.restart:
+        return out
+    return claim_output(args.out, "directory", force=args.force)
 
 
 def _wizard(args: argparse.Namespace, options: Any, console: Console) -> Any:
@@ -167,8 +190,8 @@ def _wizard(args: argparse.Namespace, options: Any, console: Console) -> Any:
             "virtual), display_index, origin_px and pixel_pitch_um"
         )
     cam_settings = _parse_settings(args.camera_set)
-    if args.out:
-        bundle_dir = Path(args.out)
+    if args.out is not None:
+        bundle_dir = _wizard_out(args)
     else:
         unfinished = None if args.restart else find_unfinished(Path.cwd() / "calibrations" / profile.name)
         bundle_dir = unfinished or new_bundle_dir(profile)

@@ -5,6 +5,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from thintact_sdk.cli.argtypes import int_range, positive_float, positive_int
+from thintact_sdk.cli.output_path import add_force_argument, claim_output
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
@@ -12,7 +15,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="calibrate the depth LUT from ball presses (virtual sensor, recording or live)",
         description=(
             "Press a ball of known radius into the membrane and store the colour→slope LUT "
-            "with the device (calibrations/<device>/tactile/lut.npz + lut.json). A virtual "
+            "with the device (calibrations/<device>/tactile/lut.npz + lut.json under "
+            "$THINTACT_CALIBRATION_PATH's first directory, else ./calibrations; an existing "
+            "LUT is only replaced with --force). A virtual "
             "sensor is pressed by the tactile simulator; --recording uses a recording whose "
             "'reference' (or first) frame has no contact; otherwise the live camera is used "
             "and you are prompted for each press."
@@ -20,26 +25,34 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--profile", required=True, help="profile name or file")
     p.add_argument("--recording", type=Path, help="recording of ball presses (thintact-recording/1)")
-    p.add_argument("--presses", type=int, default=12, help="ball presses (virtual, live)")
-    p.add_argument("--ball-radius-mm", type=float, default=1.5,
+    p.add_argument("--presses", type=positive_int, default=12, help="ball presses (virtual, live), >= 1")
+    p.add_argument("--ball-radius-mm", type=positive_float, default=1.5,
                    help="calibration ball radius in mm (paper: 3 mm ball → 1.5)")
-    p.add_argument("--bins", type=int, default=32, help="LUT nodes per colour axis")
-    p.add_argument("--out", type=Path, help="LUT file (default: the device's calibrations folder)")
+    p.add_argument("--bins", type=int_range(4, 256), default=32, help="LUT nodes per colour axis (4..256)")
+    p.add_argument("--out", help="LUT file (default: the device's folder under "
+                   "$THINTACT_CALIBRATION_PATH or ./calibrations, never the checkout's)")
+    add_force_argument(p, "over an existing LUT")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     from rich.progress import Progress
 
-    from thintact_sdk.errors import ThinTactError
+    from thintact_sdk.errors import OutputError
     from thintact_sdk.profile import load_profile
     from thintact_sdk.sensor import VIRTUAL_CAMERAS, Sensor
     from thintact_sdk.tactile import device_calibration as dc
-    from thintact_sdk.tactile.store import save_device_lut
+    from thintact_sdk.tactile.store import device_lut_path, user_calibrations_root
 
-    if args.presses < 1 or args.bins < 4 or args.ball_radius_mm <= 0:
-        raise ThinTactError("--presses must be ≥ 1, --bins ≥ 4 and --ball-radius-mm > 0")
     profile = load_profile(args.profile)
+    if args.out is not None:
+        target = claim_output(args.out, "file", force=args.force)
+        if target.suffix != ".npz":
+            raise OutputError(f"--out {target} must name a .npz file (its .json goes beside it)")
+    else:
+        target = claim_output(device_lut_path(profile, user_calibrations_root()), "file",
+                              force=args.force, option="the device LUT")
+    claim_output(target.with_suffix(".json"), "file", force=args.force, option="the LUT's metadata")
     virtual = profile.camera is not None and profile.camera.plugin in VIRTUAL_CAMERAS
     with Progress(transient=True) as bar:
         task = bar.add_task("ball presses", total=args.presses)
@@ -60,7 +73,7 @@ def run(args: argparse.Namespace) -> int:
                     bar.stop()
                     lut = dc.calibrate_live(sensor, args.presses, args.ball_radius_mm,
                                             bins=args.bins, progress=progress)
-    path = lut.save(args.out) if args.out is not None else save_device_lut(lut, profile)
+    path = lut.save(target)
     filled = int((lut.counts > 1e-3).sum())
     print(f"tactile LUT for {profile.name!r}: {lut.meta.get('presses')} presses, "
           f"{lut.meta.get('calibration_pixels')} pixels, {filled} of {lut.bins**3} nodes "

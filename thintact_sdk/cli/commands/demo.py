@@ -17,6 +17,8 @@ from typing import Any
 
 import numpy as np
 
+from thintact_sdk.cli.argtypes import finite_float, positive_float
+from thintact_sdk.cli.output_path import add_force_argument, claim_output
 from thintact_sdk.errors import PluginError, ThinTactError
 from thintact_sdk.profile import Profile, load_profile
 
@@ -32,11 +34,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--profile", default="virtual-finger", help="a profile whose camera is 'virtual'")
     p.add_argument("--out", default="demo-output", help="directory for demo.png and demo.json")
-    p.add_argument("--depth-mm", type=float, default=0.75, help="indentation depth of the ball (mm)")
-    p.add_argument("--radius-mm", type=float, default=2.0, help="ball radius (mm)")
-    p.add_argument("--shear-mm", type=float, nargs=2, default=(0.12, -0.06), metavar=("X", "Y"),
+    p.add_argument("--depth-mm", type=finite_float, default=0.75, help="indentation depth of the ball (mm)")
+    p.add_argument("--radius-mm", type=positive_float, default=2.0, help="ball radius (mm)")
+    p.add_argument("--shear-mm", type=finite_float, nargs=2, default=(0.12, -0.06), metavar=("X", "Y"),
                    help="tangential membrane shift under the ball (mm)")
     p.add_argument("--show", action="store_true", help="also open the figure in a window")
+    add_force_argument(p, "into an existing non-empty --out (demo.png and demo.json are replaced)")
     p.set_defaults(func=run)
 
 
@@ -60,6 +63,7 @@ def run(args: argparse.Namespace) -> int:
     from thintact_sdk.tactile.evaluation import depth_rms as depth_rms_in_contact
     from thintact_sdk.tactile.evaluation import marker_errors
 
+    out = claim_output(args.out, "directory", force=args.force)
     profile = load_profile(args.profile)
     if profile.camera is None or profile.camera.plugin != VIRTUAL_CAMERA:
         raise ThinTactError(
@@ -68,7 +72,6 @@ def run(args: argparse.Namespace) -> int:
         )
     if not 0.05 <= args.depth_mm <= 2.0:
         raise ThinTactError("--depth-mm must be between 0.05 and 2.0 mm")
-    out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
 
     sim = TactileSimulator.for_profile(profile)

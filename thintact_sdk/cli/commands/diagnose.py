@@ -4,7 +4,12 @@ simulation, which effects of the vocabulary are missing, fitted (CONTRACTS §6).
 from __future__ import annotations
 
 import argparse
+import math
 import time
+from typing import Any
+
+from thintact_sdk.cli.argtypes import non_negative_float, non_negative_int, positive_float
+from thintact_sdk.cli.output_path import add_force_argument, claim_output
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -15,15 +20,30 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("recording", metavar="RECORDING", help="thintact-recording/1 directory")
     p.add_argument("--out", required=True, metavar="DIR", help="output directory")
-    p.add_argument("--time-budget", type=float, default=75.0, metavar="S",
+    p.add_argument("--time-budget", type=positive_float, default=75.0, metavar="S",
                    help="seconds allowed for naming effects (default 75; the whole run stays under 120 s)")
-    p.add_argument("--sys-frac", type=float, default=1e-3, metavar="F",
+    p.add_argument("--sys-frac", type=non_negative_float, default=1e-3, metavar="F",
                    help="systematic-error allowance, relative (default 0.001)")
-    p.add_argument("--max-effects", type=int, default=4, metavar="K",
+    p.add_argument("--max-effects", type=non_negative_int, default=4, metavar="K",
                    help="accept at most K effects (default 4)")
     p.add_argument("--png", action="store_true", help="also write the figures as DIR/figures/*.png")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
+    add_force_argument(p, "into an existing non-empty --out")
     p.set_defaults(func=run)
+
+
+def _check_finite(report: dict[str, Any]) -> None:
+    """Refuse to write a report whose headline figures are NaN/Inf (never a silent NaN)."""
+    from thintact_sdk.errors import ThinTactError
+
+    figures = {"noise_rms_dn": report.get("noise_rms_dn")}
+    for part in ("baseline", "final"):
+        for key in ("rms_dn", "chi2_per_dof"):
+            figures[f"{part}.{key}"] = report.get(part, {}).get(key)
+    bad = [k for k, v in figures.items() if not (isinstance(v, int | float) and math.isfinite(v))]
+    if bad:
+        raise ThinTactError(f"the diagnosis gave non-finite {', '.join(bad)} (too few usable "
+                            "pixels: saturated or masked?); nothing was written")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -31,10 +51,8 @@ def run(args: argparse.Namespace) -> int:
 
     from thintact_sdk.diagnose import DiagnoseOptions, diagnose, load_diagnosis_data
     from thintact_sdk.diagnose.outputs import write_outputs
-    from thintact_sdk.errors import ThinTactError
 
-    if args.time_budget <= 0 or args.sys_frac < 0 or args.max_effects < 0:
-        raise ThinTactError("--time-budget must be > 0, --sys-frac and --max-effects >= 0")
+    out = claim_output(args.out, "directory", force=args.force)
     con = Console(stderr=True, quiet=args.quiet)
     t0 = time.perf_counter()
     data = load_diagnosis_data(args.recording)
@@ -45,8 +63,9 @@ def run(args: argparse.Namespace) -> int:
     opts = DiagnoseOptions(sys_frac=args.sys_frac, time_budget_s=args.time_budget, max_effects=args.max_effects)
     with con.status("diagnosing...") as status:
         d = diagnose(data, options=opts, progress=lambda m: status.update(m))
-    paths = write_outputs(d, args.out, png=args.png)
     rep = d.report
+    _check_finite(rep)
+    paths = write_outputs(d, out, png=args.png)
     print(f"baseline: rms {rep['baseline']['rms_dn']:.2f} DN, chi2/dof {rep['baseline']['chi2_per_dof']:.3f} "
           f"(noise rms {rep['noise_rms_dn']:.2f} DN)")
     for f in rep["findings"]:

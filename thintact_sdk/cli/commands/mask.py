@@ -10,6 +10,7 @@ import json
 from pathlib import Path
 from typing import Any
 
+from thintact_sdk.cli.output_path import add_force_argument, claim_output
 from thintact_sdk.errors import PluginError, ThinTactError
 
 
@@ -47,12 +48,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     o.add_argument("--workers", type=int, default=1,
                    help="individuals evaluated at once, one BLAS thread each (result unchanged)")
     o.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_force_argument(o, "into an existing non-empty --out that holds no checkpoint to resume")
     o.set_defaults(func=run_optimize)
 
     s = msub.add_parser("show", help="render a design's K x K pattern as a PNG")
     s.add_argument("design", metavar="DESIGN.json")
     s.add_argument("--out", required=True, metavar="PNG")
     s.add_argument("--cell-px", type=int, default=1, help="image pixels per mask cell")
+    add_force_argument(s, "over an existing --out file")
     s.set_defaults(func=run_show)
 
     c = msub.add_parser("compare", help="white uniformity, PSNR, SSIM and fitness of designs "
@@ -73,12 +76,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     d.add_argument("--feature-um", type=float, required=True)
     d.add_argument("--seed", type=int, default=0)
     d.add_argument("--out", required=True, metavar="DESIGN.json")
+    add_force_argument(d, "over an existing --out file")
     d.set_defaults(func=run_design)
 
     a = msub.add_parser("apply", help="write a copy of a profile that uses a design's phi")
     a.add_argument("design", metavar="DESIGN.json")
     a.add_argument("--profile", required=True)
     a.add_argument("--out", required=True, metavar="PROFILE.yaml")
+    add_force_argument(a, "over an existing --out file")
     a.set_defaults(func=run_apply)
 
 
@@ -103,11 +108,13 @@ def run_optimize(args: argparse.Namespace) -> int:
         TextColumn,
         TimeRemainingColumn,
     )
-    from thintact_masks.ga import GAConfig
+    from thintact_masks.ga import CHECKPOINT_NAME, GAConfig
     from thintact_masks.optimize import DESIGN_NAME, PLOT_NAME, optimize_mask
 
     from thintact_sdk.profile import load_profile
 
+    if not (Path(args.out) / CHECKPOINT_NAME).is_file() or not str(args.out).strip():
+        claim_output(args.out, "directory", force=args.force)  # else: the documented resume
     profile = load_profile(args.profile)
     if args.K is not None and args.K < 2:
         raise ThinTactError(f"--K must be at least 2, got {args.K}")
@@ -140,8 +147,9 @@ def run_show(args: argparse.Namespace) -> int:
     _plugin()
     from thintact_masks.design_io import load_design, render_mask_png
 
+    out = claim_output(args.out, "file", force=args.force)
     mask, _ = load_design(args.design)
-    path = render_mask_png(mask, args.out, args.cell_px)
+    path = render_mask_png(mask, out, args.cell_px)
     print(f"{path}: {mask.K}x{mask.K} cells ({mask.design}), open fraction "
           f"{float(mask.pattern().mean()):.3f}")
     return 0
@@ -197,13 +205,14 @@ def run_design(args: argparse.Namespace) -> int:
 
     from thintact_sdk.plugin_manager import get_registry
 
+    out = claim_output(args.out, "file", force=args.force)
     if args.kind == "ga":
         raise ThinTactError("use 'thintact mask optimize' for GA designs")
     if args.K < 1 or not args.feature_um > 0:
         raise ThinTactError("--K must be >= 1 and --feature-um > 0")
     designer = get_registry().create("mask", args.kind)
     mask = designer.design(args.K, args.feature_um, seed=args.seed)
-    path = write_json_atomic(args.out, design_record(mask))
+    path = write_json_atomic(out, design_record(mask))
     print(f"{path}: {args.kind} design, K={mask.K}, feature {mask.feature_um} um")
     return 0
 
@@ -214,6 +223,7 @@ def run_apply(args: argparse.Namespace) -> int:
 
     from thintact_sdk.profile import load_profile, profile_from_dict, write_profile
 
+    out = claim_output(args.out, "file", force=args.force)
     mask, rec = load_design(args.design)
     profile = load_profile(args.profile)
     d = profile.contract_dict()
@@ -222,8 +232,8 @@ def run_apply(args: argparse.Namespace) -> int:
     d["mask"].pop("phi_rows", None)
     if mask.phi_rows is not None:
         d["mask"]["phi_rows"] = [int(v) for v in mask.phi_rows]
-    new = profile_from_dict(d, where=args.out)
-    path = write_profile(new, args.out)
+    new = profile_from_dict(d, where=str(out))
+    path = write_profile(new, out)
     if rec.get("scale", 1.0) != 1.0:
         print(f"warning: {args.design} was optimised on a device scaled by {rec['scale']}")
     print(f"{path}: profile {new.name!r} with the {mask.design} mask (K={mask.K})")

@@ -34,10 +34,12 @@ from thintact_sdk.capture import (
     create_camera,
     to_measurement,
 )
+from thintact_sdk.cli.argtypes import positive_float, positive_int
+from thintact_sdk.cli.output_path import add_force_argument, claim_output
 from thintact_sdk.errors import DeviceError, EndOfStreamError, RecordingError, ThinTactError
 from thintact_sdk.frames import RawFrame
 from thintact_sdk.profile import Profile, load_profile
-from thintact_sdk.recording import RecordingWriter
+from thintact_sdk.recording import RecordingWriter, check_appendable
 
 CLI_DESCRIPTION = """\
 Capture N frames from the profile's camera into a thintact-recording/1 directory.
@@ -68,19 +70,22 @@ def register(sub: argparse._SubParsersAction) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("--profile", required=True, help="profile name or file")
-    p.add_argument("--frames", type=int, required=True, metavar="N", help="frames to record")
-    p.add_argument("--out", required=True, metavar="DIR", help="recording directory (or .mcap file with --format mcap) to create")
+    p.add_argument("--frames", type=positive_int, required=True, metavar="N",
+                   help="frames to record (>= 1)")
+    p.add_argument("--out", required=True, metavar="DIR",
+                   help="recording directory (or .mcap file with --format mcap) to create")
     p.add_argument("--raw", action="store_true", help="also keep the raw mosaics (raw/*.npy)")
-    p.add_argument("--timeout", type=float, default=5.0, metavar="S",
+    p.add_argument("--timeout", type=positive_float, default=5.0, metavar="S",
                    help="longest wait for one frame in seconds (default 5)")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a camera setting (YAML value), e.g. --set fps=0")
-    p.add_argument("--append", action="store_true", help="add frames to an existing recording")
+    p.add_argument("--append", action="store_true",
+                   help="add frames to an existing recording of the same device (resume)")
     p.add_argument("--fail-on-drop", action="store_true",
                    help="exit with an error if the camera dropped any frame")
     p.add_argument("--no-scenes", action="store_true",
                    help="do not save ground-truth scenes reported by the camera")
-    p.add_argument("--buffer-mb", type=float, default=512.0, metavar="MB",
+    p.add_argument("--buffer-mb", type=positive_float, default=512.0, metavar="MB",
                    help="memory for frames waiting to be written (default 512)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     mcap = p.add_argument_group("MCAP logs (--format mcap, docs/logging.md)")
@@ -92,6 +97,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                       help="MCAP chunk compression (default none: raw frames barely compress)")
     mcap.add_argument("--image-encoding", choices=("rgb8", "32FC3"), default="rgb8",
                       help="MCAP reconstruction encoding (default rgb8; 32FC3 is exact)")
+    add_force_argument(p, "a new recording into an existing non-empty directory that is not "
+                       "a recording (an existing recording needs --append)")
     p.set_defaults(func=run)
 
 
@@ -176,8 +183,10 @@ def record(
     """
     if frames <= 0:
         raise ThinTactError("--frames must be at least 1")
-    if (out / "manifest.json").is_file() and not append:
-        raise RecordingError(f"{out} already holds a recording; choose a new --out or pass --append")
+    if (out / "manifest.json").is_file():
+        if not append:
+            raise RecordingError(f"{out} already holds a recording; choose a new --out or pass --append")
+        check_appendable(out, profile)  # before the camera is opened
     save_raw = None
     if keep_raw:
         try:
@@ -386,6 +395,7 @@ def _record_mcap(args: argparse.Namespace, profile: Profile, out: Path) -> Recor
         if given:
             raise ThinTactError(f"{flag} applies to --format recording only; an MCAP log "
                                 "always holds the raw frames and is never appended to")
+    out.unlink(missing_ok=True)  # only there when claim_output was given --force
     return record_mcap(
         profile, args.frames, out, tactile=not args.no_tactile, timeout_s=args.timeout,
         settings=parse_settings(args.set), compression=args.compression,
@@ -393,9 +403,23 @@ def _record_mcap(args: argparse.Namespace, profile: Profile, out: Path) -> Recor
     )
 
 
+def claim_recording_dir(path: str, append: bool, force: bool) -> Path:
+    """``record``'s ``--out``: a recording there is resumed with ``--append`` and refused
+    without it (``--force`` never discards recorded frames); otherwise the shared policy."""
+    if str(path).strip() and (Path(path) / "manifest.json").is_file():
+        if not append:
+            raise RecordingError(f"{path} already holds a recording; choose a new --out or pass "
+                                 "--append to add frames to it")
+        return Path(path)
+    return claim_output(path, "directory", force=force)
+
+
 def run(args: argparse.Namespace) -> int:
+    if args.format == "mcap":
+        out = claim_output(args.out, "file", force=args.force)
+    else:
+        out = claim_recording_dir(args.out, args.append, args.force)
     profile = load_profile(args.profile)
-    out = Path(args.out)
     if args.format == "mcap":
         summary = _record_mcap(args, profile, out)
     else:

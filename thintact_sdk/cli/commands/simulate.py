@@ -7,7 +7,10 @@ from pathlib import Path
 
 import numpy as np
 
+from thintact_sdk.cli.argtypes import positive_float, seed
+from thintact_sdk.cli.output_path import add_force_argument, claim_output
 from thintact_sdk.errors import ThinTactError
+from thintact_sdk.recording import SCENE_TOLERANCE
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -22,12 +25,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--profile", required=True, help="profile name or file")
     p.add_argument("--scenes", required=True, type=Path, help="F×N×M×C (or N×M×C) .npy")
-    p.add_argument("--out", required=True, type=Path, help="output .npy")
+    p.add_argument("--out", required=True, help="output .npy")
     p.add_argument("--noise", action="store_true", help="output noisy DN instead of irradiance")
-    p.add_argument("--seed", type=int, default=0, help="noise seed (with --noise)")
-    p.add_argument("--gain", type=float, default=None,
+    p.add_argument("--seed", type=seed, default=0, help="noise seed (with --noise), 0..2**63-1")
+    p.add_argument("--gain", type=positive_float, default=None,
                    help="DN per simulator unit (with --noise); default puts the brightest "
                         "all-white pixel at 60%% of (saturation - black)")
+    add_force_argument(p, "over an existing --out file")
     p.set_defaults(func=run)
 
 
@@ -36,13 +40,24 @@ def _load_scenes(path: Path) -> np.ndarray:
         raise ThinTactError(f"scenes file not found: {path}")
     try:
         x = np.load(path, allow_pickle=False)
-    except (ValueError, OSError) as err:
-        raise ThinTactError(f"cannot read scenes {path}: {err}") from None
+    except (ValueError, OSError, EOFError) as err:
+        raise ThinTactError(f"cannot read scenes {path} (empty, truncated or not a .npy file): {err}") from None
+    if not isinstance(x, np.ndarray) or x.dtype.kind not in "uif":
+        kind = x.dtype if isinstance(x, np.ndarray) else type(x).__name__
+        raise ThinTactError(f"scenes {path}: dtype {kind} is not a number array")
     if x.ndim == 3:
         x = x[None]
     if x.ndim != 4:
         raise ThinTactError(f"scenes {path} must be F×N×M×C or N×M×C, got shape {x.shape}")
-    return np.asarray(x, dtype=float)
+    if x.shape[0] == 0:
+        raise ThinTactError(f"scenes {path} holds no scene (shape {x.shape})")
+    x = np.asarray(x, dtype=float)
+    bad = ~np.isfinite(x) | (x < 0) | (x > 1.0 + SCENE_TOLERANCE)
+    if bad.any():
+        f = int(np.argwhere(bad)[0][0])
+        raise ThinTactError(f"scenes {path}: scene {f} holds values outside [0, 1] (NaN/Inf "
+                            "included); scenes are display values in [0, 1]")
+    return x
 
 
 def run(args: argparse.Namespace) -> int:
@@ -52,6 +67,7 @@ def run(args: argparse.Namespace) -> int:
     from thintact_sdk.imaging.simulator import Simulator
     from thintact_sdk.profile import load_profile
 
+    out_path = claim_output(args.out, "file", force=args.force)
     profile = load_profile(args.profile)
     scenes = _load_scenes(args.scenes)
     want = (profile.scene.rows, profile.scene.cols, len(profile.sensor.channels))
@@ -60,8 +76,6 @@ def run(args: argparse.Namespace) -> int:
             f"scenes have shape {scenes.shape[1:]} per frame but profile {profile.name!r} "
             f"needs N×M×C = {want}"
         )
-    if args.gain is not None and args.gain <= 0:
-        raise ThinTactError("--gain must be positive (DN per simulator unit)")
     sim = Simulator(profile)
     out = np.empty((scenes.shape[0], profile.sensor.rows, profile.sensor.cols, want[2]))
     rng = np.random.default_rng(args.seed)
@@ -79,7 +93,10 @@ def run(args: argparse.Namespace) -> int:
                 sig = sim.predict_signal_dn(scenes[f], gain)
                 out[f] = signal_to_dn(sig, profile.noise, rng, saturation_dn=level)
             progress.advance(task)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    np.save(args.out, out)
-    print(f"wrote {args.out} ({out.shape[0]} frames, {'DN' if args.noise else 'irradiance'})")
+    if not np.isfinite(out).all():
+        raise ThinTactError(f"the simulation of {args.scenes} gave NaN/Inf values; nothing written")
+    out_path.parent.mkdir(parents=True, exist_ok=True)
+    with open(out_path, "wb") as stream:  # exactly the named file (np.save would add .npy)
+        np.save(stream, out)
+    print(f"wrote {out_path} ({out.shape[0]} frames, {'DN' if args.noise else 'irradiance'})")
     return 0
