@@ -259,3 +259,15 @@ def test_claim_output_policy(tmp_path: Path) -> None:
                                (tmp_path, "directory", "not empty")]:
         with pytest.raises(OutputError, match=needle):
             claim_output(path, kind)  # type: ignore[arg-type]
+
+
+def test_new_luts_go_to_the_users_calibrations_never_the_checkout(tmp_path: Path, monkeypatch: Any,
+                                                                   repo_root: Path) -> None:
+    from thintact_sdk.tactile.store import calibration_roots, user_calibrations_root
+
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.delenv("THINTACT_CALIBRATION_PATH", raising=False)
+    assert user_calibrations_root() == tmp_path / "calibrations"
+    assert repo_root / "calibrations" in calibration_roots()  # still looked up there
+    monkeypatch.setenv("THINTACT_CALIBRATION_PATH", f"{tmp_path / 'a'}:{tmp_path / 'b'}")
+    assert user_calibrations_root() == tmp_path / "a"
