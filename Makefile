@@ -7,7 +7,7 @@ setup:
 	bash tools/bootstrap.sh
 
 demo: setup
-	.venv/bin/thintact demo --out demo-output
+	.venv/bin/thintact demo --out demo-output --force
 
 lint: setup
 	.venv/bin/ruff check thintact_sdk plugins tests tools
