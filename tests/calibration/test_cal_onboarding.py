@@ -78,3 +78,32 @@ def test_one_term_matrices_decode_quietly_with_t2s_closed_form() -> None:
         est = T2SClosedFormDecoder(sm, 1.0).decode(y.astype(np.float32))
     expected = TikhonovSolver(pc[0], qc[0], 1.0).solve(y[..., 0])
     np.testing.assert_allclose(est[..., 0], expected, atol=1e-5)
+
+
+def _flat_field(truth) -> np.ndarray:  # type: ignore[no-untyped-def]
+    """Noiseless uniform-scene signal (DN above black) of the exact simulator."""
+    return Simulator(truth).linear_batch(np.ones((1, 24, 32, 1)))[0] * 1000.0
+
+
+@pytest.mark.parametrize("flipped", [False, True])
+def test_mask_pose_is_recovered_from_a_flat_field(flipped: bool) -> None:
+    from thintact_sdk.calibration.pose import estimate_pose
+    from thintact_sdk.profile import Profile
+
+    nominal = small_profile(("G",))
+    data = nominal.contract_dict()
+    if flipped:  # the mask mounted turned by 180°
+        data["mask"]["phi"] = data["mask"]["phi"][::-1]
+        data["mask"]["phi_rows"] = data["mask"]["phi_rows"][::-1]
+    physics = {"mask_misalignment": {"dx_um": -12.0, "dy_um": 9.0, "angle_deg": 0.05},
+               "geometry": {"scene_to_mask_mm": 4.95}}
+    truth = Profile.model_validate(data).with_physics(physics)
+    est = estimate_pose(_flat_field(truth), nominal)
+    assert est.flipped == flipped
+    assert abs(est.dx_um + 12.0) < 0.5 and abs(est.dy_um - 9.0) < 0.5  # 1/40 of a 20 um cell
+    assert abs(est.scene_to_mask_mm - 4.95) < 0.02
+    assert abs(est.angle_deg - 0.05) < 0.1  # 0.05° moves this small mask by 0.3 um: barely seen
+    posed = est.apply(nominal)  # rotation aside (not separable), the simulator's own fit:
+    unrotated = truth.with_physics({**physics, "mask_misalignment": {"dx_um": -12.0, "dy_um": 9.0}})
+    reference = SystemMatrices.two_term_fit(Simulator(unrotated))
+    assert _coding_similarity(SystemMatrices.direct(posed), reference) > 0.999
