@@ -400,3 +400,53 @@ def calibrate_recording(
 
         write_report(outcome, profile, out / "report.html")
     return outcome
+
+
+def bundle_from_matrices(
+    profile: Profile,
+    sm: SystemMatrices,
+    out_dir: str | Path,
+    options: CalibrationOptions | None = None,
+    recording: Recording | None = None,
+) -> CalibrationBundle:
+    """A bundle (source ``import``) around matrices calibrated elsewhere.
+
+    The joint filter is trained on them as for a calibration. τ and the decoder are chosen
+    on ``recording``'s validation frames (scenes that are neither dark nor slits; its dark
+    frames, else the black level, subtracted) when one is given and holds enough of them,
+    else on simulated training scenes.
+    """
+    from thintact_sdk.calibration.classify import classify_scene, is_dark, is_slit
+    from thintact_sdk.calibration.collect import dark_level
+    from thintact_sdk.imaging.noise import QUANTISATION_VARIANCE_DN2
+
+    opts = options or CalibrationOptions()
+    k = _frames_averaged(recording, opts) if recording is not None else max(1, opts.frames_averaged or 1)
+    bundle, table = build_bundle(profile, sm, opts, k, "import", None)
+    simulated = _simulated_curve(table)
+    metrics: dict[str, Any] = {"tau_selection": {"criterion": "simulated"} if simulated is None else
+                               {"criterion": "simulated", "tau": simulated.tau}}
+    if recording is not None:
+        dark, source = dark_level(recording)
+        val = [i for i in range(len(recording)) if (scene := recording.scene(i)) is not None
+               and not is_dark(r := classify_scene(scene)) and not is_slit(r)]
+        collection = SlitCollection([], dark, source, None, val)
+        frames = validation_frames(recording, collection, profile.noise.saturation_dn)
+        nz = profile.noise
+        noise = NoiseEstimate(nz.read_noise_dn, nz.electrons_per_dn, nz.read_noise_dn, nz.electrons_per_dn,
+                              (nz.read_noise_dn**2 + QUANTISATION_VARIANCE_DN2) / k, 1.0 / (nz.electrons_per_dn * k))
+        selection = select(profile, bundle, frames, noise, decoder=opts.decoder, tau=opts.tau, simulated=simulated)
+        for name, tau in selection.decoder_taus.items():
+            bundle.meta[TAU_KEYS.get(name, "tau")] = float(tau)
+        bundle.meta["decoder"] = selection.decoder
+        metrics = {"tau_selection": selection.to_json(),
+                   "psnr_db": {v.label: v.psnr_db for v in selection.validation},
+                   "ssim": {v.label: v.ssim for v in selection.validation}}
+        bundle.meta["recording"] = str(recording.root)
+    bundle.meta["metrics"] = metrics
+    bundle.meta["imported_from"] = sm.meta.get("imported_from")
+    try:
+        bundle.save(Path(out_dir))
+    except OSError as err:
+        raise CalibrationError(f"cannot write the calibration bundle to {out_dir}: {err}") from None
+    return bundle

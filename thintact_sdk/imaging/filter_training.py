@@ -342,6 +342,10 @@ def train_joint_filter(
         scenes = training_scenes(n, m, seed=seed) if scenes is None else scenes
         data = make_training_data(system_matrices, scenes, noise=noise, seed=seed)
     r, s = data.y.shape[2:]
+    if not np.any(data.y_open):  # one-term (coding-only) matrices: nothing to remove, F(Y) = 0
+        c = data.y.shape[1]
+        return JointFilter(np.zeros((c, r, s)), np.ones((c, r, s)),
+                           {"method": "none: the system matrices have no open term", "final_loss": 0.0})
     block: tuple[int, int] | None
     if isinstance(low_block, str):
         if low_block != "auto":
