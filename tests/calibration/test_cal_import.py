@@ -78,3 +78,21 @@ def test_imported_bundle_chooses_tau_and_reconstructs(unit, tmp_path: Path, mode
     truth = r.scene(i).mean(axis=2, keepdims=True)
     floor = 18.0 if model == "t2s" else 8.0  # one term cannot explain the open light (10.4 dB)
     assert psnr(np.clip(est, 0, 1), truth) > floor
+
+
+def test_import_and_export_through_the_cli(unit, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:  # type: ignore[no-untyped-def]
+    from thintact_sdk.profile import write_profile
+
+    profile, rec, sm = unit
+    write_profile(profile, tmp_path / "p.json")
+    export_matrices(sm, tmp_path / "m.mat")
+    assert main(["calibrate-import", str(tmp_path / "m.mat"), "--profile", str(tmp_path / "p.json"),
+                 "--out", str(tmp_path / "cal"), "--recording", str(rec.root), "--filter-steps", "0"]) == 0
+    assert "cross-validation" in capsys.readouterr().out
+    assert main(["calibrate-export", str(tmp_path / "cal"), "--out", str(tmp_path / "back.npz")]) == 0
+    np.testing.assert_allclose(import_matrices(tmp_path / "back.npz", profile).Pc, sm.Pc, rtol=1e-6)
+    np.savez(tmp_path / "wrong.npz", Po=sm.Po[:, :10], Qo=sm.Qo, Pc=sm.Pc, Qc=sm.Qc)
+    assert main(["calibrate-import", str(tmp_path / "wrong.npz"), "--profile", str(tmp_path / "p.json"),
+                 "--out", str(tmp_path / "cal2")]) == 2
+    err = capsys.readouterr().err
+    assert "wrong.npz: Po is 1×10×24, expected 64×24" in err and "\n" not in err.strip()

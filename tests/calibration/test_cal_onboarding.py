@@ -107,3 +107,21 @@ def test_mask_pose_is_recovered_from_a_flat_field(flipped: bool) -> None:
     unrotated = truth.with_physics({**physics, "mask_misalignment": {"dx_um": -12.0, "dy_um": 9.0}})
     reference = SystemMatrices.two_term_fit(Simulator(unrotated))
     assert _coding_similarity(SystemMatrices.direct(posed), reference) > 0.999
+
+
+def test_calibrate_pose_cli_writes_the_pose_into_the_profile(tmp_path: Path) -> None:
+    from thintact_sdk.cli.main import main
+    from thintact_sdk.profile import Profile, load_profile, write_profile
+
+    nominal = small_profile(("G",))
+    write_profile(nominal, tmp_path / "nominal.json")
+    data = nominal.contract_dict()
+    data["mask"]["phi"], data["mask"]["phi_rows"] = data["mask"]["phi"][::-1], data["mask"]["phi_rows"][::-1]
+    truth = Profile.model_validate(data).with_physics({"mask_misalignment": {"dx_um": 6.0, "dy_um": -3.0}})
+    np.save(tmp_path / "flat.npy", _flat_field(truth) + nominal.noise.black_level_dn)
+    assert main(["calibrate-pose", str(tmp_path / "flat.npy"), "--profile", str(tmp_path / "nominal.json"),
+                 "--out", str(tmp_path / "posed.json")]) == 0
+    posed = load_profile(tmp_path / "posed.json")
+    assert posed.mask.phi == truth.mask.phi and posed.mask.phi_rows == truth.mask.phi_rows
+    assert abs(posed.physics["mask_misalignment"]["dx_um"] - 6.0) < 0.5
+    assert abs(posed.physics["mask_misalignment"]["dy_um"] + 3.0) < 0.5
