@@ -232,7 +232,7 @@ def compare_with_reference(
     if noise is not None:
         frames = validation_frames(recording, collection, profile.noise.saturation_dn)
         ref_sel = select(profile, ref_bundle, frames, noise, decoder=options.decoder,
-                         simulated=_simulated_curve(table))
+                         simulated=_simulated_curve(table), noise_criteria_curves=False)
         ref_val = ref_sel.validation
         ref_bundle.meta["tau"] = ref_sel.tau
     else:

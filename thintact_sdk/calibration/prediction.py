@@ -33,6 +33,9 @@ from thintact_sdk.imaging.simulator import Simulator
 from thintact_sdk.imaging.t2s import SystemMatrices
 from thintact_sdk.profile import NoiseSpec, Profile
 
+SLIT_BATCH = 16
+"""Slit scenes simulated per batch (bounds memory at paper size: 16 × 1024 × 1280 × 3 float64)."""
+
 
 @dataclass
 class Prediction:
@@ -44,24 +47,15 @@ class Prediction:
     notes: dict[str, Any] = field(default_factory=dict)
 
 
-def design_matrices(profile: Profile, calibrated: SystemMatrices) -> tuple[SystemMatrices, np.ndarray]:
-    """The design's two-term matrices at the unit's signal level, and the per-channel gains.
-
-    The gain of channel c makes the simulated white response match the calibrated one in
-    the least-squares sense (DN per simulator unit).
-    """
-    sim = Simulator(profile)
-    design = SystemMatrices.two_term_fit(sim)
+def design_gains(profile: Profile, calibrated: SystemMatrices, sim: Simulator) -> np.ndarray:
+    """DN per simulator unit, per channel, that make the design's white response match the
+    unit's calibrated one in the least-squares sense."""
     n, m = calibrated.scene_shape
     white = np.ones((n, m, calibrated.channels))
     got = calibrated.forward(white)
-    model = design.forward(white)
-    gains = np.array([float(np.sum(got[..., c] * model[..., c]) / np.sum(model[..., c] ** 2))
-                      for c in range(calibrated.channels)])
-    root = np.sqrt(np.abs(gains))[:, None, None]
-    scaled = SystemMatrices(design.Po * root, design.Qo * root, design.Pc * root, design.Qc * root,
-                            {**design.meta, "gains_dn_per_unit": gains.tolist()})
-    return scaled, gains
+    model = sim.linear_batch(white[None])[0]
+    return np.array([float(np.sum(got[..., c] * model[..., c]) / np.sum(model[..., c] ** 2))
+                     for c in range(calibrated.channels)])
 
 
 def simulated_calibration(profile: Profile, gains: np.ndarray, noise: NoiseSpec, method: Method,
@@ -77,22 +71,25 @@ def simulated_calibration(profile: Profile, gains: np.ndarray, noise: NoiseSpec,
     c = len(gains)
     h: list[tuple[list[int], list[np.ndarray], list[LowRankImage]]] = [([], [], []) for _ in range(c)]
     v: list[tuple[list[int], list[np.ndarray], list[LowRankImage]]] = [([], [], []) for _ in range(c)]
-    for i in range(n + m):
-        x = np.zeros((n, m, c))
-        if i < n:
-            x[i] = 1.0
-        else:
-            x[:, i - n] = 1.0
-        y = signal_to_dn(sim.predict_signal_dn(x, gains), noise, rng) - dark_dn
-        for ch in range(c):
+    for start in range(0, n + m, SLIT_BATCH):
+        idx = range(start, min(start + SLIT_BATCH, n + m))
+        x = np.zeros((len(idx), n, m, c))
+        for b, i in enumerate(idx):
             if i < n:
-                h[ch][0].append(i)
-                h[ch][1].append(np.ones(m))
-                h[ch][2].append(compress(y[..., ch], rank, seed=i))
+                x[b, i] = 1.0
             else:
-                v[ch][0].append(i - n)
-                v[ch][1].append(np.ones(n))
-                v[ch][2].append(compress(y[..., ch].T, rank, seed=i))
+                x[b, :, i - n] = 1.0
+        ys = signal_to_dn(sim.predict_signal_dn(x, gains), noise, rng) - dark_dn
+        for y, i in zip(ys, idx, strict=True):
+            for ch in range(c):
+                if i < n:
+                    h[ch][0].append(i)
+                    h[ch][1].append(np.ones(m))
+                    h[ch][2].append(compress(y[..., ch], rank, seed=i))
+                else:
+                    v[ch][0].append(i - n)
+                    v[ch][1].append(np.ones(n))
+                    v[ch][2].append(compress(y[..., ch].T, rank, seed=i))
     mats = []
     for ch in range(c):
         slits = ChannelSlits(SlitStack.from_images(*h[ch]), SlitStack.from_images(*v[ch]), n, m)
@@ -131,12 +128,12 @@ def predict_validation(
     frames_averaged, filter_steps, filter_scenes, method, max_iter, tol, rank
         As for the unit's own calibration.
     """
-    _, gains = design_matrices(profile, calibrated)
+    sim = Simulator(profile)
+    gains = design_gains(profile, calibrated, sim)
     noise = averaged_noise(profile.noise, frames_averaged)
     rng = np.random.default_rng(seed)
     c = calibrated.channels
     n, m = calibrated.scene_shape
-    sim = Simulator(profile)
     dark_dn = signal_to_dn(np.zeros((*calibrated.sensor_shape, c)), noise, rng)  # one dark capture
     design = simulated_calibration(profile, gains, noise, method, max_iter, tol, rank, rng, dark_dn)
     jf = None

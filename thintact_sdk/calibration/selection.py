@@ -105,6 +105,7 @@ def select(
     decoder: str | None = None,
     tau: float | None = None,
     simulated: TauCurve | None = None,
+    noise_criteria_curves: bool = True,
 ) -> TauSelection:
     """Choose the decoder and τ on the unit's validation frames.
 
@@ -124,6 +125,9 @@ def select(
         Impose this τ (no selection; the validation is then scored at it).
     simulated
         The τ curve on simulated training scenes (reported, and the fallback).
+    noise_criteria_curves
+        Compute the GCV and discrepancy curves (reported; GCV is the fallback without a
+        simulated curve).
     """
     sm = bundle.system_matrices
     curves: list[TauCurve] = [simulated] if simulated is not None else []
@@ -149,7 +153,7 @@ def select(
     else:
         chosen = names[0] if decoder else DEFAULT_DECODER
         criterion, tau_chosen = "gcv", float("nan")
-    if frames.signals:
+    if frames.signals and (noise_criteria_curves or (not cvs and simulated is None)):
         inv_var = [1.0 / noise.variance(np.asarray(y, np.float64)) for y in frames.signals]
         gcv, discrepancy = noise_criteria(decoders[chosen], sm, frames.signals, inv_var, grid)
         curves += [gcv, discrepancy]
