@@ -169,10 +169,17 @@ class TactileConfig(_Section):
 
 
 class CalibrationLimits(_Section):
-    """Pass/fail limits for a calibration's validation."""
+    """Pass/fail limits for a calibration's validation.
 
-    min_psnr_db: float = 20.0
-    min_ssim: float = 0.6
+    A unit fails a validation scene that it reconstructs more than ``psnr_margin_db`` worse
+    than its own design is predicted to (``thintact_sdk.calibration.prediction``);
+    ``min_psnr_db`` and ``min_ssim`` are optional fixed floors on the means.
+    """
+
+    psnr_margin_db: float = Field(default=1.5, ge=0, description="allowed shortfall (dB) "
+                                  "below the PSNR predicted for the design, per scene")
+    min_psnr_db: float | None = None
+    min_ssim: float | None = None
 
 
 class Profile(BaseModel):

@@ -91,7 +91,8 @@ def run_case(profile: Profile, case: Case, methods: list[tuple[str, str]], work:
         t0 = time.perf_counter()
         out = calibrate_recording(
             rec, work / f"cal-{method}-{gains}",
-            CalibrationOptions(method=method, frame_gains=gains, filter_steps=0, filter_scenes=16),  # type: ignore[arg-type]
+            CalibrationOptions(method=method, frame_gains=gains, filter_steps=0, filter_scenes=16,  # type: ignore[arg-type]
+                               predict=False),
             report=False,
         )
         m = out.bundle.meta["metrics"]

@@ -14,17 +14,23 @@ import numpy as np
 
 from thintact_sdk.calibration.collect import Progress, SlitCollection, collect_slits, signal_of
 from thintact_sdk.calibration.gauge import operator_error, term_errors
+from thintact_sdk.calibration.health import HealthReport, NoiseEstimate, assess
 from thintact_sdk.calibration.lowrank import DEFAULT_RANK
+from thintact_sdk.calibration.prediction import Prediction, predict_validation
 from thintact_sdk.calibration.registration import RegistrationResult
+from thintact_sdk.calibration.selection import TAU_KEYS, TauSelection, select, validation_frames
 from thintact_sdk.calibration.solver import ChannelMatrices, Method, SolveReport, solve_channel
+from thintact_sdk.calibration.tau import TauCurve
 from thintact_sdk.calibration.validation import (
     DEFAULT_DECODER,
+    TAU_GRID,
     ValidationResult,
     averaged_noise,
     choose_tau,
     make_decoder,
     score,
 )
+from thintact_sdk.calibration.verdict import Verdict, judge
 from thintact_sdk.errors import CalibrationError
 from thintact_sdk.imaging.calibration_bundle import CalibrationBundle
 from thintact_sdk.imaging.t2s import SystemMatrices
@@ -50,13 +56,18 @@ class CalibrationOptions:
         The fit is exact on clean data but ill-conditioned (neighbouring slits look alike),
         so noise leaks into it: use it only on well-averaged recordings.
     tau
-        Tikhonov τ stored in the bundle (DN²); None chooses it on simulated data.
+        Tikhonov τ stored in the bundle (DN²); None chooses it on the unit's own validation
+        frames (:mod:`thintact_sdk.calibration.selection`).
     filter_steps
         Adam steps of the joint-filter training (0: closed form only).
     filter_scenes
         Number of training scenes for the filter.
     decoder
-        Decoder used for validation.
+        Decoder used for validation; None compares the candidates of
+        :data:`thintact_sdk.calibration.selection.CANDIDATE_DECODERS` and recommends the best.
+    predict
+        Predict each validation scene's PSNR from the profile and fail a unit that falls short
+        of it by more than ``calibration_limits.psnr_margin_db``.
     frames_averaged
         Frames averaged per pattern (sets the noise for τ and filter training); None reads
         it from the recording (``frames`` per frame) or assumes 1.
@@ -70,8 +81,9 @@ class CalibrationOptions:
     tau: float | None = None
     filter_steps: int = 100
     filter_scenes: int = 32
-    decoder: str = DEFAULT_DECODER
+    decoder: str | None = None
     frames_averaged: int | None = None
+    predict: bool = True
 
 
 @dataclass
@@ -87,6 +99,10 @@ class CalibrationOutcome:
     registration: RegistrationResult | None = None
     reference: dict[str, Any] = field(default_factory=dict)
     tau_table: dict[str, float] = field(default_factory=dict)
+    selection: TauSelection | None = None
+    health: HealthReport | None = None
+    prediction: Prediction | None = None
+    verdict: Verdict | None = None
 
 
 def channel_matrices(sm: SystemMatrices, c: int) -> ChannelMatrices:
@@ -167,10 +183,10 @@ def validate(
     collection: SlitCollection,
     profile: Profile,
     bundle: CalibrationBundle,
-    decoder: str = DEFAULT_DECODER,
+    decoder: str | None = DEFAULT_DECODER,
 ) -> list[ValidationResult]:
     """Reconstruct every validation frame of ``recording`` and score it against its scene."""
-    dec = make_decoder(profile, bundle, decoder)
+    dec = make_decoder(profile, bundle, decoder or DEFAULT_DECODER)
     out = []
     for i in collection.validation:
         truth = recording.scene(i)
@@ -194,11 +210,15 @@ def compare_with_reference(
     reference: SystemMatrices,
     options: CalibrationOptions,
     frames_averaged: int,
+    noise: NoiseEstimate | None = None,
 ) -> dict[str, Any]:
     """How the calibrated matrices compare with reference ones (e.g. the simulator's fit).
 
     Returns per-channel gauge-free operator errors, per-term errors in the canonical gauge,
-    and the validation PSNR/SSIM of a bundle built the same way from the reference.
+    and the validation PSNR/SSIM of a bundle built the same way from the reference. With
+    ``noise`` (the unit's measured noise), the reference's decoder τ is chosen by the same
+    selection as the unit's (:func:`~thintact_sdk.calibration.selection.select`), so both are
+    scored held out; without it, at the τ chosen on simulated scenes.
     """
     sm = bundle.system_matrices
     out: dict[str, Any] = {"operator_error": [], "term_errors": []}
@@ -207,8 +227,16 @@ def compare_with_reference(
         out["operator_error"].append(operator_error(est, ref))
         out["term_errors"].append(term_errors(est, ref))
     ref_opts = CalibrationOptions(**{**options.__dict__, "tau": None})
-    ref_bundle, _ = build_bundle(profile, reference, ref_opts, frames_averaged, "simulator", collection.exposure_us)
-    ref_val = validate(recording, collection, profile, ref_bundle, options.decoder)
+    ref_bundle, table = build_bundle(profile, reference, ref_opts, frames_averaged, "simulator",
+                                     collection.exposure_us)
+    if noise is not None:
+        frames = validation_frames(recording, collection, profile.noise.saturation_dn)
+        ref_sel = select(profile, ref_bundle, frames, noise, decoder=options.decoder,
+                         simulated=_simulated_curve(table), noise_criteria_curves=False)
+        ref_val = ref_sel.validation
+        ref_bundle.meta["tau"] = ref_sel.tau
+    else:
+        ref_val = validate(recording, collection, profile, ref_bundle, options.decoder)
     out["reference_tau"] = ref_bundle.tau
     out["reference_psnr_db"] = {v.label: v.psnr_db for v in ref_val}
     out["reference_ssim"] = {v.label: v.ssim for v in ref_val}
@@ -219,6 +247,17 @@ def scaled(sm: SystemMatrices, factor: float) -> SystemMatrices:
     """``sm`` with its products scaled by ``factor`` (each matrix by ``sqrt(factor)``)."""
     r = float(np.sqrt(factor))
     return SystemMatrices(sm.Po * r, sm.Qo * r, sm.Pc * r, sm.Qc * r, dict(sm.meta))
+
+
+def _simulated_curve(table: dict[str, float]) -> TauCurve | None:
+    """The τ table of :func:`~thintact_sdk.calibration.validation.choose_tau` as a curve."""
+    if not table:
+        return None
+    taus = [float(t) for t in table]
+    values = list(table.values())
+    best = taus[int(np.argmax(values))]
+    return TauCurve("simulated", taus, values, best, "mean PSNR dB",
+                    f"{len(TAU_GRID)} candidates on eight simulated training scenes")
 
 
 def limits_of(profile: Profile) -> CalibrationLimits:
@@ -274,21 +313,42 @@ def calibrate_recording(
     k = _frames_averaged(recording, opts)
     bundle, tau_table = build_bundle(profile, sm, opts, k, source, collection.exposure_us, status)
     if status:
-        status("validating")
-    val = validate(recording, collection, profile, bundle, opts.decoder)
+        status("checking the unit's health (slit residuals, noise, defects)")
+    health = assess(recording, collection, sm, k)
+    if status:
+        status("choosing the decoder and tau on the validation frames")
+    frames = validation_frames(recording, collection, profile.noise.saturation_dn)
+    selection = select(profile, bundle, frames, health.noise, decoder=opts.decoder, tau=opts.tau,
+                       simulated=_simulated_curve(tau_table))
+    for name, tau in selection.decoder_taus.items():
+        bundle.meta[TAU_KEYS.get(name, "tau")] = float(tau)
+    bundle.meta["decoder"] = selection.decoder
+    val = selection.validation
+    prediction = None
+    if opts.predict and frames.labels:
+        if status:
+            status("predicting what this design should reach")
+        prediction = predict_validation(
+            profile, sm, frames.labels, frames.truths, selection.decoder, k,
+            filter_steps=opts.filter_steps, filter_scenes=opts.filter_scenes, method=opts.method,
+            max_iter=opts.max_iter, tol=opts.tol, rank=opts.rank)
     lim = limits_of(profile)
+    verdict = judge(val, prediction, health, lim, registration)
+    passed = verdict.passed
     mean_psnr = float(np.mean([v.psnr_db for v in val])) if val else float("nan")
     mean_ssim = float(np.mean([v.ssim for v in val])) if val else float("nan")
-    passed = bool(val) and mean_psnr >= lim.min_psnr_db and mean_ssim >= lim.min_ssim
-    if registration is not None and not registration.passed:
-        passed = False
     metrics: dict[str, Any] = {
         "psnr_db": {v.label: v.psnr_db for v in val},
         "ssim": {v.label: v.ssim for v in val},
         "mean_psnr_db": mean_psnr,
         "mean_ssim": mean_ssim,
-        "limits": {"min_psnr_db": lim.min_psnr_db, "min_ssim": lim.min_ssim},
+        "limits": {"psnr_margin_db": lim.psnr_margin_db, "min_psnr_db": lim.min_psnr_db,
+                   "min_ssim": lim.min_ssim},
         "passed": passed,
+        "verdict": verdict.to_json(),
+        "predicted_psnr_db": None if prediction is None else
+        {k_: round(v, 3) for k_, v in prediction.psnr_db.items()},
+        "health": health.to_json(),
         "solve": [
             {
                 "channel": ch.meta.get("channel", str(c)),
@@ -308,7 +368,7 @@ def calibrate_recording(
             **{v.label: v.saturated_fraction for v in val if v.saturated_fraction > 0},
         },
         "exposure_normalised_frames": len(collection.frame_scale),
-        "tau_selection": tau_table,
+        "tau_selection": selection.to_json(),
     }
     if collection.frame_gains:
         metrics["frame_gains"] = collection.frame_gains
@@ -320,7 +380,9 @@ def calibrate_recording(
             status("comparing with the reference matrices")
         if reference_exposure_us and collection.exposure_us:
             reference = scaled(reference, collection.exposure_us / reference_exposure_us)
-        ref_info = compare_with_reference(recording, collection, profile, bundle, reference, opts, k)
+        ref_opts = CalibrationOptions(**{**opts.__dict__, "decoder": selection.decoder})
+        ref_info = compare_with_reference(recording, collection, profile, bundle, reference, ref_opts, k,
+                                          health.noise)
         metrics["reference"] = ref_info
     if not val:
         metrics["warning"] = "the recording has no validation frames (scenes that are neither dark nor slits)"
@@ -331,9 +393,60 @@ def calibrate_recording(
         bundle.save(out)
     except OSError as err:
         raise CalibrationError(f"cannot write the calibration bundle to {out}: {err}") from None
-    outcome = CalibrationOutcome(bundle, out, reports, collection, val, passed, registration, ref_info, tau_table)
+    outcome = CalibrationOutcome(bundle, out, reports, collection, val, passed, registration, ref_info,
+                                 tau_table, selection, health, prediction, verdict)
     if report:
         from thintact_sdk.calibration.report import write_report
 
         write_report(outcome, profile, out / "report.html")
     return outcome
+
+
+def bundle_from_matrices(
+    profile: Profile,
+    sm: SystemMatrices,
+    out_dir: str | Path,
+    options: CalibrationOptions | None = None,
+    recording: Recording | None = None,
+) -> CalibrationBundle:
+    """A bundle (source ``import``) around matrices calibrated elsewhere.
+
+    The joint filter is trained on them as for a calibration. τ and the decoder are chosen
+    on ``recording``'s validation frames (scenes that are neither dark nor slits; its dark
+    frames, else the black level, subtracted) when one is given and holds enough of them,
+    else on simulated training scenes.
+    """
+    from thintact_sdk.calibration.classify import classify_scene, is_dark, is_slit
+    from thintact_sdk.calibration.collect import dark_level
+    from thintact_sdk.imaging.noise import QUANTISATION_VARIANCE_DN2
+
+    opts = options or CalibrationOptions()
+    k = _frames_averaged(recording, opts) if recording is not None else max(1, opts.frames_averaged or 1)
+    bundle, table = build_bundle(profile, sm, opts, k, "import", None)
+    simulated = _simulated_curve(table)
+    metrics: dict[str, Any] = {"tau_selection": {"criterion": "simulated"} if simulated is None else
+                               {"criterion": "simulated", "tau": simulated.tau}}
+    if recording is not None:
+        dark, source = dark_level(recording)
+        val = [i for i in range(len(recording)) if (scene := recording.scene(i)) is not None
+               and not is_dark(r := classify_scene(scene)) and not is_slit(r)]
+        collection = SlitCollection([], dark, source, None, val)
+        frames = validation_frames(recording, collection, profile.noise.saturation_dn)
+        nz = profile.noise
+        noise = NoiseEstimate(nz.read_noise_dn, nz.electrons_per_dn, nz.read_noise_dn, nz.electrons_per_dn,
+                              (nz.read_noise_dn**2 + QUANTISATION_VARIANCE_DN2) / k, 1.0 / (nz.electrons_per_dn * k))
+        selection = select(profile, bundle, frames, noise, decoder=opts.decoder, tau=opts.tau, simulated=simulated)
+        for name, tau in selection.decoder_taus.items():
+            bundle.meta[TAU_KEYS.get(name, "tau")] = float(tau)
+        bundle.meta["decoder"] = selection.decoder
+        metrics = {"tau_selection": selection.to_json(),
+                   "psnr_db": {v.label: v.psnr_db for v in selection.validation},
+                   "ssim": {v.label: v.ssim for v in selection.validation}}
+        bundle.meta["recording"] = str(recording.root)
+    bundle.meta["metrics"] = metrics
+    bundle.meta["imported_from"] = sm.meta.get("imported_from")
+    try:
+        bundle.save(Path(out_dir))
+    except OSError as err:
+        raise CalibrationError(f"cannot write the calibration bundle to {out_dir}: {err}") from None
+    return bundle

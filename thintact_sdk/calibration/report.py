@@ -1,4 +1,5 @@
-"""The calibration's HTML report: matrices, convergence, validation, pass/fail.
+"""The calibration's HTML report: verdict with fixes, τ choice, validation against the design's
+prediction, health (residuals, noise, defects), matrices, convergence.
 
 One self-contained file (figures as base64 PNG, matplotlib Agg backend).
 """
@@ -62,6 +63,16 @@ def _convergence_figure(outcome: CalibrationOutcome, profile: Profile) -> str:
     return _png(fig)
 
 
+def _framed(ax: Any) -> None:
+    """No ticks but a dark frame, so a white panel stays visible on the white page."""
+    ax.set_xticks([])
+    ax.set_yticks([])
+    for spine in ax.spines.values():
+        spine.set_visible(True)
+        spine.set_color("#444")
+        spine.set_linewidth(1.0)
+
+
 def _validation_figure(outcome: CalibrationOutcome) -> str | None:
     import matplotlib.pyplot as plt
 
@@ -71,12 +82,83 @@ def _validation_figure(outcome: CalibrationOutcome) -> str | None:
     fig, axes = plt.subplots(len(val), 2, figsize=(6, 2.6 * len(val)), squeeze=False,
                              layout="constrained")
     for i, v in enumerate(val):
-        axes[i][0].imshow(np.clip(v.truth, 0, 1))
+        axes[i][0].imshow(_display(v.truth), vmin=0, vmax=1, cmap="gray")
         axes[i][0].set_title(f"{v.label}: displayed", fontsize=9)
-        axes[i][1].imshow(np.clip(v.estimate, 0, 1))
-        axes[i][1].set_title(f"reconstructed: {v.psnr_db:.1f} dB, SSIM {v.ssim:.3f}", fontsize=9)
+        axes[i][1].imshow(_display(v.estimate), vmin=0, vmax=1, cmap="gray")
+        axes[i][1].set_title(f"reconstructed (held out): {v.psnr_db:.1f} dB, SSIM {v.ssim:.3f}", fontsize=9)
         for ax in axes[i]:
-            ax.axis("off")
+            _framed(ax)
+    return _png(fig)
+
+
+def _display(image: np.ndarray) -> np.ndarray:
+    """``N × M × C`` display values as an image matplotlib shows (one channel: grey)."""
+    x = np.clip(np.asarray(image, np.float32), 0, 1)
+    return x[..., 0] if x.ndim == 3 and x.shape[2] == 1 else x
+
+
+def _tau_figure(outcome: CalibrationOutcome) -> str | None:
+    import matplotlib.pyplot as plt
+
+    sel = outcome.selection
+    if sel is None or not sel.curves:
+        return None
+    psnr_curves = [c for c in sel.curves if c.unit == "mean PSNR dB"]
+    noise_curves = [c for c in sel.curves if c.unit != "mean PSNR dB"]
+    fig, axes = plt.subplots(1, 2, figsize=(11, 3.4), layout="constrained")
+    for c in psnr_curves:
+        line = axes[0].semilogx(c.taus, c.values, ".-", label=c.criterion)[0]
+        if np.isfinite(c.tau):
+            axes[0].axvline(c.tau, color=line.get_color(), ls=":", lw=1)
+    axes[0].axvline(sel.tau, color="k", lw=1.5, label=f"chosen τ = {sel.tau:.3g} ({sel.decoder})")
+    axes[0].set_xlabel("τ (DN²)")
+    axes[0].set_ylabel("mean PSNR (dB)")
+    axes[0].legend(fontsize=7)
+    axes[0].grid(True, which="both", alpha=0.3)
+    for c in noise_curves:
+        line = axes[1].loglog(c.taus, c.values, ".-", label=f"{c.criterion}: {c.unit}")[0]
+        if np.isfinite(c.tau):
+            axes[1].axvline(c.tau, color=line.get_color(), ls=":", lw=1)
+    if noise_curves:
+        axes[1].axhline(1.0, color="gray", lw=0.8)
+        axes[1].set_xlabel("τ (DN²)")
+        axes[1].legend(fontsize=7)
+        axes[1].grid(True, which="both", alpha=0.3)
+    else:
+        axes[1].axis("off")
+    return _png(fig)
+
+
+def _health_figure(outcome: CalibrationOutcome, profile: Profile) -> str | None:
+    import matplotlib.pyplot as plt
+    from matplotlib.patches import Rectangle
+
+    h = outcome.health
+    if h is None:
+        return None
+    fig, axes = plt.subplots(1, 3, figsize=(15, 3.6), layout="constrained")
+    vals = list(h.slit_chi2.values())
+    axes[0].plot(range(len(vals)), vals, ".", ms=3)
+    axes[0].axhline(1.0, color="gray", lw=0.8)
+    axes[0].set_xlabel("slit frame (rows, then columns)")
+    axes[0].set_ylabel("mean r²/σ² (1 = noise)")
+    axes[0].set_title("Per-slit fit residual against the measured noise", fontsize=9)
+    im = axes[1].imshow(h.chi2_map, cmap="magma", vmin=0, vmax=max(3.0, float(np.percentile(h.chi2_map, 99.9))))
+    fig.colorbar(im, ax=axes[1], fraction=0.046)
+    axes[1].set_title("Slit residual r²/σ² per sensor pixel (defects boxed)", fontsize=9)
+    for d in h.defects:
+        axes[1].add_patch(Rectangle((d.col0 - 0.5, d.row0 - 0.5), d.col1 - d.col0, d.row1 - d.row0,
+                                    fill=False, ec="cyan", lw=1.5))
+        axes[1].annotate(d.kind, (d.col1, d.row0), color="cyan", fontsize=8)
+    names = profile.sensor.channels
+    for c in range(h.column_deviation.shape[0]):
+        axes[2].plot(100 * h.column_deviation[c], lw=0.8, label=f"columns {names[c] if c < len(names) else c}")
+    for c in range(h.row_deviation.shape[0]):
+        axes[2].plot(100 * h.row_deviation[c], lw=0.8, ls="--", label=f"rows {names[c] if c < len(names) else c}")
+    axes[2].set_xlabel("sensor column / row")
+    axes[2].set_ylabel("open response vs neighbours (%)")
+    axes[2].set_title("Dim or bright sensor lines", fontsize=9)
+    axes[2].legend(fontsize=7)
     return _png(fig)
 
 
@@ -88,6 +170,86 @@ def _table(rows: list[list[Any]], header: list[str]) -> str:
     return f"<table><tr>{head}</tr>{body}</table>"
 
 
+def _fmt(value: Any) -> str:
+    """A value as a person reads it: 4 significant digits, lists and dicts flattened."""
+    if isinstance(value, bool) or value is None:
+        return {True: "yes", False: "no", None: "—"}[value]
+    if isinstance(value, float | np.floating):
+        return f"{float(value):.4g}"
+    if isinstance(value, list | tuple):
+        return "(" + ", ".join(_fmt(v) for v in value) + ")"
+    if isinstance(value, dict):
+        return "; ".join(f"{k}: {_fmt(v)}" for k, v in value.items())
+    return str(value)
+
+
+def _failures(outcome: CalibrationOutcome) -> str:
+    if outcome.verdict is None or not outcome.verdict.failures:
+        return ""
+    items = "".join(f"<li><b>{html.escape(f.what)}</b>: {html.escape(f.detail)}<br><i>Suggested fix:</i> "
+                    f"{html.escape(f.fix)}</li>" for f in outcome.verdict.failures)
+    return f"<ul>{items}</ul>"
+
+
+def _selection_text(outcome: CalibrationOutcome) -> str:
+    sel = outcome.selection
+    if sel is None:
+        return "<p>No τ selection was run.</p>"
+    rows = [[name, f"{tau:.4g}", f"{sel.cross_validation[name].held_out_mean_db:.2f}"
+             if name in sel.cross_validation else "—"] for name, tau in sel.decoder_taus.items()]
+    chosen = {c.criterion: c for c in sel.curves}
+    crit = [[c.criterion, f"{c.tau:.4g}" if np.isfinite(c.tau) else "none", c.note] for c in chosen.values()]
+    return (f"<p>Recommended decoder <b>{html.escape(sel.decoder)}</b> with τ = {sel.tau:.4g} DN², chosen by "
+            f"<b>{html.escape(sel.criterion)}</b>. Cross-validation tunes τ on one fold of the validation "
+            "scenes and scores the other fold with it, so no scene is scored with a τ tuned on it.</p>"
+            + _table(rows, ["decoder", "τ (DN²)", "held-out mean PSNR (dB)"])
+            + "<p>τ each criterion would choose:</p>" + _table(crit, ["criterion", "τ (DN²)", "note"]))
+
+
+def _validation_table(outcome: CalibrationOutcome) -> str:
+    if not outcome.validation:
+        return "<p>No validation frames in the recording: nothing to judge the unit by.</p>"
+    checks = {c.label: c for c in outcome.verdict.scenes} if outcome.verdict else {}
+    margin = outcome.verdict.margin_db if outcome.verdict else float("nan")
+    rows = []
+    for v in outcome.validation:
+        c = checks.get(v.label)
+        if c is None:
+            note = "no prediction"
+        elif c.shortfall_db > margin:
+            note = f"FAIL: PSNR {c.shortfall_db:.2f} dB below prediction (allowed {margin:g} dB)"
+        else:
+            note = f"pass: PSNR within {margin:g} dB of prediction"
+        if v.saturated_fraction > 0:
+            note += f"; saturated: {100 * v.saturated_fraction:.2f} % of pixels"
+        rows.append([v.label, f"{v.psnr_db:.2f}", "—" if c is None else f"{c.predicted_db:.2f}",
+                     "—" if c is None else f"{c.shortfall_db:+.2f}", f"{v.ssim:.3f}", note])
+    return _table(rows, ["scene", "PSNR (dB)", "predicted PSNR (dB)", "shortfall (dB)", "SSIM", "verdict"])
+
+
+def _health_section(outcome: CalibrationOutcome, profile: Profile) -> list[str]:
+    h = outcome.health
+    if h is None:
+        return []
+    n = h.noise
+    out = ["<h2>Health</h2>",
+           f"<p>Mean slit-fit residual r²/σ² = {h.mean_chi2:.3f} (1 is pure noise). Noise measured on "
+           "the slit residuals against the profile's:</p>",
+           _table([["read noise (DN, per capture)", f"{n.read_noise_dn:.3g}", f"{n.profile_read_noise_dn:.3g}"],
+                   ["electrons per DN", f"{n.electrons_per_dn:.3g}", f"{n.profile_electrons_per_dn:.3g}"]],
+                  ["", "measured", "profile"])]
+    if h.defects:
+        out.append("<p><b>Defects located:</b></p><ul>" + "".join(
+            f"<li>{html.escape(d.describe())}</li>" for d in h.defects) + "</ul>")
+    else:
+        out.append("<p>No defect located: no structure beyond noise in the slit residuals, no dim or "
+                   "bright sensor line.</p>")
+    fig = _health_figure(outcome, profile)
+    if fig:
+        out.append(f"<img src='{fig}'>")
+    return out
+
+
 def write_report(outcome: CalibrationOutcome, profile: Profile, path: str | Path) -> Path:
     """Write ``report.html`` for ``outcome``; returns its path."""
     import matplotlib
@@ -95,7 +257,6 @@ def write_report(outcome: CalibrationOutcome, profile: Profile, path: str | Path
     matplotlib.use("Agg")
     meta = outcome.bundle.meta
     metrics = meta.get("metrics", {})
-    lim = metrics.get("limits", {})
     verdict = "PASS" if outcome.passed else "FAIL"
     color = "#1a7f37" if outcome.passed else "#cf222e"
     parts = [
@@ -104,11 +265,13 @@ def write_report(outcome: CalibrationOutcome, profile: Profile, path: str | Path
         "table{border-collapse:collapse}td,th{border:1px solid #ccc;padding:3px 8px}"
         "img{max-width:100%}</style></head><body>",
         f"<h1>Calibration of {html.escape(profile.name)}</h1>",
-        f"<p style='font-size:1.4em;color:{color}'><b>{verdict}</b> — mean PSNR "
-        f"{metrics.get('mean_psnr_db', float('nan')):.2f} dB (limit {lim.get('min_psnr_db')}), mean SSIM "
-        f"{metrics.get('mean_ssim', float('nan')):.3f} (limit {lim.get('min_ssim')})</p>",
+        f"<p style='font-size:1.4em;color:{color}'><b>{verdict}</b> — mean held-out PSNR "
+        f"{metrics.get('mean_psnr_db', float('nan')):.2f} dB, mean SSIM "
+        f"{metrics.get('mean_ssim', float('nan')):.3f}</p>",
+        _failures(outcome),
         _table(
-            [[k, meta.get(k)] for k in ("created", "source", "profile_hash", "software_version", "tau", "exposure_us")]
+            [[k, _fmt(meta.get(k))] for k in ("created", "source", "profile_hash", "software_version",
+                                               "decoder", "tau", "tau_t2s_closed_form", "exposure_us")]
             + [["dark level", metrics.get("dark")], ["slit frames", metrics.get("slit_frames")],
                ["frames averaged per pattern", metrics.get("frames_averaged")],
                ["recording", meta.get("recording")]],
@@ -125,20 +288,18 @@ def write_report(outcome: CalibrationOutcome, profile: Profile, path: str | Path
         "<p>Gauge: the open term is the smoothest mixture, and ‖P‖<sub>F</sub> = ‖Q‖<sub>F</sub> per "
         "term (paper Algorithm 3). Only the products P X Qᵀ are physical.</p>",
         f"<img src='{_matrices_figure(outcome, profile)}'>",
-        "<h2>Validation</h2>",
+        "<h2>Decoder and τ, chosen on this unit's frames</h2>",
+        _selection_text(outcome),
     ]
-    rows = []
-    for v in outcome.validation:
-        ok = v.psnr_db >= lim.get("min_psnr_db", 0) and v.ssim >= lim.get("min_ssim", 0)
-        note = "pass" if ok else "below limit"
-        if v.saturated_fraction > 0:
-            note += f" (saturated: {100 * v.saturated_fraction:.2f} % of pixels)"
-        rows.append([v.label, f"{v.psnr_db:.2f}", f"{v.ssim:.3f}", note])
-    parts.append(_table(rows, ["scene", "PSNR (dB)", "SSIM", "vs limits"]) if rows else
-                 "<p>No validation frames in the recording.</p>")
+    tau_fig = _tau_figure(outcome)
+    if tau_fig:
+        parts.append(f"<img src='{tau_fig}'>")
+    parts.append("<h2>Validation against this design's prediction</h2>")
+    parts.append(_validation_table(outcome))
     fig = _validation_figure(outcome)
     if fig:
         parts.append(f"<img src='{fig}'>")
+    parts += _health_section(outcome, profile)
     if outcome.reference:
         ref = outcome.reference
         parts.append("<h2>Comparison with the reference matrices</h2>")
@@ -155,7 +316,7 @@ def write_report(outcome: CalibrationOutcome, profile: Profile, path: str | Path
     reg = metrics.get("registration")
     if reg:
         parts.append("<h2>Registration</h2>")
-        parts.append(_table([[k, v] for k, v in reg.items()], ["field", "value"]))
+        parts.append(_table([[k, _fmt(v)] for k, v in reg.items()], ["field", "value"]))
     if metrics.get("saturated_frames"):
         parts.append("<h2>Saturation</h2>")
         parts.append(_table([[k, f"{100 * v:.3f} %"] for k, v in metrics["saturated_frames"].items()],

@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 
 from thintact_sdk.imaging.calibration_bundle import CalibrationBundle
+from thintact_sdk.imaging.filter_training import scene_for_channels
 from thintact_sdk.imaging.metrics import psnr, ssim
 from thintact_sdk.imaging.tikhonov import TikhonovSolver
 from thintact_sdk.interfaces import Decoder
@@ -59,9 +60,15 @@ def make_decoder(
 
 
 def score(label: str, estimate: np.ndarray, truth: np.ndarray) -> ValidationResult:
-    """PSNR and SSIM of ``estimate`` against ``truth`` (clipped to [0, 1] first, as displayed)."""
+    """PSNR and SSIM of ``estimate`` against ``truth`` (clipped to [0, 1] first, as displayed).
+
+    ``truth`` is brought to the estimate's channel count first (:func:`scene_for_channels`:
+    a monochrome device is scored against the mean of the displayed channels).
+    """
     est = np.clip(np.asarray(estimate, np.float32), 0.0, 1.0)
-    tru = np.asarray(truth, np.float32)
+    if est.ndim == 2:
+        est = est[..., None]
+    tru = scene_for_channels(np.asarray(truth, np.float32), est.shape[2])
     return ValidationResult(label, psnr(est, tru), ssim(est, tru), est, tru)
 
 
@@ -97,6 +104,7 @@ def choose_tau(
     rng = np.random.default_rng(seed)
     sm = bundle.system_matrices
     coding = []
+    scenes = [scene_for_channels(x, sm.channels) for x in scenes]
     for x in scenes:
         y = sm.forward(x)
         var = noise.read_noise_dn**2 + np.maximum(y, 0) / noise.electrons_per_dn

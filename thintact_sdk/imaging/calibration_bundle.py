@@ -4,7 +4,8 @@ A bundle directory holds
 
 ``calibration.json``
     ``{"format": "thintact-calibration/1", "profile", "profile_hash", "software_version",
-    "created", "tau", "exposure_us", "metrics": {...}, "source": "wizard|recording|simulator"}``
+    "created", "tau", "exposure_us", "metrics": {...}, "source": "wizard|recording|simulator|import"}``
+    (``import``: matrices calibrated elsewhere, :mod:`thintact_sdk.calibration.matrices_io`)
 ``system_matrices.npz``
     :class:`~thintact_sdk.imaging.t2s.SystemMatrices` (DN above black per display unit).
 ``filter.npz``
@@ -35,7 +36,7 @@ META_FILE = "calibration.json"
 MATRICES_FILE = "system_matrices.npz"
 FILTER_FILE = "filter.npz"
 REPORT_FILE = "report.html"
-SOURCES = ("wizard", "recording", "simulator")
+SOURCES = ("wizard", "recording", "simulator", "import")
 TIMESTAMP_FORMAT = "%Y%m%dT%H%M%S"
 
 
@@ -85,7 +86,7 @@ class CalibrationBundle:
         tau
             Tikhonov weight τ the decoder should use (DN² units of the system matrices).
         source
-            ``"wizard"``, ``"recording"`` or ``"simulator"``.
+            ``"wizard"``, ``"recording"``, ``"simulator"`` or ``"import"``.
         exposure_us
             Camera exposure (us) the matrices were measured at.
         metrics

@@ -90,6 +90,9 @@ class AxisGeometry:
         Scene-to-mask distance, mm.
     d_mm
         Mask-to-sensor distance, mm.
+    mask_shift_um
+        Shift of the mask pattern along the axis, um: the pattern is read at ``m − shift``
+        (``dx_um`` / ``dy_um`` of the ``mask_misalignment`` effect, CONTRACTS §5).
     """
 
     n_sensor: int
@@ -100,22 +103,31 @@ class AxisGeometry:
     K: int  # noqa: N815 - the paper's symbol
     z_mm: float
     d_mm: float
+    mask_shift_um: float = 0.0
 
     @classmethod
     def rows_of(cls, profile: Profile, K: int | None = None) -> AxisGeometry:  # noqa: N803
-        """The y axis of ``profile`` (rows: ``P``, R × N); ``K`` overrides the mask length."""
+        """The y axis of ``profile`` (rows: ``P``, R × N); ``K`` overrides the mask length.
+
+        The profile's ``physics`` is honoured: ``geometry`` replaces z and d, and
+        ``mask_misalignment.dy_um`` shifts the pattern (its ``angle_deg`` cannot be
+        represented by a separable model, see :func:`unmodelled_angle_deg`).
+        """
+        pose = MaskPose.of(profile)
         return cls(profile.sensor.rows, profile.sensor.pixel_pitch_um, profile.scene.rows,
                    profile.scene.pixel_pitch_um, profile.mask.feature_um,
-                   profile.mask.K if K is None else int(K),
-                   profile.geometry.scene_to_mask_mm, profile.geometry.mask_to_sensor_mm)
+                   profile.mask.K if K is None else int(K), pose.z_mm, pose.d_mm, pose.dy_um)
 
     @classmethod
     def cols_of(cls, profile: Profile, K: int | None = None) -> AxisGeometry:  # noqa: N803
-        """The x axis of ``profile`` (columns: ``Q``, S × M); ``K`` overrides the mask length."""
+        """The x axis of ``profile`` (columns: ``Q``, S × M); ``K`` overrides the mask length.
+
+        Honours ``physics`` like :meth:`rows_of` (``mask_misalignment.dx_um`` here).
+        """
+        pose = MaskPose.of(profile)
         return cls(profile.sensor.cols, profile.sensor.pixel_pitch_um, profile.scene.cols,
                    profile.scene.pixel_pitch_um, profile.mask.feature_um,
-                   profile.mask.K if K is None else int(K),
-                   profile.geometry.scene_to_mask_mm, profile.geometry.mask_to_sensor_mm)
+                   profile.mask.K if K is None else int(K), pose.z_mm, pose.d_mm, pose.dx_um)
 
     @property
     def h_mm(self) -> float:
@@ -135,6 +147,43 @@ class AxisGeometry:
     def default_d_stripe_px(self) -> float:
         """FWHM of the striped area in sensor pixels: ``2·0.766·H / p`` × the tuned scale."""
         return DEFAULT_D_STRIPE_SCALE * 2.0 * _HALF_MAX_OVER_H * self.h_mm * 1e3 / self.sensor_pitch_um
+
+
+@dataclass(frozen=True)
+class MaskPose:
+    """Where the mask really is, from a profile's ``physics`` (CONTRACTS §5).
+
+    Attributes
+    ----------
+    z_mm, d_mm
+        Scene-to-mask and mask-to-sensor distances, mm (``geometry`` effect, else nominal).
+    dx_um, dy_um
+        Shift of the pattern along x (columns) and y (rows), um (``mask_misalignment``).
+    angle_deg
+        Rotation of the pattern, degrees (``mask_misalignment``). A 180° flip is written into
+        the profile as reversed ``phi`` and ``phi_rows`` instead (see
+        :mod:`thintact_sdk.calibration.pose`), so only small angles appear here.
+    """
+
+    z_mm: float
+    d_mm: float
+    dx_um: float = 0.0
+    dy_um: float = 0.0
+    angle_deg: float = 0.0
+
+    @classmethod
+    def of(cls, profile: Profile) -> MaskPose:
+        """The pose described by ``profile.physics`` (nominal geometry, no shift when absent)."""
+        from thintact_sdk.physics import resolve_physics
+        from thintact_sdk.physics.geometry import distances_mm
+
+        physics = resolve_physics(profile.physics)
+        g = physics.get("geometry", {})
+        z, d = distances_mm(profile.geometry.scene_to_mask_mm, profile.geometry.mask_to_sensor_mm,
+                            g.get("scene_to_mask_mm"), g.get("mask_to_sensor_mm"))
+        mis = physics.get("mask_misalignment", {})
+        return cls(z, d, float(mis.get("dx_um", 0.0)), float(mis.get("dy_um", 0.0)),
+                   float(mis.get("angle_deg", 0.0)))
 
 
 def _centred(n: int, pitch_um: float) -> np.ndarray:
@@ -176,7 +225,8 @@ class DirectGenerator:
         h_um = z_um + d_um
         y_sensor = _centred(axis.n_sensor, axis.sensor_pitch_um)[:, None]
         y_scene = _centred(axis.n_scene, axis.scene_pitch_um)[None, :]
-        m_um = (z_um * y_sensor + d_um * y_scene) / h_um  # where the ray crosses the mask
+        # where the ray crosses the mask, in the (shifted) pattern's frame
+        m_um = (z_um * y_sensor + d_um * y_scene) / h_um - axis.mask_shift_um
         a_um = z_um * axis.sensor_pitch_um / h_um  # footprint of the sensor pixel on the mask
         b_um = d_um * axis.scene_pitch_um / h_um  # footprint of the scene pixel on the mask
         half_um = (a_um + b_um) / 2.0
@@ -248,6 +298,12 @@ def direct_system_matrices(
     Po, Qo, Pc, Qc
         ``R × N``, ``S × M``, ``R × N``, ``S × M`` float64 in relative irradiance per display
         unit (a white scene through a fully open mask gives 1 at the sensor centre).
+
+    Notes
+    -----
+    The profile's ``physics`` is honoured where a separable model can: the ``geometry``
+    distances and the ``mask_misalignment`` shift. Its rotation is not (a rotated mask is
+    not separable); ``MaskPose.of(profile).angle_deg`` says how much is left out.
     """
     phi_arr = np.asarray(phi)
     rows_phi = phi_arr if phi_rows is None else np.asarray(phi_rows)

@@ -29,7 +29,40 @@ from thintact_sdk.imaging.recon_filter import JointFilter
 from thintact_sdk.imaging.scenes import gelsight, gelsight_count, make_scene
 from thintact_sdk.imaging.t2s import SystemMatrices
 
-__all__ = ["JointFilter", "TrainingData", "make_training_data", "train_joint_filter", "training_scenes"]
+__all__ = [
+    "JointFilter",
+    "TrainingData",
+    "make_training_data",
+    "scene_for_channels",
+    "train_joint_filter",
+    "training_scenes",
+]
+
+
+def scene_for_channels(scene: np.ndarray, channels: int) -> np.ndarray:
+    """``scene`` (``N × M`` or ``N × M × C``, display units) as ``N × M × channels``.
+
+    A one-channel (monochrome) device sees the mean of the display's linear channels; a
+    one-channel scene is shown grey on every channel of a colour device.
+
+    Raises
+    ------
+    ValueError
+        When the channel counts cannot be matched (e.g. 3 scene channels for a 4-plane device).
+    """
+    x = np.asarray(scene)
+    if x.ndim == 2:
+        x = x[..., None]
+    if x.ndim != 3:
+        raise ValueError(f"scene must be N×M or N×M×C, got shape {x.shape}")
+    have = x.shape[2]
+    if have == channels:
+        return x
+    if channels == 1:
+        return x.mean(axis=2, keepdims=True, dtype=np.float64).astype(x.dtype, copy=False)
+    if have == 1:
+        return np.repeat(x, channels, axis=2)
+    raise ValueError(f"scene has {have} channels but the device has {channels}")
 
 
 def training_scenes(n: int, m: int, count: int = 32, seed: int = 0) -> list[np.ndarray]:
@@ -86,13 +119,17 @@ def make_training_data(
 
     Parameters
     ----------
+    scenes
+        ``N × M × C`` display values; reduced or repeated to the matrices' channel count with
+        :func:`scene_for_channels` (a monochrome device trains a one-channel filter).
     noise
         A :class:`thintact_sdk.profile.NoiseSpec` (or ``None`` for noiseless data): Gaussian
         noise of the sensor's variance ``read² + Y / electrons_per_dn`` (DN²) is added to Y.
     """
     rng = np.random.default_rng(seed)
     ys, yos = [], []
-    for x in scenes:
+    for scene in scenes:
+        x = scene_for_channels(scene, system_matrices.channels)
         yo = system_matrices.forward_open(x)
         y = yo + system_matrices.forward_coding(x)
         if noise is not None:
@@ -305,6 +342,10 @@ def train_joint_filter(
         scenes = training_scenes(n, m, seed=seed) if scenes is None else scenes
         data = make_training_data(system_matrices, scenes, noise=noise, seed=seed)
     r, s = data.y.shape[2:]
+    if not np.any(data.y_open):  # one-term (coding-only) matrices: nothing to remove, F(Y) = 0
+        c = data.y.shape[1]
+        return JointFilter(np.zeros((c, r, s)), np.ones((c, r, s)),
+                           {"method": "none: the system matrices have no open term", "final_loss": 0.0})
     block: tuple[int, int] | None
     if isinstance(low_block, str):
         if low_block != "auto":

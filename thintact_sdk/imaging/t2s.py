@@ -238,13 +238,16 @@ class SystemMatrices:
     ) -> SystemMatrices:
         """The paper's direct generation of the system matrices from φ (§C), same for every channel.
 
-        Uses :func:`thintact_sdk.imaging.direct_generation.direct_system_matrices`; the
-        matrices are multiplied by ``sqrt(scale_dn)`` each so the model is in DN.
+        Uses :func:`thintact_sdk.imaging.direct_generation.direct_system_matrices` with the
+        mask's ``phi`` (columns) and ``phi_rows`` (rows) and the pose in the profile's
+        ``physics``; the matrices are multiplied by ``sqrt(scale_dn)`` each so the model is in
+        DN. ``meta["unmodelled_angle_deg"]`` is the mask rotation a separable model leaves out.
         """
-        from thintact_sdk.imaging.direct_generation import direct_system_matrices
+        from thintact_sdk.imaging.direct_generation import MaskPose, direct_system_matrices
 
         phi = np.asarray(profile.mask.phi, np.int8)
-        po, qo, pc, qc = direct_system_matrices(phi, profile, d_stripe_px)
+        phi_rows = np.asarray(profile.mask.rows_vector, np.int8)
+        po, qo, pc, qc = direct_system_matrices(phi, profile, d_stripe_px, phi_rows=phi_rows)
         n_ch = len(profile.sensor.channels)
         s = np.sqrt(float(scale_dn))
         stacks = [np.repeat(np.asarray(m, np.float64)[None] * s, n_ch, axis=0) for m in (po, qo, pc, qc)]
@@ -256,6 +259,7 @@ class SystemMatrices:
                 "profile_hash": profile.content_hash(),
                 "d_stripe_px": d_stripe_px,
                 "scale_dn": float(scale_dn),
+                "unmodelled_angle_deg": MaskPose.of(profile).angle_deg,
             },
         )
 

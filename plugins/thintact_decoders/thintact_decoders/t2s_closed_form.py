@@ -109,9 +109,8 @@ class T2SClosedFormDecoder(Decoder):
             self.info["open_rank"].append([int(np.sum(sp > 0)), int(np.sum(sq > 0))])
             full_p = np.linalg.svd(sm.Po[c].astype(np.float64), compute_uv=False)
             full_q = np.linalg.svd(sm.Qo[c].astype(np.float64), compute_uv=False)
-            self.info["dropped_open_sv"].append([
-                float(full_p[len(svds[c][1]):].max(initial=0) / full_p[0]),
-                float(full_q[len(svds[c][4]):].max(initial=0) / full_q[0])])
+            self.info["dropped_open_sv"].append([_dropped_fraction(full_p, len(svds[c][1])),
+                                                 _dropped_fraction(full_q, len(svds[c][4]))])
         self.k_p = per["left"][0].shape[0] - kp
         xp = self.xp
         self._left = xp.asarray(np.stack(per["left"]), gemm=True)
@@ -214,6 +213,12 @@ class T2SClosedFormDecoder(Decoder):
         """Reconstruct from raw binned DN (black level included), black removed in the solve."""
         self._check(raw)
         return self._solve(self.xp.channels_first(raw, gemm=True), float(black_level_dn))
+
+
+def _dropped_fraction(sv: np.ndarray, kept: int) -> float:
+    """Largest dropped singular value relative to the largest; 0 for an all-zero (one-term,
+    coding-only) open matrix."""
+    return float(sv[kept:].max(initial=0) / sv[0]) if sv[0] > 0 else 0.0
 
 
 def _small_inverse(

@@ -49,7 +49,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="lsq: joint least squares per slit (default); paper: Algorithm 1 verbatim")
     p.add_argument("--max-iter", type=positive_int, default=50, help="refinement iterations (Algorithm 3)")
     p.add_argument("--tau", type=positive_float,
-                   help="Tikhonov tau in DN², > 0 (default: chosen on simulated data)")
+                   help="Tikhonov tau in DN², > 0 (default: cross-validated on the recording's "
+                   "validation scenes)")
     p.add_argument("--frame-gains", choices=["off", "auto", "on"], default="off",
                    help="per-slit-frame gains from the white frame (unrecorded exposure or "
                    "brightness drift); only for well-averaged recordings (noise leaks in)")
@@ -103,9 +104,13 @@ def run(args: argparse.Namespace) -> int:
         outcome = _wizard(args, options, console)
     m = outcome.bundle.meta["metrics"]
     verdict = "PASS" if outcome.passed else "FAIL"
+    sel = m.get("tau_selection", {})
     print(f"calibration bundle: {outcome.path}")
-    print(f"validation: mean PSNR {m['mean_psnr_db']:.2f} dB, mean SSIM {m['mean_ssim']:.3f} -> {verdict} "
-          f"(limits {m['limits']['min_psnr_db']} dB, {m['limits']['min_ssim']})")
+    print(f"decoder {sel.get('decoder')}, tau {sel.get('tau')} DN² ({sel.get('criterion')})")
+    print(f"validation (held out): mean PSNR {m['mean_psnr_db']:.2f} dB, mean SSIM {m['mean_ssim']:.3f} "
+          f"-> {verdict}")
+    for f in m.get("verdict", {}).get("failures", []):
+        print(f"  FAIL {f['what']}: {f['detail']}\n       fix: {f['fix']}")
     for s in m["solve"]:
         print(f"  channel {s['channel']}: {s['iterations']} iterations, "
               f"{'converged' if s['converged'] else 'NOT converged'}, relative residual {s['relative_residual']:.3e}")

@@ -30,8 +30,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("recording", metavar="RECORDING", help="thintact-recording/1 directory")
     p.add_argument("--calibration", required=True, metavar="CAL", help="calibration bundle directory")
     p.add_argument("--out", required=True, metavar="DIR", help="output directory for the .npy estimates")
-    p.add_argument("--decoder", default="thintact-noniterative", help="decoder plugin (default thintact-noniterative)")
-    p.add_argument("--tau", type=positive_float, help="override the bundle's Tikhonov tau (DN², > 0)")
+    p.add_argument("--decoder", help="decoder plugin (default: the one the calibration recommends, "
+                   "calibration.json 'decoder', else thintact-noniterative)")
+    p.add_argument("--tau", type=positive_float, help="override the bundle's Tikhonov tau (DN², > 0; "
+                   "default: the calibration's, chosen on the unit's own frames)")
     p.add_argument("--dark", choices=["auto", "black"], default="auto",
                    help="auto: subtract the recording's dark frames (all-zero scenes) when it has "
                    "any, else the black level; black: always the profile's black level")
@@ -74,7 +76,8 @@ def run(args: argparse.Namespace) -> int:
             "other physics fields than this recording's profile[/yellow]"
         )
     settings = {} if args.tau is None else {"tau": args.tau}
-    decoder = make_decoder(profile, bundle, args.decoder, **settings)
+    decoder_name = args.decoder or str(bundle.meta.get("decoder") or "thintact-noniterative")
+    decoder = make_decoder(profile, bundle, decoder_name, **settings)
     ref_exposure = bundle.meta.get("exposure_us")
     out.mkdir(parents=True, exist_ok=True)
     dark, dark_source = dark_level(rec, use_dark_frames=args.dark == "auto")

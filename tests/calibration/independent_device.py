@@ -1,0 +1,124 @@
+"""Slit-scan recordings of a device made WITHOUT the decoder's assumptions (test helper).
+
+The calibration under test models every frame as ``Po X Qoᵀ + Pc X Qcᵀ``. The recordings here
+are made by the exact simulator of CONTRACTS §4 (cos⁴ radiometry, sharp mask shadow, pixel
+integration) with a *true* physics that differs from the profile (slightly different
+distances, a shifted and slightly rotated mask), the contract's noise (Poisson, read noise,
+rounding, clipping), one capture per scene (no averaging), and optional defects the
+calibration must find: a dust speck (a dark, soft, round spot on the sensor image), a dim
+sensor column.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from thintact_sdk.imaging.filter_training import scene_for_channels
+from thintact_sdk.imaging.noise import signal_to_dn
+from thintact_sdk.imaging.scenes import gelsight, make_scene
+from thintact_sdk.imaging.simulator import Simulator
+from thintact_sdk.profile import Profile, load_profile
+from thintact_sdk.recording import Recording, RecordingWriter
+
+TRUE_PHYSICS: dict[str, dict[str, Any]] = {
+    "geometry": {"scene_to_mask_mm": 4.86, "mask_to_sensor_mm": 0.99},
+    "mask_misalignment": {"angle_deg": 0.03, "dx_um": 3.0, "dy_um": -2.0},
+}
+"""How the real unit differs from its profile (all within assembly tolerances)."""
+
+
+@dataclass(frozen=True)
+class Dust:
+    """A dust speck's shadow: transmission ``1 − depth·exp(−r²/2σ²)`` around ``(row, col)``."""
+
+    row: int
+    col: int
+    sigma_px: float = 2.5
+    depth: float = 0.5
+
+
+@dataclass(frozen=True)
+class DimColumn:
+    """Sensor column ``col`` with ``gain`` (< 1) times the signal."""
+
+    col: int
+    gain: float = 0.85
+
+
+def small_profile(channels: tuple[str, ...] = ("R", "G", "B"), seed: int = 11,
+                  rows: int = 64, cols: int = 80, scene: tuple[int, int] = (24, 32)) -> Profile:
+    """virtual-mini's optics on a small sensor with a random φ (and a different φ_rows)."""
+    d = load_profile("virtual-mini").contract_dict()
+    rng = np.random.default_rng(seed)
+    k = 96
+    d["name"] = "independent-" + "".join(c.lower() for c in channels)
+    d["sensor"] = {"rows": rows, "cols": cols, "pixel_pitch_um": 10.0, "channels": list(channels)}
+    d["scene"] = {"rows": scene[0], "cols": scene[1], "pixel_pitch_um": 31.5}
+    d["mask"] = {"feature_um": 20.0, "phi": rng.choice([-1, 1], k).tolist(),
+                 "phi_rows": rng.choice([-1, 1], k).tolist()}
+    d["physics"] = {}
+    for key in ("camera", "display", "decoder", "light", "tactile", "calibration_limits"):
+        d.pop(key, None)
+    return Profile.model_validate(d)
+
+
+def validation_scenes(n: int, m: int) -> list[tuple[str, np.ndarray]]:
+    """The wizard's kinds of validation scenes (labels and ``N × M × 3`` display values)."""
+    out = [("val_white", make_scene("white", n, m)), ("val_smooth_color", make_scene("smooth_color", n, m)),
+           ("val_checker", make_scene("checker", n, m))]
+    out += [(f"val_gelsight_{i}", gelsight(n, m, i)) for i in range(3)]
+    return [(label, np.asarray(x, np.float32)) for label, x in out]
+
+
+def _defect_gain(shape: tuple[int, int], defects: list[Dust | DimColumn]) -> np.ndarray:
+    gain = np.ones(shape)
+    yy, xx = np.mgrid[0 : shape[0], 0 : shape[1]]
+    for d in defects:
+        if isinstance(d, Dust):
+            gain *= 1.0 - d.depth * np.exp(-((yy - d.row) ** 2 + (xx - d.col) ** 2) / (2 * d.sigma_px**2))
+        else:
+            gain[:, d.col] *= d.gain
+    return gain
+
+
+def write_recording(root: Path, profile: Profile, *, seed: int = 0, white_fraction: float = 0.7,
+                    defects: list[Dust | DimColumn] | None = None,
+                    physics: dict[str, dict[str, Any]] | None = None) -> Recording:
+    """Dark, white, every row and column slit, validation scenes: one noisy capture each.
+
+    The white scene peaks at ``white_fraction`` of the sensor's range above black. The
+    profile written with the recording is ``profile`` (the nominal design), not the truth.
+    """
+    truth = profile.with_physics(TRUE_PHYSICS if physics is None else physics)
+    sim = Simulator(truth)
+    n, m = profile.scene.rows, profile.scene.cols
+    c = len(profile.sensor.channels)
+    nz = profile.noise
+    gain = white_fraction * (nz.saturation_dn - nz.black_level_dn) / float(
+        np.max(sim.linear_batch(np.ones((1, n, m, c)))))
+    defect = _defect_gain((profile.sensor.rows, profile.sensor.cols), defects or [])[..., None]
+    rng = np.random.default_rng(seed)
+    w = RecordingWriter(root, profile)
+
+    def add(scene: np.ndarray, label: str) -> None:
+        signal = sim.predict_signal_dn(scene_for_channels(scene, c), gain) * defect
+        w.add(signal_to_dn(signal, nz, rng).astype(np.uint16), scene, label=label)
+
+    zero = np.zeros((n, m, 3), np.float32)
+    add(zero, "dark")
+    add(np.ones((n, m, 3), np.float32), "white")
+    for i in range(n):
+        x = zero.copy()
+        x[i] = 1.0
+        add(x, f"hslit_{i:04d}")
+    for j in range(m):
+        x = zero.copy()
+        x[:, j] = 1.0
+        add(x, f"vslit_{j:04d}")
+    for label, x in validation_scenes(n, m):
+        add(x, label)
+    return Recording(root)

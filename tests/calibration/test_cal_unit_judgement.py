@@ -1,0 +1,174 @@
+"""Judging a real unit: τ from its own frames, validation against its design's prediction,
+health with located defects, on recordings made without the decoder's assumptions."""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+from independent_device import DimColumn, Dust, small_profile, write_recording
+
+from thintact_sdk.calibration.collect import collect_slits, signal_of
+from thintact_sdk.calibration.pipeline import CalibrationOptions, solve_matrices
+from thintact_sdk.calibration.tau import assign_folds, cross_validate
+from thintact_sdk.calibration.validation import make_decoder
+from thintact_sdk.cli.main import main
+from thintact_sdk.imaging.calibration_bundle import CalibrationBundle
+from thintact_sdk.imaging.metrics import psnr
+from thintact_sdk.imaging.scenes import gelsight
+from thintact_sdk.recording import Recording, RecordingWriter
+
+
+class _ScaledDecoder:
+    """Linear stand-in decoder: ``decode(y) = y / (1 + τ)`` on a 1×1 grid."""
+
+    def __init__(self) -> None:
+        self.tau = 0.0
+
+    def set_tau(self, tau: float) -> None:
+        self.tau = tau
+
+    def decode(self, y: np.ndarray) -> np.ndarray:
+        return np.asarray(y, np.float32) / (1.0 + self.tau)
+
+
+def test_cross_validation_never_scores_a_scene_with_a_tau_tuned_on_it() -> None:
+    # fold 0 (truths ≈ 0.5 from 1.0) wants τ = 1; fold 1 (truths ≈ 0.25) wants τ = 3
+    values = [0.5, 0.25, 0.49, 0.26, 0.5]
+    truths = [np.full((1, 1, 1), v) for v in values]
+    signals = [np.ones((1, 1, 1), np.float32)] * len(values)
+    folds = assign_folds(truths)
+    assert folds == [0, 1, 0, 1, 0]  # identical scenes (the first and the last) share a fold
+    labels = ["a", "b", "c", "d", "a2"]
+    cv = cross_validate(_ScaledDecoder(), "stub", signals, truths, labels, np.array([1.0, 3.0]))
+    assert cv is not None
+    assert cv.fold_tau == [1.0, 3.0]
+    # each scene is scored with the other fold's τ: perfect in its own fold, not held out
+    assert cv.held_out_psnr["a"] == pytest.approx(psnr(np.full((1, 1, 1), 0.25), truths[0]))
+    assert cv.held_out_psnr["b"] == pytest.approx(psnr(np.full((1, 1, 1), 0.5), truths[1]))
+    # one distinct scene per fold is too few to tune on
+    assert cross_validate(_ScaledDecoder(), "stub", signals[:2], truths[:2], labels[:2], np.array([1.0])) is None
+
+
+def _test_scenes(n: int, m: int) -> list[tuple[str, np.ndarray]]:
+    """Scenes the calibration never saw (other presses, a smooth random field)."""
+    rng = np.random.default_rng(7)
+    from scipy.ndimage import gaussian_filter
+
+    field = gaussian_filter(rng.random((n, m, 3)), (3, 3, 0))
+    field = (field - field.min()) / np.ptp(field)
+    return [(f"test_gelsight_{i}", gelsight(n, m, i)) for i in range(3, 6)] + [("test_field", field)]
+
+
+@pytest.fixture(scope="module")
+def healthy(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path, Path]:
+    """A healthy RGB unit: calibration recording, its bundle (via the CLI), a test recording."""
+    root = tmp_path_factory.mktemp("healthy")
+    profile = small_profile(("R", "G", "B"))
+    write_recording(root / "rec", profile, seed=1)
+    rc = main(["calibrate", "--from-recording", str(root / "rec"), "--out", str(root / "cal"),
+               "--filter-steps", "10", "--no-progress"])
+    assert rc == 0, (root / "cal" / "calibration.json").read_text()
+    # the same unit (same true physics), new scenes, one capture each
+    from independent_device import TRUE_PHYSICS
+
+    from thintact_sdk.imaging.noise import signal_to_dn
+    from thintact_sdk.imaging.simulator import Simulator
+
+    sim = Simulator(profile.with_physics(TRUE_PHYSICS))
+    nz = profile.noise
+    n, m = profile.scene.rows, profile.scene.cols
+    gain = 0.7 * (nz.saturation_dn - nz.black_level_dn) / float(np.max(sim.linear_batch(np.ones((1, n, m, 3)))))
+    rng = np.random.default_rng(99)
+    w = RecordingWriter(root / "test", profile)
+    w.add(signal_to_dn(np.zeros((64, 80, 3)), nz, rng).astype(np.uint16), np.zeros((n, m, 3), np.float32),
+          label="dark")
+    for label, x in _test_scenes(n, m):
+        w.add(signal_to_dn(sim.predict_signal_dn(x, gain), nz, rng).astype(np.uint16), x.astype(np.float32),
+              label=label)
+    return root / "rec", root / "cal", root / "test"
+
+
+def test_healthy_unit_passes_against_its_own_prediction(healthy: tuple[Path, Path, Path]) -> None:
+    _, cal, _ = healthy
+    meta = json.loads((cal / "calibration.json").read_text())
+    m = meta["metrics"]
+    assert m["passed"] and m["verdict"]["failures"] == []
+    assert m["health"]["defects"] == []
+    assert all(s["shortfall_db"] <= 1.5 for s in m["verdict"]["scenes"])
+    criteria = {c["criterion"] for c in m["tau_selection"]["curves"]}
+    assert {"gcv", "discrepancy", "simulated"} <= criteria
+    assert any(c.startswith("cross-validation") for c in criteria)
+    assert meta["decoder"] == m["tau_selection"]["decoder"]
+    report = (cal / "report.html").read_text()
+    assert "Health" in report and "predicted PSNR" in report and "below limit" not in report
+    assert not re.search(r"\d\.\d{9,}", report.split("<img")[0])  # no raw 15-digit floats
+
+
+def _mean_psnr(out_dir: Path, rec: Recording) -> float:
+    values = []
+    for i, fr in enumerate(rec.frames):
+        truth = rec.scene(i)
+        if truth is None or not truth.any():
+            continue
+        est = np.load(out_dir / f"{Path(fr.measurement).stem}.npy")
+        values.append(psnr(np.clip(est, 0, 1), truth))
+    return float(np.mean(values))
+
+
+def test_default_reconstruct_is_near_the_best_tau_and_beats_the_paper_pipeline(
+        healthy: tuple[Path, Path, Path], tmp_path: Path) -> None:
+    rec_dir, cal, test_dir = healthy
+    test = Recording(test_dir)
+    assert main(["reconstruct", str(test_dir), "--calibration", str(cal), "--out", str(tmp_path / "d"),
+                 "--no-progress"]) == 0
+    default = _mean_psnr(tmp_path / "d", test)
+    bundle = CalibrationBundle.load(cal)
+    profile = test.profile
+    dark = np.asarray(test.measurement(0), np.float64)
+    frames = [(signal_of(test, i, dark, None)[0].astype(np.float32), test.scene(i)) for i in range(1, len(test))]
+    taus = np.geomspace(1e2, 1e7, 41)
+
+    def best(decoder: object) -> float:
+        out = -np.inf
+        for tau in taus:
+            decoder.set_tau(float(tau))  # type: ignore[attr-defined]
+            out = max(out, float(np.mean([psnr(np.clip(decoder.decode(y), 0, 1), x)  # type: ignore[attr-defined]
+                                          for y, x in frames])))
+        return out
+
+    hindsight = best(make_decoder(profile, bundle, bundle.meta["decoder"]))
+    rec = Recording(rec_dir)
+    paper_sm, _ = solve_matrices(collect_slits(rec), CalibrationOptions(method="paper"), profile)
+    paper = CalibrationBundle.create(profile, paper_sm, None, tau=1.0, source="recording")
+    reference = best(make_decoder(profile, paper, "t2s-closed-form"))
+    print(f"default {default:.2f} dB, hindsight {hindsight:.2f} dB, Alg. 1-3 + exact T2S {reference:.2f} dB")
+    assert default >= hindsight - 0.3
+    assert default >= reference - 0.05
+
+
+@pytest.fixture(scope="module")
+def defective(tmp_path_factory: pytest.TempPathFactory) -> tuple[int, Path]:
+    root = tmp_path_factory.mktemp("defective")
+    write_recording(root / "rec", small_profile(("Y",)), seed=2,
+                    defects=[Dust(row=20, col=50), DimColumn(col=33)])
+    rc = main(["calibrate", "--from-recording", str(root / "rec"), "--out", str(root / "cal"),
+               "--filter-steps", "0", "--no-progress"])
+    return rc, root / "cal"
+
+
+def test_defective_unit_fails_naming_and_locating_each_defect(defective: tuple[int, Path]) -> None:
+    rc, cal = defective
+    assert rc == 1
+    m = json.loads((cal / "calibration.json").read_text())["metrics"]
+    defects = {d["kind"]: d for d in m["health"]["defects"]}
+    assert set(defects) == {"dust speck", "dim column"}
+    assert abs(defects["dust speck"]["centre"][0] - 20) <= 1.5 and abs(defects["dust speck"]["centre"][1] - 50) <= 1.5
+    assert defects["dim column"]["col0"] == 33 and defects["dim column"]["strength"] == pytest.approx(-0.15, abs=0.02)
+    whats = [f["what"] for f in m["verdict"]["failures"]]
+    assert "dust speck" in whats and "dim column" in whats
+    report = (cal / "report.html").read_text()
+    assert "Suggested fix" in report and "dust speck at sensor rows" in report

@@ -1,0 +1,291 @@
+"""The unit's health: slit-fit residuals against the noise, measured noise, located defects.
+
+After the solve every slit frame is read once more and compared with the calibrated model
+``Po X Qoᵀ + Pc X Qcᵀ`` of its own scene. The residual ``r`` of a healthy unit is noise:
+
+* **noise measured**: ``E[r²] = a + b·signal`` fitted over signal-level bins (read noise
+  ``√(a − 1/12)``, ``1/b`` electrons per DN, divided by the frames averaged) and compared with
+  the profile's noise section;
+* **χ² map**: ``r²/σ²`` per sensor pixel averaged over the slit frames and channels, with
+  ``σ²`` the measured noise model; structure in it is something the separable model cannot
+  describe. Hotspots (Gaussian-smoothed map far above its robust spread) are located and
+  classified: a compact spot is a **dust speck** (on the mask or the sensor cover), a
+  one-pixel-wide line a **column/row defect**;
+* **dim or bright columns and rows**: a gain on one sensor column is separable, so the solve
+  absorbs it into ``Qo``/``Qc`` instead of leaving a residual; it is found as a dip or peak of
+  the open response ``Qo·1`` (``Po·1`` for rows) against its smooth neighbourhood.
+
+Every defect names its kind, where it is (sensor rows/columns) and how strong it is.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy import ndimage
+
+from thintact_sdk.calibration.classify import classify_scene, is_dark, is_slit
+from thintact_sdk.calibration.collect import SlitCollection, signal_of
+from thintact_sdk.imaging.filter_training import scene_for_channels
+from thintact_sdk.imaging.noise import QUANTISATION_VARIANCE_DN2
+from thintact_sdk.imaging.t2s import SystemMatrices
+from thintact_sdk.profile import NoiseSpec
+from thintact_sdk.recording import Recording
+
+_MEDIAN_CHI2_1 = 0.45494
+"""Median of a χ² variable with one degree of freedom (r²/σ² of Gaussian noise)."""
+HOTSPOT_SIGMA_PX = 1.5
+"""Smoothing of the χ² map before hotspots are looked for (sensor pixels)."""
+HOTSPOT_ROBUST_SIGMAS = 10.0
+"""A hotspot stands this many robust standard deviations above the map's median…"""
+HOTSPOT_MIN_EXCESS = 0.5
+"""…and at least this far above it in χ² (50 % more residual power than the noise)."""
+LINE_ROBUST_SIGMAS = 8.0
+LINE_MIN_DEVIATION = 0.02
+"""A column or row whose open response departs from its neighbours' by more than both
+``LINE_ROBUST_SIGMAS`` robust standard deviations and 2 % is a dim/bright line."""
+
+
+@dataclass
+class NoiseEstimate:
+    """Noise measured on the slit residuals against the profile's.
+
+    Attributes
+    ----------
+    read_noise_dn, electrons_per_dn
+        Measured per captured frame (the averaging over ``frames_averaged`` undone).
+    profile_read_noise_dn, profile_electrons_per_dn
+        The profile's values.
+    variance_offset_dn2, variance_slope
+        ``E[r²] = offset + slope·signal`` of the averaged frames (DN², DN).
+    """
+
+    read_noise_dn: float
+    electrons_per_dn: float
+    profile_read_noise_dn: float
+    profile_electrons_per_dn: float
+    variance_offset_dn2: float
+    variance_slope: float
+
+    def variance(self, signal_dn: np.ndarray) -> np.ndarray:
+        """Measured noise variance (DN²) of the recording's frames at ``signal_dn`` above black."""
+        return self.variance_offset_dn2 + self.variance_slope * np.clip(signal_dn, 0.0, None)
+
+    def to_json(self) -> dict[str, float]:
+        return {k: round(float(v), 4) for k, v in self.__dict__.items()}
+
+
+@dataclass
+class Defect:
+    """Something wrong with the unit, located on the sensor.
+
+    Attributes
+    ----------
+    kind
+        ``dust speck``, ``dim column``, ``bright column``, ``dim row``, ``bright row``,
+        ``column defect``, ``row defect``.
+    row0, row1, col0, col1
+        Sensor pixel bounds (inclusive-exclusive) of the affected area.
+    centre
+        ``(row, col)`` of its centre (sensor pixels).
+    strength
+        χ² excess over the noise (hotspots) or relative gain change (lines, e.g. −0.15).
+    channels
+        Channel names where it shows.
+    """
+
+    kind: str
+    row0: int
+    row1: int
+    col0: int
+    col1: int
+    centre: tuple[float, float]
+    strength: float
+    channels: list[str] = field(default_factory=list)
+
+    def describe(self) -> str:
+        """One line a person can act on."""
+        where = (f"sensor rows {self.row0}-{self.row1 - 1}, columns {self.col0}-{self.col1 - 1} "
+                 f"(centre row {self.centre[0]:.0f}, column {self.centre[1]:.0f})")
+        if self.kind.endswith(("column", "row")) and not self.kind.endswith("defect"):
+            line = f"column {self.col0}" if self.kind.endswith("column") else f"row {self.row0}"
+            return (f"{self.kind} at sensor {line}: {100 * self.strength:+.1f} % response "
+                    f"({', '.join(self.channels)})")
+        return f"{self.kind} at {where}: residual {self.strength:.1f}× the noise power above normal"
+
+    def to_json(self) -> dict[str, Any]:
+        d = dict(self.__dict__)
+        d["centre"] = [round(float(v), 1) for v in self.centre]
+        d["strength"] = round(float(self.strength), 4)
+        d["description"] = self.describe()
+        return d
+
+
+@dataclass
+class HealthReport:
+    """Per-slit χ², χ² map, measured noise and defects of one calibration."""
+
+    slit_chi2: dict[str, float]
+    chi2_map: np.ndarray
+    noise: NoiseEstimate
+    defects: list[Defect]
+    column_deviation: np.ndarray
+    row_deviation: np.ndarray
+
+    @property
+    def mean_chi2(self) -> float:
+        """Mean ``r²/σ²`` over all slit frames (1 for pure noise)."""
+        return float(np.mean(list(self.slit_chi2.values()))) if self.slit_chi2 else float("nan")
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "mean_slit_chi2": round(self.mean_chi2, 4),
+            "worst_slits": dict(sorted(((k, round(v, 3)) for k, v in self.slit_chi2.items()),
+                                       key=lambda kv: -kv[1])[:5]),
+            "noise": self.noise.to_json(),
+            "defects": [d.to_json() for d in self.defects],
+        }
+
+
+def _fit_noise(pred: np.ndarray, r2: np.ndarray, noise: NoiseSpec, frames: int,
+               dark_frames: int) -> NoiseEstimate:
+    """``E[r²] = a + b·signal`` over 24 signal-quantile bins (robust: each bin's median of
+    ``r²`` / 0.4549, the median of a χ²₁ variable, so a local defect does not bias it).
+
+    ``dark_frames`` captures were averaged into the subtracted dark level: their read noise is
+    in every residual too, and is taken out of the per-frame read noise reported.
+    """
+    edges = np.unique(np.quantile(pred, np.linspace(0.0, 1.0, 25)))
+    idx = np.clip(np.searchsorted(edges, pred, side="right") - 1, 0, max(len(edges) - 2, 0))
+    xs, ys = [], []
+    for bin_index in range(len(edges) - 1):
+        sel = idx == bin_index
+        if np.count_nonzero(sel) > 10:
+            xs.append(float(np.mean(pred[sel])))
+            ys.append(float(np.median(r2[sel])) / _MEDIAN_CHI2_1)
+    offset: float = float(np.median(r2)) / _MEDIAN_CHI2_1
+    slope: float = 0.0
+    if len(xs) >= 2 and np.ptp(xs) > 0:
+        slope, offset = (float(v) for v in np.polyfit(xs, ys, 1))
+    a, b = max(float(offset), QUANTISATION_VARIANCE_DN2 / frames), max(float(slope), 1e-12)
+    dark_share = 1.0 + (1.0 / dark_frames if dark_frames > 0 else 0.0)
+    read = float(np.sqrt(max(a * frames / dark_share - QUANTISATION_VARIANCE_DN2, 0.0)))
+    return NoiseEstimate(read, 1.0 / (b * frames), noise.read_noise_dn, noise.electrons_per_dn, a, b)
+
+
+def _hotspots(chi2_map: np.ndarray) -> list[Defect]:
+    smooth = ndimage.gaussian_filter(chi2_map, HOTSPOT_SIGMA_PX, mode="nearest")
+    med = float(np.median(smooth))
+    spread = 1.4826 * float(np.median(np.abs(smooth - med))) + 1e-12
+    hot = (smooth > med + HOTSPOT_ROBUST_SIGMAS * spread) & (smooth > med + HOTSPOT_MIN_EXCESS)
+    labels, count = ndimage.label(hot)
+    out = []
+    for k, sl in enumerate(ndimage.find_objects(labels), start=1):
+        if sl is None:
+            continue
+        excess = np.where(labels[sl] == k, smooth[sl] - med, 0.0)
+        peak = float(excess.max())
+        core = excess >= 0.5 * peak  # the defect's half-maximum area within its hotspot
+        if core.sum() < 3:
+            continue
+        rows, cols = np.nonzero(core)
+        r0, r1 = sl[0].start + int(rows.min()), sl[0].start + int(rows.max()) + 1
+        c0, c1 = sl[1].start + int(cols.min()), sl[1].start + int(cols.max()) + 1
+        cy, cx = ndimage.center_of_mass(np.where(core, excess, 0.0))
+        h, w = r1 - r0, c1 - c0
+        if w <= 3 and h >= 4 * w:
+            kind = "column defect"
+        elif h <= 3 and w >= 4 * h:
+            kind = "row defect"
+        else:
+            kind = "dust speck"
+        out.append(Defect(kind, r0, r1, c0, c1, (sl[0].start + cy, sl[1].start + cx), peak))
+    return out
+
+
+def _line_deviation(open_matrix: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Relative deviation of each sensor line's open response from its neighbours, and the
+    robust spread of that deviation (per channel: ``C × lines``, ``C``)."""
+    resp = np.abs(np.asarray(open_matrix, np.float64).sum(axis=2))  # C × lines
+    trend = ndimage.median_filter(resp, size=(1, 7), mode="nearest")
+    dev = resp / np.where(trend > 0, trend, 1.0) - 1.0
+    spread = 1.4826 * np.median(np.abs(dev - np.median(dev, axis=1, keepdims=True)), axis=1)
+    return dev, spread
+
+
+def _lines(dev: np.ndarray, spread: np.ndarray, names: list[str], axis: str,
+           shape: tuple[int, int]) -> list[Defect]:
+    out: dict[int, Defect] = {}
+    for c in range(dev.shape[0]):
+        bad = np.flatnonzero((np.abs(dev[c]) > LINE_ROBUST_SIGMAS * spread[c])
+                             & (np.abs(dev[c]) > LINE_MIN_DEVIATION))
+        for j in (int(b) for b in bad):
+            kind = ("dim " if dev[c, j] < 0 else "bright ") + axis
+            if j not in out:
+                if axis == "column":
+                    out[j] = Defect(kind, 0, shape[0], j, j + 1, (shape[0] / 2, float(j)), float(dev[c, j]))
+                else:
+                    out[j] = Defect(kind, j, j + 1, 0, shape[1], (float(j), shape[1] / 2), float(dev[c, j]))
+            out[j].channels.append(names[c] if c < len(names) else str(c))
+    return list(out.values())
+
+
+def assess(recording: Recording, collection: SlitCollection, sm: SystemMatrices,
+           frames_averaged: int) -> HealthReport:
+    """Residuals of every slit frame against the calibrated model; noise; defects.
+
+    Parameters
+    ----------
+    recording, collection
+        The recording and what :func:`~thintact_sdk.calibration.collect.collect_slits` made of it.
+    sm
+        The calibrated matrices (DN above dark per display unit at the reference exposure).
+    frames_averaged
+        Frames averaged per pattern (the noise of the measurements is divided by it).
+    """
+    profile = recording.profile
+    nz = profile.noise
+    k = max(1, int(frames_averaged))
+    c = sm.channels
+    shape = sm.sensor_shape
+    saturation = nz.saturation_dn - 1.0
+    residuals: list[tuple[str, np.ndarray, np.ndarray, np.ndarray]] = []
+    dark_frames = 0
+    for i in range(len(recording)):
+        scene = recording.scene(i)
+        if scene is None:
+            continue
+        roles = classify_scene(scene)
+        dark_frames += int(is_dark(roles))
+        if not is_slit(roles):
+            continue
+        signal, scale = signal_of(recording, i, collection.dark_dn, collection.exposure_us)
+        pred = sm.forward(scene_for_channels(scene, c).astype(np.float64))
+        raw = np.asarray(recording.measurement(i))
+        ok = (raw.reshape(signal.shape) < saturation)
+        label = recording.frames[i].label or str(i)
+        residuals.append((label, (signal[..., :c] - pred) / scale, pred / scale, ok[..., :c]))
+    pred_all = np.concatenate([p[m] for _, _, p, m in residuals])
+    r2_all = np.concatenate([r[m] ** 2 for _, r, _, m in residuals])
+    from_frames = "dark frame" in collection.dark_source
+    noise = _fit_noise(pred_all, r2_all, nz, k, dark_frames if from_frames else 0)
+    chi2_sum = np.zeros(shape)
+    count = np.zeros(shape)
+    slit_chi2: dict[str, float] = {}
+    for label, r, p, m in residuals:
+        z = np.where(m, r**2 / noise.variance(p), 0.0)
+        chi2_sum += z.sum(axis=2)
+        count += m.sum(axis=2)
+        slit_chi2[label] = float(z.sum() / max(int(m.sum()), 1))
+    chi2_map = chi2_sum / np.maximum(count, 1)
+    names = list(profile.sensor.channels)
+    col_dev, col_spread = _line_deviation(sm.Qo)
+    row_dev, row_spread = _line_deviation(sm.Po)
+    defects = _hotspots(chi2_map)
+    for d in defects:
+        d.channels = names[:c]
+    defects += _lines(col_dev, col_spread, names, "column", shape)
+    defects += _lines(row_dev, row_spread, names, "row", shape)
+    return HealthReport(slit_chi2, chi2_map, noise, defects, col_dev, row_dev)

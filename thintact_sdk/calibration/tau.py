@@ -1,0 +1,264 @@
+"""Choosing the Tikhonov τ from the unit's own frames.
+
+Three criteria, each a curve over a log grid of τ:
+
+``cross-validation``
+    The validation scenes are split into two folds (identical scenes, e.g. ``white`` and
+    ``val_white``, always in the same fold). τ is tuned on one fold and the other fold is
+    scored with it, and vice versa: the held-out PSNR of every scene comes from a τ that never
+    saw that scene. The τ written into the bundle is then the best over all scenes.
+``gcv``
+    Generalised cross-validation, which needs no scene: ``GCV(τ) = mean(r²/σ²) / (1 − tr(H)/n)²``
+    with ``r = Y − A X̂_τ`` the residual of the full T2S model, ``σ²`` the noise model's
+    variance at the measured level, ``H = A·decode_τ`` the influence operator (its trace by
+    Hutchinson's estimator with fixed Rademacher probes) and ``n`` the number of measured values.
+``discrepancy``
+    Morozov's principle: the largest τ whose residual is not above the noise,
+    ``mean(r²/σ²) ≤ 1``, with ``σ²`` from the noise measured on the slit frames.
+
+Every decoder used here must be linear in the measurement and expose ``set_tau``
+(``thintact-noniterative`` and ``t2s-closed-form`` do).
+"""
+
+from __future__ import annotations
+
+import hashlib
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from thintact_sdk.calibration.validation import score
+from thintact_sdk.imaging.filter_training import scene_for_channels
+from thintact_sdk.imaging.metrics import psnr
+from thintact_sdk.imaging.t2s import SystemMatrices
+
+TAU_STEPS_PER_DECADE = 2
+"""Resolution of the coarse τ grid; :func:`refine` adds :data:`FINE_STEPS_PER_DECADE` points
+per decade around the coarse optimum."""
+FINE_STEPS_PER_DECADE = 8
+MIN_SCENES_PER_FOLD = 2
+"""Cross-validation needs this many distinct scenes in each fold (a τ tuned on one scene is
+that scene's, not the unit's)."""
+
+
+@dataclass
+class TauCurve:
+    """One criterion's curve and choice.
+
+    Attributes
+    ----------
+    criterion
+        ``cross-validation``, ``gcv``, ``discrepancy`` or ``simulated``.
+    taus
+        The grid, DN² (units of the system matrices squared).
+    values
+        The criterion at each τ (``unit`` says what it is).
+    tau
+        The τ the criterion chose (NaN when it cannot choose, ``note`` says why).
+    unit
+        What ``values`` are: ``mean PSNR dB`` (higher is better), ``GCV`` (lower is better),
+        ``mean r²/σ²`` (target 1).
+    note
+        Anything a reader must know (e.g. "the residual never reaches the noise").
+    """
+
+    criterion: str
+    taus: list[float]
+    values: list[float]
+    tau: float
+    unit: str
+    note: str = ""
+
+    def to_json(self) -> dict[str, Any]:
+        """JSON-ready dict (numbers rounded to 4 significant digits)."""
+        return {"criterion": self.criterion, "tau": _sig(self.tau), "unit": self.unit,
+                "taus": [_sig(t) for t in self.taus], "values": [_sig(v) for v in self.values],
+                "note": self.note}
+
+
+@dataclass
+class CrossValidation:
+    """Two-fold cross-validation of τ over validation scenes for one decoder.
+
+    Attributes
+    ----------
+    decoder
+        Decoder name.
+    curve
+        Mean PSNR over all scenes against τ (its ``tau`` is the deployed choice).
+    labels
+        Scene labels, in order.
+    folds
+        Fold index (0 or 1) of each scene.
+    fold_tau
+        τ chosen on each fold.
+    held_out_psnr
+        Per label: PSNR (dB) with the τ chosen on the *other* fold.
+    held_out_estimates
+        Per label: the ``N × M × C`` reconstruction at that τ.
+    """
+
+    decoder: str
+    curve: TauCurve
+    labels: list[str]
+    folds: list[int]
+    fold_tau: list[float]
+    held_out_psnr: dict[str, float] = field(default_factory=dict)
+    held_out_estimates: dict[str, np.ndarray] = field(default_factory=dict)
+
+    @property
+    def held_out_mean_db(self) -> float:
+        """Mean held-out PSNR (dB): the cross-validated estimate of this decoder's quality."""
+        return float(np.mean(list(self.held_out_psnr.values())))
+
+
+def _sig(x: float) -> float:
+    return float(f"{x:.4g}") if np.isfinite(x) else float("nan")
+
+
+def tau_grid(sm: SystemMatrices, lo: float = 1e-9, hi: float = 1e-1) -> np.ndarray:
+    """Log grid of τ, ``lo … hi`` × the largest ``σ_P² σ_Q²`` of the coding matrices (DN²)."""
+    unit = 0.0
+    for c in range(sm.channels):
+        sp = np.linalg.norm(np.asarray(sm.Pc[c], np.float64), 2)
+        sq = np.linalg.norm(np.asarray(sm.Qc[c], np.float64), 2)
+        unit = max(unit, float(sp * sq) ** 2)
+    decades = np.log10(hi / lo)
+    count = int(round(decades * TAU_STEPS_PER_DECADE)) + 1
+    return unit * np.logspace(np.log10(lo), np.log10(hi), count)
+
+
+def refine(taus: np.ndarray, best: float) -> np.ndarray:
+    """``taus`` plus a finer grid over ± one coarse step around ``best`` (sorted, unique)."""
+    step = 10.0 ** (1.0 / TAU_STEPS_PER_DECADE)
+    count = int(round(2 * FINE_STEPS_PER_DECADE / TAU_STEPS_PER_DECADE)) + 1
+    fine = best * np.logspace(-np.log10(step), np.log10(step), count)
+    return np.unique(np.concatenate([taus, fine]))
+
+
+def assign_folds(scenes: Sequence[np.ndarray]) -> list[int]:
+    """Fold 0 or 1 for each scene: distinct scenes alternate, identical scenes share a fold."""
+    keys: dict[str, int] = {}
+    out = []
+    for x in scenes:
+        key = hashlib.sha1(np.ascontiguousarray(np.asarray(x, np.float32)).tobytes()).hexdigest()
+        if key not in keys:
+            keys[key] = len(keys) % 2
+        out.append(keys[key])
+    return out
+
+
+def _psnr_table(decoder: Any, signals: Sequence[np.ndarray], truths: Sequence[np.ndarray],
+                taus: np.ndarray) -> np.ndarray:
+    """PSNR (dB) of every signal at every τ, ``len(signals) × len(taus)``."""
+    channels = [np.asarray(decoder.decode(signals[0])).shape[-1]] if signals else [1]
+    tru = [scene_for_channels(np.asarray(x, np.float32), channels[0]) for x in truths]
+    table = np.empty((len(signals), len(taus)))
+    for j, tau in enumerate(taus):
+        decoder.set_tau(float(tau))
+        for i, (y, x) in enumerate(zip(signals, tru, strict=True)):
+            table[i, j] = psnr(np.clip(np.asarray(decoder.decode(y), np.float32), 0.0, 1.0), x)
+    return table
+
+
+def cross_validate(decoder: Any, name: str, signals: Sequence[np.ndarray],
+                   truths: Sequence[np.ndarray], labels: Sequence[str],
+                   taus: np.ndarray, min_per_fold: int = MIN_SCENES_PER_FOLD) -> CrossValidation | None:
+    """Two-fold cross-validation of τ; ``None`` when the scenes do not make two folds of
+    ``min_per_fold`` distinct scenes each.
+
+    Parameters
+    ----------
+    decoder
+        A decoder with ``set_tau`` and ``decode`` (``R × S × C`` DN above black → ``N × M × C``).
+    signals, truths, labels
+        Measured signals (DN above black, float32), displayed scenes, frame labels.
+    taus
+        τ grid (DN²).
+    """
+    folds = assign_folds(truths)
+    distinct = {(f, hashlib.sha1(np.ascontiguousarray(np.asarray(x, np.float32)).tobytes()).hexdigest())
+                for f, x in zip(folds, truths, strict=True)}
+    if any(sum(1 for f, _ in distinct if f == fold) < min_per_fold for fold in (0, 1)):
+        return None
+    fold_arr = np.asarray(folds)
+    table = _psnr_table(decoder, signals, truths, taus)
+    fine = refine(taus, float(taus[int(np.argmax(table.mean(axis=0)))]))
+    extra = np.setdiff1d(fine, taus)
+    taus = np.concatenate([taus, extra])
+    table = np.concatenate([table, _psnr_table(decoder, signals, truths, extra)], axis=1)
+    order = np.argsort(taus)
+    taus, table = taus[order], table[:, order]
+    fold_tau = [float(taus[int(np.argmax(table[fold_arr == f].mean(axis=0)))]) for f in (0, 1)]
+    mean = table.mean(axis=0)
+    curve = TauCurve("cross-validation", [float(t) for t in taus], [float(v) for v in mean],
+                     float(taus[int(np.argmax(mean))]), "mean PSNR dB",
+                     f"two folds of {int(np.sum(fold_arr == 0))} and {int(np.sum(fold_arr == 1))} "
+                     "scenes; each scene is scored with the tau tuned on the other fold")
+    out = CrossValidation(name, curve, list(labels), folds, fold_tau)
+    for f in (0, 1):
+        decoder.set_tau(fold_tau[1 - f])
+        for i in (int(k) for k in np.flatnonzero(fold_arr == f)):
+            est = np.asarray(decoder.decode(signals[i]), np.float32)
+            out.held_out_estimates[labels[i]] = est
+            out.held_out_psnr[labels[i]] = score(labels[i], est, truths[i]).psnr_db
+    decoder.set_tau(curve.tau)
+    return out
+
+
+def noise_criteria(decoder: Any, sm: SystemMatrices, signals: Sequence[np.ndarray],
+                   inv_var: Sequence[np.ndarray], taus: np.ndarray, probes: int = 4,
+                   seed: int = 0) -> tuple[TauCurve, TauCurve]:
+    """GCV and the discrepancy principle over ``signals`` (one pass over the τ grid).
+
+    Parameters
+    ----------
+    decoder
+        Linear decoder with ``set_tau``.
+    sm
+        The matrices the residual ``r = Y − A X̂_τ`` is computed with.
+    inv_var
+        ``1/σ²`` per measured value (DN⁻²), same shapes as ``signals``; weighting leaves the
+        trace of the influence operator unchanged, so the classical GCV formula applies.
+    probes
+        Rademacher probes of Hutchinson's trace estimator (the same for every τ).
+
+    Returns
+    -------
+    (gcv, discrepancy)
+        GCV chooses its minimum; the discrepancy principle the largest τ with
+        ``mean(r²/σ²) ≤ 1`` (NaN, with a note, when the residual never gets that low).
+    """
+    rng = np.random.default_rng(seed)
+    shape = np.shape(signals[0])
+    n = float(np.prod(shape))
+    zs = [rng.choice(np.array([-1.0, 1.0], np.float32), size=shape) for _ in range(probes)]
+    chi2 = np.empty(len(taus))
+    gcv = np.empty(len(taus))
+    for j, tau in enumerate(taus):
+        decoder.set_tau(float(tau))
+        acc, count = 0.0, 0
+        for y, w in zip(signals, inv_var, strict=True):
+            r = y - sm.forward(np.asarray(decoder.decode(y), np.float64))
+            acc += float(np.sum(r * r * w))
+            count += r.size
+        chi2[j] = acc / count
+        trace = float(np.mean([np.sum(z * sm.forward(np.asarray(decoder.decode(z), np.float64)))
+                               for z in zs]))
+        gcv[j] = chi2[j] / (1.0 - min(trace, n - 1.0) / n) ** 2
+    grid = [float(t) for t in taus]
+    k = int(np.argmin(gcv))
+    gcv_curve = TauCurve("gcv", grid, [float(v) for v in gcv], grid[k], "GCV (lower is better)",
+                         f"{len(signals)} frames, {probes} Hutchinson probes")
+    below = np.flatnonzero(chi2 <= 1.0)
+    note = ""
+    if below.size:
+        tau_d = grid[int(below[-1])]
+    else:
+        tau_d = float("nan")
+        note = (f"the residual never reaches the noise (smallest mean r²/σ² {chi2.min():.3g}): "
+                "model error above the noise")
+    disc = TauCurve("discrepancy", grid, [float(v) for v in chi2], tau_d, "mean r²/σ² (target 1)", note)
+    return gcv_curve, disc
