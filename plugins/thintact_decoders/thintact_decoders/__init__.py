@@ -29,6 +29,7 @@ from thintact_decoders.candidates import candidate_specs, parse_preference, pref
 from thintact_decoders.flatcam import FlatCamDecoder
 from thintact_decoders.iterative import T2SIterativeDecoder
 from thintact_decoders.loading import resolve_bundle
+from thintact_decoders.modes import DEFAULT_MODE_RTOL
 from thintact_decoders.noniterative import NonIterativeDecoder
 from thintact_decoders.selection import BackendPreferenceWarning, make_probes, select_backend
 from thintact_decoders.t2s_closed_form import T2SClosedFormDecoder
@@ -92,6 +93,10 @@ def _selected(name: str, profile: Profile, settings: dict[str, Any], sm: SystemM
     return decoder
 
 
+def _mode_rtol(settings: dict[str, Any]) -> float:
+    return float(settings.get("mode_rtol", DEFAULT_MODE_RTOL))
+
+
 def _tau(bundle_tau: float, settings: dict[str, Any], profile: Profile) -> float:
     if "tau" in settings:
         return float(settings["tau"])
@@ -111,7 +116,7 @@ def make_noniterative(profile: Profile, settings: dict[str, Any]) -> NonIterativ
     return _selected("thintact-noniterative", profile, settings, bundle.system_matrices,
                      lambda xp: NonIterativeDecoder(
                          bundle.system_matrices, jf, tau, xp, fold=str(settings.get("fold", "auto")),
-                         max_rank=int(settings.get("max_rank", 8))))  # type: ignore[return-value]
+                         max_rank=int(settings.get("max_rank", 8)), mode_rtol=_mode_rtol(settings)))  # type: ignore[return-value]
 
 
 def make_iterative(profile: Profile, settings: dict[str, Any]) -> T2SIterativeDecoder:
@@ -129,7 +134,7 @@ def make_flatcam(profile: Profile, settings: dict[str, Any]) -> FlatCamDecoder:
     bundle = resolve_bundle(profile, settings)
     tau = _tau(bundle.tau, settings, profile)
     return _selected("flatcam", profile, settings, bundle.system_matrices,
-                     lambda xp: FlatCamDecoder(bundle.system_matrices, tau, xp))  # type: ignore[return-value]
+                     lambda xp: FlatCamDecoder(bundle.system_matrices, tau, xp, _mode_rtol(settings)))  # type: ignore[return-value]
 
 
 def make_t2s_closed_form(profile: Profile, settings: dict[str, Any]) -> T2SClosedFormDecoder:
@@ -139,7 +144,8 @@ def make_t2s_closed_form(profile: Profile, settings: dict[str, Any]) -> T2SClose
     return _selected("t2s-closed-form", profile, settings, bundle.system_matrices,
                      lambda xp: T2SClosedFormDecoder(
                          bundle.system_matrices, tau, xp, open_rtol=float(settings.get("open_rtol", 1e-6)),
-                         max_open_rank=int(settings.get("max_open_rank", 8))))  # type: ignore[return-value]
+                         max_open_rank=int(settings.get("max_open_rank", 8)),
+                         mode_rtol=_mode_rtol(settings)))  # type: ignore[return-value]
 
 
 @thintact_sdk.hookimpl
