@@ -66,7 +66,7 @@ class FakeSpec(BackendSpec):
 @pytest.fixture(scope="module")
 def operator():
     sm, _ = frequency_split_matrices(SENSOR, SCENE, BLOCK, seed=1)
-    return sm, make_probes(sm, 64.0, 4095.0)
+    return sm, make_probes(sm, load_profile("virtual-mini").noise)
 
 
 def _select(operator, specs, tmp_path, preferred=None, calls=None):
@@ -120,8 +120,10 @@ def test_preference_is_honoured_within_20_percent_only() -> None:
     assert chosen == "numpy-float32" and note is not None and "25% slower" in note
     chosen, note = decide(ms, cost, "torch-bfloat16", unavailable={"torch-bfloat16": "emulated"})
     assert chosen == "numpy-float32" and note is not None and "emulated" in note
+    chosen, note = decide(ms, {"numpy-float32": 0.5, "torch-float32": 0.3})
+    assert chosen == "torch-float32" and note is not None and "most accurate" in note
     with pytest.raises(ValueError, match="no backend"):
-        decide(ms, {"numpy-float32": 1.0, "torch-float32": 1.0})
+        decide({}, {})
 
 
 def test_bfloat16_is_a_candidate_only_with_native_support() -> None:

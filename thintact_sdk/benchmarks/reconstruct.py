@@ -188,7 +188,7 @@ def run(args: argparse.Namespace) -> int:
         (r, s), (n, _) = dev.sm.sensor_shape, dev.sm.scene_shape
         # (tag, backend, mode_rtol): every real backend of this host with the default mode
         # truncation, and numpy float32 with every mode (the work before truncation)
-        runs = [(spec.key, spec.make(), None) for spec in specs]
+        runs: list[tuple[str, Any, float | None]] = [(spec.key, spec.make(), None) for spec in specs]
         runs.append(("numpy-float32, all modes", ArrayBackend("numpy", "float32"), 0.0))
         for tag, be, rtol in runs:
             say(f"timing non-iterative decoders ({tag})")

@@ -86,9 +86,8 @@ def _selected(name: str, profile: Profile, settings: dict[str, Any], sm: SystemM
     not_candidates = {} if caps.native_bf16 else {"torch-bfloat16": EMULATED_BF16}
     (r, s), (n, m) = sm.sensor_shape, sm.scene_shape
     key = f"{host_fingerprint(caps)}|{name}|{sm.channels}x{r}x{s}->{n}x{m}|{dtype}"
-    nz = profile.noise
     decoder, _ = select_backend(
-        build, lambda: make_probes(sm, nz.black_level_dn, nz.saturation_dn), candidate_specs(caps, dtype),
+        build, lambda: make_probes(sm, profile.noise), candidate_specs(caps, dtype),
         key, preferred, source, not_candidates)
     return decoder
 

@@ -26,6 +26,7 @@ from thintact_decoders.candidates import BackendSpec
 from thintact_sdk.imaging.metrics import psnr
 from thintact_sdk.imaging.t2s import SystemMatrices
 from thintact_sdk.interfaces import Decoder
+from thintact_sdk.profile import NoiseSpec
 
 PSNR_BOUND_DB = 0.1
 PREFERENCE_SLACK = 0.2
@@ -46,16 +47,20 @@ class Probe:
     truth: np.ndarray
 
 
-def make_probes(sm: SystemMatrices, black_dn: float, saturation_dn: float) -> list[Probe]:
-    """Noiseless raw frames of the bench scenes (USAF, a GelSight press) through ``sm``."""
+def make_probes(sm: SystemMatrices, noise: NoiseSpec, seed: int = 0) -> list[Probe]:
+    """Raw frames of the bench scenes (USAF, a GelSight press) through ``sm`` with the sensor
+    noise of ``noise`` (fixed seed): accuracy is judged where it matters, on noisy frames."""
+    from thintact_sdk.imaging.noise import signal_to_dn
     from thintact_sdk.imaging.scenes import make_scene
 
     n, m = sm.scene_shape
+    rng = np.random.default_rng(seed)
     probes = []
     for name, index in PROBE_SCENES:
         x = make_scene(name, n, m, index)[..., : sm.channels]
-        raw = np.clip(np.round(sm.forward(x) + black_dn), 0, saturation_dn).astype(np.uint16)
-        probes.append(Probe(raw, float(black_dn), x))
+        dn = signal_to_dn(np.clip(sm.forward(x), 0, None), noise, rng)
+        raw = np.clip(np.round(dn), 0, 65535).astype(np.uint16)
+        probes.append(Probe(raw, float(noise.black_level_dn), x))
     return probes
 
 
@@ -105,16 +110,22 @@ def decide(
     unavailable: dict[str, str] | None = None, preferred_from: str = "preference",
 ) -> tuple[str, str | None]:
     """``(chosen key, note)``: the fastest accurate backend, or the preferred one where it is
-    accurate and at most ``slack`` slower than that; ``note`` explains an overruled preference.
+    accurate and at most ``slack`` slower than that; ``note`` explains an overruled preference
+    (or, when no backend is within ``bound_db``, that the most accurate one was taken).
 
     Raises
     ------
     ValueError
-        When no candidate is accurate enough (nothing measured within ``bound_db``).
+        When nothing was measured at all.
     """
+    if not measured_ms:
+        raise ValueError("no backend could be measured")
     accurate = {k: v for k, v in measured_ms.items() if psnr_cost_db.get(k, np.inf) <= bound_db}
     if not accurate:
-        raise ValueError(f"no backend reconstructs within {bound_db} dB of float64: {psnr_cost_db}")
+        closest = min(measured_ms, key=lambda k: psnr_cost_db.get(k, np.inf))
+        return closest, (f"no backend reconstructs within {bound_db} dB of float64 "
+                         f"({', '.join(f'{k} {v:+.2f} dB' for k, v in psnr_cost_db.items())}); using the most "
+                         f"accurate, {closest}")
     best = min(accurate, key=accurate.__getitem__)
     if preferred is None or preferred == best:
         return best, None
