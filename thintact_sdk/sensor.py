@@ -59,6 +59,9 @@ class StreamStats:
         Tactile frames handed to the consumer.
     age_ms
         Per delivered frame: ms from its arrival from the camera (host clock) to its delivery.
+    waited_ms_max
+        Longest time a delivered frame waited, finished, for the consumer (a newer finished
+        frame replaces it, so this stays within one output period of the pipeline).
     warm_up_s
         Seconds spent building and warming up the decoder before the first read (not
         counted against the read timeout).
@@ -71,6 +74,7 @@ class StreamStats:
     consumer_dropped: int = 0
     delivered: int = 0
     age_ms: list[float] = field(default_factory=list)
+    waited_ms_max: float = 0.0
     warm_up_s: float = 0.0
 
     def age_percentile_ms(self, q: float) -> float:
@@ -88,6 +92,7 @@ class _InFlight:
     image: np.ndarray | None = None
     frame: TactileFrame | None = None
     compute_ms: float = 0.0
+    completed_ns: int = 0
 
 
 class _Latest:
@@ -404,9 +409,11 @@ class Sensor:
                         f"no tactile frame from {self.profile.name!r} within {wait:.1f} s"
                     )
                 frame = item.frame
-                age_ms = (time.monotonic_ns() - item.arrived_ns) / 1e6
+                now = time.monotonic_ns()
+                age_ms = (now - item.arrived_ns) / 1e6
                 frame.meta["age_ms"] = age_ms
                 self.stats.age_ms.append(age_ms)
+                self.stats.waited_ms_max = max(self.stats.waited_ms_max, (now - item.completed_ns) / 1e6)
                 self.stats.delivered += 1
                 n += 1
                 yield frame
@@ -473,6 +480,7 @@ class Sensor:
                 work(item)
                 if last:
                     self.stats.processed += 1
+                    item.completed_ns = time.monotonic_ns()
                 if outbox.put(item):
                     if last:
                         self.stats.consumer_dropped += 1

@@ -11,6 +11,7 @@ import pytest
 from tac_fakes import SLOTS, BlockDecoder, block_profile, make_registry
 
 import thintact_sdk
+from thintact_sdk.frames import TactileFrame
 from thintact_sdk.profile import DecoderConfig
 from thintact_sdk.sensor import Sensor
 from thintact_sdk.tactile import TactileSimulator, scene_level_lut
@@ -61,11 +62,13 @@ def _flat_scene(profile):
 
 
 def _slow_interpreter(sensor: Sensor) -> None:
-    interpret = sensor.interpreter.interpret
+    """Interpretation that takes ``STAGE_S`` and no CPU (so the test holds under load)."""
 
-    def slow(*args, **kwargs):
+    def slow(image, timestamp_ns, frame_id):
         time.sleep(STAGE_S)
-        return interpret(*args, **kwargs)
+        empty = np.zeros((0, 2), np.float32)
+        return TactileFrame(image, np.zeros(image.shape[:2], np.float32), empty, empty, False, 0.0,
+                            timestamp_ns, frame_id)
 
     sensor.interpreter.interpret = slow  # type: ignore[method-assign]
 
@@ -110,3 +113,18 @@ def test_warm_up_does_not_touch_the_reference(profile, lut) -> None:
     with Sensor(profile, registry=make_registry(), lut=lut, reference_frames=2) as s:
         assert s.warm_up() >= 0.0
         assert s.interpreter._ref_count == 0
+
+
+def test_bench_tactile_reports_streamed_fps_and_latency_percentiles(profile, lut) -> None:
+    from tac_fakes import BlockCamera
+
+    from thintact_sdk.benchmarks.tactile import _streamed_fps
+
+    cam = BlockCamera(profile, {})
+    cam.open()
+    raws = [cam.read() for _ in range(3)]
+    sensor = Sensor(profile, registry=make_registry(), lut=lut, decoder=BlockDecoder())
+    stream = _streamed_fps(profile, raws, sensor, frames=4, budget_s=2.0)
+    assert stream["fps"] > 0 and stream["processed"] >= 2
+    assert 0 < stream["latency_p50_ms"] <= stream["latency_p99_ms"]
+    assert stream["waited_ms_max"] >= 0 and stream["warm_up_s"] >= 0
