@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import threading
 import time
+from collections import deque
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import Any
@@ -36,6 +37,7 @@ from thintact_sdk.tactile.photometric import PhotometricLUT
 from thintact_sdk.tactile.store import lut_for_profile
 
 VIRTUAL_CAMERAS = ("virtual",)
+AGE_HISTORY = 10_000  # delivered frames whose age StreamStats keeps
 
 
 @dataclass
@@ -58,7 +60,8 @@ class StreamStats:
     delivered
         Tactile frames handed to the consumer.
     age_ms
-        Per delivered frame: ms from its arrival from the camera (host clock) to its delivery.
+        Per delivered frame (the last ``AGE_HISTORY``): ms from its arrival from the camera
+        (host clock) to its delivery.
     waited_ms_max
         Longest time a delivered frame waited, finished, for the consumer (a newer finished
         frame replaces it, so this stays within one output period of the pipeline).
@@ -73,7 +76,7 @@ class StreamStats:
     processed: int = 0
     consumer_dropped: int = 0
     delivered: int = 0
-    age_ms: list[float] = field(default_factory=list)
+    age_ms: deque[float] = field(default_factory=lambda: deque(maxlen=AGE_HISTORY))
     waited_ms_max: float = 0.0
     warm_up_s: float = 0.0
 

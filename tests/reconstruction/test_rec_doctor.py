@@ -23,5 +23,7 @@ def test_doctor_reports_host_and_chosen_backend(capsys) -> None:
 def test_doctor_remeasures_and_explains_a_missing_bundle(capsys) -> None:
     assert main(["doctor", "--profile", "virtual-mini", "--remeasure", "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["backend"]["from_cache"] is False
+    assert main(["doctor", "--profile", "virtual-mini", "--json"]) == 0  # the new record is cached
+    assert json.loads(capsys.readouterr().out)["backend"]["from_cache"] is True
     assert main(["doctor", "--profile", "no-such-profile"]) == 2
     assert "no-such-profile" in capsys.readouterr().err

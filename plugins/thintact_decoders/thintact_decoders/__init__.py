@@ -39,6 +39,7 @@ from thintact_sdk.interfaces import Decoder
 from thintact_sdk.machine import host_capabilities, host_fingerprint
 from thintact_sdk.profile import Profile
 
+REMEASURE_ENV = "THINTACT_BACKEND_REMEASURE"  # set (not "0"): measure again, replace the cached record
 EMULATED_BF16 = ("bfloat16 is emulated in software on this CPU (no AVX512-BF16, AMX or BF16 flag), "
                  "about 100x slower than float32")
 
@@ -88,7 +89,7 @@ def _selected(name: str, profile: Profile, settings: dict[str, Any], sm: SystemM
     key = f"{host_fingerprint(caps)}|{name}|{sm.channels}x{r}x{s}->{n}x{m}|{dtype}"
     decoder, _ = select_backend(
         build, lambda: make_probes(sm, profile.noise), candidate_specs(caps, dtype),
-        key, preferred, source, not_candidates)
+        key, preferred, source, not_candidates, remeasure=os.environ.get(REMEASURE_ENV, "") not in ("", "0"))
     return decoder
 
 

@@ -199,9 +199,10 @@ def select_backend(
     specs: Sequence[BackendSpec], cache_key: str, preferred: BackendSpec | None = None,
     preferred_from: str = "preference", not_candidates: dict[str, str] | None = None,
     cache: BackendCache | None = None, bound_db: float = PSNR_BOUND_DB, slack: float = PREFERENCE_SLACK,
-    repeats: int = 5,
+    repeats: int = 5, remeasure: bool = False,
 ) -> tuple[Decoder, BackendChoice]:
-    """Build the decoder on the best backend for this host; measure only on a cache miss.
+    """Build the decoder on the best backend for this host; measure only on a cache miss
+    (or when ``remeasure``; the new measurements replace the cached ones).
 
     Parameters
     ----------
@@ -221,7 +222,7 @@ def select_backend(
     cache = cache or BackendCache()
     unavailable = dict(not_candidates or {})
     built: dict[str, Decoder] = {}
-    record = cache.get(cache_key)
+    record = None if remeasure else cache.get(cache_key)
     from_cache = record is not None and {s.key for s in specs} <= (
         set(record.get("measured_ms", {})) | set(record.get("unavailable", {})))
     if record is not None and from_cache:

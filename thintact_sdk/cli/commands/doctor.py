@@ -3,7 +3,8 @@
 Prints the CPU (model, SIMD level, native bfloat16), numpy's BLAS and its threads, torch and
 its threads, GPUs, the float32 GEMM rate measured now, and, for a profile's decoder, the
 backend the decoder selects on this host with the measured alternatives (from the per-host
-cache when it was measured before; ``--remeasure`` measures again).
+cache when it was measured before; ``--remeasure`` measures again and replaces the cached
+record, e.g. after the first measurement ran on a busy machine).
 """
 
 from __future__ import annotations
@@ -14,13 +15,16 @@ from typing import Any
 
 from thintact_sdk.errors import CalibrationError, ProfileError
 
+REMEASURE_ENV = "THINTACT_BACKEND_REMEASURE"  # read by the decoders plugin (the core imports no plugin)
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("doctor", help="host capabilities and the decoder backend chosen on this host")
     p.add_argument("--profile", default="thintact-paper",
                    help="device profile whose decoder is checked (default thintact-paper)")
     p.add_argument("--remeasure", action="store_true",
-                   help="measure the backends again instead of using the per-host cache")
+                   help="measure the backends again (e.g. on a quiet machine) and replace this host's "
+                        "cached choice")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=run)
 
@@ -29,17 +33,15 @@ def _decoder_choice(profile: Any, remeasure: bool) -> tuple[Any, str]:
     """``(decoder, how it was built)``: the profile's decoder, or, for a profile without a
     calibration bundle, ``t2s-closed-form`` on its directly generated matrices (same shapes)."""
     import os
-    import tempfile
 
     from thintact_sdk.plugin_manager import get_registry
 
     if profile.decoder is None:
         raise ProfileError(f"profile {profile.name!r} has no decoder section")
     cfg = profile.decoder
-    old = os.environ.get("XDG_CACHE_HOME")
-    scratch = tempfile.TemporaryDirectory() if remeasure else None
-    if scratch is not None:  # a private empty cache: measure now, leave the user's as it is
-        os.environ["XDG_CACHE_HOME"] = scratch.name
+    old = os.environ.get(REMEASURE_ENV)
+    if remeasure:  # measure now and replace this host's cached record
+        os.environ[REMEASURE_ENV] = "1"
     try:
         try:
             return get_registry().create("decoder", cfg.plugin, profile, dict(cfg.settings)), "calibration bundle"
@@ -57,12 +59,10 @@ def _decoder_choice(profile: Any, remeasure: bool) -> tuple[Any, str]:
             dec = get_registry().create("decoder", "t2s-closed-form", profile, settings)
             return dec, f"t2s-closed-form on directly generated matrices of the same shape ({err})"
     finally:
-        if scratch is not None:
-            if old is None:
-                os.environ.pop("XDG_CACHE_HOME", None)
-            else:
-                os.environ["XDG_CACHE_HOME"] = old
-            scratch.cleanup()
+        if old is None:
+            os.environ.pop(REMEASURE_ENV, None)
+        else:
+            os.environ[REMEASURE_ENV] = old
 
 
 def run(args: argparse.Namespace) -> int:
