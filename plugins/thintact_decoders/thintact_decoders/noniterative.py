@@ -249,10 +249,10 @@ class NonIterativeDecoder(Decoder):
                 y32 = xp.cast(y_cf, gemm=False)
                 f = self._ps * (xp.swap(self._dr) @ (self._pf * (self._dr @ y32 @ xp.swap(self._ds))) @ self._ds)
                 y_cf = xp.cast(y32 - f, gemm=True)
-        core = self._core(y_cf)
+        core = self._core(y_cf)  # this frame's own array: updated in place
         if black_dn:
-            core = core - black_dn * self._black_core()
-        core = core * self._inv_denom
+            core -= black_dn * self._black_core()
+        core *= self._inv_denom
         return xp.synthesise(self._vp, core, self._vqt)
 
     def _black_core(self) -> Any:

@@ -187,10 +187,12 @@ class T2SClosedFormDecoder(Decoder):
             if self._unit is None:
                 ones = np.ones((self.channels, *self.sensor_shape), np.float32)
                 self._unit = self._linear(xp.asarray(ones, gemm=True))
-            core = core - black_dn * self._unit[0]
-            e = e - black_dn * self._unit[1]
+            core -= black_dn * self._unit[0]  # core and e are this frame's own arrays:
+            e = e - black_dn * self._unit[1]  # updated in place, no per-frame temporaries
         a, b, a2, b2 = self._a, self._b, self._a2, self._b2
-        xi0 = self._den * (core + a @ e @ xp.swap(b))  # Hc⁻¹ b in SVD coefficients
+        xi0 = core
+        xi0 += a @ e @ xp.swap(b)
+        xi0 *= self._den  # Hc⁻¹ b in SVD coefficients
         c = core.shape[0]
         k = self._kp * self._kq
         w = xp.contiguous(xp.swap(a) @ xi0 @ b).reshape(c, k, 1)
@@ -198,8 +200,11 @@ class T2SClosedFormDecoder(Decoder):
         coef = self._small @ xp.cat([w, w2], axis=1)
         cf = xp.contiguous(coef[:, :k]).reshape(c, self._kp, self._kq)
         cg = xp.contiguous(coef[:, k:]).reshape(c, self._kp, self._kq)
-        xi = xi0 - self._den * (a @ cf @ xp.swap(b) + a2 @ cg @ xp.swap(b2))
-        return xp.synthesise(self._vp, xi, self._vqt)
+        correction = a @ cf @ xp.swap(b)
+        correction += a2 @ cg @ xp.swap(b2)
+        correction *= self._den
+        xi0 -= correction
+        return xp.synthesise(self._vp, xi0, self._vqt)
 
     def _normal_op(self, xi: Any) -> Any:
         """``AᵀA`` in SVD coefficients: ``(σ_P² σ_Qᵀ²) ⊙ ξ + W Mmid Wᵀ ξ`` (τ excluded)."""
