@@ -13,7 +13,7 @@ import argparse
 import json
 from typing import Any
 
-from thintact_sdk.errors import CalibrationError, ProfileError
+from thintact_sdk.errors import ProfileError
 
 REMEASURE_ENV = "THINTACT_BACKEND_REMEASURE"  # read by the decoders plugin (the core imports no plugin)
 
@@ -31,33 +31,20 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def _decoder_choice(profile: Any, remeasure: bool) -> tuple[Any, str]:
     """``(decoder, how it was built)``: the profile's decoder, or, for a profile without a
-    calibration bundle, ``t2s-closed-form`` on its directly generated matrices (same shapes)."""
+    calibration bundle, the closed form on its directly generated matrices (same shapes, the
+    fallback of ``thintact bench tactile``)."""
     import os
 
-    from thintact_sdk.plugin_manager import get_registry
+    from thintact_sdk.benchmarks.tactile import _latency_decoder
 
     if profile.decoder is None:
         raise ProfileError(f"profile {profile.name!r} has no decoder section")
-    cfg = profile.decoder
     old = os.environ.get(REMEASURE_ENV)
     if remeasure:  # measure now and replace this host's cached record
         os.environ[REMEASURE_ENV] = "1"
     try:
-        try:
-            return get_registry().create("decoder", cfg.plugin, profile, dict(cfg.settings)), "calibration bundle"
-        except CalibrationError as err:
-            import numpy as np
-
-            from thintact_sdk.imaging.calibration_bundle import CalibrationBundle
-            from thintact_sdk.imaging.t2s import SystemMatrices
-
-            nz = profile.noise
-            sm = SystemMatrices.direct(profile, scale_dn=0.6 * (nz.saturation_dn - nz.black_level_dn))
-            tau = 0.01 * float(np.linalg.norm(sm.Pc[0], 2) * np.linalg.norm(sm.Qc[0], 2)) ** 2
-            bundle = CalibrationBundle.create(profile, sm, None, tau=tau, source="simulator")
-            settings = {k: v for k, v in cfg.settings.items() if k != "tau"} | {"bundle": bundle}
-            dec = get_registry().create("decoder", "t2s-closed-form", profile, settings)
-            return dec, f"t2s-closed-form on directly generated matrices of the same shape ({err})"
+        decoder, _, how = _latency_decoder(profile)
+        return decoder, how
     finally:
         if old is None:
             os.environ.pop(REMEASURE_ENV, None)
