@@ -201,8 +201,8 @@ def run(args: argparse.Namespace) -> int:
                 result["quality"][key] = _quality(_from_signal(dec, black), dev)
                 flops = dec.gemm_flops()
                 result["roofline"][key] = {
-                    "gemm_gflop": round(flops / 1e9, 3), "sgemm_gflops": round(sgemm, 1),
-                    "ratio": round(roofline_ratio(ms, flops, sgemm), 3), "kept_modes": list(dec.kept_modes)}
+                    "gemm_gflop": float(f"{flops / 1e9:.4g}"), "sgemm_gflops": float(f"{sgemm:.4g}"),
+                    "ratio": float(f"{roofline_ratio(ms, flops, sgemm):.4g}"), "kept_modes": list(dec.kept_modes)}
         say("backend selection as a decoder does it (measured now, not cached)")
         probes = [Probe(dev.raw[i], black, dev.scenes[i]) for i in (1, 2)]
         result["backend_choice"] = {}
