@@ -65,3 +65,9 @@ def blas_threads(n: int | None) -> Iterator[int]:
     finally:
         for (setter, _), old in zip(libs, before, strict=True):
             setter(ctypes.c_int(old))
+
+
+def openblas_threads() -> int | None:
+    """Threads of the first OpenBLAS loaded into this process, or None when none is found."""
+    libs = _loaded_openblas()
+    return int(libs[0][1]()) if libs else None

@@ -19,8 +19,9 @@ from __future__ import annotations
 
 import threading
 import time
+from collections import deque
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -36,11 +37,12 @@ from thintact_sdk.tactile.photometric import PhotometricLUT
 from thintact_sdk.tactile.store import lut_for_profile
 
 VIRTUAL_CAMERAS = ("virtual",)
+AGE_HISTORY = 10_000  # delivered frames whose age StreamStats keeps
 
 
 @dataclass
 class StreamStats:
-    """Frame accounting of :meth:`Sensor.stream`.
+    """Frame accounting and timing of :meth:`Sensor.stream`.
 
     Attributes
     ----------
@@ -49,13 +51,23 @@ class StreamStats:
     camera_dropped
         Frames the camera lost before delivering (gaps in its frame ids).
     skipped
-        Raw frames replaced by a newer one before the processing thread got to them.
+        Frames replaced by a newer one between pipeline stages (binning, decode,
+        interpretation) before the next stage got to them.
     processed
         Tactile frames computed.
     consumer_dropped
         Tactile frames replaced by a newer one before the consumer took them.
     delivered
         Tactile frames handed to the consumer.
+    age_ms
+        Per delivered frame (the last ``AGE_HISTORY``): ms from its arrival from the camera
+        (host clock) to its delivery.
+    waited_ms_max
+        Longest time a delivered frame waited, finished, for the consumer (a newer finished
+        frame replaces it, so this stays within one output period of the pipeline).
+    warm_up_s
+        Seconds spent building and warming up the decoder before the first read (not
+        counted against the read timeout).
     """
 
     captured: int = 0
@@ -64,6 +76,26 @@ class StreamStats:
     processed: int = 0
     consumer_dropped: int = 0
     delivered: int = 0
+    age_ms: deque[float] = field(default_factory=lambda: deque(maxlen=AGE_HISTORY))
+    waited_ms_max: float = 0.0
+    warm_up_s: float = 0.0
+
+    def age_percentile_ms(self, q: float) -> float:
+        """The ``q``-th percentile (0-100) of :attr:`age_ms`; NaN before any delivery."""
+        return float(np.percentile(self.age_ms, q)) if self.age_ms else float("nan")
+
+
+@dataclass
+class _InFlight:
+    """One frame on its way through the stream pipeline."""
+
+    raw: RawFrame
+    arrived_ns: int
+    measurement: Measurement | None = None
+    image: np.ndarray | None = None
+    frame: TactileFrame | None = None
+    compute_ms: float = 0.0
+    completed_ns: int = 0
 
 
 class _Latest:
@@ -289,14 +321,48 @@ class Sensor:
 
     def process(self, raw: RawFrame) -> TactileFrame:
         """Raw frame → tactile frame (bin, decode, interpret); sets ``latency_ms``."""
+        item = _InFlight(raw, time.monotonic_ns())
+        for stage in (self._bin_stage, self._decode_stage, self._interpret_stage):
+            stage(item)
+        assert item.frame is not None
+        return item.frame
+
+    def warm_up(self) -> float:
+        """Build the decoder (its backend selection included), load the LUT and decode one
+        black frame, so the first real frame pays none of it. Returns the seconds spent.
+
+        :meth:`stream` calls this before it starts reading, outside the read timeout.
+        """
         t0 = time.perf_counter()
-        m = to_measurement(raw, self.profile)
-        image = self.reconstruct(m)
-        frame = self.interpreter.interpret(image, raw.timestamp_ns, raw.frame_id)
-        frame.latency_ms = (time.perf_counter() - t0) * 1e3
+        s = self.profile.sensor
+        black = np.full((s.rows, s.cols, len(s.channels)), self.profile.noise.black_level_dn, np.float32)
+        self.reconstruct(Measurement(black, self.profile.noise.black_level_dn))
+        _ = self.lut
+        return time.perf_counter() - t0
+
+    # -- the stages of process() and stream() --------------------------------------------
+    def _bin_stage(self, item: _InFlight) -> None:
+        t0 = time.perf_counter()
+        item.measurement = to_measurement(item.raw, self.profile)
+        item.compute_ms += (time.perf_counter() - t0) * 1e3
+
+    def _decode_stage(self, item: _InFlight) -> None:
+        assert item.measurement is not None
+        t0 = time.perf_counter()
+        item.image = self.reconstruct(item.measurement)
+        item.measurement = None  # the binned frame is not needed any more
+        item.compute_ms += (time.perf_counter() - t0) * 1e3
+
+    def _interpret_stage(self, item: _InFlight) -> None:
+        assert item.image is not None
+        t0 = time.perf_counter()
+        raw = item.raw
+        frame = self.interpreter.interpret(item.image, raw.timestamp_ns, raw.frame_id)
+        item.compute_ms += (time.perf_counter() - t0) * 1e3
+        frame.latency_ms = item.compute_ms
         if "scene" in raw.meta:
             frame.meta["scene"] = raw.meta["scene"]
-        return frame
+        item.frame = frame
 
     def read(self) -> TactileFrame:
         """The next tactile frame (the first ``reference_frames`` make the reference)."""
@@ -308,9 +374,17 @@ class Sensor:
     ) -> Iterator[TactileFrame]:
         """Tactile frames as they come, newest first: a slow consumer never gets a backlog.
 
-        A capture thread reads the camera continuously and a processing thread turns the
-        newest raw frame into a tactile frame; each ``next()`` returns the newest tactile
-        frame not yet returned. Frames skipped on the way are counted in :attr:`stats`.
+        A pipeline of threads (capture → Bayer binning → decode → tactile interpretation)
+        works on consecutive frames at once, so the frame rate is bounded by the slowest
+        stage, not by the sum of the stages. Between stages a one-frame mailbox holds the
+        newest frame only: a stage that falls behind skips to the newest input, so no stale
+        frame is queued anywhere, and each ``next()`` returns the newest tactile frame not
+        yet returned. Skipped frames are counted in :attr:`stats`; ``frame.meta["age_ms"]``
+        is the time from the frame's arrival from the camera to its delivery.
+
+        The decoder is built and warmed up (:meth:`warm_up`) before the first read, so its
+        one-off cost (e.g. measuring the backends on a new host) never counts against
+        ``timeout_s``.
 
         Parameters
         ----------
@@ -323,17 +397,26 @@ class Sensor:
         from thintact_sdk.errors import DeviceTimeoutError
 
         wait = self.read_timeout_s if timeout_s is None else timeout_s
+        self._camera()
+        warm_up_s = self.warm_up()
         self._start_threads()
+        self.stats.warm_up_s = warm_up_s
         try:
             n = 0
             while max_frames is None or n < max_frames:
-                frame = self._frames.get(wait, self._stop)
+                item = self._frames.get(wait, self._stop)
                 if self._stream_error is not None:
                     raise self._stream_error
-                if frame is None:
+                if item is None:
                     raise DeviceTimeoutError(
                         f"no tactile frame from {self.profile.name!r} within {wait:.1f} s"
                     )
+                frame = item.frame
+                now = time.monotonic_ns()
+                age_ms = (now - item.arrived_ns) / 1e6
+                frame.meta["age_ms"] = age_ms
+                self.stats.age_ms.append(age_ms)
+                self.stats.waited_ms_max = max(self.stats.waited_ms_max, (now - item.completed_ns) / 1e6)
                 self.stats.delivered += 1
                 n += 1
                 yield frame
@@ -347,13 +430,21 @@ class Sensor:
         self._stop.clear()
         self._stream_error = None
         self._raws = _Latest()
+        self._measurements = _Latest()
+        self._images = _Latest()
         self._frames = _Latest()
         self.stats = StreamStats()
-        self._threads = [
-            threading.Thread(target=self._capture_loop, name=f"{self.profile.name}-capture",
-                             daemon=True),
-            threading.Thread(target=self._process_loop, name=f"{self.profile.name}-process",
-                             daemon=True),
+        name = self.profile.name
+        stages = [
+            ("bin", self._raws, self._measurements, self._bin_stage),
+            ("decode", self._measurements, self._images, self._decode_stage),
+            ("interpret", self._images, self._frames, self._interpret_stage),
+        ]
+        self._threads = [threading.Thread(target=self._capture_loop, name=f"{name}-capture", daemon=True)]
+        self._threads += [
+            threading.Thread(target=self._stage_loop, args=(inbox, outbox, work, label == "interpret"),
+                             name=f"{name}-{label}", daemon=True)
+            for label, inbox, outbox, work in stages
         ]
         for t in self._threads:
             t.start()
@@ -362,8 +453,8 @@ class Sensor:
         if not self._threads:
             return
         self._stop.set()
-        self._raws.wake()
-        self._frames.wake()
+        for box in (self._raws, self._measurements, self._images, self._frames):
+            box.wake()
         for t in self._threads:
             t.join(timeout=5.0)
         self._threads = []
@@ -376,22 +467,28 @@ class Sensor:
                     raw = cam.read(timeout_s=self.read_timeout_s)
                 self.stats.captured += 1
                 self.stats.camera_dropped += self.gaps.update(raw.frame_id)
-                if self._raws.put(raw):
+                if self._raws.put(_InFlight(raw, time.monotonic_ns())):
                     self.stats.skipped += 1
         except BaseException as err:  # noqa: BLE001 - handed to the consumer
             self._stream_error = err
             self._stop.set()
 
-    def _process_loop(self) -> None:
+    def _stage_loop(self, inbox: _Latest, outbox: _Latest, work: Any, last: bool) -> None:
+        """One pipeline stage: take the newest item of ``inbox``, ``work(item)``, pass it on."""
         try:
             while not self._stop.is_set():
-                raw = self._raws.get(0.1, self._stop)
-                if raw is None:
+                item = inbox.get(0.1, self._stop)
+                if item is None:
                     continue
-                frame = self.process(raw)
-                self.stats.processed += 1
-                if self._frames.put(frame):
-                    self.stats.consumer_dropped += 1
+                work(item)
+                if last:
+                    self.stats.processed += 1
+                    item.completed_ns = time.monotonic_ns()
+                if outbox.put(item):
+                    if last:
+                        self.stats.consumer_dropped += 1
+                    else:
+                        self.stats.skipped += 1
         except BaseException as err:  # noqa: BLE001 - handed to the consumer
             self._stream_error = err
             self._stop.set()

@@ -2,8 +2,11 @@
 
 Per-frame latency from a uint16 binned raw frame (1024 × 1280 × 3, black level included) in
 memory to the 400 × 512 × 3 scene, of the non-iterative decoders (the paper's joint-filter
-decoder and this SDK's exact closed form of the full T2S problem) on numpy and torch, in
-float32 and (torch) bfloat16 products; the iterative T2S baseline (Nesterov, 800 iterations)
+decoder and this SDK's exact closed form of the full T2S problem) on every backend that is real
+on this host (numpy and torch float32; torch bfloat16 products only where the CPU has them
+natively; CUDA/MPS when present), each with its GEMM FLOPs and roofline ratio (frame time over
+those FLOPs at the float32 GEMM rate measured in the same run), the work before mode
+truncation for comparison, and the backend a decoder would choose here; the iterative T2S baseline (Nesterov, 800 iterations)
 timed over a few iterations and extrapolated; their ratio; PSNR/SSIM of all of them on white,
 USAF and GelSight scenes simulated with the full simulator plus sensor noise; MLS vs the
 masks plugin's GA design (uniformity of the white reconstruction and PSNR).
@@ -18,9 +21,11 @@ from __future__ import annotations
 
 import argparse
 import json
+import tempfile
 import time
 from collections.abc import Callable
 from functools import partial
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -144,9 +149,13 @@ def run(args: argparse.Namespace) -> int:
         T2SClosedFormDecoder,
         T2SIterativeDecoder,
     )
+    from thintact_decoders.backend_cache import BackendCache
+    from thintact_decoders.candidates import candidate_specs
+    from thintact_decoders.selection import Probe, select_backend
 
-    from thintact_sdk.machine import machine_summary
+    from thintact_sdk.machine import host_capabilities, machine_summary
     from thintact_sdk.profile import load_profile
+    from thintact_sdk.roofline import measure_sgemm_gflops, roofline_ratio
 
     console = Console(stderr=True)
     t_start = time.perf_counter()
@@ -167,19 +176,41 @@ def run(args: argparse.Namespace) -> int:
             "tau": {"thintact-noniterative": tau_ni, "t2s-closed-form / iterative": tau_cf},
             "latency_ms": {}, "quality": {},
         }
-        configs = [("numpy", "float32", None), ("torch", "float32", None), ("torch", "float32", "bfloat16")]
+        builders: dict[str, Callable[..., Any]] = {
+            "thintact-noniterative": partial(NonIterativeDecoder, dev.sm, dev.filter, tau_ni),
+            "t2s-closed-form": partial(T2SClosedFormDecoder, dev.sm, tau_cf),
+        }
+        caps = host_capabilities()
+        result["host"] = caps.lines()
+        specs = candidate_specs(caps)
+        result["roofline"] = {}
         raw = dev.raw[2]
-        for be_name, dtype, gemm in configs:
-            be = ArrayBackend(be_name, dtype, gemm_dtype=gemm)
-            tag = f"{be_name}-{gemm or dtype}"
+        (r, s), (n, _) = dev.sm.sensor_shape, dev.sm.scene_shape
+        # (tag, backend, mode_rtol): every real backend of this host with the default mode
+        # truncation, and numpy float32 with every mode (the work before truncation)
+        runs: list[tuple[str, Any, float | None]] = [(spec.key, spec.make(), None) for spec in specs]
+        runs.append(("numpy-float32, all modes", ArrayBackend("numpy", "float32"), 0.0))
+        for tag, be, rtol in runs:
             say(f"timing non-iterative decoders ({tag})")
-            for label, dec in (
-                ("thintact-noniterative", NonIterativeDecoder(dev.sm, dev.filter, tau_ni, be)),
-                ("t2s-closed-form", T2SClosedFormDecoder(dev.sm, tau_cf, be)),
-            ):
+            for label, build in builders.items():
+                dec = build(be) if rtol is None else build(be, mode_rtol=rtol)
                 key = f"{label} [{tag}]"
-                result["latency_ms"][key] = round(_median_ms(_raw_call(dec, raw, black), args.repeats), 2)
+                sgemm = measure_sgemm_gflops(dev.sm.channels, n, r, s)  # same run, same load
+                ms = _median_ms(_raw_call(dec, raw, black), args.repeats)
+                result["latency_ms"][key] = round(ms, 2)
                 result["quality"][key] = _quality(_from_signal(dec, black), dev)
+                flops = dec.gemm_flops()
+                result["roofline"][key] = {
+                    "gemm_gflop": float(f"{flops / 1e9:.4g}"), "sgemm_gflops": float(f"{sgemm:.4g}"),
+                    "ratio": float(f"{roofline_ratio(ms, flops, sgemm):.4g}"), "kept_modes": list(dec.kept_modes)}
+        say("backend selection as a decoder does it (measured now, not cached)")
+        probes = [Probe(dev.raw[i], black, dev.scenes[i]) for i in (1, 2)]
+        result["backend_choice"] = {}
+        with tempfile.TemporaryDirectory() as tmp:
+            for label, build in builders.items():
+                _, choice = select_backend(build, lambda: probes, specs, f"bench|{label}",
+                                           cache=BackendCache(Path(tmp) / "backends.json"))
+                result["backend_choice"][label] = choice.summary()
         say("oracle open-term removal")
         oracle = NonIterativeDecoder(dev.sm, None, tau_ni)
         result["quality"][ORACLE] = _quality(
@@ -263,16 +294,26 @@ def _print(result: dict[str, Any], as_json: bool) -> None:
               f"(sensor {result['sensor']}, scene {result['scene']}), wall {result['wall_s']} s", style="bold")
     con.print(f"two-term fit error vs simulator: {result['two_term_fit_relative_error']:.2%}; "
               f"filter: {result['filter']}; tau: {result['tau']}")
-    tab = Table("decoder [backend]", "ms/frame", "white dB", "USAF dB", "GelSight dB", "SSIM G",
-                "white CV")
+    for line in result.get("host", []):
+        con.print(f"host: {line}")
+    tab = Table("decoder [backend]", "ms/frame", "GFLOP", "roofline", "white dB", "USAF dB", "GelSight dB",
+                "SSIM G", "white CV")
+    roof = result.get("roofline", {})
     for key, q in result["quality"].items():
         ms = result["latency_ms"].get(key)
         if key == "t2s-iterative-800":
             ms = result["iterative800"]["latency_ms_extrapolated"]
-        tab.add_row(key, f"{ms:.1f}" if ms is not None else "-", str(q["white"]["psnr_db"]),
-                    str(q["usaf"]["psnr_db"]), str(q["gelsight"]["psnr_db"]), str(q["gelsight"]["ssim"]),
-                    str(q["white"]["uniformity"]["cv"]))
+        rf = roof.get(key)
+        tab.add_row(key, f"{ms:.1f}" if ms is not None else "-",
+                    f"{rf['gemm_gflop']:.2f}" if rf else "-",
+                    f"{rf['ratio']:.2f} @ {rf['sgemm_gflops']:.0f} GFLOP/s" if rf else "-",
+                    str(q["white"]["psnr_db"]), str(q["usaf"]["psnr_db"]), str(q["gelsight"]["psnr_db"]),
+                    str(q["gelsight"]["ssim"]), str(q["white"]["uniformity"]["cv"]))
     con.print(tab)
+    con.print("roofline: frame time / (GEMM FLOPs at this host's float32 GEMM rate, measured just "
+              "before each decoder at its largest product shape)")
+    for label, summary in result.get("backend_choice", {}).items():
+        con.print(f"backend chosen for {label}: {summary}")
     for form in ("gram", "direct"):
         it = result[f"iterative800_{form}"]
         con.print(f"iterative-800 ({form} gradient): {it['latency_ms_extrapolated']:.0f} ms; {it['measured']}")

@@ -5,9 +5,13 @@ Every factory is ``factory(profile, settings) -> Decoder``. The calibration bund
 ``settings["bundle"]`` / ``settings["calibration"]`` / ``profile.decoder.calibration`` or, for
 virtual profiles, the newest bundle under ``calibrations/<profile.name>/``.
 
-Common settings: ``tau`` (overrides the bundle's), ``backend`` (``"numpy"`` default or
-``"torch"``), ``dtype`` (``"float32"``), ``device`` (torch), ``gemm_dtype`` (torch:
-``"bfloat16"`` for speed). ``thintact-noniterative`` also takes ``fold`` and ``max_rank``;
+Common settings: ``tau`` (overrides the bundle's), ``dtype`` (``"float32"``). The array backend
+of the closed-form decoders is chosen by measurement on this host
+(:mod:`thintact_decoders.selection`); ``backend`` (``"numpy"``/``"torch"``), ``device`` and
+``gemm_dtype`` in the settings, or ``THINTACT_BACKEND=torch-float32`` etc. in the environment,
+are preferences honoured only where not more than 20 % slower than the best.
+``mode_rtol`` (closed-form decoders) drops Tikhonov modes whose filter factor is below it
+(default :data:`~thintact_decoders.modes.DEFAULT_MODE_RTOL`). ``thintact-noniterative`` also takes ``fold`` and ``max_rank``;
 ``t2s-iterative`` takes ``iterations`` (800). ``t2s-closed-form`` (this SDK's extension: the
 exact full-T2S Tikhonov minimiser without iterations, see :mod:`thintact_decoders.t2s_closed_form`)
 takes ``open_rtol`` and ``max_open_rank`` and uses the bundle's ``tau_t2s_closed_form`` if present.
@@ -15,18 +19,31 @@ takes ``open_rtol`` and ``max_open_rank`` and uses the bundle's ``tau_t2s_closed
 
 from __future__ import annotations
 
+import os
+import warnings
+from collections.abc import Callable
 from typing import Any
 
 import thintact_sdk
 from thintact_decoders.backend import ArrayBackend
+from thintact_decoders.candidates import candidate_specs, parse_preference, preference_from_settings
 from thintact_decoders.flatcam import FlatCamDecoder
 from thintact_decoders.identity import IdentityDecoder, make_identity
 from thintact_decoders.iterative import T2SIterativeDecoder
 from thintact_decoders.loading import resolve_bundle
+from thintact_decoders.modes import DEFAULT_MODE_RTOL
 from thintact_decoders.noniterative import NonIterativeDecoder
+from thintact_decoders.selection import BackendPreferenceWarning, make_probes, select_backend
 from thintact_decoders.t2s_closed_form import T2SClosedFormDecoder
 from thintact_sdk.errors import CalibrationError
+from thintact_sdk.imaging.t2s import SystemMatrices
+from thintact_sdk.interfaces import Decoder
+from thintact_sdk.machine import host_capabilities, host_fingerprint
 from thintact_sdk.profile import Profile
+
+REMEASURE_ENV = "THINTACT_BACKEND_REMEASURE"  # set (not "0"): measure again, replace the cached record
+EMULATED_BF16 = ("bfloat16 is emulated in software on this CPU (no AVX512-BF16, AMX or BF16 flag), "
+                 "about 100x slower than float32")
 
 __all__ = [
     "ArrayBackend",
@@ -39,15 +56,48 @@ __all__ = [
 
 
 def _backend(settings: dict[str, Any]) -> ArrayBackend:
+    """The backend the settings name (the iterative baseline: not measured), emulated
+    bfloat16 replaced by the working precision with a warning."""
+    gemm = settings.get("gemm_dtype")
+    if gemm == "bfloat16" and not host_capabilities().native_bf16:
+        warnings.warn(f"gemm_dtype bfloat16 not used: {EMULATED_BF16}", BackendPreferenceWarning, stacklevel=3)
+        gemm = None
     try:
         return ArrayBackend(
             str(settings.get("backend", "numpy")),
             dtype=str(settings.get("dtype", "float32")),
             device=settings.get("device"),
-            gemm_dtype=settings.get("gemm_dtype"),
+            gemm_dtype=gemm,
         )
     except ValueError as err:
         raise CalibrationError(f"decoder settings: {err}") from None
+
+
+def _selected(name: str, profile: Profile, settings: dict[str, Any], sm: SystemMatrices,
+              build: Callable[[ArrayBackend], Decoder]) -> Decoder:
+    """``build`` on the backend measured fastest (and accurate) for this host and operator."""
+    dtype = str(settings.get("dtype", "float32"))
+    caps = host_capabilities()
+    env = os.environ.get("THINTACT_BACKEND", "").strip()
+    try:
+        if env:
+            preferred, source = parse_preference(env, dtype), "THINTACT_BACKEND"
+        else:
+            preferred, source = preference_from_settings(settings, dtype), "decoder.settings"
+    except ValueError as err:
+        where = "THINTACT_BACKEND" if env else "decoder settings"
+        raise CalibrationError(f"{where}: {err}") from None
+    not_candidates = {} if caps.native_bf16 else {"torch-bfloat16": EMULATED_BF16}
+    (r, s), (n, m) = sm.sensor_shape, sm.scene_shape
+    key = f"{host_fingerprint(caps)}|{name}|{sm.channels}x{r}x{s}->{n}x{m}|{dtype}"
+    decoder, _ = select_backend(
+        build, lambda: make_probes(sm, profile.noise), candidate_specs(caps, dtype),
+        key, preferred, source, not_candidates, remeasure=os.environ.get(REMEASURE_ENV, "") not in ("", "0"))
+    return decoder
+
+
+def _mode_rtol(settings: dict[str, Any]) -> float:
+    return float(settings.get("mode_rtol", DEFAULT_MODE_RTOL))
 
 
 def _tau(bundle_tau: float, settings: dict[str, Any], profile: Profile) -> float:
@@ -65,10 +115,11 @@ def make_noniterative(profile: Profile, settings: dict[str, Any]) -> NonIterativ
     bundle = resolve_bundle(profile, settings)
     if bundle.filter is None:
         raise CalibrationError(f"calibration {bundle.path} has no filter.npz: the non-iterative decoder needs one")
-    return NonIterativeDecoder(
-        bundle.system_matrices, bundle.filter, _tau(bundle.tau, settings, profile), _backend(settings),
-        fold=str(settings.get("fold", "auto")), max_rank=int(settings.get("max_rank", 8)),
-    )
+    tau, jf = _tau(bundle.tau, settings, profile), bundle.filter
+    return _selected("thintact-noniterative", profile, settings, bundle.system_matrices,
+                     lambda xp: NonIterativeDecoder(
+                         bundle.system_matrices, jf, tau, xp, fold=str(settings.get("fold", "auto")),
+                         max_rank=int(settings.get("max_rank", 8)), mode_rtol=_mode_rtol(settings)))  # type: ignore[return-value]
 
 
 def make_iterative(profile: Profile, settings: dict[str, Any]) -> T2SIterativeDecoder:
@@ -84,18 +135,20 @@ def make_iterative(profile: Profile, settings: dict[str, Any]) -> T2SIterativeDe
 def make_flatcam(profile: Profile, settings: dict[str, Any]) -> FlatCamDecoder:
     """Build the FlatCam closed-form decoder for ``profile``."""
     bundle = resolve_bundle(profile, settings)
-    return FlatCamDecoder(bundle.system_matrices, _tau(bundle.tau, settings, profile), _backend(settings))
+    tau = _tau(bundle.tau, settings, profile)
+    return _selected("flatcam", profile, settings, bundle.system_matrices,
+                     lambda xp: FlatCamDecoder(bundle.system_matrices, tau, xp, _mode_rtol(settings)))  # type: ignore[return-value]
 
 
 def make_t2s_closed_form(profile: Profile, settings: dict[str, Any]) -> T2SClosedFormDecoder:
     """Build the exact non-iterative full-T2S decoder for ``profile``."""
     bundle = resolve_bundle(profile, settings)
     tau = _tau(float(bundle.meta.get("tau_t2s_closed_form", bundle.tau)), settings, profile)
-    return T2SClosedFormDecoder(
-        bundle.system_matrices, tau, _backend(settings),
-        open_rtol=float(settings.get("open_rtol", 1e-6)),
-        max_open_rank=int(settings.get("max_open_rank", 8)),
-    )
+    return _selected("t2s-closed-form", profile, settings, bundle.system_matrices,
+                     lambda xp: T2SClosedFormDecoder(
+                         bundle.system_matrices, tau, xp, open_rtol=float(settings.get("open_rtol", 1e-6)),
+                         max_open_rank=int(settings.get("max_open_rank", 8)),
+                         mode_rtol=_mode_rtol(settings)))  # type: ignore[return-value]
 
 
 @thintact_sdk.hookimpl

@@ -110,6 +110,18 @@ class ArrayBackend:
         """Sum over one axis."""
         return a.sum(axis=axis) if self.name == "numpy" else a.sum(dim=axis)
 
+    def pad_to(self, a: Any, rows: int, cols: int) -> Any:
+        """``C × r × c`` → ``C × rows × cols``, zeros in the new rows and columns (``a`` itself
+        when it already has that shape)."""
+        c, r, k = a.shape
+        if (r, k) == (rows, cols):
+            return a
+        if self.name == "numpy":
+            out = np.zeros((c, rows, cols), a.dtype)
+            out[:, :r, :k] = a
+            return out
+        return self._torch.nn.functional.pad(a, (0, cols - k, 0, rows - r))
+
     def sum_squares(self, a: Any) -> float:
         """``Σ a²`` as a Python float."""
         return float((a * a).sum())
@@ -131,9 +143,21 @@ class ArrayBackend:
     def synthesise(self, vp: Any, coef: Any, vqt: Any) -> np.ndarray:
         """``vp @ coef @ vqt`` (``C × N × kP``, ``C × kP × kQ``, ``C × kQ × M``; ``vp``/``vqt`` in
         GEMM precision) → ``N × M × C`` float32 numpy: the last products of every closed-form
-        decoder, in GEMM precision like the first ones."""
-        return self.channels_last(vp @ self.cast(coef, gemm=True) @ vqt)
+        decoder, in GEMM precision like the first ones, in the cheaper order
+        (:func:`synthesis_macs`)."""
+        coef = self.cast(coef, gemm=True)
+        n, kp = vp.shape[-2:]
+        kq, m = vqt.shape[-2:]
+        if n * kq * (kp + m) <= kp * m * (kq + n):
+            return self.channels_last((vp @ coef) @ vqt)
+        return self.channels_last(vp @ (coef @ vqt))
 
     def channels_last(self, a: Any) -> np.ndarray:
         """``C × N × M`` on this backend → ``N × M × C`` float32 numpy."""
         return np.ascontiguousarray(np.moveaxis(self.to_numpy(a), 0, -1), dtype=np.float32)
+
+
+def synthesis_macs(n: int, kp: int, kq: int, m: int) -> int:
+    """Multiply-adds of ``(N × kP) (kP × kQ) (kQ × M)`` in the cheaper of the two orders:
+    ``N·kQ·(kP + M)`` (left first) or ``kP·M·(kQ + N)`` (right first)."""
+    return min(n * kq * (kp + m), kp * m * (kq + n))

@@ -11,7 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from thintact_decoders.backend import ArrayBackend
+from thintact_decoders.backend import ArrayBackend, synthesis_macs
+from thintact_decoders.modes import DEFAULT_MODE_RTOL, kept_mode_counts
 from thintact_decoders.shapes import check_measurement_shape
 from thintact_sdk.imaging.t2s import SystemMatrices
 from thintact_sdk.imaging.tikhonov import TikhonovSolver
@@ -33,25 +34,38 @@ class FlatCamDecoder(Decoder):
         Tikhonov weight τ.
     backend
         :class:`ArrayBackend` (default numpy float32).
+    mode_rtol
+        Tikhonov modes whose filter factor stays below this are not computed
+        (:func:`~thintact_decoders.modes.kept_mode_counts`).
     """
 
     name = "flatcam"
 
-    def __init__(self, system_matrices: SystemMatrices, tau: float, backend: ArrayBackend | None = None) -> None:
+    def __init__(self, system_matrices: SystemMatrices, tau: float, backend: ArrayBackend | None = None,
+                 mode_rtol: float = DEFAULT_MODE_RTOL) -> None:
         self.xp = backend or ArrayBackend("numpy")
         sm = system_matrices
         self.channels = sm.channels
         self.sensor_shape = sm.sensor_shape
+        self.scene_shape = sm.scene_shape
         solvers = [
             TikhonovSolver(_centred(sm.Pc[c].astype(np.float64)), _centred(sm.Qc[c].astype(np.float64)), tau)
             for c in range(sm.channels)
         ]
+        kp, kq = kept_mode_counts(np.stack([s.singular_values_p for s in solvers]),
+                                  np.stack([s.singular_values_q for s in solvers]), tau, mode_rtol)
+        self.kept_modes = (kp, kq)
         xp = self.xp
-        self._left = xp.asarray(np.stack([s.left for s in solvers]), gemm=True)
-        self._right = xp.asarray(np.stack([s.right for s in solvers]), gemm=True)
-        self._inv_denom = xp.asarray(np.stack([s.inv_denom for s in solvers]))
-        self._vp = xp.asarray(np.stack([s.vp for s in solvers]), gemm=True)
-        self._vqt = xp.asarray(np.stack([s.vqt for s in solvers]), gemm=True)
+        self._left = xp.asarray(np.stack([s.left[:kp] for s in solvers]), gemm=True)
+        self._right = xp.asarray(np.stack([s.right[:, :kq] for s in solvers]), gemm=True)
+        self._inv_denom = xp.asarray(np.stack([s.inv_denom[:kp, :kq] for s in solvers]))
+        self._vp = xp.asarray(np.stack([s.vp[:, :kp] for s in solvers]), gemm=True)
+        self._vqt = xp.asarray(np.stack([s.vqt[:kq] for s in solvers]), gemm=True)
+
+    def gemm_flops(self) -> int:
+        """Floating-point operations of the matrix products of one frame, all channels."""
+        (r, s), (n, m), (kp, kq) = self.sensor_shape, self.scene_shape, self.kept_modes
+        return 2 * self.channels * (kp * r * s + kp * s * kq + synthesis_macs(n, kp, kq, m))
 
     def decode(self, signal: np.ndarray) -> np.ndarray:
         """Reconstruct ``N × M × C`` float32 from ``R × S × C`` DN above black."""

@@ -21,7 +21,8 @@ from typing import Any
 
 import numpy as np
 
-from thintact_decoders.backend import ArrayBackend
+from thintact_decoders.backend import ArrayBackend, synthesis_macs
+from thintact_decoders.modes import DEFAULT_MODE_RTOL, kept_mode_counts
 from thintact_decoders.shapes import check_measurement_shape
 from thintact_sdk.imaging.dct import dct2, dct_matrix, idct2
 from thintact_sdk.imaging.recon_filter import JointFilter
@@ -90,6 +91,10 @@ class NonIterativeDecoder(Decoder):
         approximation whose cost must be measured).
     max_rank, block
         Limits for folding (``block`` = ``(kr, ks)``, only for ``"approx"``).
+    mode_rtol
+        Tikhonov modes whose filter factor stays below this are not computed
+        (:func:`~thintact_decoders.modes.kept_mode_counts`; 0 keeps all).
+        :attr:`kept_modes` says how many of P's and Q's were kept.
     """
 
     name = "thintact-noniterative"
@@ -103,11 +108,13 @@ class NonIterativeDecoder(Decoder):
         fold: str = "auto",
         max_rank: int = 8,
         block: tuple[int, int] | None = None,
+        mode_rtol: float = DEFAULT_MODE_RTOL,
     ) -> None:
         if fold not in ("auto", "never", "approx"):
             raise ValueError(f"fold must be 'auto', 'never' or 'approx', got {fold!r}")
         self.xp = backend or ArrayBackend("numpy")
         self.tau = float(tau)
+        self.mode_rtol = float(mode_rtol)
         sm = system_matrices
         self.channels = sm.channels
         self.sensor_shape = sm.sensor_shape
@@ -115,11 +122,14 @@ class NonIterativeDecoder(Decoder):
         solvers = [TikhonovSolver(sm.Pc[c], sm.Qc[c], self.tau, np.float64) for c in range(sm.channels)]
         left = np.stack([s.left for s in solvers])  # C × kP × R
         right = np.stack([s.right for s in solvers])  # C × S × kQ
-        self.k_p = left.shape[1]
+        self._sp = np.stack([s.singular_values_p for s in solvers])  # C × kP
+        self._sq = np.stack([s.singular_values_q for s in solvers])  # C × kQ
         self.folded = False
         self.filter_info: dict[str, Any] = {"filter": joint_filter is not None}
         self._jf = joint_filter
-        big_left = left
+        self._full: dict[str, np.ndarray] = {"left": left, "right": right,
+                                             "vp": np.stack([s.vp for s in solvers]),
+                                             "vqt": np.stack([s.vqt for s in solvers])}
         if joint_filter is not None:
             kr, ks, rank, factors = filter_structure(joint_filter, max_rank)
             r, s = self.sensor_shape
@@ -131,8 +141,8 @@ class NonIterativeDecoder(Decoder):
             self.filter_info.update(kr=kr, ks=ks, phi_s_rank=rank)
             if fold != "never" and foldable:
                 self.folded = True
-                big_left, self._lcat, self._rcat, self._phif = self._fold(left, right, joint_filter,
-                                                                          kr, ks, rank, factors)
+                self._full["dk"], self._full["lcat"], self._full["rcat"], self._phif = self._fold(
+                    left, right, joint_filter, kr, ks, rank, factors)
                 self._ek_t = self.xp.asarray(dct_matrix(s)[:ks].T, gemm=True)  # S × ks
                 self.kr, self.rank = kr, rank
             elif self.xp.name == "torch":
@@ -141,26 +151,59 @@ class NonIterativeDecoder(Decoder):
                 self._pf = self.xp.asarray(joint_filter.phi_f)
                 self._ps = self.xp.asarray(joint_filter.phi_s)
         self.filter_info["folded"] = self.folded
-        self._big_left = self.xp.asarray(big_left, gemm=True)
-        self._right = self.xp.asarray(right, gemm=True)
-        self._sig2 = np.stack([np.outer(s.singular_values_p**2, s.singular_values_q**2) for s in solvers])
-        self._inv_denom = self.xp.asarray(1.0 / (self._sig2 + self.tau))
-        self._vp = self.xp.asarray(np.stack([s.vp for s in solvers]), gemm=True)
-        self._vqt = self.xp.asarray(np.stack([s.vqt for s in solvers]), gemm=True)
+        self.kept_modes = (0, 0)
+        self._place(*kept_mode_counts(self._sp, self._sq, self.tau, self.mode_rtol))
+
+    def _place(self, kp: int, kq: int) -> None:
+        """Put the operators of the leading ``kp × kq`` modes on the backend (contiguous)."""
+        xp, full = self.xp, self._full
+        self.kept_modes = (kp, kq)
+        self.k_p = kp
+        big_left = full["left"][:, :kp]
+        if self.folded:
+            c, r = self.channels, self.sensor_shape[0]
+            dk = full["dk"]
+            big_left = np.concatenate([big_left, np.broadcast_to(dk, (c, dk.shape[0], r))], axis=1)
+            rcat = full["rcat"]
+            ks = rcat.shape[1]
+            self._lcat = xp.asarray(full["lcat"][:, :kp])  # C × kp × (rank·kr)
+            self._rcat = xp.asarray(rcat.reshape(c, ks, self.rank, -1)[..., :kq].reshape(c, ks, -1))
+        self._big_left = xp.asarray(big_left, gemm=True)
+        self._right = xp.asarray(full["right"][..., :kq], gemm=True)
+        self._sig2 = np.einsum("ci,cj->cij", self._sp[:, :kp] ** 2, self._sq[:, :kq] ** 2)
+        self._inv_denom = xp.asarray(1.0 / (self._sig2 + self.tau))
+        self._vp = xp.asarray(full["vp"][..., :kp], gemm=True)
+        self._vqt = xp.asarray(full["vqt"][:, :kq], gemm=True)
         self._unit_core: Any = None
 
     def set_tau(self, tau: float) -> None:
-        """Change τ without recomputing the SVDs (the black-level constant is unaffected)."""
+        """Change τ without recomputing the SVDs (the modes kept follow the new τ)."""
         if tau <= 0:
             raise ValueError("tau must be > 0")
         self.tau = float(tau)
-        self._inv_denom = self.xp.asarray(1.0 / (self._sig2 + self.tau))
+        kept = kept_mode_counts(self._sp, self._sq, self.tau, self.mode_rtol)
+        if kept != self.kept_modes:
+            self._place(*kept)
+        else:
+            self._inv_denom = self.xp.asarray(1.0 / (self._sig2 + self.tau))
+
+    def gemm_flops(self) -> int:
+        """Floating-point operations of the matrix products of one frame, all channels."""
+        c, (r, s), (n, m) = self.channels, self.sensor_shape, self.scene_shape
+        kp, kq = self.kept_modes
+        rows = kp + (self.kr if self.folded else 0)
+        flops = rows * r * s + kp * s * kq + synthesis_macs(n, kp, kq, m)
+        if self.folded:
+            ks = self._ek_t.shape[-1]
+            flops += self.kr * s * ks + self.kr * ks * self.rank * kq + kp * self.rank * self.kr * kq
+        return 2 * c * flops
 
     # -- precomputation ----------------------------------------------------------------
     def _fold(
         self, left: np.ndarray, right: np.ndarray, jf: JointFilter, kr: int, ks: int, rank: int,
         factors: list[tuple[np.ndarray, np.ndarray]],
-    ) -> tuple[np.ndarray, Any, Any, Any]:
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, Any]:
+        """``(D_k, L_cat, R_cat, Φf block)``: float64 numpy except Φf (on the backend)."""
         r, s = self.sensor_shape
         dk = dct_matrix(r)[:kr]  # kr × R
         ek = dct_matrix(s)[:ks]  # ks × S
@@ -174,10 +217,8 @@ class NonIterativeDecoder(Decoder):
                 rs.append((ek * vt[j][None, :]) @ right[c])  # ks × kQ
             lcats.append(np.concatenate(ls, axis=1))  # kP × (rank·kr)
             rcats.append(np.concatenate(rs, axis=1))  # ks × (rank·kQ)
-        big_left = np.concatenate([left, np.broadcast_to(dk, (self.channels, kr, r))], axis=1)
         phif = jf.phi_f[:, :kr, :ks].astype(np.float64)
-        return (big_left, self.xp.asarray(np.stack(lcats)), self.xp.asarray(np.stack(rcats)),
-                self.xp.asarray(phif))
+        return dk, np.stack(lcats), np.stack(rcats), self.xp.asarray(phif)
 
     # -- the per-frame work ------------------------------------------------------------
     def _core(self, y: Any) -> Any:
@@ -208,10 +249,10 @@ class NonIterativeDecoder(Decoder):
                 y32 = xp.cast(y_cf, gemm=False)
                 f = self._ps * (xp.swap(self._dr) @ (self._pf * (self._dr @ y32 @ xp.swap(self._ds))) @ self._ds)
                 y_cf = xp.cast(y32 - f, gemm=True)
-        core = self._core(y_cf)
+        core = self._core(y_cf)  # this frame's own array: updated in place
         if black_dn:
-            core = core - black_dn * self._black_core()
-        core = core * self._inv_denom
+            core -= black_dn * self._black_core()
+        core *= self._inv_denom
         return xp.synthesise(self._vp, core, self._vqt)
 
     def _black_core(self) -> Any:

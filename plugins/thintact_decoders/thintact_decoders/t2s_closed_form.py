@@ -26,7 +26,8 @@ from typing import Any
 
 import numpy as np
 
-from thintact_decoders.backend import ArrayBackend
+from thintact_decoders.backend import ArrayBackend, synthesis_macs
+from thintact_decoders.modes import DEFAULT_MODE_RTOL, kept_mode_counts
 from thintact_decoders.shapes import check_measurement_shape
 from thintact_sdk.imaging.t2s import SystemMatrices
 from thintact_sdk.imaging.tikhonov import TikhonovSolver
@@ -54,6 +55,11 @@ class T2SClosedFormDecoder(Decoder):
     open_rtol, max_open_rank
         Singular values of Po, Qo kept: above ``open_rtol`` × the largest, at most
         ``max_open_rank`` per axis. ``truncation`` in :attr:`info` reports what was dropped.
+    mode_rtol
+        The coding term ``Σ_P U_Pᵀ Y U_Q Σ_Q`` (the two big products) is computed only for
+        the Tikhonov modes whose filter factor reaches this
+        (:func:`~thintact_decoders.modes.kept_mode_counts`); the rest of the solve keeps
+        every mode. :attr:`kept_modes` says how many were kept.
     """
 
     name = "t2s-closed-form"
@@ -65,6 +71,7 @@ class T2SClosedFormDecoder(Decoder):
         backend: ArrayBackend | None = None,
         open_rtol: float = 1e-6,
         max_open_rank: int = 8,
+        mode_rtol: float = DEFAULT_MODE_RTOL,
     ) -> None:
         self.xp = backend or ArrayBackend("numpy")
         sm = system_matrices
@@ -82,7 +89,7 @@ class T2SClosedFormDecoder(Decoder):
         kq = max(len(v[4]) for v in svds)
         self._kp, self._kq = kp, kq
         per: dict[str, list[np.ndarray]] = {key: [] for key in (
-            "left", "right", "den", "vp", "vqt", "uq", "scale", "a", "b", "a2", "b2", "small", "sig2")}
+            "left", "up_t", "right", "sp", "sq", "den", "vp", "vqt", "uq", "scale", "a", "b", "a2", "b2", "small", "sig2")}
         self.info: dict[str, Any] = {"open_rank": [], "dropped_open_sv": []}
         self._parts: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
         for c in range(sm.channels):
@@ -96,8 +103,11 @@ class T2SClosedFormDecoder(Decoder):
             part = (np.concatenate([a, a2], 1), np.concatenate([b, b2], 1), np.outer(sp**2, sq**2), sig2)
             self._parts.append(part)
             per["small"].append(_small_inverse(part, kp, kq, self.tau))
-            per["left"].append(np.concatenate([sol.left, up.T], axis=0))  # (kP + kp) × R
+            per["left"].append(sol.left)  # kP × R
+            per["up_t"].append(up.T)  # kp × R
             per["right"].append(sol.right)
+            per["sp"].append(sol.singular_values_p)
+            per["sq"].append(sol.singular_values_q)
             per["den"].append(sol.inv_denom)
             per["sig2"].append(sig2)
             per["vp"].append(sol.vp)
@@ -111,10 +121,14 @@ class T2SClosedFormDecoder(Decoder):
             full_q = np.linalg.svd(sm.Qo[c].astype(np.float64), compute_uv=False)
             self.info["dropped_open_sv"].append([_dropped_fraction(full_p, len(svds[c][1])),
                                                  _dropped_fraction(full_q, len(svds[c][4]))])
-        self.k_p = per["left"][0].shape[0] - kp
         xp = self.xp
-        self._left = xp.asarray(np.stack(per["left"]), gemm=True)
-        self._right = xp.asarray(np.stack(per["right"]), gemm=True)
+        self.mode_rtol = float(mode_rtol)
+        self._coding_left, self._up_t = np.stack(per["left"]), np.stack(per["up_t"])
+        self._coding_right = np.stack(per["right"])
+        self._sp, self._sq = np.stack(per["sp"]), np.stack(per["sq"])  # C × kP, C × kQ
+        self._full_modes = (self._coding_left.shape[1], self._coding_right.shape[2])
+        self.kept_modes = (0, 0)
+        self._place(*kept_mode_counts(self._sp, self._sq, self.tau, self.mode_rtol))
         self._uq = xp.asarray(np.stack(per["uq"]), gemm=True)  # C × S × kq
         st = {key: xp.asarray(np.stack(per[key]), gemm=key in ("vp", "vqt"))
               for key in ("den", "vp", "vqt", "scale", "a", "b", "a2", "b2", "small", "sig2")}
@@ -123,11 +137,35 @@ class T2SClosedFormDecoder(Decoder):
         self._sig2 = st["sig2"]  # σ_P,i² σ_Q,j² of Pc, Qc
         self._unit: Any = None
 
+    def _place(self, kp: int, kq: int) -> None:
+        """Put the big products' operators for the leading ``kp × kq`` coding modes (and the
+        open term's ``E`` rows) on the backend, contiguous."""
+        xp = self.xp
+        self.kept_modes = (kp, kq)
+        self.k_p = kp
+        self._left = xp.asarray(np.concatenate([self._coding_left[:, :kp], self._up_t], axis=1), gemm=True)
+        self._right = xp.asarray(self._coding_right[..., :kq], gemm=True)
+        self._unit = None
+
+    def gemm_flops(self) -> int:
+        """Floating-point operations of the matrix products of one frame, all channels."""
+        (r, s), (n, m) = self.sensor_shape, self.scene_shape
+        (kp, kq), (big_p, big_q) = self.kept_modes, self._full_modes
+        ko_p, ko_q = self._kp, self._kq
+        big = (kp + ko_p) * r * s + kp * s * kq + ko_p * s * ko_q
+        # a e bᵀ and the two correction terms (3×), the projections aᵀ ξ b and a2ᵀ ξ b2 (2×)
+        woodbury = 3 * (big_p * ko_p * ko_q + big_p * ko_q * big_q) + 2 * (ko_p * big_p * big_q + ko_p * big_q * ko_q)
+        return 2 * self.channels * (big + woodbury + synthesis_macs(n, big_p, big_q, m))
+
     def set_tau(self, tau: float) -> None:
-        """Change τ without recomputing any SVD (only the 2K × 2K system and ``1/(σ² + τ)``)."""
+        """Change τ without recomputing any SVD (only the 2K × 2K system and ``1/(σ² + τ)``;
+        the coding modes kept follow the new τ)."""
         if tau <= 0:
             raise ValueError("tau must be > 0")
         self.tau = float(tau)
+        kept = kept_mode_counts(self._sp, self._sq, self.tau, self.mode_rtol)
+        if kept != self.kept_modes:
+            self._place(*kept)
         xp = self.xp
         self._den = xp.asarray(np.stack([1.0 / (p[3] + self.tau) for p in self._parts]))
         self._small = xp.asarray(np.stack([_small_inverse(p, self._kp, self._kq, self.tau)
@@ -136,8 +174,8 @@ class T2SClosedFormDecoder(Decoder):
     def _linear(self, y: Any) -> tuple[Any, Any]:
         """``(Σ_P U_Pᵀ Y U_Q Σ_Q, Eᵀ Y)`` for channel-first ``y`` (GEMM precision)."""
         xp = self.xp
-        t = self._left @ y  # C × (kP + kp) × S
-        core = xp.cast(t[:, : self.k_p] @ self._right, gemm=False)
+        t = self._left @ y  # C × (kept kP + kp) × S
+        core = xp.pad_to(xp.cast(t[:, : self.k_p] @ self._right, gemm=False), *self._full_modes)
         e = xp.cast(t[:, self.k_p :] @ self._uq, gemm=False) * self._scale  # C × kp × kq
         return core, e
 
@@ -148,10 +186,12 @@ class T2SClosedFormDecoder(Decoder):
             if self._unit is None:
                 ones = np.ones((self.channels, *self.sensor_shape), np.float32)
                 self._unit = self._linear(xp.asarray(ones, gemm=True))
-            core = core - black_dn * self._unit[0]
-            e = e - black_dn * self._unit[1]
+            core -= black_dn * self._unit[0]  # core and e are this frame's own arrays:
+            e = e - black_dn * self._unit[1]  # updated in place, no per-frame temporaries
         a, b, a2, b2 = self._a, self._b, self._a2, self._b2
-        xi0 = self._den * (core + a @ e @ xp.swap(b))  # Hc⁻¹ b in SVD coefficients
+        xi0 = core
+        xi0 += a @ e @ xp.swap(b)
+        xi0 *= self._den  # Hc⁻¹ b in SVD coefficients
         c = core.shape[0]
         k = self._kp * self._kq
         w = xp.contiguous(xp.swap(a) @ xi0 @ b).reshape(c, k, 1)
@@ -159,8 +199,11 @@ class T2SClosedFormDecoder(Decoder):
         coef = self._small @ xp.cat([w, w2], axis=1)
         cf = xp.contiguous(coef[:, :k]).reshape(c, self._kp, self._kq)
         cg = xp.contiguous(coef[:, k:]).reshape(c, self._kp, self._kq)
-        xi = xi0 - self._den * (a @ cf @ xp.swap(b) + a2 @ cg @ xp.swap(b2))
-        return xp.synthesise(self._vp, xi, self._vqt)
+        correction = a @ cf @ xp.swap(b)
+        correction += a2 @ cg @ xp.swap(b2)
+        correction *= self._den
+        xi0 -= correction
+        return xp.synthesise(self._vp, xi0, self._vqt)
 
     def _normal_op(self, xi: Any) -> Any:
         """``AᵀA`` in SVD coefficients: ``(σ_P² σ_Qᵀ²) ⊙ ξ + W Mmid Wᵀ ξ`` (τ excluded)."""

@@ -1,0 +1,109 @@
+"""Which array backends are real on this host, and how a preference names one.
+
+A backend is named by a key ``<engine>-<gemm precision>``: ``numpy-float32``,
+``torch-float32``, ``torch-bfloat16`` (CPU bfloat16 products), ``cuda-float32``,
+``mps-float32``. Only backends that run in hardware here are candidates: bfloat16 on a CPU
+without native support (AVX512-BF16, AMX, Arm BF16) is emulated in software, ~100× slower
+than float32, and is never measured nor chosen.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from thintact_decoders.backend import ArrayBackend
+from thintact_sdk.machine import HostCapabilities
+
+
+@dataclass(frozen=True)
+class BackendSpec:
+    """How to build one :class:`ArrayBackend`.
+
+    Attributes
+    ----------
+    engine
+        ``"numpy"`` or ``"torch"``.
+    device
+        torch device (``"cpu"``, ``"cuda"``, ``"mps"``); ``"cpu"`` for numpy.
+    dtype
+        Working precision (``"float32"``, ``"float64"``).
+    gemm_dtype
+        Precision of the large products (``dtype`` or ``"bfloat16"``).
+    """
+
+    engine: str
+    device: str = "cpu"
+    dtype: str = "float32"
+    gemm_dtype: str = "float32"
+
+    @property
+    def key(self) -> str:
+        """``numpy-float32``, ``torch-bfloat16``, ``cuda-float32``, …"""
+        head = self.engine if self.device == "cpu" else self.device
+        return f"{head}-{self.gemm_dtype}"
+
+    def make(self) -> ArrayBackend:
+        """The backend object."""
+        return ArrayBackend(self.engine, self.dtype, device=self.device, gemm_dtype=self.gemm_dtype)
+
+
+def candidate_specs(caps: HostCapabilities, dtype: str = "float32", torch_available: bool | None = None,
+                    ) -> list[BackendSpec]:
+    """Backends worth measuring on a host with ``caps``, working precision ``dtype``.
+
+    numpy always; torch on the CPU when importable; CPU bfloat16 products only when
+    ``caps.native_bf16``; CUDA / MPS when ``caps.gpus`` lists them.
+    """
+    if torch_available is None:
+        torch_available = caps.torch is not None
+    specs = [BackendSpec("numpy", "cpu", dtype, dtype)]
+    if not torch_available:
+        return specs
+    specs.append(BackendSpec("torch", "cpu", dtype, dtype))
+    if caps.native_bf16 and dtype == "float32":
+        specs.append(BackendSpec("torch", "cpu", dtype, "bfloat16"))
+    if any(g.startswith("cuda") for g in caps.gpus):
+        specs.append(BackendSpec("torch", "cuda", dtype, dtype))
+    if "mps" in caps.gpus and dtype == "float32":
+        specs.append(BackendSpec("torch", "mps", dtype, dtype))
+    return specs
+
+
+def parse_preference(text: str, dtype: str = "float32") -> BackendSpec:
+    """A backend named by a user: a key (``torch-bfloat16``) or an engine / device alone
+    (``numpy``, ``torch``, ``cuda``, ``mps``: working precision for the products).
+
+    Raises
+    ------
+    ValueError
+        For a name that is none of those.
+    """
+    head, _, gemm = text.strip().lower().partition("-")
+    gemm = gemm or dtype
+    if gemm not in ("float32", "float64", "bfloat16"):
+        raise ValueError(f"backend {text!r}: precision must be float32, float64 or bfloat16")
+    if head == "numpy" and gemm == "bfloat16":
+        raise ValueError(f"backend {text!r}: bfloat16 products need torch (torch-bfloat16)")
+    if head in ("numpy", "torch"):
+        return BackendSpec(head, "cpu", dtype, gemm)
+    if head in ("cuda", "mps"):
+        return BackendSpec("torch", head, dtype, gemm)
+    raise ValueError(f"backend {text!r}: expected numpy, torch, cuda or mps (optionally -float32/-bfloat16)")
+
+
+def preference_from_settings(settings: dict[str, object], dtype: str = "float32") -> BackendSpec | None:
+    """The backend a profile's ``decoder.settings`` asks for (``backend``, ``device``,
+    ``gemm_dtype``), or None when it names none."""
+    if "backend" not in settings and "gemm_dtype" not in settings and "device" not in settings:
+        return None
+    engine = str(settings.get("backend", "torch" if "device" in settings or "gemm_dtype" in settings
+                              else "numpy"))
+    device = str(settings.get("device") or "cpu")
+    if engine == "numpy" and device != "cpu":
+        raise ValueError(f"decoder settings: device {device!r} needs backend torch")
+    gemm = str(settings.get("gemm_dtype") or dtype)
+    if engine == "numpy" and gemm == "bfloat16":
+        raise ValueError("decoder settings: gemm_dtype bfloat16 needs backend torch")
+    if engine not in ("numpy", "torch"):
+        raise ValueError(f"decoder settings: backend must be 'numpy' or 'torch', got {engine!r}")
+    return BackendSpec(engine, device, dtype, gemm)

@@ -1,0 +1,130 @@
+"""Sensor.stream as a pipeline: stages overlap, the decoder warms up outside the read
+timeout, frames carry their age. Stages are slowed with sleeps (no CPU), so the figures
+hold on a loaded machine."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+from tac_fakes import SLOTS, BlockDecoder, block_profile, make_registry
+
+import thintact_sdk
+from thintact_sdk.frames import TactileFrame
+from thintact_sdk.profile import DecoderConfig
+from thintact_sdk.sensor import Sensor
+from thintact_sdk.tactile import TactileSimulator, scene_level_lut
+
+STAGE_S = 0.06
+
+
+class SlowDecoder(BlockDecoder):
+    """Block decoder taking ``STAGE_S`` per frame, and ``first_s`` extra on its first decode."""
+
+    def __init__(self, first_s: float = 0.0) -> None:
+        self.first_s = first_s
+        self.calls = 0
+
+    def decode(self, signal: np.ndarray) -> np.ndarray:
+        self.calls += 1
+        time.sleep(STAGE_S + (self.first_s if self.calls == 1 else 0.0))
+        return super().decode(signal)
+
+
+class _SlowStartPlugin:
+    """A decoder whose construction takes 1.2 s (as backend selection on a new host)."""
+
+    @thintact_sdk.hookimpl
+    def thintact_decoders(self):
+        def build(profile, settings):
+            time.sleep(1.2)
+            return SlowDecoder(first_s=0.8)
+
+        return [thintact_sdk.Component("tac-slow-start", build, "test")]
+
+
+@pytest.fixture(scope="module")
+def profile():
+    return block_profile()
+
+
+@pytest.fixture(scope="module")
+def lut(profile):
+    return scene_level_lut(profile)
+
+
+@pytest.fixture(autouse=True)
+def _flat_scene(profile):
+    SLOTS["tac-block"] = TactileSimulator.for_profile(profile).flat().scene
+    yield
+    SLOTS.clear()
+
+
+def _slow_interpreter(sensor: Sensor) -> None:
+    """Interpretation that takes ``STAGE_S`` and no CPU (so the test holds under load)."""
+
+    def slow(image, timestamp_ns, frame_id):
+        time.sleep(STAGE_S)
+        empty = np.zeros((0, 2), np.float32)
+        return TactileFrame(image, np.zeros(image.shape[:2], np.float32), empty, empty, False, 0.0,
+                            timestamp_ns, frame_id)
+
+    sensor.interpreter.interpret = slow  # type: ignore[method-assign]
+
+
+def test_stream_overlaps_decode_and_interpretation(profile, lut) -> None:
+    """Decode and interpretation take ≥ 60 ms each. One after the other, frames/s × the
+    compute time per frame (bin + decode + interpret) cannot exceed 1; pipelined it is ~2."""
+    with Sensor(profile, registry=make_registry(), lut=lut, decoder=SlowDecoder(),
+                camera_settings={"fps": 100.0}) as s:
+        _slow_interpreter(s)
+        frames = []
+        t0 = 0.0
+        for frame in s.stream(max_frames=16, timeout_s=5.0):
+            if not frames:
+                t0 = time.perf_counter()
+            frames.append(frame)
+        fps = (len(frames) - 1) / (time.perf_counter() - t0)
+    compute_s = float(np.mean([f.latency_ms for f in frames])) / 1e3
+    assert fps * compute_s > 1.3, f"{fps:.1f} fps at {compute_s * 1e3:.0f} ms per frame: no overlap"
+    ids = [f.frame_id for f in frames]
+    assert ids == sorted(ids) and len(set(ids)) == len(ids)
+    assert all(f.latency_ms is not None and f.latency_ms >= 2 * STAGE_S * 1e3 * 0.9 for f in frames)
+    ages = [f.meta["age_ms"] for f in frames]
+    assert list(s.stats.age_ms) == ages and min(ages) >= 2 * STAGE_S * 1e3 * 0.9
+    assert s.stats.age_percentile_ms(50) <= s.stats.age_percentile_ms(99)
+
+
+def test_decoder_warm_up_does_not_count_against_the_read_timeout(profile, lut) -> None:
+    """Building the decoder (1.2 s) and its first decode (0.8 s extra) exceed the 0.5 s read
+    timeout; the stream still delivers its first frame."""
+    reg = make_registry()
+    reg.register(_SlowStartPlugin(), "tac-slow-start")
+    slow = profile.model_copy(update={"decoder": DecoderConfig(plugin="tac-slow-start")}, deep=True)
+    with Sensor(slow, registry=reg, lut=lut, read_timeout_s=0.5, camera_settings={"fps": 50.0}) as s:
+        frame = next(s.stream(max_frames=1))
+        assert frame.frame_id >= 1
+        assert s.stats.warm_up_s >= 2.0
+        assert isinstance(s.decoder, SlowDecoder) and s.decoder.calls >= 2
+
+
+def test_warm_up_does_not_touch_the_reference(profile, lut) -> None:
+    with Sensor(profile, registry=make_registry(), lut=lut, reference_frames=2) as s:
+        assert s.warm_up() >= 0.0
+        assert s.interpreter._ref_count == 0
+
+
+def test_bench_tactile_reports_streamed_fps_and_latency_percentiles(profile, lut) -> None:
+    from tac_fakes import BlockCamera
+
+    from thintact_sdk.benchmarks.tactile import _streamed_fps
+
+    cam = BlockCamera(profile, {})
+    cam.open()
+    raws = [cam.read() for _ in range(3)]
+    sensor = Sensor(profile, registry=make_registry(), lut=lut, decoder=BlockDecoder())
+    stream = _streamed_fps(profile, raws, sensor, frames=4, budget_s=2.0)
+    assert stream["fps"] > 0 and stream["processed"] >= 2
+    assert 0 < stream["latency_p50_ms"] <= stream["latency_p99_ms"]
+    assert stream["waited_ms_max"] >= 0 and stream["warm_up_s"] >= 0
