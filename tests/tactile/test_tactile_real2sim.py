@@ -45,6 +45,7 @@ def test_resumed_training_is_bit_identical_to_an_uninterrupted_run(tmp_path: Pat
     second.run()
     a, b = _weights(tmp_path / "a" / "generator.pt"), _weights(tmp_path / "b" / "generator.pt")
     assert a.keys() == b.keys()
+    assert all(np.isfinite(r["cycle"]) and np.isfinite(r["d"]) for r in straight.history)
     for k in a:
         assert torch.equal(a[k], b[k]), k
     # the training moved the weights at all

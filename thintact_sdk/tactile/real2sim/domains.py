@@ -85,9 +85,12 @@ def simulated_presses(
     ball_radius_mm: float,
     depth_range_mm: tuple[float, float] = (0.4, 1.5),
     seed: int = 0,
+    noise_std: float = 0.01,
 ) -> np.ndarray:
     """The sim domain: ``count`` marker-free ball presses at random places and depths,
-    plus the flat membrane as image 0.
+    plus the flat membrane as image 0, each with Gaussian camera noise of ``noise_std``
+    (display units; a real camera's images are never exactly uniform, and an exactly uniform
+    training crop makes instance normalisation's gradient blow up to NaN).
 
     Returns
     -------
@@ -108,4 +111,6 @@ def simulated_presses(
         centre = (float(rng.uniform(-half_w, half_w)), float(rng.uniform(-half_h, half_h)))
         out.append(sim.press(Sphere(ball_radius_mm), float(rng.uniform(*depth_range_mm)),
                              centre).scene)
-    return np.stack(out).astype(np.float32)
+    images = np.stack(out)
+    images += noise_std * rng.standard_normal(images.shape)
+    return np.clip(images, 0.0, 1.0).astype(np.float32)

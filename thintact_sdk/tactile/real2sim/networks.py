@@ -18,7 +18,7 @@ def _conv_norm_relu(c_in: int, c_out: int, k: int, stride: int = 1) -> list[nn.M
     return [
         nn.Conv2d(c_in, c_out, k, stride, pad, padding_mode="reflect"),
         nn.InstanceNorm2d(c_out),
-        nn.ReLU(inplace=True),
+        nn.ReLU(),
     ]
 
 
@@ -72,12 +72,12 @@ class PatchDiscriminator(nn.Module):
 
     def __init__(self, width: int = 32, layers: int = 3, channels: int = 3) -> None:
         super().__init__()
-        mods: list[nn.Module] = [nn.Conv2d(channels, width, 4, 2, 1), nn.LeakyReLU(0.2, True)]
+        mods: list[nn.Module] = [nn.Conv2d(channels, width, 4, 2, 1), nn.LeakyReLU(0.2)]
         c = width
         for i in range(1, layers):
             stride = 2 if i < layers - 1 else 1
             mods += [nn.Conv2d(c, 2 * c, 4, stride, 1), nn.InstanceNorm2d(2 * c),
-                     nn.LeakyReLU(0.2, True)]
+                     nn.LeakyReLU(0.2)]
             c *= 2
         mods.append(nn.Conv2d(c, 1, 4, 1, 1))
         self.net = nn.Sequential(*mods)

@@ -203,6 +203,10 @@ class Real2SimTrainer:
         ident = (torch.mean(torch.abs(m.real_to_sim(sim) - sim))
                  + torch.mean(torch.abs(m.sim_to_real(real) - real)))
         g_loss = adv + cfg.cycle_weight * cycle + cfg.identity_weight * ident
+        if not torch.isfinite(g_loss):
+            raise ThinTactError(
+                f"real2sim training diverged at iteration {self.iteration + 1} (non-finite "
+                f"loss); the last checkpoint is at iteration {self.iteration - self.iteration % cfg.checkpoint_every}")
         self.opt_g.zero_grad(set_to_none=True)
         g_loss.backward()
         self.opt_g.step()
