@@ -49,6 +49,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="device whose tactile working grid sets the frame size")
     b.add_argument("--frames", type=int, default=50)
     b.add_argument("--device", default="auto", choices=("auto", "cpu", "cuda"))
+    b.add_argument("--threads", type=int, default=None,
+                   help="torch CPU threads (default: torch's own choice)")
     b.set_defaults(func=run_bench)
 
 
@@ -122,14 +124,17 @@ def run_bench(args: argparse.Namespace) -> int:
     import time
 
     import numpy as np
+    import torch
 
     from thintact_sdk.machine import machine_summary
     from thintact_sdk.profile import load_profile
     from thintact_sdk.tactile.interpreter import TactileInterpreter
     from thintact_sdk.tactile.real2sim.translate import Real2SimTranslator
 
-    if args.frames < 3:
-        raise ThinTactError("--frames must be ≥ 3")
+    if args.frames < 3 or (args.threads is not None and args.threads < 1):
+        raise ThinTactError("--frames must be ≥ 3 and --threads ≥ 1")
+    if args.threads is not None:
+        torch.set_num_threads(args.threads)
     translator = Real2SimTranslator.load(args.generator, args.device)
     work = TactileInterpreter(load_profile(args.profile)).work
     shapes: list[tuple[int, ...]] = [(work.rows, work.cols, 3)]
