@@ -164,6 +164,11 @@ class TactileConfig(_Section):
     mm_per_px: float | None = Field(default=None, gt=0, description="scene pixel size in mm")
     contact_threshold_mm: float = Field(default=0.1, gt=0)
     lut: str | None = Field(default=None, description="photometric-stereo LUT file")
+    real2sim: str | None = Field(
+        default=None,
+        description="Real2Sim generator file (thintact real2sim train): real images are "
+        "translated to simulation-like ones before photometric stereo",
+    )
     marker_pitch_mm: float = Field(default=1.5, gt=0)
     marker_diameter_mm: float = Field(default=0.5, gt=0)
 

@@ -80,27 +80,49 @@ def evaluate_gelsight(
         LUT nodes per colour axis.
     """
     pack = load_pack(path)
-    n = len(pack["imgs"])
-    train = list(range(0, n, 2)) if train is None else list(train)
-    test = [i for i in range(n) if i not in set(train)]
-    f0 = pack["f0"].astype(np.float32) / 255.0
-    rng = np.random.default_rng(0)
-    feats, gxs, gys, valids = [], [], [], []
-    rr, cc = np.mgrid[0 : f0.shape[0], 0 : f0.shape[1]]
-    for i in train:
-        img = pack["imgs"][i].astype(np.float32) / 255.0
-        gx, gy, inside = _slopes(pack, i, 0.9)
-        cx, cy = pack["touch_center"][i]
-        far = np.hypot(rr - cy, cc - cx) > 1.6 * pack["touch_radius"][i]
-        feats.append(img - f0)
-        gxs.append(gx)
-        gys.append(gy)
-        valids.append(inside | (far & (rng.random(far.shape) < 0.1)))
-    lut = calibrate_lut(feats, gxs, gys, valids, bins=bins, meta={"source": "taxim-gelsight"})
+    images = pack["imgs"].astype(np.float32) / 255.0
+    return evaluate_images(pack, images, pack["f0"].astype(np.float32) / 255.0, train, bins)
+
+
+def split_presses(count: int, train: list[int] | None = None) -> tuple[list[int], list[int]]:
+    """``(train, test)`` press indices: ``train`` (default: the even ones) and the rest."""
+    train = list(range(0, count, 2)) if train is None else sorted(set(train))
+    return train, [i for i in range(count) if i not in set(train)]
+
+
+def evaluate_images(
+    pack: dict[str, np.ndarray],
+    images: np.ndarray,
+    reference: np.ndarray,
+    train: list[int] | None = None,
+    bins: int = 24,
+    lut: PhotometricLUT | None = None,
+) -> GelSightEvaluation:
+    """Photometric stereo on the pack's presses, given as ``images`` (``P × H × W × 3`` in
+    [0, 1]: the pack's own or a translation of them) against ``reference``.
+
+    A LUT is calibrated on the ``train`` presses with the annotated ball-cap slopes unless
+    ``lut`` is given (then ``train`` only defines the held-out presses); it is tested on the
+    others, inside 0.9 of their annotated circles.
+    """
+    train, test = split_presses(len(images), train)
+    f0 = np.asarray(reference, np.float32)
+    if lut is None:
+        rng = np.random.default_rng(0)
+        feats, gxs, gys, valids = [], [], [], []
+        rr, cc = np.mgrid[0 : f0.shape[0], 0 : f0.shape[1]]
+        for i in train:
+            gx, gy, inside = _slopes(pack, i, 0.9)
+            cx, cy = pack["touch_center"][i]
+            far = np.hypot(rr - cy, cc - cx) > 1.6 * pack["touch_radius"][i]
+            feats.append(images[i] - f0)
+            gxs.append(gx)
+            gys.append(gy)
+            valids.append(inside | (far & (rng.random(far.shape) < 0.1)))
+        lut = calibrate_lut(feats, gxs, gys, valids, bins=bins, meta={"source": "taxim-gelsight"})
     g_err, g_zero, d_err, peaks = [], [], [], []
     for i in test:
-        img = pack["imgs"][i].astype(np.float32) / 255.0
-        gx, gy = lut.lookup(img - f0)
+        gx, gy = lut.lookup(images[i] - f0)
         tx, ty, inside = _slopes(pack, i, 0.9)
         g_err.append(np.hypot(gx - tx, gy - ty)[inside])
         g_zero.append(np.hypot(tx, ty)[inside])

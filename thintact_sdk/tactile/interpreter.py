@@ -9,6 +9,7 @@ the markers against the reference frame.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from typing import Any
 
 import cv2
@@ -112,6 +113,10 @@ class TactileInterpreter:
     reference_frames
         Without :meth:`set_reference`, the mean of the first this-many images becomes the
         reference (reconstruction noise in the reference would bias every frame).
+    translator
+        Applied to every image on the working grid before anything else (Real2Sim: real
+        images made simulation-like, :class:`~thintact_sdk.tactile.real2sim.Real2SimTranslator`);
+        ``H × W × 3`` in [0, 1] → the same.
 
     The first image interpreted becomes the reference (no-contact) frame unless
     :meth:`set_reference` is called first.
@@ -126,6 +131,7 @@ class TactileInterpreter:
         max_work_mm: float = 0.13,
         smooth_px: float = 1.0,
         reference_frames: int = 1,
+        translator: Callable[[np.ndarray], np.ndarray] | None = None,
     ) -> None:
         self.params = TactileParams.from_profile(profile)
         self.factor = working_factor(self.params, max_work_mm)
@@ -142,6 +148,7 @@ class TactileInterpreter:
         self.reference_frames = max(1, int(reference_frames))
         self._ref_sum: np.ndarray | None = None
         self._ref_count = 0
+        self.translator = translator
 
     @classmethod
     def for_profile(cls, profile: Profile, **options: Any) -> TactileInterpreter:
@@ -150,6 +157,11 @@ class TactileInterpreter:
         :func:`thintact_sdk.tactile.store.lut_for_profile`)."""
         from thintact_sdk.tactile.store import lut_for_profile
 
+        if profile.tactile is not None and profile.tactile.real2sim and "translator" not in options:
+            from thintact_sdk.tactile.real2sim.translate import Real2SimTranslator
+
+            options["translator"] = Real2SimTranslator.load(
+                profile.resolve_path(profile.tactile.real2sim))
         return cls(profile, lut_for_profile(profile), **options)
 
     @property
@@ -166,7 +178,7 @@ class TactileInterpreter:
 
     def set_reference(self, image: np.ndarray) -> None:
         """Use ``image`` (``N × M × 3``, no contact) as background and marker reference."""
-        img = bin_image(self._check(image), self.factor)
+        img = self._work_image(self._check(image))
         det = detect_markers(img, self.work, self.marker_threshold)
         self.background = fill_masked(img, det.mask, self._sigma_px)
         self.reference_markers_mm = det.positions_mm
@@ -185,6 +197,11 @@ class TactileInterpreter:
             )
         return img
 
+    def _work_image(self, full: np.ndarray) -> np.ndarray:
+        """The image binned to the working grid, translated when a translator is set."""
+        img = bin_image(full, self.factor)
+        return img if self.translator is None else self.translator(img)
+
     def _work_depth(self, img: np.ndarray, marker_mask: np.ndarray | None) -> np.ndarray:
         """Depth (mm, ≥ 0) on the working grid from a working-grid image."""
         if self.background is None:
@@ -198,7 +215,7 @@ class TactileInterpreter:
 
     def depth_from_image(self, image: np.ndarray) -> np.ndarray:
         """Depth map (``N × M`` float32 mm, ≥ 0) of one image against the reference."""
-        img = bin_image(self._check(image), self.factor)
+        img = self._work_image(self._check(image))
         det = detect_markers(img, self.work, self.marker_threshold)
         return upsample(self._work_depth(img, det.mask), self.factor)
 
@@ -216,7 +233,7 @@ class TactileInterpreter:
         full = self._check(image)
         if self.background is None or 0 < self._ref_count < self.reference_frames:
             self._accumulate_reference(full)
-        img = bin_image(full, self.factor)
+        img = self._work_image(full)
         det = detect_markers(img, self.work, self.marker_threshold)
         depth = upsample(self._work_depth(img, det.mask), self.factor)
         contact, area, _ = self.contact(depth)
