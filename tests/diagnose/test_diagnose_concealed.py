@@ -127,7 +127,8 @@ def test_dust_speck_flagged_where_it_is(concealed: Any) -> None:
                 strict=False,
             ),
         ),
-        "dim_column",
+        "dim_column", "mask_rotation_035", "pair_rotation_refraction", "pair_rotation_diffraction",
+        "triple_rotation_diffraction_stray", "triple_rotation_refraction_gamma",
     ],
 )
 def test_concealed_matrix(concealed: Any, case: str) -> None:

@@ -186,7 +186,7 @@ def _build() -> dict[str, Candidate]:
     cands.append(
         Candidate("mask_misalignment", "optical", ("angle_deg", "dx_um", "dy_um"), _const(0, 0, 0),
                   _const(0.3, 5.0, 5.0), _const(-10.0, -500.0, -500.0), _const(10.0, 500.0, 500.0),
-                  _mis_to, _mis_from, signed=(True, True, True), slow_params=(0,))
+                  _mis_to, _mis_from, signed=(True, True, True))
     )
     to, frm = _scalar("mask_leakage", "transmittance")
     cands.append(
