@@ -173,11 +173,10 @@ def rotated_terms(
             continue
         rx = int(np.sum(np.any(b_x[v] != 0, axis=(1, 2, 3))))
         ry = int(np.sum(np.any(b_y[v] != 0, axis=(1, 2, 3))))
-        for ll in range(exp.rank):
-            for j in range(rx):
-                for i in range(ry):
-                    terms.append(SeparableTerm(coef * u_x[v, j] * b_y[v, i, ll],
-                                               b_x[v, j, ll] * u_y[v, i], part))
+        block = [SeparableTerm(coef * u_x[v, j] * b_y[v, i, ll], b_x[v, j, ll] * u_y[v, i], part)
+                 for ll in range(exp.rank) for j in range(rx) for i in range(ry)]
+        # compressing each profile's block first keeps the Gram matrices small
+        terms += compress_terms(block, kp.compress_tol / 4)
     return compress_terms(terms, kp.compress_tol)
 
 
