@@ -28,6 +28,7 @@ end like the unrotated kernel's.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -39,6 +40,9 @@ from thintact_sdk.physics import diffraction, mask_leakage
 
 if TYPE_CHECKING:
     from thintact_sdk.imaging.simulator import KernelParams
+
+FactorDerivs = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]]
+"""The radiometric factors of one axis with their derivatives (see ``axis_term_matrices``)."""
 
 SHIFT_STEP_UM = 0.5
 """Largest step of the tabulated displacements (µm); the weights are interpolated by local
@@ -59,9 +63,13 @@ def pair_centres_mm(grid: AxisGrid, alpha: float, beta: float) -> np.ndarray:
 
 def _shift_family(
     grid: AxisGrid, alpha: float, beta: float, edges_mm: np.ndarray, values: np.ndarray,
-    factor_derivs: object, n_sub: int, t_lo: float, t_hi: float,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    factor_derivs: FactorDerivs, n_sub: int, t_lo: float, t_hi: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[int]]:
     """Compressed family of displaced one-axis matrices.
+
+    The profiles displaced by every node ``t`` of a grid over ``[t_lo, t_hi]`` (mm, with
+    margins) go through :func:`~thintact_sdk.imaging.sim_separable.axis_term_matrices`; per
+    profile the family is factored as ``A(t) ≈ Σ_j u_j(t)·B_j`` (SVD over the node index).
 
     Returns
     -------
@@ -72,13 +80,15 @@ def _shift_family(
         unused columns of lower-rank profiles are zero).
     basis
         ``(V, r, L, n_sensor, n_scene)`` basis matrices ``B_j`` per profile.
+    ranks
+        The rank kept for each profile.
     """
     width = min(alpha * grid.sensor_pitch_mm, beta * grid.scene_pitch_mm)
     step = min(SHIFT_STEP_UM * 1e-3, width / SHIFT_STEPS_PER_WIDTH)
     n = max(2, int(math.ceil((t_hi - t_lo) / step)) + 3)
     nodes = (t_lo + t_hi) / 2 + (np.arange(n) - (n - 1) / 2) * step
-    fam = axis_term_matrices(grid, alpha, beta, edges_mm, values, factor_derivs,  # type: ignore[arg-type]
-                             n_sub, shifts_mm=nodes)  # (T, V, L, r, n)
+    fam = axis_term_matrices(grid, alpha, beta, edges_mm, values, factor_derivs, n_sub,
+                             shifts_mm=nodes)  # (T, V, L, r, n)
     n_v = values.shape[0]
     per_v = []
     for v in range(n_v):
@@ -95,12 +105,13 @@ def _shift_family(
     for v, (u, b) in enumerate(per_v):
         weights[v, :, : u.shape[1]] = u
         basis[v, : b.shape[0]] = b.reshape((b.shape[0],) + fam.shape[2:])
-    return nodes, weights, basis
+    return nodes, weights, basis, [b.shape[0] for _, b in per_v]
 
 
 def _interp_weights(nodes: np.ndarray, weights: np.ndarray, t: np.ndarray) -> np.ndarray:
     """``(V, r) + t.shape``: the weights ``u_j`` at displacements ``t`` by local cubic
-    (4-point Lagrange) interpolation between the nodes (linear in the end intervals)."""
+    (4-point Lagrange) interpolation on the nodes nearest to each ``t`` (linear with fewer
+    than four nodes)."""
     n = nodes.size
     pos = np.clip((t - nodes[0]) / (nodes[1] - nodes[0]), 0.0, n - 1.000001)
     i0 = np.floor(pos).astype(np.int64)
@@ -160,9 +171,9 @@ def rotated_terms(
     t_y = s * (cx - dx)  # (S, M)
     ex, vx = profiles_x
     ey, vy = profiles_y
-    nodes_x, w_x, b_x = _shift_family(gx, alpha, beta, ex / c, vx, exp.fx_derivs, kp.n_sub,
+    nodes_x, w_x, b_x, ranks_x = _shift_family(gx, alpha, beta, ex / c, vx, exp.fx_derivs, kp.n_sub,
                                       dx - t_x.max() / c, dx - t_x.min() / c)
-    nodes_y, w_y, b_y = _shift_family(gy, alpha, beta, ey / c, vy, exp.gy_derivs, kp.n_sub,
+    nodes_y, w_y, b_y, ranks_y = _shift_family(gy, alpha, beta, ey / c, vy, exp.gy_derivs, kp.n_sub,
                                       dy + t_y.min() / c, dy + t_y.max() / c)
     # weights of the x family at each y pair, of the y family at each x pair
     u_x = _interp_weights(nodes_x, w_x, dx - t_x / c)  # (V, r_x, R, N)
@@ -171,8 +182,7 @@ def rotated_terms(
     for part, v, coef in pairs:
         if coef == 0:
             continue
-        rx = int(np.sum(np.any(b_x[v] != 0, axis=(1, 2, 3))))
-        ry = int(np.sum(np.any(b_y[v] != 0, axis=(1, 2, 3))))
+        rx, ry = ranks_x[v], ranks_y[v]
         block = [SeparableTerm(coef * u_x[v, j] * b_y[v, i, ll], b_x[v, j, ll] * u_y[v, i], part)
                  for ll in range(exp.rank) for j in range(rx) for i in range(ry)]
         # compressing each profile's block first keeps the Gram matrices small
