@@ -12,7 +12,8 @@ recording, outside it::
     OUT/<case>/truth.json      {"case", "physics", "defects", "gains_dn_per_unit", "note"}
 
 Cases: single effects at clear amplitudes, some below the per-pixel noise (visible only in
-aggregate), pairs, none at all, and defects outside the vocabulary (a dust speck: a small
+aggregate), pairs and triples (rotation with diffraction, rotation with refraction), none at
+all, and defects outside the vocabulary (a dust speck: a small
 dark Gaussian blot on the sensor; a dim column).
 
 Usage::
@@ -75,6 +76,35 @@ CASES: dict[str, dict[str, Any]] = {
     },
     "pair_angular_leakage": {
         "physics": {"pixel_angular_response": {"exponent": 4.0}, "mask_leakage": {"transmittance": 0.02}}
+    },
+    "mask_rotation_035": {"physics": {"mask_misalignment": {"angle_deg": 0.35, "dx_um": 0.0, "dy_um": 0.0}},
+                          "note": "the rotation an independent renderer saw recovered as 0.304 deg"},
+    "pair_rotation_diffraction": {
+        "physics": {
+            "diffraction": {"wavelength_nm": [625.0, 530.0, 465.0]},
+            "mask_misalignment": {"angle_deg": 0.3, "dx_um": 0.0, "dy_um": 0.0},
+        }
+    },
+    "pair_rotation_refraction": {
+        "physics": {
+            "refraction": {"n_scene_side": 1.41},
+            "mask_misalignment": {"angle_deg": 0.3, "dx_um": 0.0, "dy_um": 0.0},
+        }
+    },
+    # triples
+    "triple_rotation_diffraction_stray": {
+        "physics": {
+            "diffraction": {"wavelength_nm": [625.0, 530.0, 465.0]},
+            "mask_misalignment": {"angle_deg": 0.3, "dx_um": 0.0, "dy_um": 0.0},
+            "stray_light": {"mean_dn": [30.0, 25.0, 20.0]},
+        }
+    },
+    "triple_rotation_refraction_gamma": {
+        "physics": {
+            "refraction": {"n_scene_side": 1.41},
+            "mask_misalignment": {"angle_deg": 0.3, "dx_um": 0.0, "dy_um": 0.0},
+            "sensor_gamma": {"gamma": 0.93},
+        }
     },
     # defects outside the vocabulary
     "dust": {"physics": {}, "defects": [{"kind": "dust", "row": 40, "col": 110, "sigma_px": 2.5, "depth": 0.5}]},

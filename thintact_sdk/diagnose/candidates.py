@@ -49,6 +49,9 @@ class Candidate:
     channelwise
         Parameter i acts only on channel i (diffraction wavelengths), so one simulation
         with every parameter stepped gives every column of the Jacobian.
+    costly
+        Every simulation rebuilds an expensive kernel (the rotated mask's): its full fit may
+        use all the time left rather than a share of it.
     """
 
     name: str
@@ -63,6 +66,7 @@ class Candidate:
     channelwise: bool = False
     signed: tuple[bool, ...] = field(default=())
     slow_params: tuple[int, ...] = ()
+    costly: bool = False
 
     @property
     def k(self) -> int:
@@ -186,7 +190,7 @@ def _build() -> dict[str, Candidate]:
     cands.append(
         Candidate("mask_misalignment", "optical", ("angle_deg", "dx_um", "dy_um"), _const(0, 0, 0),
                   _const(0.3, 5.0, 5.0), _const(-10.0, -500.0, -500.0), _const(10.0, 500.0, 500.0),
-                  _mis_to, _mis_from, signed=(True, True, True), slow_params=(0,))
+                  _mis_to, _mis_from, signed=(True, True, True), costly=True)
     )
     to, frm = _scalar("mask_leakage", "transmittance")
     cands.append(

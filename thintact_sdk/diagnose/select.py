@@ -544,7 +544,8 @@ def select_effects(
             # one fit may use at most 40 % of the time left, so later rounds still happen
             # (a fit on the simulator's slow path needs every second it can get)
             fit_deadline = deadline
-            if deadline is not None and not CANDIDATES[res.name].slow_params:
+            cand = CANDIDATES[res.name]
+            if deadline is not None and not (cand.slow_params or cand.costly):
                 now = time.perf_counter()
                 fit_deadline = now + 0.4 * max(deadline - now, 0.0)
             try:

@@ -111,6 +111,7 @@ def box_box_integrals(
     values: np.ndarray,
     n_sub_sensor: int,
     n_sub_scene: int,
+    profile_shifts_mm: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Exact mask integrals over every (sensor sub-interval, scene sub-interval) pair.
 
@@ -125,12 +126,16 @@ def box_box_integrals(
     n_sub_sensor, n_sub_scene
         Sub-intervals per sensor and per scene pixel (the smooth radiometric factor is
         later evaluated at each sub-rectangle centre).
+    profile_shifts_mm
+        Optional ``(T,)`` displacements: the integrals of ``A(m - t)`` for each, stacked
+        in a leading axis of ``integrals``.
 
     Returns
     -------
     integrals
         ``(V, n_sensor, n_scene, n_sub_sensor, n_sub_scene)``:
-        ``∫∫ A(alpha·u + beta·s) du ds`` over each sub-rectangle, in mm².
+        ``∫∫ A(alpha·u + beta·s) du ds`` over each sub-rectangle, in mm² (with
+        ``profile_shifts_mm``: ``(T, V, ...)``).
     offsets_mm
         ``(n_sensor, n_scene, n_sub_sensor, n_sub_scene)``: ``s - u`` at each
         sub-rectangle centre in mm.
@@ -138,11 +143,15 @@ def box_box_integrals(
     ue = grid.sensor_edges_mm(n_sub_sensor)
     se = grid.scene_edges_mm(n_sub_scene)
     corners = alpha * ue[:, None] + beta * se[None, :]
-    d = second_antiderivative(edges_mm, values, corners)
-    box = (d[:, 1:, 1:] - d[:, :-1, 1:] - d[:, 1:, :-1] + d[:, :-1, :-1]) / (alpha * beta)
-    n_v = values.shape[0]
+    shifts = np.zeros(1) if profile_shifts_mm is None else np.asarray(profile_shifts_mm, float)
+    d = second_antiderivative(edges_mm, values, corners[None] - shifts[:, None, None])
+    d = np.moveaxis(d, 1, 0)  # (T, V, corners...)
+    box = (d[..., 1:, 1:] - d[..., :-1, 1:] - d[..., 1:, :-1] + d[..., :-1, :-1]) / (alpha * beta)
+    n_t, n_v = shifts.size, values.shape[0]
     r, n = grid.n_sensor, grid.n_scene
-    box = box.reshape(n_v, r, n_sub_sensor, n, n_sub_scene).transpose(0, 1, 3, 2, 4)
+    box = box.reshape(n_t, n_v, r, n_sub_sensor, n, n_sub_scene).transpose(0, 1, 2, 4, 3, 5)
+    if profile_shifts_mm is None:
+        box = box[0]
     uc = (ue[1:] + ue[:-1]) / 2
     sc = (se[1:] + se[:-1]) / 2
     off = sc[None, :] - uc[:, None]

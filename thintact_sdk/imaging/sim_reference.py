@@ -31,14 +31,27 @@ def _mask_value(mx: np.ndarray, my: np.ndarray, profile: Profile, physics: dict)
     return np.where(inside, np.where(open_, 1.0, t), 0.0)
 
 
-def reference_kernel(profile: Profile, n_sensor: int = 8, n_scene: int = 8) -> np.ndarray:
+def reference_kernel(profile: Profile, n_sensor: int = 8, n_scene: int = 8,
+                     sensor_pixels: np.ndarray | None = None,
+                     scene_pixels: np.ndarray | None = None) -> np.ndarray:
     """The imaging operator as a dense matrix by brute force.
+
+    Parameters
+    ----------
+    profile
+        The device (``physics`` as in the simulator's kernel stage).
+    n_sensor, n_scene
+        Midpoint samples per axis in every sensor pixel and every scene pixel.
+    sensor_pixels, scene_pixels
+        Optional flat (row-major) indices of the sensor and scene pixels to compute
+        (default all): a window of a larger device.
 
     Returns
     -------
     numpy.ndarray
-        ``(R·S, N·M)``: pixel-averaged irradiance at sensor pixel ``(r, c)`` (row-major)
-        per unit radiance of scene pixel ``(n, m)`` (same units as the simulator).
+        ``(R·S, N·M)`` (or the selected rows/columns): pixel-averaged irradiance at sensor
+        pixel ``(r, c)`` (row-major) per unit radiance of scene pixel ``(n, m)`` (same units
+        as the simulator).
     """
     ph = resolve_physics(profile.physics)
     g = ph.get("geometry", {})
@@ -61,8 +74,11 @@ def reference_kernel(profile: Profile, n_sensor: int = 8, n_scene: int = 8) -> n
     u_x = np.broadcast_to(ux[None, :, None, :], (rows, cols, n_sensor, n_sensor)).reshape(rows * cols, -1)
     s_y = np.broadcast_to(sy[:, None, :, None], (nr, nc, n_scene, n_scene)).reshape(nr * nc, -1)
     s_x = np.broadcast_to(sx[None, :, None, :], (nr, nc, n_scene, n_scene)).reshape(nr * nc, -1)
-    out = np.empty((rows * cols, nr * nc))
-    for j in range(nr * nc):
+    if sensor_pixels is not None:
+        u_y, u_x = u_y[sensor_pixels], u_x[sensor_pixels]
+    scene_idx = np.arange(nr * nc) if scene_pixels is None else np.asarray(scene_pixels)
+    out = np.empty((u_y.shape[0], scene_idx.size))
+    for col, j in enumerate(scene_idx):
         dx = s_x[j][None, None, :] - u_x[:, :, None]
         dy = s_y[j][None, None, :] - u_y[:, :, None]
         rho = np.sqrt(dx**2 + dy**2)
@@ -75,7 +91,7 @@ def reference_kernel(profile: Profile, n_sensor: int = 8, n_scene: int = 8) -> n
         mx = u_x[:, :, None] + dx * kappa
         my = u_y[:, :, None] + dy * kappa
         t = _mask_value(mx, my, profile, ph)
-        out[:, j] = (factor * t).mean(axis=(1, 2)) * spitch**2
+        out[:, col] = (factor * t).mean(axis=(1, 2)) * spitch**2
     return out
 
 

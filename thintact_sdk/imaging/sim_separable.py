@@ -136,6 +136,7 @@ def axis_term_matrices(
     factor_derivs: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]],
     n_sub: int = 4,
     chunk_rows: int = 64,
+    shifts_mm: np.ndarray | None = None,
 ) -> np.ndarray:
     """Per-axis matrices for every (profile, smooth factor) pair.
 
@@ -149,45 +150,59 @@ def axis_term_matrices(
         offsets (mm) of any shape → three arrays ``shape + (L,)``.
     n_sub
         Sub-intervals per pixel for the first moment.
+    shifts_mm
+        Optional ``(T,)`` displacements (mm): member ``t`` of the family uses the profile
+        ``A(m - t)`` (the rotated mask's local shears, :mod:`~thintact_sdk.imaging.sim_rotated`).
 
     Returns
     -------
     numpy.ndarray
         ``(V, L, n_sensor, n_scene)``: ``(1/pitch)·∫∫ A(alpha·u + beta·s)·f_l(s - u) du ds``,
-        i.e. averaged over the sensor pixel and integrated over the scene pixel (mm/mm²).
+        i.e. averaged over the sensor pixel and integrated over the scene pixel (mm/mm²);
+        with ``shifts_mm``, ``(T, V, L, n_sensor, n_scene)``.
     """
+    family = shifts_mm is not None
+    shifts = np.atleast_1d(np.asarray(0.0 if shifts_mm is None else shifts_mm, float))
+    n_t, n_v = shifts.size, values.shape[0]
+    # about chunk_rows·16·n_scene sub-rectangle values per profile and displacement per chunk
+    rows_per_chunk = max(1, min(chunk_rows, chunk_rows * 16 // (n_t * n_v * n_sub**2)))
     out: np.ndarray | None = None
-    for r0 in range(0, grid.n_sensor, chunk_rows):
-        r1 = min(grid.n_sensor, r0 + chunk_rows)
+    for r0 in range(0, grid.n_sensor, rows_per_chunk):
+        r1 = min(grid.n_sensor, r0 + rows_per_chunk)
         # the chunk's sensor centres are displaced from the full grid's by shift
         shift = (r0 + (r1 - r0 - 1) / 2 - (grid.n_sensor - 1) / 2) * grid.sensor_pitch_mm
-        box, off = _shifted_box(grid, r0, r1, alpha, beta, edges_mm, values, n_sub, shift)
+        box, off = _shifted_box(grid, r0, r1, alpha, beta, edges_mm, values, n_sub, shift,
+                                shifts)
         centre = off.mean(axis=(2, 3))
-        rel = (off - centre[..., None, None])[None]
+        rel = (off - centre[..., None, None])[None, None]
         # within-sub-rectangle variance of s - u (exact for a uniform profile there)
         var_in = (grid.sensor_pitch_mm**2 + grid.scene_pitch_mm**2) / (12 * n_sub**2)
-        b0 = box.sum(axis=(3, 4))
-        b1 = (box * rel).sum(axis=(3, 4))
-        b2 = (box * (rel**2 + var_in)).sum(axis=(3, 4))
-        f, df, d2f = (np.moveaxis(a, -1, 0)[None] for a in factor_derivs(centre))  # (1, L, r, n)
-        blk = (b0[:, None] * f + b1[:, None] * df + 0.5 * b2[:, None] * d2f) / grid.sensor_pitch_mm
+        b0 = box.sum(axis=(-2, -1))
+        b1 = (box * rel).sum(axis=(-2, -1))
+        b2 = (box * (rel**2 + var_in)).sum(axis=(-2, -1))
+        f, df, d2f = (np.moveaxis(a, -1, 0)[None, None] for a in factor_derivs(centre))
+        blk = (b0[:, :, None] * f + b1[:, :, None] * df + 0.5 * b2[:, :, None] * d2f) \
+            / grid.sensor_pitch_mm  # (T, V, L, r, n)
         if out is None:
-            out = np.empty((values.shape[0], f.shape[1], grid.n_sensor, grid.n_scene))
-        out[:, :, r0:r1] = blk
+            out = np.empty((n_t, n_v, f.shape[2], grid.n_sensor, grid.n_scene))
+        out[:, :, :, r0:r1] = blk
     assert out is not None
-    return out
+    return out if family else out[0]
 
 
 def _shifted_box(
     grid: AxisGrid, r0: int, r1: int, alpha: float, beta: float,
     edges_mm: np.ndarray, values: np.ndarray, n_sub: int, shift_mm: float,
+    profile_shifts_mm: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`box_box_integrals` for sensor rows ``r0:r1`` of ``grid`` (true positions)."""
+    """:func:`box_box_integrals` for sensor rows ``r0:r1`` of ``grid`` (true positions), for
+    every profile displacement: ``(T, V, r, n, n_sub, n_sub)`` and the offsets."""
     sub = AxisGrid(r1 - r0, grid.sensor_pitch_mm, grid.n_scene, grid.scene_pitch_mm)
     # moving the sensor by shift_mm equals moving the mask edges by -alpha·shift_mm
-    # and the scene by -shift_mm (offsets s - u shrink by shift_mm)
+    # and the scene by -shift_mm (offsets s - u shrink by shift_mm); displacing the
+    # profile by t equals reading it at m - t
     box, off = box_box_integrals(sub, alpha, beta, edges_mm - alpha * shift_mm, values,
-                                 n_sub, n_sub)
+                                 n_sub, n_sub, profile_shifts_mm)
     return box, off - shift_mm
 
 

@@ -7,8 +7,9 @@ Stages, in order (CONTRACTS §4 baseline plus the effects of ``profile.physics``
    square of ``cos^q θ/H² · T(m)`` (kernel effects: ``diffraction``,
    ``pixel_angular_response``, ``refraction``, ``mask_misalignment``, ``mask_leakage``,
    ``geometry``). Separable physics uses ``Y_c = Σ_k P_k X_c Q_kᵀ``
-   (:mod:`~thintact_sdk.imaging.sim_separable`); a rotated mask or refraction uses the direct
-   path (:mod:`~thintact_sdk.imaging.sim_direct`);
+   (:mod:`~thintact_sdk.imaging.sim_separable`, rotated masks
+   :mod:`~thintact_sdk.imaging.sim_rotated`); refraction uses the direct path
+   (:mod:`~thintact_sdk.imaging.sim_direct`);
 3. linear signal effects (``sensor_blur``, ``color_crosstalk``, ``veiling_glare``);
 4. **the gain enters here**: ``L = gain_dn_per_unit[c] · signal`` (DN above black);
 5. DN effects (``stray_light``, ``sensor_gamma``, ``saturation``).
@@ -29,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from thintact_sdk.errors import ThinTactError
+from thintact_sdk.imaging import sim_rotated
 from thintact_sdk.imaging.sim_axis import AxisGrid, mask_cell_edges_mm
 from thintact_sdk.imaging.sim_radiometry import SeparableExpansion
 from thintact_sdk.imaging.sim_separable import (
@@ -89,8 +91,8 @@ class KernelParams:
 
     @property
     def separable(self) -> bool:
-        """True unless the mask is rotated, the scene side refracts or the direct path is forced."""
-        return self.angle_deg == 0.0 and self.n_scene_side == 1.0 and not self.force_direct
+        """True unless the scene side refracts or the direct path is forced."""
+        return self.n_scene_side == 1.0 and not self.force_direct
 
     def grid_x(self) -> AxisGrid:
         return AxisGrid(self.cols, self.pitch_um * 1e-3, self.scene_cols, self.scene_pitch_um * 1e-3)
@@ -171,6 +173,8 @@ def build_separable_kernel(kp: KernelParams) -> SeparableKernel:
     phi_x = np.asarray(kp.phi, float)
     phi_y = np.asarray(kp.phi_rows, float)
     info = {"rank": float(exp.rank), "radiometric_rel_error": exp.rel_error}
+    if kp.angle_deg != 0.0:
+        return _build_rotated_kernel(kp, exp, info)
     if kp.wavelengths_nm is None:
         c_o, c_c = mask_leakage.intensity_coefficients(kp.leakage)
         mx = axis_term_matrices(gx, alpha, beta, edges_x, np.stack([np.ones(k), phi_x]),
@@ -210,6 +214,27 @@ def build_separable_kernel(kp: KernelParams) -> SeparableKernel:
                 for ll in range(exp.rank):
                     terms.append(SeparableTerm(coef * my[v, ll], mx[v, ll], part))
             by_wavelength[lam] = compress_terms(terms, kp.compress_tol)
+        per_channel.append(by_wavelength[lam])
+    info["terms"] = float(max(len(t) for t in per_channel))
+    return SeparableKernel(per_channel, info)
+
+
+def _build_rotated_kernel(kp: KernelParams, exp: SeparableExpansion,
+                          info: dict[str, float]) -> SeparableKernel:
+    """Separable kernel of a rotated mask (:mod:`~thintact_sdk.imaging.sim_rotated`), with
+    or without diffraction (one set of terms per distinct wavelength)."""
+    if kp.wavelengths_nm is None:
+        px, py, pairs = sim_rotated.geometric_profiles(kp)
+        terms = sim_rotated.rotated_terms(kp, exp, px, py, pairs)
+        info["terms"] = float(len(terms))
+        return SeparableKernel([terms] * kp.channels, info)
+    by_wavelength: dict[float, list[SeparableTerm]] = {}
+    per_channel = []
+    for ch in range(kp.channels):
+        lam = kp.wavelengths_nm[min(ch, len(kp.wavelengths_nm) - 1)]
+        if lam not in by_wavelength:
+            px, py, pairs = sim_rotated.diffraction_profiles(kp, lam)
+            by_wavelength[lam] = sim_rotated.rotated_terms(kp, exp, px, py, pairs)
         per_channel.append(by_wavelength[lam])
     info["terms"] = float(max(len(t) for t in per_channel))
     return SeparableKernel(per_channel, info)
@@ -283,8 +308,8 @@ class Simulator(ImagingModel):
         self.kernel_params = kernel_params(profile, self.physics, n_sub, rank_tol, direct)
         if "diffraction" in self.physics and not self.kernel_params.separable:
             raise ThinTactError(
-                "physics: diffraction cannot be combined with a rotated mask or refraction "
-                "(the simulator's diffraction model needs a separable, straight-ray kernel)"
+                "physics: diffraction cannot be combined with refraction (the simulator's "
+                "diffraction model needs straight rays in air)"
             )
         self._kernel: Any = None
         self._ref_gain: float | None = None
@@ -422,7 +447,7 @@ class Simulator(ImagingModel):
         Raises
         ------
         ThinTactError
-            When the physics is not separable per channel (rotated mask, refraction, colour
+            When the physics is not separable per channel (refraction, colour
             crosstalk, display gamma, DN-defined effects).
         """
         o, c = self.open_coding_terms(channel)
@@ -437,7 +462,8 @@ class Simulator(ImagingModel):
         blockers = [e for e in ("color_crosstalk", "display_gamma", "stray_light",
                                 "sensor_gamma", "saturation") if e in self.physics]
         if not self.separable or blockers:
-            why = "a rotated mask or refraction" if not self.separable else ", ".join(blockers)
+            why = "refraction or the forced direct path" if not self.separable \
+                else ", ".join(blockers)
             raise ThinTactError(f"the physics of {self.profile.name!r} is not separable ({why})")
         if not 0 <= channel < self.n_channels:
             raise ThinTactError(f"channel {channel} out of range 0..{self.n_channels - 1}")
