@@ -288,10 +288,11 @@ class Recording:
         exp = (self.profile.scene.rows, self.profile.scene.cols)
         n_ch = len(self.profile.sensor.channels)
         channels = arr.shape[2] if arr.ndim == 3 else 1
-        if arr.ndim not in (2, 3) or arr.shape[:2] != exp or channels not in (1, n_ch):
+        allowed = sorted({1, 3, n_ch})  # an LCD shows RGB scenes to a monochrome sensor too
+        if arr.ndim not in (2, 3) or arr.shape[:2] != exp or channels not in allowed:
             raise RecordingError(
                 f"{self._name(i)}: {s}: shape {arr.shape} does not match the profile's scene "
-                f"{exp[0]}×{exp[1]} with 1 or {n_ch} channel(s)"
+                f"{exp[0]}×{exp[1]} with {' or '.join(map(str, allowed))} channel(s)"
             )
         _check_values(arr, f"{self._name(i)}: {s}", low=0.0, high=1.0 + SCENE_TOLERANCE)
         return arr
