@@ -406,9 +406,14 @@ def available_profiles() -> dict[str, Path]:
     it, so one broken file never hides the others.
     """
     found, broken = _scan_profiles()
-    for f, why in broken.values():
-        warnings.warn(f"skipping profile file {f}: {why.splitlines()[0]}", UserWarning, stacklevel=2)
+    _warn_skipped(broken)
     return found
+
+
+def _warn_skipped(broken: dict[str, tuple[Path, str]]) -> None:
+    for f, why in broken.values():
+        first = why.splitlines()[0].rstrip(":")
+        warnings.warn(f"skipping profile file {f}: {first.split(f'{f}: ', 1)[-1]}", UserWarning, stacklevel=3)
 
 
 def load_profile(name_or_path: str | os.PathLike[str] | Profile) -> Profile:
@@ -434,6 +439,7 @@ def load_profile(name_or_path: str | os.PathLike[str] | Profile) -> Profile:
     profiles, broken = _scan_profiles()
     name = str(name_or_path)
     if name in profiles:
+        _warn_skipped(broken)
         return read_profile_file(profiles[name])
     if name in broken:
         raise ProfileError(broken[name][1])
