@@ -271,18 +271,6 @@ class Profile(BaseModel):
             raise ValueError(str(err)) from None
         return v
 
-    @model_validator(mode="after")
-    def _mask_covers_sensor(self) -> Profile:
-        mask_um = self.mask.K * self.mask.feature_um
-        sensor_um = max(self.sensor.rows, self.sensor.cols) * self.sensor.pixel_pitch_um
-        if mask_um < sensor_um:
-            raise ValueError(
-                f"mask.phi has K={self.mask.K} cells of {self.mask.feature_um:g} um "
-                f"({mask_um / 1000:g} mm), smaller than the sensor's longer side "
-                f"({sensor_um / 1000:g} mm); the mask must cover the sensor"
-            )
-        return self
-
     @property
     def source(self) -> Path | None:
         """The file this profile was loaded from, if any."""

@@ -55,7 +55,7 @@ _EFFECT, _PARAM, _HIGH = _first_bounded_param()
         ("geometry.scene_to_mask_mm", float("inf"), "geometry.scene_to_mask_mm"),
         ("geometry.mask_to_sensor_mm", float("nan"), "geometry.mask_to_sensor_mm"),
         ("noise.read_noise_dn", float("nan"), "noise.read_noise_dn"),
-        ("mask.phi", [1, -1, 1], "mask.phi has K=3"),
+        ("mask.phi_rows", [1, -1, 1], "phi_rows has 3 entries but phi has 128"),
         ("mask.phi", [True] * 128, "mask.phi"),
         ("sensor.channels", ["R", "G", "X"], "unknown channel"),
         ("sensor.channels", ["R", "R"], "channels repeat"),
