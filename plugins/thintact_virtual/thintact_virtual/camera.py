@@ -2,9 +2,11 @@
 
 Settings (``profile.camera.settings`` merged with the factory's ``settings``):
 
-``scenes``          library name of :data:`thintact_sdk.imaging.scenes.LIBRARY` or a list of
-                    names (default ``"gelsight"``); frame k shows ``names[k % len]`` with
-                    index ``k // len`` (GelSight press / random seed).
+``scenes``          library name of :data:`thintact_sdk.imaging.scenes.LIBRARY`, ``"tactile"``
+                    (the tactile simulator's membrane: unloaded, then 8 ball presses, see
+                    :mod:`thintact_virtual.tactile_scenes`) or a list of names (default
+                    ``"gelsight"``); frame k shows ``names[k % len]`` with index ``k // len``
+                    (GelSight press / random seed / tactile press).
 ``slot``            scene-slot key (default the profile's name); a scene set there overrides
                     the library.
 ``fps``             frame rate the reads are paced to; 0 = as fast as possible.
@@ -32,6 +34,7 @@ from thintact_sdk.imaging.simulator import Simulator
 from thintact_sdk.interfaces import Camera, CameraCapabilities, Range
 from thintact_sdk.profile import Profile
 from thintact_virtual.bench import REFERENCE_EXPOSURE_US, get_scene_slot, white_level_dn
+from thintact_virtual.tactile_scenes import CYCLE, TACTILE_SCENE, tactile_scene
 
 EXPOSURE_RANGE_US = Range(10.0, 1_000_000.0, "us")
 
@@ -49,9 +52,10 @@ class VirtualCamera(Camera):
         names = base.get("scenes", "gelsight")
         self.scene_names: list[str] = [names] if isinstance(names, str) else list(names)
         for n in self.scene_names:
-            if n not in LIBRARY:
+            if n not in LIBRARY and n != TACTILE_SCENE:
                 raise ThinTactError(
-                    f"virtual camera: unknown scene {n!r}; library scenes: {', '.join(LIBRARY)}"
+                    f"virtual camera: unknown scene {n!r}; library scenes: "
+                    f"{', '.join([*LIBRARY, TACTILE_SCENE])}"
                 )
         if not self.scene_names:
             raise ThinTactError("virtual camera: 'scenes' is an empty list")
@@ -174,10 +178,14 @@ class VirtualCamera(Camera):
             from thintact_sdk.imaging.scenes import gelsight_count
 
             index %= gelsight_count()
+        elif name == TACTILE_SCENE:
+            index %= CYCLE
         elif name != "random":
             index = 0
         key = (name, index)
-        if key not in self._scenes:
+        if key not in self._scenes and name == TACTILE_SCENE:
+            self._scenes[key] = tactile_scene(self.profile, index)
+        elif key not in self._scenes:
             self._scenes[key] = make_scene(name, self.profile.scene.rows,
                                            self.profile.scene.cols, index)
         return self._scenes[key], key
