@@ -24,8 +24,10 @@ from collections import OrderedDict
 from typing import Any
 
 import numpy as np
+from pydantic import Field
 
 from thintact_sdk.bayer import mosaic_from_rgb
+from thintact_sdk.camera_settings import CameraSettings, parse_camera_settings
 from thintact_sdk.errors import DeviceError, ThinTactError, UnsupportedFeatureError
 from thintact_sdk.frames import RawFrame
 from thintact_sdk.imaging.noise import signal_to_dn
@@ -39,6 +41,18 @@ from thintact_virtual.tactile_scenes import CYCLE, TACTILE_SCENE, tactile_scene
 EXPOSURE_RANGE_US = Range(10.0, 1_000_000.0, "us")
 
 
+class VirtualCameraSettings(CameraSettings):
+    """``camera.settings`` of the virtual camera (see the module docstring)."""
+
+    scenes: str | list[str] = "gelsight"
+    slot: str | None = None
+    fps: float = Field(default=0.0, ge=0, le=10_000)
+    seed: int = Field(default=0, ge=0, strict=True)
+    noise: bool = Field(default=True, strict=True)
+    white_level_dn: float | None = Field(default=None, gt=0)
+    exposure_us: float = Field(default=REFERENCE_EXPOSURE_US, gt=0)
+
+
 class VirtualCamera(Camera):
     """A camera whose frames are the simulator's images of a scene (see module docstring)."""
 
@@ -49,7 +63,8 @@ class VirtualCamera(Camera):
         base.update(settings or {})
         self.profile = profile
         self.settings = base
-        names = base.get("scenes", "gelsight")
+        parsed = parse_camera_settings(VirtualCameraSettings, base, "virtual")
+        names = parsed.scenes
         self.scene_names: list[str] = [names] if isinstance(names, str) else list(names)
         for n in self.scene_names:
             if n not in LIBRARY and n != TACTILE_SCENE:
@@ -59,13 +74,11 @@ class VirtualCamera(Camera):
                 )
         if not self.scene_names:
             raise ThinTactError("virtual camera: 'scenes' is an empty list")
-        self.fps = float(base.get("fps", 0.0) or 0.0)
-        if self.fps < 0:
-            raise ThinTactError("virtual camera: fps must be >= 0")
-        self.noise = bool(base.get("noise", True))
-        self.seed = int(base.get("seed", 0) or 0)
-        self.slot_key = str(base.get("slot", profile.name))
-        self._exposure_us = float(base.get("exposure_us", REFERENCE_EXPOSURE_US))
+        self.fps = parsed.fps
+        self.noise = parsed.noise
+        self.seed = parsed.seed
+        self.slot_key = parsed.slot if parsed.slot is not None else profile.name
+        self._exposure_us = parsed.exposure_us
         self._check_exposure(self._exposure_us)
         self._white_dn = white_level_dn(profile, base)
         self._sim: Simulator | None = None
