@@ -49,3 +49,29 @@ def test_mistyped_value_is_named(plugin: str, key: str, value: object) -> None:
 def test_replay_without_path_names_it() -> None:
     with pytest.raises(CameraSettingsError, match=r"camera\.settings\.path: required"):
         get_registry().create("camera", "replay", load_profile("virtual-mini"), {})
+
+
+def test_uvc_backend_error_in_read_is_device_lost(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """A cv2.error raised inside VideoCapture.read becomes DeviceLostError."""
+    import cv2
+    import numpy as np
+
+    from thintact_sdk.errors import DeviceLostError
+
+    clip = tmp_path / "f_%03d.png"
+    for i in range(2):
+        cv2.imwrite(str(tmp_path / f"f_{i:03d}.png"), np.zeros((8, 8, 3), np.uint8))
+    cam = get_registry().create("camera", "uvc", load_profile("virtual-mini"), {"device": str(clip)})
+    with cam:
+        class _Broken:
+            def read(self):  # type: ignore[no-untyped-def]
+                raise cv2.error("backend crashed")
+
+            def __getattr__(self, name):  # type: ignore[no-untyped-def]
+                return getattr(real, name)
+
+        real = cam._cap
+        cam._cap = _Broken()
+        with pytest.raises(DeviceLostError, match="failed while reading"):
+            cam.read(timeout_s=5.0)
+        cam._cap = real

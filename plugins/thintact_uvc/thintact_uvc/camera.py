@@ -307,6 +307,8 @@ class UvcCamera(Camera):
             raise DeviceTimeoutError(
                 f"uvc: no frame from {self.source.label} within {timeout_s:.2f} s"
             ) from None
+        except (cv2.error, OSError) as err:  # the driver or backend failed inside read()
+            raise DeviceLostError(f"uvc camera {self.source.label} failed while reading: {err}") from None
         finally:
             if self._pending is not None and self._pending.done():
                 self._pending = None
