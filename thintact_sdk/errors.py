@@ -15,6 +15,10 @@ class ProfileError(ThinTactError):
     """A device profile is missing, unreadable or fails validation."""
 
 
+class CameraSettingsError(ProfileError):
+    """A camera plugin's ``camera.settings`` holds an unknown key or a value of the wrong type."""
+
+
 class PluginError(ThinTactError):
     """A plugin is unknown, failed to load or does not provide what was asked."""
 

@@ -91,6 +91,9 @@ class TactileFrame:
         Area of the contact region in mm².
     shear_direction_rad
         Direction of the mean marker displacement (atan2(y, x)), NaN without shear.
+    shear_mm
+        ``(2,)`` float64 mean (dx, dy) displacement in mm of the markers that move (lost
+        markers ignored); (0, 0) when none moves. Always finite.
     timestamp_ns, frame_id
         Of the raw frame this was computed from.
     force_n
@@ -112,6 +115,7 @@ class TactileFrame:
     timestamp_ns: int
     frame_id: int
     shear_direction_rad: float = float("nan")
+    shear_mm: np.ndarray = field(default_factory=lambda: np.zeros(2))
     latency_ms: float | None = None
     meta: dict[str, Any] = field(default_factory=dict)
     force_n: np.ndarray | None = None

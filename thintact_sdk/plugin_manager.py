@@ -2,6 +2,12 @@
 
 A plugin that fails to import (or whose hooks raise) is recorded with its error and
 skipped; the others still load. ``thintact plugins`` prints the result.
+
+Every component is reachable by its plain name (``virtual``) and by its namespaced name
+``<plugin>:<name>`` (``virtual:virtual``, ``acme:virtual``). When two plugins provide a
+component of the same kind and name, the plain name is ambiguous: asking for it raises a
+:class:`PluginError` naming both packages, whatever order they loaded in, so a third-party
+package can never silently take the place of the SDK's own component.
 """
 
 from __future__ import annotations
@@ -48,6 +54,10 @@ class PluginRegistry:
         self.pm.add_hookspecs(ThinTactSpec)
         self.plugins: dict[str, PluginInfo] = {}
         self._components: dict[str, dict[str, Component]] = {k: {} for k in KINDS}
+        # kind -> plain name -> every plugin providing it, in load order (2+ = a collision)
+        self._providers: dict[str, dict[str, list[str]]] = {k: {} for k in KINDS}
+        # kind -> "plugin:name" -> component
+        self._namespaced: dict[str, dict[str, Component]] = {k: {} for k in KINDS}
 
     # -- loading -----------------------------------------------------------------------
     def load_entry_points(self, group: str = ENTRY_POINT_GROUP) -> None:
@@ -91,15 +101,19 @@ class PluginRegistry:
                     continue
                 for comp in comps:
                     comp.plugin = name
-                    existing = self._components[kind].get(comp.name)
-                    if existing is not None and existing.plugin != name:
+                    self._namespaced[kind][f"{name}:{comp.name}"] = comp
+                    providers = self._providers[kind].setdefault(comp.name, [])
+                    if name not in providers:
+                        providers.append(name)
+                    info.provides.setdefault(kind, []).append(comp.name)
+                    if len(providers) > 1:
                         info.error = (
-                            f"{kind} {comp.name!r} already provided by plugin {existing.plugin!r}; "
-                            "ignored"
+                            f"{kind} {comp.name!r} is also provided by "
+                            f"{self._describe(providers[0])}; use '{name}:{comp.name}' or "
+                            f"'{providers[0]}:{comp.name}' to choose"
                         )
                         continue
                     self._components[kind][comp.name] = comp
-                    info.provides.setdefault(kind, []).append(comp.name)
 
     # -- queries -----------------------------------------------------------------------
     def components(self, kind: str) -> dict[str, Component]:
@@ -108,14 +122,44 @@ class PluginRegistry:
             raise PluginError(f"unknown component kind {kind!r}; kinds: {', '.join(KINDS)}")
         return dict(self._components[kind])
 
+    def _describe(self, plugin: str) -> str:
+        """``plugin 'acme' (package acme-thintact-camera 1.2.3)`` for error messages."""
+        info = self.plugins.get(plugin)
+        if info is None or info.distribution is None:
+            return f"plugin {plugin!r}"
+        return f"plugin {plugin!r} (package {info.distribution} {info.version or ''})".replace(" )", ")")
+
+    def collisions(self, kind: str) -> dict[str, list[str]]:
+        """Plain names of ``kind`` provided by two or more plugins → those plugins."""
+        self.components(kind)  # validates kind
+        return {n: list(p) for n, p in self._providers[kind].items() if len(p) > 1}
+
     def get(self, kind: str, name: str) -> Component:
-        """The component ``name`` of ``kind``; raises PluginError naming the alternatives."""
+        """The component ``name`` (or ``plugin:name``) of ``kind``.
+
+        Raises
+        ------
+        PluginError
+            Unknown name (the message lists the alternatives), or a plain name that two
+            plugins provide (the message names both packages and the namespaced choices).
+        """
         comps = self.components(kind)
-        if name in comps:
+        if ":" in name:
+            if name in self._namespaced[kind]:
+                return self._namespaced[kind][name]
+        elif len(self._providers[kind].get(name, [])) > 1:
+            who = self._providers[kind][name]
+            raise PluginError(
+                f"{kind.replace('_', ' ')} name {name!r} is provided by "
+                f"{' and '.join(self._describe(p) for p in who)}; choose one explicitly in "
+                f"the profile: {' or '.join(repr(f'{p}:{name}') for p in who)}"
+            )
+        elif name in comps:
             return comps[name]
         failed = [f"{p.name} ({p.error})" for p in self.plugins.values() if p.error]
         hint = f"; plugins that failed to load: {', '.join(failed)}" if failed else ""
-        known = ", ".join(sorted(comps)) or "(none installed)"
+        known = ", ".join(sorted(comps) + sorted(f"{p}:{n}" for n, ps in self.collisions(kind).items()
+                                                 for p in ps)) or "(none installed)"
         raise PluginError(f"no {kind.replace('_', ' ')} plugin named {name!r}; available: {known}{hint}")
 
     def create(self, kind: str, name: str, *args: Any, **kwargs: Any) -> Any:

@@ -14,16 +14,45 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import re
+import warnings
 from pathlib import Path
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-from thintact_sdk.errors import ProfileError
+from thintact_sdk.errors import ProfileError, ThinTactError
 
 PROFILE_FORMAT = "thintact-profile/1"
 SHIPPED_PROFILE_DIR = Path(__file__).parent / "profiles"
+
+MAX_PIXELS_PER_SIDE = 16384
+"""Largest sensor / scene side in pixels (a 16k × 16k frame is already 256 Mpx)."""
+MAX_MASK_CELLS = 16384
+"""Largest K (mask cells per side)."""
+MAX_PITCH_UM = 10_000.0
+"""Largest pixel pitch or mask feature in um (10 mm)."""
+MAX_DISTANCE_MM = 1000.0
+"""Largest scene → mask or mask → sensor distance in mm."""
+KNOWN_CHANNELS = ("R", "G", "B", "mono")
+"""Channel names a profile may list: the Bayer-binned colours, or one monochrome channel."""
+_NAME_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$")
+_PLUGIN_NAME_RE = re.compile(r"^([A-Za-z0-9][A-Za-z0-9._-]*:)?[A-Za-z0-9][A-Za-z0-9._-]{0,63}$")
+
+Count = Annotated[int, Field(strict=True, gt=0, le=MAX_PIXELS_PER_SIDE)]
+"""A pixel count: a true integer (not a bool or a float) in [1, 16384]."""
+PitchUm = Annotated[float, Field(gt=0, le=MAX_PITCH_UM, allow_inf_nan=False)]
+"""A finite positive length in um, at most 10 mm."""
+MaskCellUm = Annotated[float, Field(gt=0, le=100 * MAX_PITCH_UM, allow_inf_nan=False)]
+"""A mask cell side in um, at most 1 m: a lens-based sensor's profile declares an open
+aperture, one cell as wide as the field (``digit``: 15 mm)."""
+DistanceMm = Annotated[float, Field(gt=0, le=MAX_DISTANCE_MM, allow_inf_nan=False)]
+"""A finite positive distance in mm, at most 1 m."""
+FiniteNonNeg = Annotated[float, Field(ge=0, allow_inf_nan=False)]
+FinitePos = Annotated[float, Field(gt=0, allow_inf_nan=False)]
+PluginName = Annotated[str, Field(pattern=_PLUGIN_NAME_RE.pattern)]
+"""A plugin component name, optionally namespaced by its plugin: ``virtual`` or ``acme:virtual``."""
 
 
 class _Section(BaseModel):
@@ -35,27 +64,42 @@ class _Section(BaseModel):
 class SensorSpec(_Section):
     """The measurement image after Bayer binning: ``rows`` R × ``cols`` S × channels."""
 
-    rows: int = Field(gt=0, description="R, measurement rows after binning")
-    cols: int = Field(gt=0, description="S, measurement columns after binning")
-    pixel_pitch_um: float = Field(gt=0, description="binned pixel pitch p in um")
-    channels: list[str] = Field(default_factory=lambda: ["R", "G", "B"], min_length=1)
+    rows: Count = Field(description="R, measurement rows after binning")
+    cols: Count = Field(description="S, measurement columns after binning")
+    pixel_pitch_um: PitchUm = Field(description="binned pixel pitch p in um")
+    channels: list[str] = Field(default_factory=lambda: ["R", "G", "B"], min_length=1, max_length=3)
+
+    @field_validator("channels")
+    @classmethod
+    def _known_channels(cls, v: list[str]) -> list[str]:
+        unknown = [c for c in v if c not in KNOWN_CHANNELS]
+        if unknown:
+            raise ValueError(f"unknown channel(s) {unknown}; known: {', '.join(KNOWN_CHANNELS)}")
+        if len(set(v)) != len(v):
+            raise ValueError(f"channels repeat: {v}")
+        if "mono" in v and len(v) > 1:
+            raise ValueError("'mono' is the only channel of a monochrome sensor")
+        return v
 
 
 class SceneSpec(_Section):
     """The scene grid (LCD pixels / membrane): ``rows`` N × ``cols`` M, pitch in um."""
 
-    rows: int = Field(gt=0, description="N, scene rows")
-    cols: int = Field(gt=0, description="M, scene columns")
-    pixel_pitch_um: float = Field(gt=0, description="scene pixel pitch in um")
+    rows: Count = Field(description="N, scene rows")
+    cols: Count = Field(description="M, scene columns")
+    pixel_pitch_um: PitchUm = Field(description="scene pixel pitch in um")
 
 
 class MaskSpec(_Section):
     """Separable binary mask: cell (i, j) is open when phi_rows[i]·phi[j] = +1."""
 
-    feature_um: float = Field(gt=0, description="mask cell side delta in um")
-    phi: list[int] = Field(min_length=1, description="K entries of +1/-1 along x (columns)")
-    phi_rows: list[int] | None = Field(
-        default=None, description="K entries of +1/-1 along y (rows); defaults to phi"
+    feature_um: MaskCellUm = Field(description="mask cell side delta in um")
+    phi: list[Annotated[int, Field(strict=True)]] = Field(
+        min_length=1, max_length=MAX_MASK_CELLS, description="K entries of +1/-1 along x (columns)"
+    )
+    phi_rows: list[Annotated[int, Field(strict=True)]] | None = Field(
+        default=None, max_length=MAX_MASK_CELLS,
+        description="K entries of +1/-1 along y (rows); defaults to phi",
     )
     design: str | None = Field(default=None, description="mask plugin that made phi (mls, ga, ...)")
 
@@ -90,8 +134,8 @@ class MaskSpec(_Section):
 class GeometrySpec(_Section):
     """Distances along the optical axis: scene → mask z, mask → sensor d (mm)."""
 
-    scene_to_mask_mm: float = Field(gt=0, description="z, scene plane to mask in mm")
-    mask_to_sensor_mm: float = Field(gt=0, description="d, mask to sensor in mm")
+    scene_to_mask_mm: DistanceMm = Field(description="z, scene plane to mask in mm")
+    mask_to_sensor_mm: DistanceMm = Field(description="d, mask to sensor in mm")
 
     @property
     def total_mm(self) -> float:
@@ -102,10 +146,10 @@ class GeometrySpec(_Section):
 class NoiseSpec(_Section):
     """Sensor noise model (CONTRACTS §4), all in digital numbers (DN)."""
 
-    black_level_dn: float = Field(ge=0)
-    read_noise_dn: float = Field(ge=0)
-    electrons_per_dn: float = Field(gt=0)
-    saturation_dn: float = Field(gt=0)
+    black_level_dn: FiniteNonNeg
+    read_noise_dn: FiniteNonNeg
+    electrons_per_dn: FinitePos
+    saturation_dn: FinitePos
 
     @model_validator(mode="after")
     def _black_below_saturation(self) -> NoiseSpec:
@@ -117,7 +161,9 @@ class NoiseSpec(_Section):
 class CameraConfig(_Section):
     """Which camera plugin produces raw frames, and its settings."""
 
-    plugin: str = Field(description="camera plugin name, e.g. 'virtual', 'genicam', 'uvc', 'replay'")
+    plugin: PluginName = Field(
+        description="camera plugin name, e.g. 'virtual', 'genicam', 'uvc', 'replay' (or 'acme:virtual')"
+    )
     settings: dict[str, Any] = Field(default_factory=dict)
     bayer_pattern: Literal["RGGB", "BGGR", "GRBG", "GBRG", "none"] = Field(
         default="RGGB", description="CFA layout of the raw frame; 'none' for already binned RGB"
@@ -127,18 +173,18 @@ class CameraConfig(_Section):
 class LightConfig(_Section):
     """Which LED controller plugin drives the sensor's LEDs, where, and the default levels."""
 
-    plugin: str
+    plugin: PluginName
     port: str | None = Field(default=None, description="serial port path or pyserial URL")
     settings: dict[str, Any] = Field(default_factory=dict)
-    intensities: list[float] | None = Field(
-        default=None, description="LED levels in [0, 1] set when the sensor opens"
+    intensities: list[Annotated[float, Field(ge=0, le=1, allow_inf_nan=False)]] | None = Field(
+        default=None, max_length=256, description="LED levels in [0, 1] set when the sensor opens"
     )
 
 
 class DecoderConfig(_Section):
     """Which decoder reconstructs scenes and from which calibration."""
 
-    plugin: str = Field(default="thintact-noniterative")
+    plugin: PluginName = Field(default="thintact-noniterative")
     calibration: str | None = Field(
         default=None, description="calibration bundle directory (relative to the profile file)"
     )
@@ -148,29 +194,30 @@ class DecoderConfig(_Section):
 class DisplayConfig(_Section):
     """The LCD that shows calibration patterns: plugin, which display, sensing area placement."""
 
-    plugin: str = Field(default="virtual")
-    display_index: int = Field(default=0, ge=0)
-    pixel_pitch_um: float = Field(default=31.5, gt=0)
-    origin_px: tuple[int, int] = Field(
+    plugin: PluginName = Field(default="virtual")
+    display_index: int = Field(default=0, ge=0, strict=True)
+    pixel_pitch_um: PitchUm = Field(default=31.5)
+    origin_px: tuple[Annotated[int, Field(strict=True, ge=0)], Annotated[int, Field(strict=True, ge=0)]] = Field(
         default=(0, 0), description="(x, y) of the sensing area's top-left pixel on the panel"
     )
-    settle_s: float = Field(default=0.1, ge=0, description="wait after a pattern change")
+    settle_s: float = Field(default=0.1, ge=0, le=60, allow_inf_nan=False,
+                            description="wait after a pattern change in s")
     settings: dict[str, Any] = Field(default_factory=dict)
 
 
 class TactileConfig(_Section):
     """Tactile pipeline parameters (photometric stereo, contact, markers)."""
 
-    mm_per_px: float | None = Field(default=None, gt=0, description="scene pixel size in mm")
-    contact_threshold_mm: float = Field(default=0.1, gt=0)
+    mm_per_px: DistanceMm | None = Field(default=None, description="scene pixel size in mm")
+    contact_threshold_mm: DistanceMm = Field(default=0.1)
     lut: str | None = Field(default=None, description="photometric-stereo LUT file")
     real2sim: str | None = Field(
         default=None,
         description="Real2Sim generator file (thintact real2sim train): real images are "
         "translated to simulation-like ones before photometric stereo",
     )
-    marker_pitch_mm: float = Field(default=1.5, gt=0)
-    marker_diameter_mm: float = Field(default=0.5, gt=0)
+    marker_pitch_mm: DistanceMm = Field(default=1.5)
+    marker_diameter_mm: DistanceMm = Field(default=0.5)
 
 
 class CalibrationLimits(_Section):
@@ -181,10 +228,11 @@ class CalibrationLimits(_Section):
     ``min_psnr_db`` and ``min_ssim`` are optional fixed floors on the means.
     """
 
-    psnr_margin_db: float = Field(default=1.5, ge=0, description="allowed shortfall (dB) "
-                                  "below the PSNR predicted for the design, per scene")
-    min_psnr_db: float | None = None
-    min_ssim: float | None = None
+    psnr_margin_db: float = Field(default=1.5, ge=0, allow_inf_nan=False,
+                                  description="allowed shortfall (dB) below the PSNR predicted "
+                                  "for the design, per scene")
+    min_psnr_db: float | None = Field(default=None, allow_inf_nan=False)
+    min_ssim: float | None = Field(default=None, ge=-1, le=1, allow_inf_nan=False)
 
 
 class Profile(BaseModel):
@@ -216,6 +264,27 @@ class Profile(BaseModel):
     def _known_format(cls, v: str) -> str:
         if v != PROFILE_FORMAT:
             raise ValueError(f"unknown profile format {v!r}; this SDK reads {PROFILE_FORMAT!r}")
+        return v
+
+    @field_validator("name")
+    @classmethod
+    def _name_not_path(cls, v: str) -> str:
+        if not _NAME_RE.match(v):
+            raise ValueError(
+                f"{v!r} is not a profile name: use 1-64 letters, digits, '.', '_' or '-', "
+                "starting with a letter or digit (no path separators)"
+            )
+        return v
+
+    @field_validator("physics")
+    @classmethod
+    def _known_physics(cls, v: dict[str, dict[str, Any]]) -> dict[str, dict[str, Any]]:
+        from thintact_sdk.physics import resolve_physics
+
+        try:
+            resolve_physics(v)
+        except ThinTactError as err:
+            raise ValueError(str(err)) from None
         return v
 
     @property
@@ -280,17 +349,29 @@ def profile_from_dict(data: Any, where: str = "(in memory)") -> Profile:
 
 
 def read_profile_file(path: str | os.PathLike[str]) -> Profile:
-    """Load and validate a profile from a ``.json``, ``.yaml`` or ``.yml`` file."""
+    """Load and validate a profile from a ``.json``, ``.yaml`` or ``.yml`` file.
+
+    Raises
+    ------
+    ProfileError
+        The file is missing, unreadable, not UTF-8, not JSON/YAML, or fails validation;
+        the message names the file (and the dotted field).
+    """
     p = Path(path)
     if not p.is_file():
         raise ProfileError(f"profile file not found: {p}")
-    text = p.read_text(encoding="utf-8")
+    try:
+        text = p.read_text(encoding="utf-8")
+    except UnicodeDecodeError as err:
+        raise ProfileError(f"cannot read profile {p}: not UTF-8 text (byte {err.start})") from None
+    except OSError as err:
+        raise ProfileError(f"cannot read profile {p}: {err.strerror or err}") from None
     try:
         if p.suffix.lower() == ".json":
             data = json.loads(text)
         else:
             data = yaml.safe_load(text)
-    except (json.JSONDecodeError, yaml.YAMLError) as err:
+    except (json.JSONDecodeError, yaml.YAMLError, RecursionError, ValueError) as err:
         raise ProfileError(f"cannot parse profile {p}: {err}") from None
     prof = profile_from_dict(data, where=str(p))
     prof._source = p.resolve()
@@ -303,9 +384,10 @@ def profile_search_path() -> list[Path]:
     return dirs + [SHIPPED_PROFILE_DIR]
 
 
-def available_profiles() -> dict[str, Path]:
-    """Map profile name → file for every profile found on the search path (first wins)."""
+def _scan_profiles() -> tuple[dict[str, Path], dict[str, tuple[Path, str]]]:
+    """Profiles on the search path: ``name → file`` and the broken files, ``stem → (file, why)``."""
     found: dict[str, Path] = {}
+    broken: dict[str, tuple[Path, str]] = {}
     for d in profile_search_path():
         if not d.is_dir():
             continue
@@ -314,10 +396,28 @@ def available_profiles() -> dict[str, Path]:
                 continue
             try:
                 name = read_profile_file(f).name
-            except ProfileError:
+            except ProfileError as err:
+                broken.setdefault(f.stem, (f, str(err)))
                 continue
             found.setdefault(name, f)
+    return found, broken
+
+
+def available_profiles() -> dict[str, Path]:
+    """Map profile name → file for every valid profile on the search path (first wins).
+
+    A file that cannot be read or validated is skipped with a :class:`UserWarning` naming
+    it, so one broken file never hides the others.
+    """
+    found, broken = _scan_profiles()
+    _warn_skipped(broken)
     return found
+
+
+def _warn_skipped(broken: dict[str, tuple[Path, str]]) -> None:
+    for f, why in broken.values():
+        first = why.splitlines()[0].rstrip(":")
+        warnings.warn(f"skipping profile file {f}: {first.split(f'{f}: ', 1)[-1]}", UserWarning, stacklevel=3)
 
 
 def load_profile(name_or_path: str | os.PathLike[str] | Profile) -> Profile:
@@ -328,17 +428,28 @@ def load_profile(name_or_path: str | os.PathLike[str] | Profile) -> Profile:
     name_or_path
         An existing profile object, a path to a JSON/YAML file, or the ``name`` of a
         profile on :func:`profile_search_path`.
+
+    Raises
+    ------
+    ProfileError
+        No such profile, or the file of that name on the search path is broken (the
+        message names the file and the problem).
     """
     if isinstance(name_or_path, Profile):
         return name_or_path
     p = Path(name_or_path)
     if p.suffix.lower() in (".json", ".yaml", ".yml") or p.exists():
         return read_profile_file(p)
-    profiles = available_profiles()
-    if str(name_or_path) in profiles:
-        return read_profile_file(profiles[str(name_or_path)])
+    profiles, broken = _scan_profiles()
+    name = str(name_or_path)
+    if name in profiles:
+        _warn_skipped(broken)
+        return read_profile_file(profiles[name])
+    if name in broken:
+        raise ProfileError(broken[name][1])
     known = ", ".join(sorted(profiles)) or "(none)"
-    raise ProfileError(f"no profile named {str(name_or_path)!r}; known profiles: {known}")
+    skipped = f" (skipped broken files: {', '.join(str(f) for f, _ in broken.values())})" if broken else ""
+    raise ProfileError(f"no profile named {name!r}; known profiles: {known}{skipped}")
 
 
 def write_profile(profile: Profile, path: str | os.PathLike[str]) -> Path:

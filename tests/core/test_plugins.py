@@ -127,3 +127,109 @@ def test_unknown_component_names_alternatives() -> None:
 
     with pytest.raises(PluginError, match="no camera plugin named 'nope'"):
         get_registry().get("camera", "nope")
+
+
+SHADOWING = {
+    "pyproject.toml": """
+        [build-system]
+        requires = ["setuptools>=61"]
+        build-backend = "setuptools.build_meta"
+        [project]
+        name = "acme-shadow-camera"
+        version = "0.0.1"
+        [project.entry-points.thintact]
+        aaa-acme = "acme_shadow_camera"
+        [tool.setuptools]
+        packages = ["acme_shadow_camera"]
+    """,
+    "acme_shadow_camera/__init__.py": """
+        from thintact_sdk import Component, hookimpl
+
+        class ZeroCamera:
+            def __init__(self, profile, settings):
+                self.kind = "acme-zero"
+
+        @hookimpl
+        def thintact_cameras():
+            return [Component("virtual", ZeroCamera, "a camera that takes the SDK's name")]
+    """,
+}
+
+PICK_CAMERAS = """
+import json
+from thintact_sdk.errors import PluginError
+from thintact_sdk.plugin_manager import get_registry
+from thintact_sdk.profile import load_profile
+reg = get_registry()
+try:
+    reg.get("camera", "virtual")
+    plain = "no error"
+except PluginError as err:
+    plain = str(err)
+acme = reg.create("camera", "aaa-acme:virtual", load_profile("virtual-mini"), {})
+sdk = reg.get("camera", "virtual:virtual")
+print(json.dumps({"plain": plain, "acme": acme.kind, "sdk_plugin": sdk.plugin}))
+"""
+
+
+@pytest.mark.timeout(300)
+def test_third_party_cannot_shadow_a_builtin_camera_name(tmp_path: Path) -> None:
+    """A package loaded first (entry point 'aaa-acme') that registers a camera 'virtual'
+    makes the plain name ambiguous: an error naming both packages; namespaced names work."""
+    src = tmp_path / "src"
+    for rel, text in SHADOWING.items():
+        p = src / rel
+        p.parent.mkdir(parents=True, exist_ok=True)
+        p.write_text(textwrap.dedent(text))
+    target = tmp_path / "site"
+    subprocess.run(
+        [sys.executable, "-m", "pip", "install", "-q", "--no-deps", "--target", str(target), str(src)],
+        check=True, capture_output=True, text=True, timeout=240,
+    )
+    env = dict(os.environ, PYTHONPATH=str(target))
+    used = subprocess.run([sys.executable, "-c", PICK_CAMERAS], capture_output=True, text=True, env=env,
+                          timeout=120)
+    assert used.returncode == 0, used.stderr
+    out = json.loads(used.stdout)
+    assert "acme-shadow-camera" in out["plain"] and "thintact-virtual" in out["plain"], out["plain"]
+    assert "'aaa-acme:virtual'" in out["plain"] and "'virtual:virtual'" in out["plain"]
+    assert out["acme"] == "acme-zero" and out["sdk_plugin"] == "virtual"
+
+    rec = subprocess.run(
+        [sys.executable, "-m", "thintact_sdk.cli.main", "record", "--profile", "virtual-mini",
+         "--frames", "1", "--out", str(tmp_path / "rec")],
+        capture_output=True, text=True, env=env, timeout=120,
+    )
+    assert rec.returncode == 2, rec.stderr
+    assert "acme-shadow-camera" in rec.stderr and "Traceback" not in rec.stderr
+    assert not (tmp_path / "rec" / "recording.json").exists()
+
+
+def test_collision_in_process_names_both_plugins() -> None:
+    """Registering a second provider of 'virtual' in a private registry: plain name refused,
+    namespaced names resolve to each provider, the collision is listed."""
+    import types
+
+    from thintact_sdk import Component, hookimpl
+    from thintact_sdk.errors import PluginError
+    from thintact_sdk.plugin_manager import PluginRegistry
+
+    def _module(label: str) -> types.ModuleType:
+        mod = types.ModuleType(f"fake_{label}")
+
+        @hookimpl
+        def thintact_cameras() -> list[Component]:
+            return [Component("virtual", lambda: label, f"{label} camera")]
+
+        mod.thintact_cameras = thintact_cameras  # type: ignore[attr-defined]
+        return mod
+
+    reg = PluginRegistry()
+    reg.register(_module("sdk"), "sdk")
+    reg.register(_module("acme"), "acme")
+    assert reg.collisions("camera") == {"virtual": ["sdk", "acme"]}
+    with pytest.raises(PluginError, match=r"'sdk:virtual' or 'acme:virtual'"):
+        reg.get("camera", "virtual")
+    assert reg.create("camera", "acme:virtual") == "acme"
+    assert reg.create("camera", "sdk:virtual") == "sdk"
+    assert "also provided by plugin 'sdk'" in (reg.plugins["acme"].error or "")

@@ -108,7 +108,7 @@ def test_open_camera_and_read_measurement_through_a_real_plugin(tmp_path, profil
 
     rgb = _rgb(profile, 9)
     RecordingWriter(tmp_path / "rec", profile).add(rgb, label="one")
-    cam_cfg = profile.camera.model_copy(update={"plugin": "replay", "bayer_pattern": "none"})
+    cam_cfg = profile.camera.model_copy(update={"plugin": "replay", "bayer_pattern": "none", "settings": {}})
     replay_profile = profile.model_copy(update={"camera": cam_cfg})
     with open_camera(replay_profile, settings={"path": str(tmp_path / "rec"),
                                                "rate": "fast"}) as cam:

@@ -50,34 +50,78 @@ class BallPress:
     grad_y: np.ndarray | None = None
 
 
+_EDGE_MARGIN_RADII = 1.5
+"""Press centres stay this many ball radii inside the field's edges."""
+_DEPTH_RANGE_RADII = (0.2, 2.0 / 3.0)
+"""Default press depths as fractions of the ball radius (0.3-1.0 mm for the 1.5 mm ball)."""
+
+
+def _field_half_mm(params: TactileParams) -> tuple[float, float]:
+    """Half width and half height of the membrane field in mm."""
+    return (params.cols / 2) * params.mm_per_px, (params.rows / 2) * params.mm_per_px
+
+
+def ball_radius_for_field(profile: Profile, ball_radius_mm: float = CALIBRATION_BALL_RADIUS_MM) -> float:
+    """The calibration ball radius (mm) to simulate on ``profile``: ``ball_radius_mm``, or a
+    smaller ball when that one does not fit (centres :data:`_EDGE_MARGIN_RADII` radii inside
+    the edges, with room to move: a third of the shorter half side at most)."""
+    half_w, half_h = _field_half_mm(TactileSimulator.for_profile(profile).params)
+    return min(ball_radius_mm, min(half_w, half_h) / (_EDGE_MARGIN_RADII + 1.5))
+
+
 def random_ball_presses(
     profile: Profile,
     count: int = 12,
-    ball_radius_mm: float = CALIBRATION_BALL_RADIUS_MM,
-    depth_range_mm: tuple[float, float] = (0.3, 1.0),
+    ball_radius_mm: float | None = None,
+    depth_range_mm: tuple[float, float] | None = None,
     seed: int = 0,
 ) -> list[tuple[TactileScene, dict[str, float]]]:
     """Simulated ball presses at random places and depths inside the field.
+
+    Parameters
+    ----------
+    ball_radius_mm
+        Ball radius in mm; None: the 1.5 mm calibration ball, or a smaller one on a field
+        too small for it (:func:`ball_radius_for_field`).
+    depth_range_mm
+        Press depths drawn uniformly in this range (mm); None: 0.2-0.67 ball radii.
 
     Returns
     -------
     list of (scene, press)
         ``press`` holds ``x_mm``, ``y_mm``, ``depth_mm``, ``ball_radius_mm``.
+
+    Raises
+    ------
+    CalibrationError
+        An explicit ``ball_radius_mm`` too large for the field (the message gives the
+        largest that fits).
     """
     sim = TactileSimulator.for_profile(profile)
     p = sim.params
+    radius = ball_radius_for_field(profile) if ball_radius_mm is None else float(ball_radius_mm)
+    field_w, field_h = _field_half_mm(p)
+    half_w = field_w - _EDGE_MARGIN_RADII * radius
+    half_h = field_h - _EDGE_MARGIN_RADII * radius
+    if not (radius > 0 and half_w > 0 and half_h > 0):
+        largest = min(field_w, field_h) / _EDGE_MARGIN_RADII
+        raise CalibrationError(
+            f"a ball of radius {radius:g} mm does not fit in the {2 * field_w:.3g} x "
+            f"{2 * field_h:.3g} mm field of profile {profile.name!r}; use a ball radius below "
+            f"{largest:.3g} mm"
+        )
+    if depth_range_mm is None:
+        depth_range_mm = (_DEPTH_RANGE_RADII[0] * radius, _DEPTH_RANGE_RADII[1] * radius)
     rng = np.random.default_rng(seed)
-    half_w = (p.cols / 2) * p.mm_per_px - 1.5 * ball_radius_mm
-    half_h = (p.rows / 2) * p.mm_per_px - 1.5 * ball_radius_mm
     out = []
     for _ in range(count):
         press = {
             "x_mm": float(rng.uniform(-half_w, half_w)),
             "y_mm": float(rng.uniform(-half_h, half_h)),
             "depth_mm": float(rng.uniform(*depth_range_mm)),
-            "ball_radius_mm": ball_radius_mm,
+            "ball_radius_mm": radius,
         }
-        scene = sim.press(Sphere(ball_radius_mm), press["depth_mm"], (press["x_mm"], press["y_mm"]))
+        scene = sim.press(Sphere(radius), press["depth_mm"], (press["x_mm"], press["y_mm"]))
         out.append((scene, press))
     return out
 

@@ -238,7 +238,7 @@ class TactileInterpreter:
         depth = upsample(self._work_depth(img, det.mask), self.factor)
         contact, area, _ = self.contact(depth)
         pos, disp = self.tracker.update(det.positions_mm)
-        _, direction = mean_shear(disp)
+        shear, direction = mean_shear(disp)
         meta: dict[str, object] = {
             "markers_detected": int(len(det.positions_mm)),
             "markers_tracked": int(np.isfinite(pos[:, 0]).sum()) if len(pos) else 0,
@@ -258,6 +258,7 @@ class TactileInterpreter:
             timestamp_ns=int(timestamp_ns),
             frame_id=int(frame_id),
             shear_direction_rad=direction,
+            shear_mm=np.asarray(shear, np.float64),
             meta=meta,
             force_n=self.force_model.estimate(*loads),
             slip_ratio=estimate_slip_ratio(*loads) if contact else None,

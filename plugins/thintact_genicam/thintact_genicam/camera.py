@@ -36,6 +36,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from pydantic import Field
 
 from thintact_genicam.features import (
     STANDARD,
@@ -48,22 +49,38 @@ from thintact_genicam.features import (
 from thintact_genicam.producers import quiet_harvesters, resolve_producer
 from thintact_genicam.shared import acquire_harvester, release_harvester
 from thintact_genicam.trigger import fire_software_trigger, set_trigger
+from thintact_sdk.camera_settings import CameraSettings, parse_camera_settings
 from thintact_sdk.capture import FrameGapCounter, bit_depth_problem
 from thintact_sdk.errors import (
+    CameraSettingsError,
     DeviceError,
     DeviceLostError,
     DeviceNotFoundError,
     DeviceTimeoutError,
-    ProfileError,
     UnsupportedFeatureError,
 )
 from thintact_sdk.frames import RawFrame
 from thintact_sdk.interfaces import Camera, CameraCapabilities, Range
 from thintact_sdk.profile import Profile
 
-PLUGIN_KEYS = {"cti", "serial", "device_id", "index", "features", "strict", "num_buffers",
-               "reconnect_s"}
 MAX_WAIT_S = 3600.0
+
+
+class GenICamPluginSettings(CameraSettings):
+    """The plugin's own ``camera.settings`` keys and their types; the other keys are the
+    standard feature names of :data:`thintact_genicam.features.STANDARD` (and aliases)."""
+
+    cti: str | None = None
+    serial: str | int | None = None
+    device_id: str | None = None
+    index: int = Field(default=0, ge=0, strict=True)
+    features: dict[str, Any] = Field(default_factory=dict)
+    strict: bool = Field(default=False, strict=True)
+    num_buffers: int = Field(default=8, ge=1, le=1024, strict=True)
+    reconnect_s: float = Field(default=0.0, ge=0, le=MAX_WAIT_S)
+
+
+PLUGIN_KEYS = set(GenICamPluginSettings.model_fields)
 
 
 class GenICamSettingWarning(UserWarning):
@@ -81,11 +98,14 @@ class GenICamCamera(Camera):
         unknown = sorted(k for k in settings if k not in PLUGIN_KEYS and k not in STANDARD
                          and k not in ALIASES)
         if unknown:
-            raise ProfileError(
-                f"unknown genicam camera setting(s) {', '.join(unknown)}; known: "
+            raise CameraSettingsError(
+                f"invalid genicam camera settings:\n  - camera.settings.{unknown[0]}: unknown "
+                f"genicam camera setting ({', '.join(unknown)}); known: "
                 f"{', '.join(sorted(PLUGIN_KEYS | set(STANDARD)))} (vendor features go under "
                 "'features')"
             )
+        parse_camera_settings(GenICamPluginSettings, {k: v for k, v in settings.items() if k in PLUGIN_KEYS},
+                              "genicam")
         cti = settings.get("cti")
         self.cti: Path = resolve_producer(profile.resolve_path(str(cti)) if cti else None)
         self.profile = profile

@@ -37,17 +37,18 @@ from __future__ import annotations
 import time
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
+from pydantic import Field
 
 from thintact_replay.rawframes import RAW_FIELD, load_raw_data
 from thintact_sdk.bayer import mosaic_from_rgb
+from thintact_sdk.camera_settings import CameraSettings, parse_camera_settings
 from thintact_sdk.errors import (
     DeviceError,
     DeviceTimeoutError,
     EndOfStreamError,
-    ProfileError,
     RecordingError,
 )
 from thintact_sdk.frames import RawFrame
@@ -90,29 +91,33 @@ def _check_frame_files(rec: Recording, scenes: bool) -> None:
                 )
 
 
+class ReplayCameraSettings(CameraSettings):
+    """``camera.settings`` of the replay camera (see the module docstring)."""
+
+    path: str = Field(min_length=1, description="the recording directory to play")
+    rate: Literal["recorded", "fast"] = "recorded"
+    speed: float = Field(default=1.0, gt=0, le=1000)
+    fps: float = Field(default=0.0, ge=0, le=10_000)
+    loop: bool = Field(default=False, strict=True)
+    raw: bool = Field(default=True, strict=True)
+    scenes: bool = Field(default=True, strict=True)
+
+
 class ReplayCamera(Camera):
     """Plays a recording through the :class:`~thintact_sdk.interfaces.Camera` API."""
 
     name = "replay"
 
     def __init__(self, profile: Profile, settings: dict[str, Any]) -> None:
-        path = settings.get("path")
-        if not path:
-            raise ProfileError(
-                "replay camera needs camera.settings.path: the recording directory to play"
-            )
+        parsed = parse_camera_settings(ReplayCameraSettings, settings, "replay")
         self.profile = profile
-        self.path: Path = profile.resolve_path(str(path))
-        self.rate = str(settings.get("rate", "recorded"))
-        if self.rate not in ("recorded", "fast"):
-            raise ProfileError(f"camera.settings.rate must be 'recorded' or 'fast', not {self.rate!r}")
-        self.speed = float(settings.get("speed", 1.0))
-        if self.speed <= 0:
-            raise ProfileError("camera.settings.speed must be > 0")
-        self.fps = float(settings.get("fps", 0.0))
-        self.loop = bool(settings.get("loop", False))
-        self.use_raw = bool(settings.get("raw", True))
-        self.with_scenes = bool(settings.get("scenes", True))
+        self.path: Path = profile.resolve_path(parsed.path)
+        self.rate = parsed.rate
+        self.speed = parsed.speed
+        self.fps = parsed.fps
+        self.loop = parsed.loop
+        self.use_raw = parsed.raw
+        self.with_scenes = parsed.scenes
         self.pattern = profile.camera.bayer_pattern if profile.camera is not None else "RGGB"
         self._rec: Recording | None = None
         self._times_ns: list[int] = []

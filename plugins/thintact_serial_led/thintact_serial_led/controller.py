@@ -20,6 +20,12 @@ from typing import Any
 
 import serial
 
+try:  # POSIX: tcdrain/tcflush on a vanished pty raise termios.error, which is not an OSError
+    from termios import error as _TermiosError
+    _PORT_ERRORS: tuple[type[BaseException], ...] = (serial.SerialException, OSError, _TermiosError)
+except ImportError:  # pragma: no cover - Windows has no termios
+    _PORT_ERRORS = (serial.SerialException, OSError)
+
 from thintact_sdk.errors import (
     DeviceError,
     DeviceLostError,
@@ -83,7 +89,7 @@ class SerialLedController(LightController):
             raise DeviceNotFoundError(f"cannot open LED controller port {self.port}: {err}") from None
         try:
             self._serial.reset_input_buffer()
-        except (serial.SerialException, OSError):
+        except _PORT_ERRORS:
             pass
         self._seq = int(time.monotonic_ns() % 255)
         self._lost = False
@@ -107,7 +113,7 @@ class SerialLedController(LightController):
         if self._serial is not None:
             try:
                 self._serial.close()
-            except (serial.SerialException, OSError):
+            except _PORT_ERRORS:
                 pass
             self._serial = None
 
@@ -166,7 +172,10 @@ class SerialLedController(LightController):
             raise DeviceError(f"LED controller on {self.port} is not open; call open() first")
         self._seq = (self._seq + 1) % 255  # 0xff is reserved for the board's framing errors
         seq = self._seq
-        line = encode_line(seq, body)
+        try:
+            line = encode_line(seq, body)
+        except ValueError as err:  # a control byte, '*' or non-ASCII: never sent
+            raise ProtocolError(f"refusing to send to the LED board on {self.port}: {err}") from None
         self.stats["requests"] += 1
         problems: list[str] = []
         for attempt in range(self.retries + 1):
@@ -216,7 +225,7 @@ class SerialLedController(LightController):
             self._serial.flush()
         except serial.SerialTimeoutException:
             raise DeviceTimeoutError(f"writing to the LED board on {self.port} timed out") from None
-        except (serial.SerialException, OSError) as err:
+        except _PORT_ERRORS as err:
             self.close()
             self._lost = True
             raise DeviceLostError(f"LED controller port {self.port} vanished: {err}") from None
@@ -229,7 +238,7 @@ class SerialLedController(LightController):
                 return None
             try:
                 chunk = self._serial.read(max(1, self._serial.in_waiting or 1))
-            except (serial.SerialException, OSError) as err:
+            except _PORT_ERRORS as err:
                 self.close()
                 self._lost = True
                 raise DeviceLostError(f"LED controller port {self.port} vanished: {err}") from None

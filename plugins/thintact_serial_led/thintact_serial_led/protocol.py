@@ -32,10 +32,38 @@ def crc8(data: bytes) -> int:
     return crc
 
 
+def check_body(body: str) -> None:
+    """Refuse a body that could break the framing: one line of printable ASCII words.
+
+    Raises
+    ------
+    ValueError
+        ``body`` holds a control byte (``\\n``, ``\\r``, NUL, ...), a ``*`` (the CRC
+        separator), a non-ASCII character, or does not fit in one line.
+    """
+    for i, ch in enumerate(body):
+        if not " " <= ch <= "~":
+            raise ValueError(f"command body has byte {ord(ch):#04x} at {i} (only printable ASCII "
+                             f"is allowed): {body[:40]!r}")
+        if ch == "*":
+            raise ValueError(f"command body has '*' (the checksum separator) at {i}: {body[:40]!r}")
+    if not body.strip() or body != " ".join(body.split()):
+        raise ValueError(f"command body must be words separated by single spaces: {body[:40]!r}")
+    if len(body) + 7 > MAX_LINE_BYTES:  # "ss " + body + "*cc\n"
+        raise ValueError(f"command body of {len(body)} bytes does not fit in one {MAX_LINE_BYTES}-byte line")
+
+
 def encode_line(seq: int, body: str) -> bytes:
-    """One protocol line (newline included) carrying ``body`` under sequence number ``seq``."""
+    """One protocol line (newline included) carrying ``body`` under sequence number ``seq``.
+
+    Raises
+    ------
+    ValueError
+        ``seq`` outside 0..255, or ``body`` refused by :func:`check_body`.
+    """
     if not 0 <= seq <= 0xFF:
         raise ValueError(f"sequence number {seq} outside 0..255")
+    check_body(body)
     payload = f"{seq:02x} {body}".encode("ascii")
     return payload + b"*" + f"{crc8(payload):02x}".encode("ascii") + b"\n"
 

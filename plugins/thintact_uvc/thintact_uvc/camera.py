@@ -40,7 +40,9 @@ from typing import Any
 
 import cv2
 import numpy as np
+from pydantic import Field
 
+from thintact_sdk.camera_settings import CameraSettings, parse_camera_settings
 from thintact_sdk.errors import (
     DeviceError,
     DeviceLostError,
@@ -56,8 +58,6 @@ from thintact_sdk.interfaces import Camera, CameraCapabilities, Range
 from thintact_sdk.profile import Profile
 from thintact_uvc.sources import Source, resolve_source
 
-KNOWN_KEYS = {"device", "width", "height", "fps", "exposure_us", "gain", "fourcc", "strict",
-              "pixel_format", "loop", "open_timeout_s", "convert_rgb"}
 V4L2_EXPOSURE_UNIT_US = 100.0
 
 
@@ -80,18 +80,30 @@ class UvcSettingWarning(UserWarning):
     """A setting the device or file cannot honour."""
 
 
+class UvcCameraSettings(CameraSettings):
+    """``camera.settings`` of the uvc camera: keys and types (see the module docstring)."""
+
+    device: int | str | None = None
+    width: int | None = Field(default=None, gt=0, strict=True)
+    height: int | None = Field(default=None, gt=0, strict=True)
+    fps: float | None = Field(default=None, ge=0, le=10_000)
+    exposure_us: float | None = Field(default=None, gt=0)
+    gain: float | None = None
+    fourcc: str | None = None
+    strict: bool = Field(default=False, strict=True)
+    pixel_format: str | None = None
+    loop: bool = Field(default=False, strict=True)
+    open_timeout_s: float = Field(default=10.0, gt=0, le=3600)
+    convert_rgb: bool = Field(default=True, strict=True)
+
+
 class UvcCamera(Camera):
     """An OpenCV ``VideoCapture`` source as a :class:`~thintact_sdk.interfaces.Camera`."""
 
     name = "uvc"
 
     def __init__(self, profile: Profile, settings: dict[str, Any]) -> None:
-        unknown = sorted(set(settings) - KNOWN_KEYS)
-        if unknown:
-            raise ProfileError(
-                f"unknown uvc camera setting(s) {', '.join(unknown)}; known: "
-                f"{', '.join(sorted(KNOWN_KEYS))}"
-            )
+        parse_camera_settings(UvcCameraSettings, settings, "uvc")
         if "device" not in settings:
             raise ProfileError(
                 "uvc camera needs camera.settings.device (index, /dev/video* path, "
@@ -295,6 +307,8 @@ class UvcCamera(Camera):
             raise DeviceTimeoutError(
                 f"uvc: no frame from {self.source.label} within {timeout_s:.2f} s"
             ) from None
+        except (cv2.error, OSError) as err:  # the driver or backend failed inside read()
+            raise DeviceLostError(f"uvc camera {self.source.label} failed while reading: {err}") from None
         finally:
             if self._pending is not None and self._pending.done():
                 self._pending = None

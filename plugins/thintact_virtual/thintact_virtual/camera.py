@@ -2,9 +2,11 @@
 
 Settings (``profile.camera.settings`` merged with the factory's ``settings``):
 
-``scenes``          library name of :data:`thintact_sdk.imaging.scenes.LIBRARY` or a list of
-                    names (default ``"gelsight"``); frame k shows ``names[k % len]`` with
-                    index ``k // len`` (GelSight press / random seed).
+``scenes``          library name of :data:`thintact_sdk.imaging.scenes.LIBRARY`, ``"tactile"``
+                    (the tactile simulator's membrane: unloaded, then 8 ball presses, see
+                    :mod:`thintact_virtual.tactile_scenes`) or a list of names (default
+                    ``"gelsight"``); frame k shows ``names[k % len]`` with index ``k // len``
+                    (GelSight press / random seed / tactile press).
 ``slot``            scene-slot key (default the profile's name); a scene set there overrides
                     the library.
 ``fps``             frame rate the reads are paced to; 0 = as fast as possible.
@@ -22,8 +24,10 @@ from collections import OrderedDict
 from typing import Any
 
 import numpy as np
+from pydantic import Field
 
 from thintact_sdk.bayer import mosaic_from_rgb
+from thintact_sdk.camera_settings import CameraSettings, parse_camera_settings
 from thintact_sdk.errors import DeviceError, ThinTactError, UnsupportedFeatureError
 from thintact_sdk.frames import RawFrame
 from thintact_sdk.imaging.noise import signal_to_dn
@@ -32,8 +36,21 @@ from thintact_sdk.imaging.simulator import Simulator
 from thintact_sdk.interfaces import Camera, CameraCapabilities, Range
 from thintact_sdk.profile import Profile
 from thintact_virtual.bench import REFERENCE_EXPOSURE_US, get_scene_slot, white_level_dn
+from thintact_virtual.tactile_scenes import CYCLE, TACTILE_SCENE, tactile_scene
 
 EXPOSURE_RANGE_US = Range(10.0, 1_000_000.0, "us")
+
+
+class VirtualCameraSettings(CameraSettings):
+    """``camera.settings`` of the virtual camera (see the module docstring)."""
+
+    scenes: str | list[str] = "gelsight"
+    slot: str | None = None
+    fps: float = Field(default=0.0, ge=0, le=10_000)
+    seed: int = Field(default=0, ge=0, strict=True)
+    noise: bool = Field(default=True, strict=True)
+    white_level_dn: float | None = Field(default=None, gt=0)
+    exposure_us: float = Field(default=REFERENCE_EXPOSURE_US, gt=0)
 
 
 class VirtualCamera(Camera):
@@ -46,22 +63,22 @@ class VirtualCamera(Camera):
         base.update(settings or {})
         self.profile = profile
         self.settings = base
-        names = base.get("scenes", "gelsight")
+        parsed = parse_camera_settings(VirtualCameraSettings, base, "virtual")
+        names = parsed.scenes
         self.scene_names: list[str] = [names] if isinstance(names, str) else list(names)
         for n in self.scene_names:
-            if n not in LIBRARY:
+            if n not in LIBRARY and n != TACTILE_SCENE:
                 raise ThinTactError(
-                    f"virtual camera: unknown scene {n!r}; library scenes: {', '.join(LIBRARY)}"
+                    f"virtual camera: unknown scene {n!r}; library scenes: "
+                    f"{', '.join([*LIBRARY, TACTILE_SCENE])}"
                 )
         if not self.scene_names:
             raise ThinTactError("virtual camera: 'scenes' is an empty list")
-        self.fps = float(base.get("fps", 0.0) or 0.0)
-        if self.fps < 0:
-            raise ThinTactError("virtual camera: fps must be >= 0")
-        self.noise = bool(base.get("noise", True))
-        self.seed = int(base.get("seed", 0) or 0)
-        self.slot_key = str(base.get("slot", profile.name))
-        self._exposure_us = float(base.get("exposure_us", REFERENCE_EXPOSURE_US))
+        self.fps = parsed.fps
+        self.noise = parsed.noise
+        self.seed = parsed.seed
+        self.slot_key = parsed.slot if parsed.slot is not None else profile.name
+        self._exposure_us = parsed.exposure_us
         self._check_exposure(self._exposure_us)
         self._white_dn = white_level_dn(profile, base)
         self._sim: Simulator | None = None
@@ -174,10 +191,14 @@ class VirtualCamera(Camera):
             from thintact_sdk.imaging.scenes import gelsight_count
 
             index %= gelsight_count()
+        elif name == TACTILE_SCENE:
+            index %= CYCLE
         elif name != "random":
             index = 0
         key = (name, index)
-        if key not in self._scenes:
+        if key not in self._scenes and name == TACTILE_SCENE:
+            self._scenes[key] = tactile_scene(self.profile, index)
+        elif key not in self._scenes:
             self._scenes[key] = make_scene(name, self.profile.scene.rows,
                                            self.profile.scene.cols, index)
         return self._scenes[key], key

@@ -8,6 +8,7 @@ import json
 import yaml
 
 from thintact_sdk.profile import available_profiles, load_profile, read_profile_file
+from thintact_sdk.profile_plugins import check_profile_plugins
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -15,6 +16,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     psub = p.add_subparsers(dest="profile_command", metavar="ACTION", required=True)
     v = psub.add_parser("validate", help="validate profile files (JSON or YAML)")
     v.add_argument("files", nargs="+", metavar="FILE")
+    v.add_argument("--strict", action="store_true",
+                   help="also check that every plugin the profile names is installed")
     v.set_defaults(func=run_validate)
     s = psub.add_parser("show", help="print a profile by name or file")
     s.add_argument("name", metavar="NAME")
@@ -27,6 +30,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run_validate(args: argparse.Namespace) -> int:
     for f in args.files:
         prof = read_profile_file(f)  # raises ProfileError naming the field
+        if args.strict:
+            check_profile_plugins(prof)
         print(f"{f}: ok (profile {prof.name!r}, sensor {prof.sensor.rows}x{prof.sensor.cols}, "
               f"scene {prof.scene.rows}x{prof.scene.cols}, K={prof.mask.K})")
     return 0

@@ -1,0 +1,39 @@
+"""Check that the plugins a profile names exist (``thintact profile validate --strict``)."""
+
+from __future__ import annotations
+
+from thintact_sdk.errors import PluginError, ProfileError
+from thintact_sdk.plugin_manager import PluginRegistry, get_registry
+from thintact_sdk.profile import Profile
+
+_SECTION_KIND = {
+    "camera": "camera",
+    "light": "light_controller",
+    "decoder": "decoder",
+    "display": "display",
+}
+"""Profile section → the plugin kind its ``plugin`` field names."""
+
+
+def check_profile_plugins(profile: Profile, registry: PluginRegistry | None = None) -> None:
+    """Raise if a ``<section>.plugin`` of ``profile`` is not an installed component.
+
+    Raises
+    ------
+    ProfileError
+        One line per unknown or ambiguous plugin, naming the file, the dotted field
+        (``camera.plugin``) and the available names.
+    """
+    reg = registry or get_registry()
+    problems = []
+    for section, kind in _SECTION_KIND.items():
+        cfg = getattr(profile, section)
+        if cfg is None:
+            continue
+        try:
+            reg.get(kind, cfg.plugin)
+        except PluginError as err:
+            problems.append(f"  - {section}.plugin: {err}")
+    if problems:
+        where = profile.source or "(in memory)"
+        raise ProfileError(f"invalid profile {where}:\n" + "\n".join(problems))
