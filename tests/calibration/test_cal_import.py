@@ -26,7 +26,7 @@ from thintact_sdk.recording import Recording
 @pytest.fixture(scope="module")
 def unit(tmp_path_factory: pytest.TempPathFactory):  # type: ignore[no-untyped-def]
     root = tmp_path_factory.mktemp("import")
-    profile = small_profile(("Y",))
+    profile = small_profile(("mono",))
     rec = write_recording(root / "rec", profile, seed=3)
     sm, _ = solve_matrices(collect_slits(rec), CalibrationOptions(), profile)
     return profile, rec, sm

@@ -49,7 +49,7 @@ def test_direct_generation_honours_the_mask_pose_and_distances() -> None:
 @pytest.mark.parametrize("decoder", ["thintact-noniterative", "t2s-closed-form", "flatcam",
                                      "t2s-iterative"])
 def test_monochrome_device_calibrates_and_decodes(tmp_path: Path, decoder: str) -> None:
-    profile = small_profile(("Y",))
+    profile = small_profile(("mono",))
     rec = write_recording(tmp_path / "rec", profile)
     out = calibrate_recording(rec, tmp_path / "cal", CalibrationOptions(filter_steps=5), report=False)
     bundle = CalibrationBundle.load(out.path)  # refused when the filter has 3 channels
