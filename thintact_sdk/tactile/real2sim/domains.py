@@ -20,7 +20,7 @@ from thintact_sdk.errors import ThinTactError
 from thintact_sdk.profile import Profile, SceneSpec, TactileConfig, load_profile
 from thintact_sdk.tactile.grid import TactileParams
 from thintact_sdk.tactile.indenters import Sphere
-from thintact_sdk.tactile.simulate import TactileSimulator
+from thintact_sdk.tactile.simulate import TactileScene, TactileSimulator
 
 
 @dataclass
@@ -79,6 +79,31 @@ def sensor_profile(rows: int, cols: int, mm_per_px: float, elastomer_sigma_mm: f
     )
 
 
+def ball_presses(
+    profile: Profile,
+    count: int,
+    ball_radius_mm: float,
+    depth_range_mm: tuple[float, float],
+    rng: np.random.Generator,
+) -> tuple[TactileScene, list[TactileScene]]:
+    """The flat membrane and ``count`` marker-free presses of a ball at random places (the
+    ball inside the field by half its radius) and depths, on ``profile``'s grid."""
+    params = TactileParams.from_profile(profile)
+    sim = TactileSimulator(params, markers=False)
+    half_w = params.cols / 2 * params.mm_per_px - 0.5 * ball_radius_mm
+    half_h = params.rows / 2 * params.mm_per_px - 0.5 * ball_radius_mm
+    if half_w <= 0 or half_h <= 0:
+        raise ThinTactError(
+            f"a {2 * ball_radius_mm:g} mm ball does not fit the {params.cols}×{params.rows} px "
+            f"field at {params.mm_per_px:g} mm/px")
+    presses = []
+    for _ in range(count):
+        centre = (float(rng.uniform(-half_w, half_w)), float(rng.uniform(-half_h, half_h)))
+        presses.append(sim.press(Sphere(ball_radius_mm), float(rng.uniform(*depth_range_mm)),
+                                 centre))
+    return sim.flat(), presses
+
+
 def simulated_presses(
     profile: Profile,
     count: int,
@@ -87,30 +112,19 @@ def simulated_presses(
     seed: int = 0,
     noise_std: float = 0.01,
 ) -> np.ndarray:
-    """The sim domain: ``count`` marker-free ball presses at random places and depths,
-    plus the flat membrane as image 0, each with Gaussian camera noise of ``noise_std``
-    (display units; a real camera's images are never exactly uniform, and an exactly uniform
-    training crop makes instance normalisation's gradient blow up to NaN).
+    """The sim domain: ``count`` marker-free ball presses at random places and depths
+    (:func:`ball_presses`), plus the flat membrane as image 0, each with Gaussian camera
+    noise of ``noise_std`` (display units; a real camera's images are never exactly uniform,
+    and an exactly uniform training crop makes instance normalisation's gradient blow up to
+    NaN).
 
     Returns
     -------
     numpy.ndarray
         ``(count + 1) × H × W × 3`` float32 in [0, 1].
     """
-    params = TactileParams.from_profile(profile)
-    sim = TactileSimulator(params, markers=False)
     rng = np.random.default_rng(seed)
-    half_w = params.cols / 2 * params.mm_per_px - 0.5 * ball_radius_mm
-    half_h = params.rows / 2 * params.mm_per_px - 0.5 * ball_radius_mm
-    if half_w <= 0 or half_h <= 0:
-        raise ThinTactError(
-            f"a {2 * ball_radius_mm:g} mm ball does not fit the {params.cols}×{params.rows} px "
-            f"field at {params.mm_per_px:g} mm/px")
-    out = [sim.flat().scene]
-    for _ in range(count):
-        centre = (float(rng.uniform(-half_w, half_w)), float(rng.uniform(-half_h, half_h)))
-        out.append(sim.press(Sphere(ball_radius_mm), float(rng.uniform(*depth_range_mm)),
-                             centre).scene)
-    images = np.stack(out)
+    flat, presses = ball_presses(profile, count, ball_radius_mm, depth_range_mm, rng)
+    images = np.stack([flat.scene] + [p.scene for p in presses]).astype(np.float64)
     images += noise_std * rng.standard_normal(images.shape)
     return np.clip(images, 0.0, 1.0).astype(np.float32)

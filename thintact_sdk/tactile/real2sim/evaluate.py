@@ -24,12 +24,9 @@ from thintact_sdk.tactile.gelsight_eval import (
     load_pack,
     split_presses,
 )
-from thintact_sdk.tactile.grid import TactileParams
-from thintact_sdk.tactile.indenters import Sphere
 from thintact_sdk.tactile.photometric import PhotometricLUT, calibrate_lut
-from thintact_sdk.tactile.real2sim.domains import sensor_profile
+from thintact_sdk.tactile.real2sim.domains import ball_presses, sensor_profile
 from thintact_sdk.tactile.real2sim.translate import Real2SimTranslator
-from thintact_sdk.tactile.simulate import TactileSimulator
 
 
 @dataclass
@@ -45,21 +42,13 @@ def simulation_lut(rows: int, cols: int, mm_per_px: float, presses: int = 48,
                    ball_radius_mm: float = GELSIGHT_BALL_RADIUS_MM, bins: int = 24,
                    seed: int = 1) -> PhotometricLUT:
     """A LUT from the tactile simulation alone (exact slopes of simulated ball presses)."""
-    params = TactileParams.from_profile(sensor_profile(rows, cols, mm_per_px))
-    sim = TactileSimulator(params, markers=False)
-    flat = sim.flat().scene
     rng = np.random.default_rng(seed)
-    half_w = cols / 2 * mm_per_px - 0.5 * ball_radius_mm
-    half_h = rows / 2 * mm_per_px - 0.5 * ball_radius_mm
-    feats, gxs, gys, valid = [], [], [], []
-    for _ in range(presses):
-        sc = sim.press(Sphere(ball_radius_mm), float(rng.uniform(0.4, 1.5)),
-                       (float(rng.uniform(-half_w, half_w)), float(rng.uniform(-half_h, half_h))))
-        feats.append(sc.scene - flat)
-        gxs.append(sc.grad_x)
-        gys.append(sc.grad_y)
-        valid.append((sc.depth_mm > 1e-3) | (rng.random(sc.depth_mm.shape) < 0.1))
-    return calibrate_lut(feats, gxs, gys, valid, bins=bins, meta={"source": "simulation"})
+    flat, scenes = ball_presses(sensor_profile(rows, cols, mm_per_px), presses, ball_radius_mm,
+                                (0.4, 1.5), rng)
+    valid = [(sc.depth_mm > 1e-3) | (rng.random(sc.depth_mm.shape) < 0.1) for sc in scenes]
+    return calibrate_lut([sc.scene - flat.scene for sc in scenes], [sc.grad_x for sc in scenes],
+                         [sc.grad_y for sc in scenes], valid, bins=bins,
+                         meta={"source": "simulation"})
 
 
 def evaluate_real2sim(
