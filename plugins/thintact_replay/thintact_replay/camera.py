@@ -42,12 +42,12 @@ from typing import Any, Literal
 import numpy as np
 from pydantic import Field
 
+from thintact_replay.pacing import wait_until_due
 from thintact_replay.rawframes import RAW_FIELD, load_raw_data
 from thintact_sdk.bayer import mosaic_from_rgb
 from thintact_sdk.camera_settings import CameraSettings, parse_camera_settings
 from thintact_sdk.errors import (
     DeviceError,
-    DeviceTimeoutError,
     EndOfStreamError,
     RecordingError,
 )
@@ -224,16 +224,8 @@ class ReplayCamera(Camera):
         if self.rate == "recorded":
             period_ns = self._times_ns[-1] / (n - 1) if n > 1 else 0.0
             cycle_ns = self._times_ns[-1] + period_ns
-            due = self._t0 + (self._loops * cycle_ns + self._times_ns[i]) / 1e9 / self.speed
-            wait = due - time.monotonic()
-            if wait > timeout_s:
-                time.sleep(max(timeout_s, 0.0))
-                raise DeviceTimeoutError(
-                    f"replay: frame {i} is due in {wait:.2f} s, beyond the read timeout "
-                    f"of {timeout_s:.2f} s"
-                )
-            if wait > 0:
-                time.sleep(wait)
+            wait_until_due(self._t0, self._loops * cycle_ns + self._times_ns[i], self.speed,
+                           timeout_s, f"frame {i}")
         data, pixel_format = self._frame_data(i)
         fr = rec.frames[i]
         span = self._ids[-1] - self._ids[0] + 1

@@ -20,7 +20,8 @@ from pathlib import Path
 from typing import Any
 
 from thintact_replay.camera import EndOfRecording
-from thintact_sdk.errors import DeviceError, DeviceTimeoutError, ProfileError, RecordingError
+from thintact_replay.pacing import wait_until_due
+from thintact_sdk.errors import DeviceError, ProfileError, RecordingError
 from thintact_sdk.frames import RawFrame
 from thintact_sdk.interfaces import Camera, CameraCapabilities
 from thintact_sdk.mcaplog import McapLog
@@ -131,13 +132,8 @@ class McapReplayCamera(Camera):
         frame = self._peek()
         if self.rate == "recorded":
             offset_ns = self._loops * self._cycle_ns + frame.timestamp_ns - self._first_stamp
-            wait = self._t0 + offset_ns / 1e9 / self.speed - time.monotonic()
-            if wait > timeout_s:
-                time.sleep(max(timeout_s, 0.0))
-                raise DeviceTimeoutError(f"replay: frame {self._index} of {self.path} is due in "
-                                         f"{wait:.2f} s, beyond the read timeout of {timeout_s:.2f} s")
-            if wait > 0:
-                time.sleep(wait)
+            wait_until_due(self._t0, offset_ns, self.speed, timeout_s,
+                           f"frame {self._index} of {self.path}")
         self._pending, self._last = None, frame
         meta = {"index": self._index, "loop": self._loops, "source": str(self.path),
                 "recorded_timestamp_ns": frame.timestamp_ns}
