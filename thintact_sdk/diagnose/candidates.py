@@ -29,6 +29,46 @@ DEFAULT_WAVELENGTHS_NM = (625.0, 530.0, 465.0)
 
 
 @dataclass(frozen=True)
+class DataSearch:
+    """Start values read off the measurement (no first-order signature needed).
+
+    Attributes
+    ----------
+    starts
+        ``(measured DN at the fitted pixels, profile) -> trial vectors`` (null excluded).
+    exact
+        ``(best trial vector, measured) -> True`` when the data give the value exactly
+        (no refinement).
+    refine_width
+        ``vector -> half-width`` of the parabola that refines the best trial otherwise.
+    """
+
+    starts: Callable[[np.ndarray, Profile], list[np.ndarray]]
+    exact: Callable[[np.ndarray, np.ndarray], bool]
+    refine_width: Callable[[np.ndarray], float]
+
+
+@dataclass(frozen=True)
+class Proxy:
+    """An effect too expensive to score that another effect's fit can stand in for.
+
+    Attributes
+    ----------
+    source
+        Name of the effect whose fit (in the same round) points at this one.
+    start
+        ``(source's fitted vector, profile) -> start vector or None`` (None: the source
+        fit does not point at this effect).
+    widths
+        Relative half-widths of the parabolas that refine the start, in turn.
+    """
+
+    source: str
+    start: Callable[[np.ndarray, Profile], np.ndarray | None]
+    widths: tuple[float, ...] = (0.02, 0.004)
+
+
+@dataclass(frozen=True)
 class Candidate:
     """One effect as the diagnosis fits it.
 
@@ -52,6 +92,12 @@ class Candidate:
     costly
         Every simulation rebuilds an expensive kernel (the rotated mask's): its full fit may
         use all the time left rather than a share of it.
+    joint_refit
+        Its values may move when a later effect is fitted (False: kept where accepted).
+    search
+        Scored by trying values read off the data instead of by a first-order signature.
+    proxy
+        Not scored itself: started from another effect's fit (when that fit points at it).
     """
 
     name: str
@@ -67,6 +113,9 @@ class Candidate:
     signed: tuple[bool, ...] = field(default=())
     slow_params: tuple[int, ...] = ()
     costly: bool = False
+    joint_refit: bool = True
+    search: DataSearch | None = None
+    proxy: Proxy | None = None
 
     @property
     def k(self) -> int:
@@ -168,6 +217,33 @@ def _stray_from(d: dict[str, Any], _p: Profile) -> np.ndarray:
     return c.ravel()
 
 
+def _refraction_from_geometry(geometry_fit: np.ndarray, p: Profile) -> np.ndarray | None:
+    """Near the axis refraction acts like a shorter scene gap (z/n at the same d): when the
+    geometry fit shortens z/d, start refraction at n = (z/d)_profile / (z/d)_fit."""
+    ratio0 = p.geometry.scene_to_mask_mm / p.geometry.mask_to_sensor_mm
+    ratio = float(geometry_fit[0] / geometry_fit[1])
+    if ratio > 0.995 * ratio0:
+        return None
+    return np.array([ratio0 / ratio])
+
+
+def _clip_levels(measured: np.ndarray, p: Profile) -> list[np.ndarray]:
+    """Clip levels to try: the top of the measured histogram (a pile-up of equal values when
+    the clip acts after the noise) and high quantiles (when it acts before)."""
+    if measured.size == 0:
+        return []
+    top = float(measured.max())
+    levels = {top, *(float(np.quantile(measured, q)) for q in (0.9999, 0.999, 0.997, 0.99))}
+    black, sat = p.noise.black_level_dn, p.noise.saturation_dn
+    return [np.array([lv]) for lv in sorted(levels) if black + 1.0 < lv < sat - 0.5]
+
+
+def _clip_is_piled_up(level: np.ndarray, measured: np.ndarray) -> bool:
+    """At least 20 pixels pile up at the level, which is the top of the data."""
+    top = float(measured.max()) if measured.size else -np.inf
+    return bool(level[0] == top and int(np.sum(measured >= top - 0.5)) >= 20)
+
+
 def _build() -> dict[str, Candidate]:
     inf = np.inf
     cands: list[Candidate] = []
@@ -185,7 +261,8 @@ def _build() -> dict[str, Candidate]:
     to, frm = _scalar("refraction", "n_scene_side")
     cands.append(
         Candidate("refraction", "optical", ("n_scene_side",), _const(1.0), _const(0.4), _const(1.0),
-                  _const(3.0), to, frm, signed=(False,))
+                  _const(3.0), to, frm, signed=(False,),
+                  proxy=Proxy("geometry", _refraction_from_geometry))
     )
     cands.append(
         Candidate("mask_misalignment", "optical", ("angle_deg", "dx_um", "dy_um"), _const(0, 0, 0),
@@ -235,14 +312,17 @@ def _build() -> dict[str, Candidate]:
     to, frm = _scalar("saturation", "level_dn")
     cands.append(
         Candidate("saturation", "dn", ("level_dn",), _sat_null, _const(-100.0), _sat_lower,
-                  _sat_null, to, frm, signed=(True,))
+                  _sat_null, to, frm, signed=(True,), joint_refit=False,
+                  search=DataSearch(_clip_levels, _clip_is_piled_up,
+                                    lambda v: max(2.0, 0.002 * float(v[0]))))
     )
     n_stray = 3 * len(STRAY_TERMS)
     cands.append(
         Candidate("stray_light", "linear",
                   tuple(f"{ch} {t}" for ch in "RGB" for t in ("1", "x", "y", "x2", "xy", "y2")),
                   _const(*([0.0] * n_stray)), _const(*([5.0] * n_stray)), _const(*([-inf] * n_stray)),
-                  _const(*([inf] * n_stray)), _stray_to, _stray_from, signed=(True,) * n_stray)
+                  _const(*([inf] * n_stray)), _stray_to, _stray_from, signed=(True,) * n_stray,
+                  joint_refit=False)
     )
     return {c.name: c for c in cands}
 

@@ -12,6 +12,7 @@ import numpy as np
 from thintact_sdk.blas import blas_threads
 from thintact_sdk.diagnose.candidates import CANDIDATES, STRAY_TERMS
 from thintact_sdk.diagnose.data import DiagnosisData
+from thintact_sdk.diagnose.deadline import Deadline
 from thintact_sdk.diagnose.locate import Location, locate
 from thintact_sdk.diagnose.model import (
     DiagnosisModel,
@@ -193,7 +194,7 @@ def _diagnose(
     progress: Callable[[str], None] | None,
 ) -> Diagnosis:
     t_start = time.perf_counter()
-    deadline = t_start + opt.time_budget_s
+    deadline = Deadline.after(opt.time_budget_s)
     say = progress or (lambda _m: None)
     sim = simulate or default_simulate
     var_fn = variance_fn or default_variance_fn()
@@ -223,7 +224,7 @@ def _diagnose(
     ev1 = _evaluate_full(model, sel.values)
     final = _view(model, data, ev1.pred_dn, sel.values)
     struct = _structure(final, data, black)
-    if struct.significant and time.perf_counter() < deadline - 0.25 * opt.time_budget_s:
+    if struct.significant and deadline.remaining_s() > 0.25 * opt.time_budget_s:
         # a local defect biases the effect fits: fit again without its pixels
         say("local defect found: refitting the effects without it")
         fit2 = DiagnosisModel(sub, sim, var_fn, sys_frac=opt.sys_frac, exclude=struct.mask)
