@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
-from thintact_sdk.diagnose import optimise, select
+from thintact_sdk.diagnose import candidates, model, optimise, run, select, words
 from thintact_sdk.diagnose.candidates import CANDIDATES
 from thintact_sdk.diagnose.deadline import Deadline, DeadlineExpired
 
@@ -105,8 +105,9 @@ def test_bounded_quadratic_keeps_one_sided_parameters_on_their_side() -> None:
     np.testing.assert_allclose(a, [-1.0, 2.0], atol=1e-9)
 
 
-def test_optimiser_and_policy_name_no_effect() -> None:
-    for module in (optimise, select):
+def test_diagnosis_modules_name_no_effect() -> None:
+    """What is particular to an effect lives in its declaration (thintact_sdk.physics)."""
+    for module in (optimise, select, model, candidates, words, run):
         src = inspect.getsource(module)
         named = [n for n in CANDIDATES if f'"{n}"' in src or f"'{n}'" in src]
         assert named == [], f"{module.__name__} special-cases {named}"
