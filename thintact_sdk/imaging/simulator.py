@@ -30,14 +30,16 @@ effects (if any) applied at :meth:`Simulator.reference_gain` and divided back ou
 from __future__ import annotations
 
 from collections import OrderedDict
-from dataclasses import dataclass, replace
-from typing import Any
+from dataclasses import replace
+from typing import Any, TypeAlias, TypeVar
 
 import numpy as np
 
 from thintact_sdk.errors import ThinTactError
 from thintact_sdk.imaging import sim_rotated
 from thintact_sdk.imaging.sim_axis import AxisGrid, mask_cell_edges_mm
+from thintact_sdk.imaging.sim_direct import DirectKernel, build_direct_kernel
+from thintact_sdk.imaging.sim_params import KernelParams, kernel_params
 from thintact_sdk.imaging.sim_radiometry import SeparableExpansion
 from thintact_sdk.imaging.sim_separable import (
     SeparableKernel,
@@ -60,85 +62,17 @@ WHITE_FRACTION = 0.6
 """Default DN level of the brightest all-white pixel, as a fraction of (saturation - black)."""
 
 
-@dataclass(frozen=True)
-class KernelParams:
-    """Everything the imaging kernel depends on (the cache key)."""
+ImagingKernel: TypeAlias = SeparableKernel | DirectKernel
+"""What :func:`get_kernel` returns: ``apply(scenes F×N×M×C, precision) -> F×R×S×C`` signal
+and an ``info`` dict; the separable one also has its ``terms`` per channel."""
 
-    rows: int
-    cols: int
-    pitch_um: float
-    scene_rows: int
-    scene_cols: int
-    scene_pitch_um: float
-    feature_um: float
-    phi: tuple[int, ...]
-    phi_rows: tuple[int, ...]
-    z_mm: float
-    d_mm: float
-    q: float
-    leakage: float
-    wavelengths_nm: tuple[float, ...] | None
-    angle_deg: float
-    dx_um: float
-    dy_um: float
-    n_scene_side: float
-    channels: int
-    n_sub: int
-    rank_tol: float
-    force_direct: bool = False
-    compress_tol: float = 1e-5
-
-    @property
-    def separable(self) -> bool:
-        """True unless the scene side refracts or the direct path is forced."""
-        return self.n_scene_side == 1.0 and not self.force_direct
-
-    def grid_x(self) -> AxisGrid:
-        return AxisGrid(self.cols, self.pitch_um * 1e-3, self.scene_cols, self.scene_pitch_um * 1e-3)
-
-    def grid_y(self) -> AxisGrid:
-        return AxisGrid(self.rows, self.pitch_um * 1e-3, self.scene_rows, self.scene_pitch_um * 1e-3)
-
-
-_KERNEL_CACHE: OrderedDict[KernelParams, Any] = OrderedDict()
+_KERNEL_CACHE: OrderedDict[KernelParams, ImagingKernel] = OrderedDict()
 _CACHE_SIZE = 4
 
 
 def clear_kernel_cache() -> None:
     """Forget every cached kernel (frees memory)."""
     _KERNEL_CACHE.clear()
-
-
-def kernel_params(profile: Profile, physics: dict[str, dict[str, Any]],
-                  n_sub: int | None = None, rank_tol: float = 1e-7,
-                  force_direct: bool = False) -> KernelParams:
-    """The kernel parameters of a profile with resolved physics (``n_sub=None``: 2 when a
-    pixel pair is under 1 % of H across, else 4).
-
-    The baseline (CONTRACTS §4) comes from the profile; every kernel-stage effect in
-    ``physics`` then sets the fields its declaration's ``kernel`` names.
-    """
-    fields: dict[str, Any] = {
-        "z_mm": profile.geometry.scene_to_mask_mm, "d_mm": profile.geometry.mask_to_sensor_mm,
-        "q": 4.0, "leakage": 0.0, "wavelengths_nm": None, "angle_deg": 0.0, "dx_um": 0.0,
-        "dy_um": 0.0, "n_scene_side": 1.0,
-    }
-    for spec in stage_effects("kernel"):
-        if spec.name in physics and spec.kernel is not None:
-            fields.update(spec.kernel(physics[spec.name], profile))
-    if n_sub is None:
-        pair_mm = (profile.sensor.pixel_pitch_um + profile.scene.pixel_pitch_um) * 1e-3
-        n_sub = 2 if pair_mm < 0.01 * (fields["z_mm"] + fields["d_mm"]) else 4
-    return KernelParams(
-        rows=profile.sensor.rows, cols=profile.sensor.cols,
-        pitch_um=profile.sensor.pixel_pitch_um,
-        scene_rows=profile.scene.rows, scene_cols=profile.scene.cols,
-        scene_pitch_um=profile.scene.pixel_pitch_um,
-        feature_um=profile.mask.feature_um,
-        phi=tuple(profile.mask.phi), phi_rows=tuple(profile.mask.rows_vector),
-        channels=len(profile.sensor.channels), n_sub=n_sub, rank_tol=rank_tol,
-        force_direct=force_direct, **fields,
-    )
 
 
 def _expansion(kp: KernelParams) -> SeparableExpansion:
@@ -237,20 +171,39 @@ def _build_rotated_kernel(kp: KernelParams, exp: SeparableExpansion,
     return SeparableKernel(per_channel, info)
 
 
-def get_kernel(kp: KernelParams) -> Any:
+def get_kernel(kp: KernelParams) -> ImagingKernel:
     """The (cached) kernel for these parameters: separable or direct."""
-    if kp in _KERNEL_CACHE:
-        _KERNEL_CACHE.move_to_end(kp)
-        return _KERNEL_CACHE[kp]
-    if kp.separable and kp.wavelengths_nm is None and kp.leakage != 0.0:
-        # geometric leakage only rescales the open and coding halves: reuse the t = 0 kernel
-        kern: Any = _rescaled_for_leakage(get_kernel(replace(kp, leakage=0.0)), kp.leakage)
-    elif kp.separable:
-        kern = build_separable_kernel(kp)
-    else:
-        from thintact_sdk.imaging.sim_direct import build_direct_kernel
+    if kp.separable:
+        return _separable_kernel(kp)
+    hit = _cache_get(kp)
+    if hit is not None:
+        return hit
+    return _cache_put(kp, build_direct_kernel(kp))
 
-        kern = build_direct_kernel(kp)
+
+def _separable_kernel(kp: KernelParams) -> SeparableKernel:
+    hit = _cache_get(kp)
+    if isinstance(hit, SeparableKernel):
+        return hit
+    if kp.wavelengths_nm is None and kp.leakage != 0.0:
+        # geometric leakage only rescales the open and coding halves: reuse the t = 0 kernel
+        kern = _rescaled_for_leakage(_separable_kernel(replace(kp, leakage=0.0)), kp.leakage)
+    else:
+        kern = build_separable_kernel(kp)
+    return _cache_put(kp, kern)
+
+
+def _cache_get(kp: KernelParams) -> ImagingKernel | None:
+    hit = _KERNEL_CACHE.get(kp)
+    if hit is not None:
+        _KERNEL_CACHE.move_to_end(kp)
+    return hit
+
+
+K = TypeVar("K", SeparableKernel, DirectKernel)
+
+
+def _cache_put(kp: KernelParams, kern: K) -> K:
     _KERNEL_CACHE[kp] = kern
     while len(_KERNEL_CACHE) > _CACHE_SIZE:
         _KERNEL_CACHE.popitem(last=False)
@@ -308,12 +261,12 @@ class Simulator(ImagingModel):
                 "physics: diffraction cannot be combined with refraction (the simulator's "
                 "diffraction model needs straight rays in air)"
             )
-        self._kernel: Any = None
+        self._kernel: ImagingKernel | None = None
         self._ref_gain: float | None = None
 
     # -- kernel ---------------------------------------------------------------------------
     @property
-    def kernel(self) -> Any:
+    def kernel(self) -> ImagingKernel:
         """The imaging kernel (built on first use, shared through the cache)."""
         if self._kernel is None:
             self._kernel = get_kernel(self.kernel_params)
@@ -445,7 +398,8 @@ class Simulator(ImagingModel):
         ph = self.physics
         mapped = [s for st in ("scene", "signal") for s in stage_effects(st) if s.name in ph]
         blockers = [e for e in ph if EFFECTS[e].stage != "kernel" and EFFECTS[e].separable_terms is None]
-        if not self.separable or blockers:
+        kernel = self.kernel if self.separable else None
+        if not isinstance(kernel, SeparableKernel) or blockers:
             why = "refraction or the forced direct path" if not self.separable \
                 else ", ".join(blockers)
             raise ThinTactError(f"the physics of {self.profile.name!r} is not separable ({why})")
@@ -454,7 +408,7 @@ class Simulator(ImagingModel):
         maps = [s.separable_terms(ph[s.name], self.profile) for s in mapped if s.separable_terms]
         open_t: list[tuple[np.ndarray, np.ndarray]] = []
         coding_t: list[tuple[np.ndarray, np.ndarray]] = []
-        for t in self.kernel.terms[channel]:
+        for t in kernel.terms[channel]:
             terms = [(t.P, t.Q)]
             for split in maps:
                 terms = [out for p, q in terms for out in split(p, q)]
@@ -463,7 +417,7 @@ class Simulator(ImagingModel):
 
     def info(self) -> dict[str, float]:
         """Figures about the kernel (rank of the radiometric expansion and its error)."""
-        return dict(getattr(self.kernel, "info", {}))
+        return dict(self.kernel.info)
 
 
 def white_level_gain(sim: Simulator, fraction: float = WHITE_FRACTION) -> float:
@@ -472,4 +426,7 @@ def white_level_gain(sim: Simulator, fraction: float = WHITE_FRACTION) -> float:
     return sim.reference_gain(fraction * (nz.saturation_dn - nz.black_level_dn))
 
 
-__all__ = ["KernelParams", "Simulator", "WHITE_FRACTION", "clear_kernel_cache", "white_level_gain"]
+__all__ = [
+    "ImagingKernel", "KernelParams", "Simulator", "WHITE_FRACTION", "clear_kernel_cache", "get_kernel",
+    "kernel_params", "white_level_gain",
+]

@@ -46,7 +46,7 @@ from thintact_sdk.physics._spec import (
 
 __all__ = [
     "EFFECTS", "STAGES", "DataSearch", "EffectSpec", "FitSpec", "ParamSpec", "PhysicsError",
-    "Proxy", "register_effect", "resolve_physics", "stage_effects", "unregister_effect",
+    "Proxy", "Stage", "register_effect", "resolve_physics", "stage_effects", "unregister_effect",
 ]
 
 
