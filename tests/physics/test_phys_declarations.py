@@ -69,3 +69,20 @@ def test_kernel_stage_effect_reaches_the_kernel_through_its_declaration(mini) ->
     finally:
         unregister_effect("toy_leaky_cells")
     assert kernel_params(mini, resolve_physics({})).leakage == 0.0
+
+
+def test_physics_imports_no_higher_layer() -> None:
+    """``profile`` validates physics and ``imaging``/``diagnose`` apply it: physics imports
+    none of them (it reads profiles through the structural ``DeviceProfile``)."""
+    import ast
+    from pathlib import Path
+
+    import thintact_sdk.physics as physics
+
+    for path in Path(physics.__file__).parent.glob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text())):
+            mods = [node.module or ""] if isinstance(node, ast.ImportFrom) else \
+                [a.name for a in node.names] if isinstance(node, ast.Import) else []
+            for m in mods:
+                assert not m.startswith(("thintact_sdk.profile", "thintact_sdk.imaging",
+                                         "thintact_sdk.diagnose")), f"{path.name} imports {m}"

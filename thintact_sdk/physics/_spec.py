@@ -17,12 +17,61 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import Any, Literal
+from typing import Any, Literal, Protocol
 
 import numpy as np
 
 from thintact_sdk.errors import ThinTactError
-from thintact_sdk.profile import Profile
+
+
+class _PixelGrid(Protocol):
+    @property
+    def rows(self) -> int: ...
+    @property
+    def cols(self) -> int: ...
+    @property
+    def pixel_pitch_um(self) -> float: ...
+
+
+class _Gaps(Protocol):
+    @property
+    def scene_to_mask_mm(self) -> float: ...
+    @property
+    def mask_to_sensor_mm(self) -> float: ...
+    @property
+    def total_mm(self) -> float: ...
+
+
+class _NoiseLevels(Protocol):
+    @property
+    def black_level_dn(self) -> float: ...
+    @property
+    def saturation_dn(self) -> float: ...
+
+
+class _MaskCells(Protocol):
+    @property
+    def feature_um(self) -> float: ...
+
+
+class DeviceProfile(Protocol):
+    """What effects read of a device profile (:class:`thintact_sdk.profile.Profile` is one).
+
+    A structural type, so that ``physics`` does not import ``profile`` (which validates its
+    ``physics`` section with :func:`thintact_sdk.physics.resolve_physics`).
+    """
+
+    @property
+    def sensor(self) -> _PixelGrid: ...
+    @property
+    def scene(self) -> _PixelGrid: ...
+    @property
+    def geometry(self) -> _Gaps: ...
+    @property
+    def noise(self) -> _NoiseLevels: ...
+    @property
+    def mask(self) -> _MaskCells: ...
+
 
 STAGES = ("scene", "kernel", "signal", "dn")
 """Where an effect acts: on the scene before imaging, inside the imaging kernel, on the
@@ -32,14 +81,14 @@ Stage = Literal["scene", "kernel", "signal", "dn"]
 Params = Mapping[str, Any]
 #: ``(array, resolved parameters, profile) -> array``: scene ``F×N×M×C`` display values,
 #: signal ``F×R×S×C`` simulator units, or DN above black ``F×R×S×C``
-StageForward = Callable[[np.ndarray, Params, Profile], np.ndarray]
+StageForward = Callable[[np.ndarray, Params, DeviceProfile], np.ndarray]
 #: one separable term ``(P: R × N, Q: S × M)`` of ``Y_c = Σ P X_c Qᵀ``
 Term = tuple[np.ndarray, np.ndarray]
 #: ``(resolved parameters, profile) -> (term -> the terms it becomes)``
-TermMap = Callable[[Params, Profile], Callable[[np.ndarray, np.ndarray], list[Term]]]
+TermMap = Callable[[Params, DeviceProfile], Callable[[np.ndarray, np.ndarray], list[Term]]]
 #: ``(resolved parameters, profile) -> {KernelParams field: value}``
-KernelContribution = Callable[[Params, Profile], dict[str, Any]]
-ProfileVector = Callable[[Profile], np.ndarray]
+KernelContribution = Callable[[Params, DeviceProfile], dict[str, Any]]
+ProfileVector = Callable[[DeviceProfile], np.ndarray]
 #: how the diagnosis computes an effect (see :class:`FitSpec`)
 Domain = Literal["optical", "post", "dn", "linear"]
 
@@ -69,7 +118,7 @@ class DataSearch:
         ``vector -> half-width`` of the parabola that refines the best trial otherwise.
     """
 
-    starts: Callable[[np.ndarray, Profile], list[np.ndarray]]
+    starts: Callable[[np.ndarray, DeviceProfile], list[np.ndarray]]
     exact: Callable[[np.ndarray, np.ndarray], bool]
     refine_width: Callable[[np.ndarray], float]
 
@@ -90,7 +139,7 @@ class Proxy:
     """
 
     source: str
-    start: Callable[[np.ndarray, Profile], np.ndarray | None]
+    start: Callable[[np.ndarray, DeviceProfile], np.ndarray | None]
     widths: tuple[float, ...] = (0.02, 0.004)
 
 
@@ -142,9 +191,9 @@ class FitSpec:
     labels: tuple[str, ...]
     null: ProfileVector
     step: ProfileVector
-    to_params: Callable[[np.ndarray, Profile], dict[str, Any]]
-    from_params: Callable[[Params, Profile], np.ndarray]
-    bounds: Callable[[Profile], tuple[np.ndarray, np.ndarray]] | None = None
+    to_params: Callable[[np.ndarray, DeviceProfile], dict[str, Any]]
+    from_params: Callable[[Params, DeviceProfile], np.ndarray]
+    bounds: Callable[[DeviceProfile], tuple[np.ndarray, np.ndarray]] | None = None
     channelwise: bool = False
     signed: tuple[bool, ...] = ()
     slow_params: tuple[int, ...] = ()
@@ -152,10 +201,10 @@ class FitSpec:
     joint_refit: bool = True
     search: DataSearch | None = None
     proxy: Proxy | None = None
-    dn_response: Callable[[np.ndarray, np.ndarray, Profile], tuple[np.ndarray, np.ndarray]] | None = None
-    clip_level_dn: Callable[[np.ndarray, Profile], float] | None = None
+    dn_response: Callable[[np.ndarray, np.ndarray, DeviceProfile], tuple[np.ndarray, np.ndarray]] | None = None
+    clip_level_dn: Callable[[np.ndarray, DeviceProfile], float] | None = None
     basis: Callable[[int, int], np.ndarray] | None = None
-    report: Callable[[np.ndarray, np.ndarray, Profile], dict[str, Any]] | None = None
+    report: Callable[[np.ndarray, np.ndarray, DeviceProfile], dict[str, Any]] | None = None
 
     @property
     def k(self) -> int:
@@ -201,7 +250,7 @@ class EffectSpec:
     kernel: KernelContribution | None = None
     validate: Callable[[Params], None] | None = None
     separable_terms: TermMap | None = None
-    describe: Callable[[Params, Profile], str] | None = None
+    describe: Callable[[Params, DeviceProfile], str] | None = None
     distinguish: dict[str, str] = field(default_factory=dict)
     fit: FitSpec | None = None
 
@@ -227,7 +276,7 @@ class EffectSpec:
             hi += [p.bounds[1]] * n
         return np.asarray(lo, np.float64), np.asarray(hi, np.float64)
 
-    def fit_bounds(self, profile: Profile) -> tuple[np.ndarray, np.ndarray]:
+    def fit_bounds(self, profile: DeviceProfile) -> tuple[np.ndarray, np.ndarray]:
         """Bounds of the fit vector: :attr:`FitSpec.bounds` or the parameters' own."""
         if self.fit is None:
             raise ThinTactError(f"effect {self.name!r} declares no fit")
@@ -247,10 +296,10 @@ def scalar_fit(
 ) -> FitSpec:
     """:class:`FitSpec` of an effect with one scalar parameter ``key``."""
 
-    def to(v: np.ndarray, _p: Profile) -> dict[str, Any]:
+    def to(v: np.ndarray, _p: DeviceProfile) -> dict[str, Any]:
         return {key: round(float(v[0]), 6)}
 
-    def frm(d: Params, _p: Profile) -> np.ndarray:
+    def frm(d: Params, _p: DeviceProfile) -> np.ndarray:
         return np.array([float(d[key])])
 
     return FitSpec(domain, (key,), const(null), const(step), to, frm, signed=(signed,), **kw)

@@ -7,8 +7,7 @@ from typing import Any
 import numpy as np
 
 from thintact_sdk.errors import ThinTactError
-from thintact_sdk.physics._spec import EffectSpec, FitSpec, Params, ParamSpec, const
-from thintact_sdk.profile import Profile
+from thintact_sdk.physics._spec import DeviceProfile, EffectSpec, FitSpec, Params, ParamSpec, const
 
 BOUNDS = (-1.0, 1.0)
 #: (row, column) of the six off-diagonal terms the diagnosis fits
@@ -33,7 +32,7 @@ def apply(signal: np.ndarray, matrix: Any) -> np.ndarray:
     return np.einsum("frsk,ck->frsc", signal, m)
 
 
-def _forward(signal: np.ndarray, params: Params, _profile: Profile) -> np.ndarray:
+def _forward(signal: np.ndarray, params: Params, _profile: DeviceProfile) -> np.ndarray:
     if signal.shape[-1] != 3:  # one channel: nothing to mix
         return signal
     return apply(signal, params["matrix"])
@@ -47,16 +46,16 @@ def matrix_from_terms(v: np.ndarray) -> np.ndarray:
     return m
 
 
-def _to_params(v: np.ndarray, _p: Profile) -> dict[str, Any]:
+def _to_params(v: np.ndarray, _p: DeviceProfile) -> dict[str, Any]:
     return {"matrix": [[round(float(x), 6) for x in row] for row in matrix_from_terms(v)]}
 
 
-def _from_params(d: Params, _p: Profile) -> np.ndarray:
+def _from_params(d: Params, _p: DeviceProfile) -> np.ndarray:
     m = np.asarray(d["matrix"], np.float64)
     return np.array([m[i, j] for i, j in OFF_DIAGONAL])
 
 
-def describe(params: Params, _p: Profile) -> str:
+def describe(params: Params, _p: DeviceProfile) -> str:
     """The finding in words."""
     m = np.asarray(params["matrix"], float)
     off = m - np.diag(np.diag(m))

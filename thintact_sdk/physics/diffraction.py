@@ -22,8 +22,7 @@ from typing import Any
 import numpy as np
 from scipy.special import fresnel
 
-from thintact_sdk.physics._spec import EffectSpec, FitSpec, Params, ParamSpec, const
-from thintact_sdk.profile import Profile
+from thintact_sdk.physics._spec import DeviceProfile, EffectSpec, FitSpec, Params, ParamSpec, const
 
 
 def fresnel_width_mm(wavelength_nm: float, z_mm: float, d_mm: float) -> float:
@@ -167,16 +166,16 @@ def axis_intensity_profiles(
 DEFAULT_WAVELENGTHS_NM = (625.0, 530.0, 465.0)
 
 
-def _to_params(v: np.ndarray, _p: Profile) -> dict[str, Any]:
+def _to_params(v: np.ndarray, _p: DeviceProfile) -> dict[str, Any]:
     return {"wavelength_nm": [round(float(x), 2) for x in v]}
 
 
-def _from_params(d: Params, _p: Profile) -> np.ndarray:
+def _from_params(d: Params, _p: DeviceProfile) -> np.ndarray:
     wl = d["wavelength_nm"]
     return np.asarray(wl if isinstance(wl, list) else [wl] * 3, np.float64)
 
 
-def describe(params: Params, p: Profile) -> str:
+def describe(params: Params, p: DeviceProfile) -> str:
     """The finding in words."""
     d_mm = p.geometry.mask_to_sensor_mm
     wl = [float(x) for x in params["wavelength_nm"]]

@@ -4,8 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from thintact_sdk.physics._spec import EffectSpec, Params, ParamSpec, scalar_fit
-from thintact_sdk.profile import Profile
+from thintact_sdk.physics._spec import DeviceProfile, EffectSpec, Params, ParamSpec, scalar_fit
 
 
 def apply(scenes: np.ndarray, gamma: float) -> np.ndarray:
@@ -15,11 +14,11 @@ def apply(scenes: np.ndarray, gamma: float) -> np.ndarray:
     return np.power(np.clip(scenes, 0.0, None), gamma)
 
 
-def _forward(scenes: np.ndarray, params: Params, _profile: Profile) -> np.ndarray:
+def _forward(scenes: np.ndarray, params: Params, _profile: DeviceProfile) -> np.ndarray:
     return apply(scenes, params["gamma"])
 
 
-def describe(params: Params, _p: Profile) -> str:
+def describe(params: Params, _p: DeviceProfile) -> str:
     """The finding in words."""
     return (
         f"The display is not linear: emitted radiance = value^{float(params['gamma']):.3f}; the "

@@ -7,8 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from thintact_sdk.physics._spec import EffectSpec, FitSpec, Params, ParamSpec, const
-from thintact_sdk.profile import Profile
+from thintact_sdk.physics._spec import DeviceProfile, EffectSpec, FitSpec, Params, ParamSpec, const
 
 
 def distances_mm(
@@ -21,27 +20,27 @@ def distances_mm(
     return z, d
 
 
-def _kernel(params: Params, p: Profile) -> dict[str, Any]:
+def _kernel(params: Params, p: DeviceProfile) -> dict[str, Any]:
     z, d = distances_mm(p.geometry.scene_to_mask_mm, p.geometry.mask_to_sensor_mm,
                         params.get("scene_to_mask_mm"), params.get("mask_to_sensor_mm"))
     return {"z_mm": z, "d_mm": d}
 
 
-def _null(p: Profile) -> np.ndarray:
+def _null(p: DeviceProfile) -> np.ndarray:
     return np.array([p.geometry.scene_to_mask_mm, p.geometry.mask_to_sensor_mm])
 
 
-def _to_params(v: np.ndarray, _p: Profile) -> dict[str, Any]:
+def _to_params(v: np.ndarray, _p: DeviceProfile) -> dict[str, Any]:
     return {"scene_to_mask_mm": round(float(v[0]), 5), "mask_to_sensor_mm": round(float(v[1]), 5)}
 
 
-def _from_params(d: Params, p: Profile) -> np.ndarray:
+def _from_params(d: Params, p: DeviceProfile) -> np.ndarray:
     z, dd = distances_mm(p.geometry.scene_to_mask_mm, p.geometry.mask_to_sensor_mm,
                          d.get("scene_to_mask_mm"), d.get("mask_to_sensor_mm"))
     return np.array([z, dd])
 
 
-def describe(params: Params, p: Profile) -> str:
+def describe(params: Params, p: DeviceProfile) -> str:
     """The finding in words."""
     z, d = float(params["scene_to_mask_mm"]), float(params["mask_to_sensor_mm"])
     return (

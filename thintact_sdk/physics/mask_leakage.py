@@ -10,8 +10,7 @@ from __future__ import annotations
 
 import math
 
-from thintact_sdk.physics._spec import EffectSpec, Params, ParamSpec, scalar_fit
-from thintact_sdk.profile import Profile
+from thintact_sdk.physics._spec import DeviceProfile, EffectSpec, Params, ParamSpec, scalar_fit
 
 
 def intensity_coefficients(transmittance: float) -> tuple[float, float]:
@@ -25,7 +24,7 @@ def amplitude_coefficients(transmittance: float) -> tuple[float, float]:
     return (1.0 + r) / 2.0, (1.0 - r) / 2.0
 
 
-def describe(params: Params, _p: Profile) -> str:
+def describe(params: Params, _p: DeviceProfile) -> str:
     """The finding in words."""
     return (
         f"The closed mask cells pass {float(params['transmittance']):.2%} of the light; the "

@@ -9,8 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from thintact_sdk.physics._spec import EffectSpec, FitSpec, Params, ParamSpec, const
-from thintact_sdk.profile import Profile
+from thintact_sdk.physics._spec import DeviceProfile, EffectSpec, FitSpec, Params, ParamSpec, const
 
 
 def pattern_coordinates(
@@ -25,17 +24,17 @@ def pattern_coordinates(
     return c * x + s * y, -s * x + c * y
 
 
-def _to_params(v: np.ndarray, _p: Profile) -> dict[str, Any]:
+def _to_params(v: np.ndarray, _p: DeviceProfile) -> dict[str, Any]:
     return {"angle_deg": round(float(v[0]), 5), "dx_um": round(float(v[1]), 4),
             "dy_um": round(float(v[2]), 4)}
 
 
-def _from_params(d: Params, _p: Profile) -> np.ndarray:
+def _from_params(d: Params, _p: DeviceProfile) -> np.ndarray:
     return np.array([float(d.get("angle_deg", 0.0)), float(d.get("dx_um", 0.0)),
                      float(d.get("dy_um", 0.0))])
 
 
-def describe(params: Params, _p: Profile) -> str:
+def describe(params: Params, _p: DeviceProfile) -> str:
     """The finding in words."""
     return (
         f"The mask is turned by {float(params['angle_deg']):+.3f}° and shifted by "

@@ -6,8 +6,7 @@ from __future__ import annotations
 
 import math
 
-from thintact_sdk.physics._spec import EffectSpec, Params, ParamSpec, scalar_fit
-from thintact_sdk.profile import Profile
+from thintact_sdk.physics._spec import DeviceProfile, EffectSpec, Params, ParamSpec, scalar_fit
 
 
 def radiometric_exponent(exponent: float) -> float:
@@ -15,14 +14,14 @@ def radiometric_exponent(exponent: float) -> float:
     return 4.0 + exponent
 
 
-def max_angle_deg(p: Profile) -> float:
+def max_angle_deg(p: DeviceProfile) -> float:
     """Angle of incidence (deg) of the steepest ray: scene corner to opposite sensor corner."""
     half_s = 0.5 * math.hypot(p.sensor.rows, p.sensor.cols) * p.sensor.pixel_pitch_um * 1e-3
     half_x = 0.5 * math.hypot(p.scene.rows, p.scene.cols) * p.scene.pixel_pitch_um * 1e-3
     return math.degrees(math.atan((half_s + half_x) / p.geometry.total_mm))
 
 
-def describe(params: Params, p: Profile) -> str:
+def describe(params: Params, p: DeviceProfile) -> str:
     """The finding in words."""
     e = float(params["exponent"])
     th = max_angle_deg(p)

@@ -14,8 +14,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from thintact_sdk.physics._spec import EffectSpec, Params, ParamSpec, Proxy, scalar_fit
-from thintact_sdk.profile import Profile
+from thintact_sdk.physics._spec import (
+    DeviceProfile,
+    EffectSpec,
+    Params,
+    ParamSpec,
+    Proxy,
+    scalar_fit,
+)
 
 
 def lateral_run_mm(theta: np.ndarray, z_mm: float, d_mm: float, n: float) -> np.ndarray:
@@ -74,7 +80,7 @@ def crossing_fraction_and_factor(
     return kappa, factor
 
 
-def from_geometry_fit(geometry_fit: np.ndarray, p: Profile) -> np.ndarray | None:
+def from_geometry_fit(geometry_fit: np.ndarray, p: DeviceProfile) -> np.ndarray | None:
     """Start for the fit: near the axis refraction acts like a shorter scene gap (z/n at the
     same d), so when the geometry fit (``scene_to_mask_mm, mask_to_sensor_mm``) shortens
     z/d, n = (z/d)_profile / (z/d)_fit; None when it does not."""
@@ -85,7 +91,7 @@ def from_geometry_fit(geometry_fit: np.ndarray, p: Profile) -> np.ndarray | None
     return np.array([ratio0 / ratio])
 
 
-def describe(params: Params, p: Profile) -> str:
+def describe(params: Params, p: DeviceProfile) -> str:
     """The finding in words."""
     n = float(params["n_scene_side"])
     z = p.geometry.scene_to_mask_mm

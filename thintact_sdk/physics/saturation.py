@@ -9,12 +9,12 @@ import numpy as np
 
 from thintact_sdk.physics._spec import (
     DataSearch,
+    DeviceProfile,
     EffectSpec,
     FitSpec,
     Params,
     ParamSpec,
 )
-from thintact_sdk.profile import Profile
 
 
 def apply(signal_dn: np.ndarray, level_dn: float | None, black_level_dn: float) -> np.ndarray:
@@ -24,18 +24,18 @@ def apply(signal_dn: np.ndarray, level_dn: float | None, black_level_dn: float) 
     return np.minimum(signal_dn, level_dn - black_level_dn)
 
 
-def _forward(signal_dn: np.ndarray, params: Params, profile: Profile) -> np.ndarray:
+def _forward(signal_dn: np.ndarray, params: Params, profile: DeviceProfile) -> np.ndarray:
     return apply(signal_dn, params["level_dn"], profile.noise.black_level_dn)
 
 
-def response(lin_dn: np.ndarray, v: np.ndarray, profile: Profile) -> tuple[np.ndarray, np.ndarray]:
+def response(lin_dn: np.ndarray, v: np.ndarray, profile: DeviceProfile) -> tuple[np.ndarray, np.ndarray]:
     """``(h(L), h'(L))``: the clip and its derivative (0 where clipped)."""
     lev = float(v[0]) - profile.noise.black_level_dn
     clip = lin_dn >= lev
     return np.where(clip, lev, lin_dn), np.where(clip, 0.0, 1.0)
 
 
-def clip_levels(measured: np.ndarray, p: Profile) -> list[np.ndarray]:
+def clip_levels(measured: np.ndarray, p: DeviceProfile) -> list[np.ndarray]:
     """Clip levels to try: the top of the measured histogram (a pile-up of equal values when
     the clip acts after the noise) and high quantiles (when it acts before)."""
     if measured.size == 0:
@@ -52,16 +52,16 @@ def piled_up(level: np.ndarray, measured: np.ndarray) -> bool:
     return bool(level[0] == top and int(np.sum(measured >= top - 0.5)) >= 20)
 
 
-def _to_params(v: np.ndarray, _p: Profile) -> dict[str, Any]:
+def _to_params(v: np.ndarray, _p: DeviceProfile) -> dict[str, Any]:
     return {"level_dn": round(float(v[0]), 6)}
 
 
-def _from_params(d: Params, p: Profile) -> np.ndarray:
+def _from_params(d: Params, p: DeviceProfile) -> np.ndarray:
     lev = d.get("level_dn")
     return np.array([float(p.noise.saturation_dn if lev is None else lev)])
 
 
-def describe(params: Params, p: Profile) -> str:
+def describe(params: Params, p: DeviceProfile) -> str:
     """The finding in words."""
     return (
         f"Pixels clip at {float(params['level_dn']):.0f} DN, below the declared saturation "

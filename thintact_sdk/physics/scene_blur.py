@@ -12,8 +12,14 @@ from collections.abc import Callable
 import numpy as np
 
 from thintact_sdk.physics._blur import blur_matrix, blur_pixels
-from thintact_sdk.physics._spec import EffectSpec, Params, ParamSpec, Term, scalar_fit
-from thintact_sdk.profile import Profile
+from thintact_sdk.physics._spec import (
+    DeviceProfile,
+    EffectSpec,
+    Params,
+    ParamSpec,
+    Term,
+    scalar_fit,
+)
 
 
 def apply(scenes: np.ndarray, sigma_um: float, pitch_um: float) -> np.ndarray:
@@ -23,17 +29,17 @@ def apply(scenes: np.ndarray, sigma_um: float, pitch_um: float) -> np.ndarray:
     return blur_pixels(scenes, sigma_um / pitch_um, axes=(1, 2))
 
 
-def _forward(scenes: np.ndarray, params: Params, profile: Profile) -> np.ndarray:
+def _forward(scenes: np.ndarray, params: Params, profile: DeviceProfile) -> np.ndarray:
     return apply(scenes, params["sigma_um"], profile.scene.pixel_pitch_um)
 
 
-def _terms(params: Params, profile: Profile) -> Callable[[np.ndarray, np.ndarray], list[Term]]:
+def _terms(params: Params, profile: DeviceProfile) -> Callable[[np.ndarray, np.ndarray], list[Term]]:
     s = params["sigma_um"] / profile.scene.pixel_pitch_um
     g_rows, g_cols = blur_matrix(profile.scene.rows, s), blur_matrix(profile.scene.cols, s)
     return lambda p, q: [(p @ g_rows, q @ g_cols)]
 
 
-def describe(params: Params, p: Profile) -> str:
+def describe(params: Params, p: DeviceProfile) -> str:
     """The finding in words."""
     s = float(params["sigma_um"])
     return (

@@ -5,11 +5,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from thintact_sdk.physics._spec import EffectSpec, Params, ParamSpec, scalar_fit
-from thintact_sdk.profile import Profile
+from thintact_sdk.physics._spec import DeviceProfile, EffectSpec, Params, ParamSpec, scalar_fit
 
 
-def full_scale_dn(profile: Profile) -> float:
+def full_scale_dn(profile: DeviceProfile) -> float:
     """``FS = saturation_dn - black_level_dn``."""
     return float(profile.noise.saturation_dn - profile.noise.black_level_dn)
 
@@ -21,11 +20,11 @@ def apply(signal_dn: np.ndarray, gamma: float, full_scale_dn: float) -> np.ndarr
     return full_scale_dn * np.power(np.clip(signal_dn, 0.0, None) / full_scale_dn, gamma)
 
 
-def _forward(signal_dn: np.ndarray, params: Params, profile: Profile) -> np.ndarray:
+def _forward(signal_dn: np.ndarray, params: Params, profile: DeviceProfile) -> np.ndarray:
     return apply(signal_dn, params["gamma"], full_scale_dn(profile))
 
 
-def response(lin_dn: np.ndarray, v: np.ndarray, profile: Profile) -> tuple[np.ndarray, np.ndarray]:
+def response(lin_dn: np.ndarray, v: np.ndarray, profile: DeviceProfile) -> tuple[np.ndarray, np.ndarray]:
     """``(h(L), h'(L))`` for the diagnosis's gain solve (L floored at 1e-6·FS so that the
     derivative stays finite)."""
     fs = full_scale_dn(profile)
@@ -35,7 +34,7 @@ def response(lin_dn: np.ndarray, v: np.ndarray, profile: Profile) -> tuple[np.nd
     return out, g * out / lp
 
 
-def describe(params: Params, _p: Profile) -> str:
+def describe(params: Params, _p: DeviceProfile) -> str:
     """The finding in words."""
     return (
         f"The sensor response is not linear: DN − black = FS·(L/FS)^{float(params['gamma']):.3f}; "

@@ -16,8 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from thintact_sdk.physics._spec import EffectSpec, FitSpec, Params, ParamSpec, const
-from thintact_sdk.profile import Profile
+from thintact_sdk.physics._spec import DeviceProfile, EffectSpec, FitSpec, Params, ParamSpec, const
 
 #: polynomial terms of the fitted surface: (power of x, power of y), x and y in [-1, 1]
 SURFACE_TERMS: tuple[tuple[int, int], ...] = ((0, 0), (1, 0), (0, 1), (2, 0), (1, 1), (0, 2))
@@ -42,7 +41,7 @@ def apply(signal_dn: np.ndarray, mean_dn: Any) -> np.ndarray:
     return signal_dn + shape(*signal_dn.shape[1:3])[None, :, :, None] * m[:c]
 
 
-def _forward(signal_dn: np.ndarray, params: Params, _profile: Profile) -> np.ndarray:
+def _forward(signal_dn: np.ndarray, params: Params, _profile: DeviceProfile) -> np.ndarray:
     return apply(signal_dn, params["mean_dn"])
 
 
@@ -53,7 +52,7 @@ def surface_basis(rows: int, cols: int) -> np.ndarray:
     return np.stack([x**a * y**b for a, b in SURFACE_TERMS])
 
 
-def _to_params(v: np.ndarray, _p: Profile) -> dict[str, Any]:
+def _to_params(v: np.ndarray, _p: DeviceProfile) -> dict[str, Any]:
     c = np.asarray(v, np.float64).reshape(-1, len(SURFACE_TERMS))
     return {
         "mean_dn": [round(float(x), 3) for x in c[:, 0]],
@@ -63,7 +62,7 @@ def _to_params(v: np.ndarray, _p: Profile) -> dict[str, Any]:
     }
 
 
-def _from_params(d: Params, _p: Profile) -> np.ndarray:
+def _from_params(d: Params, _p: DeviceProfile) -> np.ndarray:
     if "polynomial_dn" in d:
         return np.asarray(d["polynomial_dn"], np.float64).ravel()
     c = np.zeros((3, len(SURFACE_TERMS)))
@@ -71,7 +70,7 @@ def _from_params(d: Params, _p: Profile) -> np.ndarray:
     return c.ravel()
 
 
-def _report(coef: np.ndarray, basis: np.ndarray, p: Profile) -> dict[str, Any]:
+def _report(coef: np.ndarray, basis: np.ndarray, p: DeviceProfile) -> dict[str, Any]:
     """Parameters from the fitted ``C × T`` coefficients: the surface's mean per channel."""
     out = _to_params(coef.ravel(), p)
     surf = np.tensordot(coef, basis, axes=1)  # C × R × S
@@ -79,7 +78,7 @@ def _report(coef: np.ndarray, basis: np.ndarray, p: Profile) -> dict[str, Any]:
     return out
 
 
-def describe(params: Params, _p: Profile) -> str:
+def describe(params: Params, _p: DeviceProfile) -> str:
     """The finding in words."""
     means = [float(x) for x in params["mean_dn"]]
     return (

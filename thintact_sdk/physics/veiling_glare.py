@@ -6,8 +6,14 @@ from collections.abc import Callable
 
 import numpy as np
 
-from thintact_sdk.physics._spec import EffectSpec, Params, ParamSpec, Term, scalar_fit
-from thintact_sdk.profile import Profile
+from thintact_sdk.physics._spec import (
+    DeviceProfile,
+    EffectSpec,
+    Params,
+    ParamSpec,
+    Term,
+    scalar_fit,
+)
 
 
 def apply(signal: np.ndarray, fraction: float) -> np.ndarray:
@@ -17,11 +23,11 @@ def apply(signal: np.ndarray, fraction: float) -> np.ndarray:
     return signal + fraction * signal.mean(axis=(1, 2), keepdims=True)
 
 
-def _forward(signal: np.ndarray, params: Params, _profile: Profile) -> np.ndarray:
+def _forward(signal: np.ndarray, params: Params, _profile: DeviceProfile) -> np.ndarray:
     return apply(signal, float(params["fraction"]))
 
 
-def _terms(params: Params, _profile: Profile) -> Callable[[np.ndarray, np.ndarray], list[Term]]:
+def _terms(params: Params, _profile: DeviceProfile) -> Callable[[np.ndarray, np.ndarray], list[Term]]:
     """Each term ``(P, Q)`` gains its frame-mean term ``(f/R·1 P, 1/S·1 Q)``."""
     fraction = float(params["fraction"])
 
@@ -34,7 +40,7 @@ def _terms(params: Params, _profile: Profile) -> Callable[[np.ndarray, np.ndarra
     return split
 
 
-def describe(params: Params, _p: Profile) -> str:
+def describe(params: Params, _p: DeviceProfile) -> str:
     """The finding in words."""
     return (
         f"A uniform veil adds {float(params['fraction']):.2%} of each frame's mean signal to "
