@@ -56,14 +56,15 @@ def _progress() -> Any:
 
 def accuracy(args: argparse.Namespace, out: dict[str, Any]) -> None:
     """Depth table and marker error on ``args.profile`` through its virtual camera."""
+    from thintact_sdk.capture import camera_is_simulated
     from thintact_sdk.errors import ThinTactError
     from thintact_sdk.profile import load_profile
-    from thintact_sdk.sensor import VIRTUAL_CAMERAS, Sensor
+    from thintact_sdk.sensor import Sensor
     from thintact_sdk.tactile.device_calibration import calibrate_virtual, scene_slot
     from thintact_sdk.tactile.evaluation import PAPER_TABLE_MM, evaluate_depth, evaluate_markers
 
     profile = load_profile(args.profile)
-    if profile.camera is None or profile.camera.plugin not in VIRTUAL_CAMERAS:
+    if not camera_is_simulated(profile):
         raise ThinTactError(f"--profile {args.profile}: the accuracy test needs a virtual camera")
     settings = {"slot": "bench-tactile", "fps": 0, "seed": args.seed}
     from thintact_sdk.errors import CalibrationError
@@ -147,7 +148,7 @@ def _simulator_decoder(sensor: Any, slot: Any, name: str) -> tuple[Any, float]:
     profile = sensor.profile
     sim = Simulator(profile)
     try:
-        from thintact_virtual.bench import signal_scale_dn
+        from thintact_sdk.virtual_bench import signal_scale_dn
 
         scale = signal_scale_dn(profile, sensor.camera_settings)
     except ImportError:

@@ -192,7 +192,7 @@ class SystemMatrices:
             Object with ``open_coding_terms(channel) -> (open_terms, coding_terms)``, lists of
             ``(P: R×N, Q: S×M)`` (the SIM contract) and a ``profile``.
         scale_dn
-            DN per simulator unit (``thintact_virtual.bench.signal_scale_dn``).
+            DN per simulator unit (``thintact_sdk.virtual_bench.signal_scale_dn``).
         channels
             Channels to fit; default all of the simulator's profile.
 

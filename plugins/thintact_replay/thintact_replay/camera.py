@@ -43,7 +43,6 @@ import numpy as np
 from pydantic import Field
 
 from thintact_replay.pacing import wait_until_due
-from thintact_replay.rawframes import RAW_FIELD, load_raw_data
 from thintact_sdk.bayer import mosaic_from_rgb
 from thintact_sdk.camera_settings import CameraSettings, parse_camera_settings
 from thintact_sdk.errors import (
@@ -55,6 +54,7 @@ from thintact_sdk.frames import RawFrame
 from thintact_sdk.interfaces import Camera, CameraCapabilities
 from thintact_sdk.profile import Profile
 from thintact_sdk.recording import Recording
+from thintact_sdk.recording_raw import RAW_FIELD, load_raw_data
 
 
 class EndOfRecording(EndOfStreamError):

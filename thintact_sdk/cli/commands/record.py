@@ -7,7 +7,7 @@ Each manifest entry carries ``timestamp_ns``, ``frame_id``, ``exposure_us`` (and
 ``gain_db``, ``device_timestamp_ns``, ``dropped_before`` when known). A ground-truth scene
 that the camera reports (``meta["scene"]``, e.g. the virtual camera) is saved as the
 frame's scene. ``--raw`` also keeps each raw mosaic (``raw/<index>.npy``, see
-:mod:`thintact_replay.rawframes`), which the ``replay`` camera then delivers as recorded.
+:mod:`thintact_sdk.recording_raw`), which the ``replay`` camera then delivers as recorded.
 
 Dropped frames (gaps in the camera's frame ids) are never silent: each gap is reported,
 the count is printed at the end, and ``--fail-on-drop`` turns any drop into an error.
@@ -21,16 +21,22 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
 from thintact_sdk.capture import create_camera, to_measurement
 from thintact_sdk.capture_run import RecordSummary, capture_frames
-from thintact_sdk.cli.argtypes import positive_float, positive_int
+from thintact_sdk.cli.argtypes import (
+    KEY_VALUE_HELP,
+    key_value,
+    key_values,
+    positive_float,
+    positive_int,
+)
 from thintact_sdk.cli.output_path import add_force_argument, claim_output
 from thintact_sdk.errors import DeviceError, RecordingError, ThinTactError
 from thintact_sdk.frames import RawFrame
 from thintact_sdk.profile import Profile, load_profile
 from thintact_sdk.recording import RecordingWriter, check_appendable
+from thintact_sdk.recording_raw import save_raw_frame
 
 CLI_DESCRIPTION = """\
 Capture N frames from the profile's camera into a thintact-recording/1 directory.
@@ -64,8 +70,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--raw", action="store_true", help="also keep the raw mosaics (raw/*.npy)")
     p.add_argument("--timeout", type=positive_float, default=5.0, metavar="S",
                    help="longest wait for one frame in seconds (default 5)")
-    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                   help="override a camera setting (YAML value), e.g. --set fps=0")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", type=key_value,
+                   help="override a camera setting, e.g. --set fps=0 (" + KEY_VALUE_HELP + ")")
     p.add_argument("--append", action="store_true",
                    help="add frames to an existing recording of the same device (resume)")
     p.add_argument("--fail-on-drop", action="store_true",
@@ -87,17 +93,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_force_argument(p, "a new recording into an existing non-empty directory that is not "
                        "a recording (an existing recording needs --append)")
     p.set_defaults(func=run)
-
-
-def parse_settings(pairs: list[str]) -> dict[str, Any]:
-    """``["key=value", ...]`` → dict with YAML-typed values."""
-    out: dict[str, Any] = {}
-    for pair in pairs:
-        key, sep, value = pair.partition("=")
-        if not sep or not key:
-            raise ThinTactError(f"--set needs KEY=VALUE, got {pair!r}")
-        out[key.strip()] = yaml.safe_load(value)
-    return out
 
 
 def storage_array(data: np.ndarray) -> np.ndarray:
@@ -161,13 +156,7 @@ def record(
         if not append:
             raise RecordingError(f"{out} already holds a recording; choose a new --out or pass --append")
         check_appendable(out, profile)  # before the camera is opened
-    save_raw = None
-    if keep_raw:
-        try:
-            from thintact_replay.rawframes import save_raw_frame
-        except ImportError:
-            raise ThinTactError("--raw needs the thintact-replay plugin (plugins/thintact_replay)") from None
-        save_raw = save_raw_frame
+    save_raw = save_raw_frame if keep_raw else None
     camera = create_camera(profile, settings=settings)
     sink = _RecordingSink(out, profile, save_raw=save_raw, scenes=scenes)
     return capture_frames(camera, profile, frames, sink, saved_in=out, timeout_s=timeout_s,
@@ -219,7 +208,7 @@ def _record_mcap(args: argparse.Namespace, profile: Profile, out: Path) -> Recor
     out.unlink(missing_ok=True)  # only there when claim_output was given --force
     return record_mcap(
         profile, args.frames, out, tactile=not args.no_tactile, timeout_s=args.timeout,
-        settings=parse_settings(args.set), compression=args.compression,
+        settings=key_values(args.set), compression=args.compression,
         image_encoding=args.image_encoding, progress=not args.quiet, buffer_mb=args.buffer_mb,
     )
 
@@ -246,7 +235,7 @@ def run(args: argparse.Namespace) -> int:
     else:
         summary = record(
             profile, args.frames, out,
-            keep_raw=args.raw, timeout_s=args.timeout, settings=parse_settings(args.set),
+            keep_raw=args.raw, timeout_s=args.timeout, settings=key_values(args.set),
             append=args.append, scenes=not args.no_scenes, progress=not args.quiet,
             buffer_mb=args.buffer_mb,
         )

@@ -69,8 +69,6 @@ class _Device:
     """Simulator, two-term fit, measurements and trained filter of one profile."""
 
     def __init__(self, profile: Any, train_count: int, say: Callable[[str], None]) -> None:
-        from thintact_virtual.bench import signal_scale_dn
-
         from thintact_sdk.imaging.filter_training import (
             make_training_data,
             train_joint_filter,
@@ -80,6 +78,7 @@ class _Device:
         from thintact_sdk.imaging.scenes import make_scene
         from thintact_sdk.imaging.simulator import Simulator
         from thintact_sdk.imaging.t2s import SystemMatrices
+        from thintact_sdk.virtual_bench import signal_scale_dn
 
         self.profile = profile
         say(f"{profile.name}: simulator and two-term fit")
@@ -143,6 +142,7 @@ def _best_tau(dec: Any, dev: _Device) -> float:
 def run(args: argparse.Namespace) -> int:
     """Run the benchmark and print its figures (table or ``--json``)."""
     from rich.console import Console
+
     from thintact_decoders import (
         ArrayBackend,
         NonIterativeDecoder,
@@ -152,7 +152,6 @@ def run(args: argparse.Namespace) -> int:
     from thintact_decoders.backend_cache import BackendCache
     from thintact_decoders.candidates import candidate_specs
     from thintact_decoders.selection import Probe, select_backend
-
     from thintact_sdk.machine import host_capabilities, machine_summary
     from thintact_sdk.profile import load_profile
     from thintact_sdk.roofline import measure_sgemm_gflops, roofline_ratio
@@ -251,7 +250,6 @@ def run(args: argparse.Namespace) -> int:
 def _mask_compare(profile: Any, dev: _Device, result: dict[str, Any], args: argparse.Namespace,
                   say: Callable[[str], None]) -> dict[str, Any]:
     from thintact_decoders import NonIterativeDecoder, T2SClosedFormDecoder
-
     from thintact_sdk.profile import profile_from_dict
 
     out: dict[str, Any] = {"mls": {
