@@ -40,6 +40,7 @@ from scipy.ndimage import gaussian_filter
 from thintact_sdk.imaging import scenes
 from thintact_sdk.imaging.direct_generation import AxisGeometry, DirectGenerator
 from thintact_sdk.imaging.metrics import psnr
+from thintact_sdk.imaging.noise import default_white_level_dn, signal_variance_dn
 from thintact_sdk.profile import Profile
 
 #: Floor of 1 − SSIM and of the white image's total variation (keeps f finite for a
@@ -187,8 +188,7 @@ class FitnessEvaluator:
             "white": scenes.white(n, m)[..., 0].astype(np.float64),
         }
         noise = profile.noise
-        white_dn = s.white_level_dn if s.white_level_dn is not None else 0.6 * (
-            noise.saturation_dn - noise.black_level_dn)
+        white_dn = s.white_level_dn if s.white_level_dn is not None else default_white_level_dn(noise)
         if s.frames_averaged < 1:
             raise ValueError(f"frames_averaged must be >= 1, got {s.frames_averaged}")
         if not white_dn > 0:
@@ -202,7 +202,7 @@ class FitnessEvaluator:
         self.noise_draws: dict[str, np.ndarray] = {}
         for name, x in self.scenes.items():
             mean_dn = self.dn_per_unit * float((po @ x @ qo.T).mean())  # open half ≈ mean signal
-            var_dn = (mean_dn / noise.electrons_per_dn + noise.read_noise_dn**2) / s.frames_averaged
+            var_dn = float(signal_variance_dn(mean_dn, noise, s.frames_averaged))
             self.sigma_rel[name] = math.sqrt(var_dn) / self.dn_per_unit if s.noise else 0.0
             self.noise_draws[name] = rng.standard_normal((n, m))
         if s.tau is not None:
