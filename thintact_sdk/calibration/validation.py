@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 
+from thintact_sdk.errors import InvalidValueError
 from thintact_sdk.imaging.calibration_bundle import CalibrationBundle
 from thintact_sdk.imaging.filter_training import scene_for_channels
 from thintact_sdk.imaging.metrics import psnr, ssim
@@ -102,7 +103,7 @@ def choose_tau(
         The chosen τ (DN²) and ``{f"{tau:.3g}": mean PSNR dB}`` for every candidate.
     """
     if bundle.filter is None:
-        raise ValueError("choose_tau needs a bundle with a trained filter")
+        raise InvalidValueError("choose_tau needs a bundle with a trained filter")
     rng = np.random.default_rng(seed)
     sm = bundle.system_matrices
     coding = []

@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 from scipy.ndimage import gaussian_filter
 
+from thintact_sdk.errors import InvalidShapeError, InvalidValueError
 from thintact_sdk.imaging.dct import SeparableDCT, dct2
 from thintact_sdk.imaging.noise import signal_variance_dn
 from thintact_sdk.imaging.recon_filter import JointFilter, joint_filter_open
@@ -55,7 +56,7 @@ def scene_for_channels(scene: np.ndarray, channels: int) -> np.ndarray:
     if x.ndim == 2:
         x = x[..., None]
     if x.ndim != 3:
-        raise ValueError(f"scene must be N×M or N×M×C, got shape {x.shape}")
+        raise InvalidShapeError(f"scene must be N×M or N×M×C, got shape {x.shape}")
     have = x.shape[2]
     if have == channels:
         return x
@@ -63,7 +64,7 @@ def scene_for_channels(scene: np.ndarray, channels: int) -> np.ndarray:
         return x.mean(axis=2, keepdims=True, dtype=np.float64).astype(x.dtype, copy=False)
     if have == 1:
         return np.repeat(x, channels, axis=2)
-    raise ValueError(f"scene has {have} channels but the device has {channels}")
+    raise InvalidShapeError(f"scene has {have} channels but the device has {channels}")
 
 
 def training_scenes(n: int, m: int, count: int = 32, seed: int = 0) -> list[np.ndarray]:
@@ -335,7 +336,7 @@ def train_joint_filter(
     block: tuple[int, int] | None
     if isinstance(low_block, str):
         if low_block != "auto":
-            raise ValueError(f"low_block must be (kr, ks), 'auto' or None, got {low_block!r}")
+            raise InvalidValueError(f"low_block must be (kr, ks), 'auto' or None, got {low_block!r}")
         block = auto_low_block(data)
     else:
         block = None if low_block is None else (int(low_block[0]), int(low_block[1]))

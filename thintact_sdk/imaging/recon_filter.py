@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from thintact_sdk.errors import CalibrationError
+from thintact_sdk.errors import CalibrationError, InvalidShapeError
 from thintact_sdk.imaging.dct import SeparableDCT
 
 FILTER_FORMAT = "thintact-joint-filter/1"
@@ -82,7 +82,7 @@ class JointFilter:
         """Estimated open component ``F(Y)`` of ``signal`` (``R × S × C``, DN) → ``R × S × C``."""
         y = np.moveaxis(np.asarray(signal), -1, 0)
         if y.shape[1:] != self.sensor_shape:
-            raise ValueError(f"signal must be {self.sensor_shape}×C, got {np.shape(signal)}")
+            raise InvalidShapeError(f"signal must be {self.sensor_shape}×C, got {np.shape(signal)}")
         out = joint_filter_open(self.phi_s, self.phi_f, y, SeparableDCT(self.sensor_shape))
         return np.moveaxis(out, 0, -1)
 

@@ -17,6 +17,7 @@ import numpy as np
 
 from thintact_decoders.backend import ArrayBackend
 from thintact_decoders.shapes import check_measurement_shape
+from thintact_sdk.errors import InvalidValueError
 from thintact_sdk.imaging.first_order import largest_eigenvalue, nesterov
 from thintact_sdk.imaging.t2s import SystemMatrices
 from thintact_sdk.interfaces import Decoder
@@ -54,9 +55,9 @@ class T2SIterativeDecoder(Decoder):
         gradient: str = "gram",
     ) -> None:
         if iterations < 1:
-            raise ValueError("iterations must be >= 1")
+            raise InvalidValueError("iterations must be >= 1")
         if gradient not in ("gram", "direct"):
-            raise ValueError(f"gradient must be 'gram' or 'direct', got {gradient!r}")
+            raise InvalidValueError(f"gradient must be 'gram' or 'direct', got {gradient!r}")
         self.gradient = gradient
         self.xp = backend or ArrayBackend("numpy")
         self.tau = float(tau)

@@ -24,6 +24,7 @@ import numpy as np
 from thintact_decoders.backend import ArrayBackend, synthesis_macs
 from thintact_decoders.modes import DEFAULT_MODE_RTOL, kept_mode_counts
 from thintact_decoders.shapes import check_measurement_shape
+from thintact_sdk.errors import InvalidValueError
 from thintact_sdk.imaging.dct import SeparableDCT, dct_matrix
 from thintact_sdk.imaging.recon_filter import JointFilter, joint_filter_open
 from thintact_sdk.imaging.t2s import SystemMatrices
@@ -111,7 +112,7 @@ class NonIterativeDecoder(Decoder):
         mode_rtol: float = DEFAULT_MODE_RTOL,
     ) -> None:
         if fold not in ("auto", "never", "approx"):
-            raise ValueError(f"fold must be 'auto', 'never' or 'approx', got {fold!r}")
+            raise InvalidValueError(f"fold must be 'auto', 'never' or 'approx', got {fold!r}")
         self.xp = backend or ArrayBackend("numpy")
         self.tau = float(tau)
         self.mode_rtol = float(mode_rtol)
@@ -178,7 +179,7 @@ class NonIterativeDecoder(Decoder):
     def set_tau(self, tau: float) -> None:
         """Change τ without recomputing the SVDs (the modes kept follow the new τ)."""
         if tau <= 0:
-            raise ValueError("tau must be > 0")
+            raise InvalidValueError("tau must be > 0")
         self.tau = float(tau)
         kept = kept_mode_counts(self._sp, self._sq, self.tau, self.mode_rtol)
         if kept != self.kept_modes:

@@ -29,6 +29,7 @@ import numpy as np
 from thintact_decoders.backend import ArrayBackend, synthesis_macs
 from thintact_decoders.modes import DEFAULT_MODE_RTOL, kept_mode_counts
 from thintact_decoders.shapes import check_measurement_shape
+from thintact_sdk.errors import InvalidShapeError, InvalidValueError
 from thintact_sdk.imaging.first_order import largest_eigenvalue, nesterov
 from thintact_sdk.imaging.t2s import SystemMatrices
 from thintact_sdk.imaging.tikhonov import TikhonovSolver
@@ -78,7 +79,7 @@ class T2SClosedFormDecoder(Decoder):
         sm = system_matrices
         (r, s), (n, m) = sm.sensor_shape, sm.scene_shape
         if r < n or s < m:
-            raise ValueError("t2s-closed-form needs at least as many sensor rows/cols as scene rows/cols")
+            raise InvalidShapeError("t2s-closed-form needs at least as many sensor rows/cols as scene rows/cols")
         self.channels, self.sensor_shape, self.scene_shape = sm.channels, (r, s), (n, m)
         self.tau = float(tau)
         svds = []
@@ -162,7 +163,7 @@ class T2SClosedFormDecoder(Decoder):
         """Change τ without recomputing any SVD (only the 2K × 2K system and ``1/(σ² + τ)``;
         the coding modes kept follow the new τ)."""
         if tau <= 0:
-            raise ValueError("tau must be > 0")
+            raise InvalidValueError("tau must be > 0")
         self.tau = float(tau)
         kept = kept_mode_counts(self._sp, self._sq, self.tau, self.mode_rtol)
         if kept != self.kept_modes:

@@ -37,6 +37,7 @@ from typing import Any
 import numpy as np
 from scipy.ndimage import gaussian_filter
 
+from thintact_sdk.errors import InvalidShapeError, InvalidValueError
 from thintact_sdk.imaging import scenes
 from thintact_sdk.imaging.direct_generation import AxisGeometry, DirectGenerator
 from thintact_sdk.imaging.metrics import psnr
@@ -190,9 +191,9 @@ class FitnessEvaluator:
         noise = profile.noise
         white_dn = s.white_level_dn if s.white_level_dn is not None else default_white_level_dn(noise)
         if s.frames_averaged < 1:
-            raise ValueError(f"frames_averaged must be >= 1, got {s.frames_averaged}")
+            raise InvalidValueError(f"frames_averaged must be >= 1, got {s.frames_averaged}")
         if not white_dn > 0:
-            raise ValueError(f"white_level_dn must be > 0, got {white_dn}")
+            raise InvalidValueError(f"white_level_dn must be > 0, got {white_dn}")
         self.white_level_dn = float(white_dn)
         #: DN per relative-irradiance unit: the fully open white response is 2× the white level
         self.dn_per_unit = 2.0 * self.white_level_dn
@@ -212,7 +213,7 @@ class FitnessEvaluator:
         else:
             self.tau = 1e-9
         if not self.tau > 0:
-            raise ValueError(f"tau must be > 0, got {self.tau}")
+            raise InvalidValueError(f"tau must be > 0, got {self.tau}")
         self._ssim = {k: SSIMReference(v) for k, v in self.scenes.items()}
         self._cast_scenes = {k: v.astype(self._dtype) for k, v in self.scenes.items()}
         self._cast_noise = {k: v.astype(self._dtype) for k, v in self.noise_draws.items()}
@@ -254,7 +255,7 @@ class FitnessEvaluator:
         """Fitness of one φ (``(K,)`` ±1)."""
         phi = np.asarray(phi)
         if phi.shape != (self.K,):
-            raise ValueError(f"phi must have shape ({self.K},), got {phi.shape}")
+            raise InvalidShapeError(f"phi must have shape ({self.K},), got {phi.shape}")
         return self.score(self.reconstruct(phi), keep_reconstructions)
 
     def evaluate_matrices(self, pc: np.ndarray, qc: np.ndarray,
