@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from thintact_sdk.imaging.noise import default_white_level_dn
 from thintact_sdk.profile import Profile
 
 
@@ -63,9 +64,8 @@ REFERENCE_EXPOSURE_US = 10_000.0
 
 def white_level_dn(profile: Profile, settings: dict[str, Any]) -> float:
     """DN above black of the brightest all-white pixel at the reference exposure."""
-    nz = profile.noise
     v = settings.get("white_level_dn")
-    return 0.6 * (nz.saturation_dn - nz.black_level_dn) if v is None else float(v)
+    return default_white_level_dn(profile.noise) if v is None else float(v)
 
 
 def signal_scale_dn(profile: Profile, settings: dict[str, Any] | None = None) -> float:

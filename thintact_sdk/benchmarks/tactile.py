@@ -188,10 +188,11 @@ def _latency_decoder(profile: Any, name: str | None = None) -> tuple[Any, Any, s
     except CalibrationError:
         pass
     from thintact_sdk.imaging.calibration_bundle import CalibrationBundle
+    from thintact_sdk.imaging.noise import default_white_level_dn
     from thintact_sdk.imaging.t2s import SystemMatrices
 
     nz = profile.noise
-    sm = SystemMatrices.direct(profile, scale_dn=0.6 * (nz.saturation_dn - nz.black_level_dn))
+    sm = SystemMatrices.direct(profile, scale_dn=default_white_level_dn(nz))
     tau = float(settings.get("tau", 0.01)) * float(np.linalg.norm(sm.Pc[0], 2) *
                                                    np.linalg.norm(sm.Qc[0], 2)) ** 2
     bundle = CalibrationBundle.create(profile, sm, None, tau=tau, source="simulator")

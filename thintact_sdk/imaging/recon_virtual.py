@@ -22,6 +22,7 @@ from thintact_sdk.imaging.metrics import psnr, ssim
 from thintact_sdk.imaging.scenes import make_scene
 from thintact_sdk.imaging.simulator import Simulator
 from thintact_sdk.imaging.t2s import SystemMatrices
+from thintact_sdk.imaging.tau_sweep import tune_decoder_tau
 from thintact_sdk.interfaces import TunableDecoder
 from thintact_sdk.plugin_manager import get_registry
 from thintact_sdk.profile import Profile
@@ -163,15 +164,7 @@ def make_virtual_bundle(
 def choose_tau(
     decoder: TunableDecoder, unit: float, measurements: np.ndarray, scenes: Sequence[np.ndarray]
 ) -> tuple[float, dict[str, float]]:
-    """τ from ``TAU_GRID_REL × unit`` maximising the mean PSNR of ``decoder`` (which has
-    ``set_tau``); leaves the decoder at that τ and returns it with the table."""
-    table: dict[str, float] = {}
-    best = (-np.inf, unit)
-    for rel in TAU_GRID_REL:
-        decoder.set_tau(rel * unit)
-        value = float(np.mean(evaluate(decoder.decode, measurements, scenes)[0]))
-        table[f"{rel * unit:.4g}"] = round(value, 2)
-        if value > best[0]:
-            best = (value, rel * unit)
-    decoder.set_tau(best[1])
-    return best[1], table
+    """τ from ``TAU_GRID_REL × unit`` maximising the mean PSNR of ``decoder``; leaves the
+    decoder at that τ and returns it with the table ``{f"{tau:.4g}": mean PSNR dB}``."""
+    sweep = tune_decoder_tau(decoder, [rel * unit for rel in TAU_GRID_REL], list(measurements), scenes)
+    return sweep.tau, {f"{tau:.4g}": round(value, 2) for tau, value in sweep.scores}

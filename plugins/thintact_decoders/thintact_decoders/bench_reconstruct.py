@@ -126,17 +126,10 @@ def _quality(decode: Callable[[np.ndarray], np.ndarray], dev: _Device,
 def _best_tau(dec: Any, dev: _Device) -> float:
     """τ (coarse grid × the coding power) maximising mean PSNR over the USAF and GelSight frames
     (the white frame is kept for the uniformity figure); leaves ``dec`` set to it."""
-    from thintact_sdk.imaging.metrics import psnr
+    from thintact_sdk.imaging.tau_sweep import tune_decoder_tau
 
-    best = (-np.inf, dev.unit)
-    for rel in (0.01, 0.03, 0.1, 0.3, 1.0, 3.0):
-        dec.set_tau(rel * dev.unit)
-        value = np.mean([psnr(np.clip(dec.decode(y), 0, 1), x)
-                         for x, y in zip(dev.scenes[1:], dev.signal[1:], strict=True)])
-        if value > best[0]:
-            best = (float(value), rel * dev.unit)
-    dec.set_tau(best[1])
-    return best[1]
+    grid = [rel * dev.unit for rel in (0.01, 0.03, 0.1, 0.3, 1.0, 3.0)]
+    return tune_decoder_tau(dec, grid, list(dev.signal[1:]), list(dev.scenes[1:])).tau
 
 
 def run(args: argparse.Namespace) -> int:

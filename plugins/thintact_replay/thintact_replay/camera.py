@@ -91,14 +91,19 @@ def _check_frame_files(rec: Recording, scenes: bool) -> None:
                 )
 
 
-class ReplayCameraSettings(CameraSettings):
-    """``camera.settings`` of the replay camera (see the module docstring)."""
+class ReplaySourceSettings(CameraSettings):
+    """``camera.settings`` every replay source takes (a recording directory or an MCAP log)."""
 
-    path: str = Field(min_length=1, description="the recording directory to play")
+    path: str = Field(min_length=1, description="the recording directory or .mcap log to play")
     rate: Literal["recorded", "fast"] = "recorded"
     speed: float = Field(default=1.0, gt=0, le=1000)
-    fps: float = Field(default=0.0, ge=0, le=10_000)
     loop: bool = Field(default=False, strict=True)
+
+
+class ReplayCameraSettings(ReplaySourceSettings):
+    """``camera.settings`` of the replay camera on a recording directory (module docstring)."""
+
+    fps: float = Field(default=0.0, ge=0, le=10_000)
     raw: bool = Field(default=True, strict=True)
     scenes: bool = Field(default=True, strict=True)
 

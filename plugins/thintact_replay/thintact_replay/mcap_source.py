@@ -19,9 +19,10 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-from thintact_replay.camera import EndOfRecording
+from thintact_replay.camera import EndOfRecording, ReplaySourceSettings
 from thintact_replay.pacing import wait_until_due
-from thintact_sdk.errors import DeviceError, ProfileError, RecordingError
+from thintact_sdk.camera_settings import parse_camera_settings
+from thintact_sdk.errors import DeviceError, RecordingError
 from thintact_sdk.frames import RawFrame
 from thintact_sdk.interfaces import Camera, CameraCapabilities
 from thintact_sdk.mcaplog import McapLog
@@ -41,15 +42,12 @@ class McapReplayCamera(Camera):
     name = "replay"
 
     def __init__(self, profile: Profile, settings: dict[str, Any]) -> None:
+        parsed = parse_camera_settings(ReplaySourceSettings, settings, "replay (MCAP log)")
         self.profile = profile
-        self.path: Path = profile.resolve_path(str(settings["path"]))
-        self.rate = str(settings.get("rate", "recorded"))
-        if self.rate not in ("recorded", "fast"):
-            raise ProfileError(f"camera.settings.rate must be 'recorded' or 'fast', not {self.rate!r}")
-        self.speed = float(settings.get("speed", 1.0))
-        if self.speed <= 0:
-            raise ProfileError("camera.settings.speed must be > 0")
-        self.loop = bool(settings.get("loop", False))
+        self.path: Path = profile.resolve_path(parsed.path)
+        self.rate = parsed.rate
+        self.speed = parsed.speed
+        self.loop = parsed.loop
         self._log: McapLog | None = None
         self._frames: Iterator[RawFrame] | None = None
         self._pending: RawFrame | None = None
