@@ -14,6 +14,9 @@ of the light into each neighbour, not 0.4 %). Edges are mirrored about the borde
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from typing import Any, Literal
+
 import numpy as np
 from scipy.ndimage import correlate1d
 from scipy.special import ndtr
@@ -46,3 +49,30 @@ def blur_pixels(a: np.ndarray, sigma_px: float, axes: tuple[int, ...]) -> np.nda
 def blur_matrix(n: int, sigma_px: float) -> np.ndarray:
     """``n × n`` matrix B with ``B @ v`` the blur of the length-``n`` pixel vector ``v``."""
     return blur_pixels(np.eye(n), sigma_px, axes=(0,))
+
+
+def blur_by_um(images: np.ndarray, sigma_um: float, pitch_um: float) -> np.ndarray:
+    """Blur ``F × rows × cols × C`` pixel-integrated images by ``sigma_um`` (pixel pitch
+    ``pitch_um``); unchanged (same object) for σ ≤ 0."""
+    if sigma_um <= 0:
+        return images
+    return blur_pixels(images, sigma_um / pitch_um, axes=(1, 2))
+
+
+def plane_blur_hooks(plane: Literal["scene", "sensor"]) -> tuple[Callable[..., np.ndarray], Callable[..., Any]]:
+    """``(forward, separable_terms)`` of a Gaussian blur effect with parameter ``sigma_um`` in the
+    profile's ``plane``: the scene (blur acts on the scene, right of ``P``/``Q``) or the sensor
+    (blur acts on the measurement, left of ``P``/``Q``)."""
+
+    def forward(images: np.ndarray, params: Any, profile: Any) -> np.ndarray:
+        return blur_by_um(images, params["sigma_um"], getattr(profile, plane).pixel_pitch_um)
+
+    def terms(params: Any, profile: Any) -> Callable[[np.ndarray, np.ndarray], list[tuple[np.ndarray, np.ndarray]]]:
+        geometry = getattr(profile, plane)
+        s = params["sigma_um"] / geometry.pixel_pitch_um
+        rows, cols = blur_matrix(geometry.rows, s), blur_matrix(geometry.cols, s)
+        if plane == "scene":
+            return lambda p, q: [(p @ rows, q @ cols)]
+        return lambda p, q: [(rows @ p, cols @ q)]
+
+    return forward, terms

@@ -7,36 +7,24 @@ the field is balanced by light scattered in from a similarly lit surround.
 
 from __future__ import annotations
 
-from collections.abc import Callable
-
 import numpy as np
 
-from thintact_sdk.physics._blur import blur_matrix, blur_pixels
+from thintact_sdk.physics._blur import blur_by_um, plane_blur_hooks
 from thintact_sdk.physics._spec import (
     DeviceProfile,
     EffectSpec,
     Params,
     ParamSpec,
-    Term,
     scalar_fit,
 )
 
 
 def apply(scenes: np.ndarray, sigma_um: float, pitch_um: float) -> np.ndarray:
-    """Blur ``F × N × M × C`` scenes by ``sigma_um`` (scene pixel pitch ``pitch_um``)."""
-    if sigma_um <= 0:
-        return scenes
-    return blur_pixels(scenes, sigma_um / pitch_um, axes=(1, 2))
+    """Blur ``F × rows × cols × C`` scenes by ``sigma_um`` (scene pixel pitch ``pitch_um``)."""
+    return blur_by_um(scenes, sigma_um, pitch_um)
 
 
-def _forward(scenes: np.ndarray, params: Params, profile: DeviceProfile) -> np.ndarray:
-    return apply(scenes, params["sigma_um"], profile.scene.pixel_pitch_um)
-
-
-def _terms(params: Params, profile: DeviceProfile) -> Callable[[np.ndarray, np.ndarray], list[Term]]:
-    s = params["sigma_um"] / profile.scene.pixel_pitch_um
-    g_rows, g_cols = blur_matrix(profile.scene.rows, s), blur_matrix(profile.scene.cols, s)
-    return lambda p, q: [(p @ g_rows, q @ g_cols)]
+_forward, _terms = plane_blur_hooks("scene")
 
 
 def describe(params: Params, p: DeviceProfile) -> str:

@@ -12,36 +12,24 @@ the diagnosis searched up to 500 um; 500 um is now the one bound.)
 
 from __future__ import annotations
 
-from collections.abc import Callable
-
 import numpy as np
 
-from thintact_sdk.physics._blur import blur_matrix, blur_pixels
+from thintact_sdk.physics._blur import blur_by_um, plane_blur_hooks
 from thintact_sdk.physics._spec import (
     DeviceProfile,
     EffectSpec,
     Params,
     ParamSpec,
-    Term,
     scalar_fit,
 )
 
 
-def apply(signal: np.ndarray, sigma_um: float, pitch_um: float) -> np.ndarray:
-    """Blur ``F × R × S × C`` signals by ``sigma_um`` (sensor pixel pitch ``pitch_um``)."""
-    if sigma_um <= 0:
-        return signal
-    return blur_pixels(signal, sigma_um / pitch_um, axes=(1, 2))
+def apply(signals: np.ndarray, sigma_um: float, pitch_um: float) -> np.ndarray:
+    """Blur ``F × rows × cols × C`` signals by ``sigma_um`` (sensor pixel pitch ``pitch_um``)."""
+    return blur_by_um(signals, sigma_um, pitch_um)
 
 
-def _forward(signal: np.ndarray, params: Params, profile: DeviceProfile) -> np.ndarray:
-    return apply(signal, params["sigma_um"], profile.sensor.pixel_pitch_um)
-
-
-def _terms(params: Params, profile: DeviceProfile) -> Callable[[np.ndarray, np.ndarray], list[Term]]:
-    s = params["sigma_um"] / profile.sensor.pixel_pitch_um
-    b_rows, b_cols = blur_matrix(profile.sensor.rows, s), blur_matrix(profile.sensor.cols, s)
-    return lambda p, q: [(b_rows @ p, b_cols @ q)]
+_forward, _terms = plane_blur_hooks("sensor")
 
 
 def describe(params: Params, p: DeviceProfile) -> str:

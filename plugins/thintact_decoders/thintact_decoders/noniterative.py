@@ -22,14 +22,13 @@ from typing import Any
 import numpy as np
 
 from thintact_decoders.backend import ArrayBackend, synthesis_macs
+from thintact_decoders.closed_form_base import ClosedFormDecoder
 from thintact_decoders.modes import DEFAULT_MODE_RTOL, kept_mode_counts
-from thintact_decoders.shapes import check_measurement_shape
 from thintact_sdk.errors import InvalidValueError
 from thintact_sdk.imaging.dct import SeparableDCT, dct_matrix
 from thintact_sdk.imaging.recon_filter import JointFilter, joint_filter_open
 from thintact_sdk.imaging.t2s import SystemMatrices
 from thintact_sdk.imaging.tikhonov import TikhonovSolver
-from thintact_sdk.interfaces import Decoder
 
 
 def low_rank_factors(phi_s: np.ndarray, max_rank: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray, float]:
@@ -72,7 +71,7 @@ def filter_structure(
     return kr, ks, max(rank, 1), factors
 
 
-class NonIterativeDecoder(Decoder):
+class NonIterativeDecoder(ClosedFormDecoder):
     """Joint-filter + closed-form decoder.
 
     Parameters
@@ -268,20 +267,3 @@ class NonIterativeDecoder(Decoder):
                     y = xp.cast(xp.cast(y, False) - f, gemm=True)
             self._unit_core = self._core(y)
         return self._unit_core
-
-    def _check(self, signal: np.ndarray) -> None:
-        check_measurement_shape(signal, self.sensor_shape, self.channels)
-
-    def decode(self, signal: np.ndarray) -> np.ndarray:
-        """Reconstruct ``N × M × C`` float32 (display units) from ``R × S × C`` DN above black."""
-        self._check(signal)
-        return self._solve(self.xp.channels_first(signal, gemm=True))
-
-    def decode_raw(self, raw: np.ndarray, black_level_dn: float) -> np.ndarray:
-        """Reconstruct from raw binned DN (``R × S × C``, e.g. uint16, black level included).
-
-        The black level is removed as a precomputed constant in the solve, so the only per-pixel
-        work before the products is one conversion to floating point.
-        """
-        self._check(raw)
-        return self._solve(self.xp.channels_first(raw, gemm=True), float(black_level_dn))

@@ -27,13 +27,12 @@ from typing import Any
 import numpy as np
 
 from thintact_decoders.backend import ArrayBackend, synthesis_macs
+from thintact_decoders.closed_form_base import ClosedFormDecoder
 from thintact_decoders.modes import DEFAULT_MODE_RTOL, kept_mode_counts
-from thintact_decoders.shapes import check_measurement_shape
 from thintact_sdk.errors import InvalidShapeError, InvalidValueError
 from thintact_sdk.imaging.first_order import largest_eigenvalue, nesterov
 from thintact_sdk.imaging.t2s import SystemMatrices
 from thintact_sdk.imaging.tikhonov import TikhonovSolver
-from thintact_sdk.interfaces import Decoder
 
 
 def _truncated_svd(a: np.ndarray, rtol: float, max_rank: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -43,7 +42,7 @@ def _truncated_svd(a: np.ndarray, rtol: float, max_rank: int) -> tuple[np.ndarra
     return u[:, :k], s[:k], vt[:k].T
 
 
-class T2SClosedFormDecoder(Decoder):
+class T2SClosedFormDecoder(ClosedFormDecoder):
     """Exact (up to open-term truncation) full-T2S Tikhonov reconstruction, non-iterative.
 
     Parameters
@@ -236,19 +235,6 @@ class T2SClosedFormDecoder(Decoder):
 
         x = nesterov(gradient, xp.zeros_like(rhs), step, iterations)
         return xp.synthesise(self._vp, x, self._vqt)
-
-    def _check(self, signal: np.ndarray) -> None:
-        check_measurement_shape(signal, self.sensor_shape, self.channels)
-
-    def decode(self, signal: np.ndarray) -> np.ndarray:
-        """Reconstruct ``N × M × C`` float32 from ``R × S × C`` DN above black."""
-        self._check(signal)
-        return self._solve(self.xp.channels_first(signal, gemm=True))
-
-    def decode_raw(self, raw: np.ndarray, black_level_dn: float) -> np.ndarray:
-        """Reconstruct from raw binned DN (black level included), black removed in the solve."""
-        self._check(raw)
-        return self._solve(self.xp.channels_first(raw, gemm=True), float(black_level_dn))
 
 
 def _dropped_fraction(sv: np.ndarray, kept: int) -> float:
