@@ -217,6 +217,11 @@ class FitnessEvaluator:
         self._cast_scenes = {k: v.astype(self._dtype) for k, v in self.scenes.items()}
         self._cast_noise = {k: v.astype(self._dtype) for k, v in self.noise_draws.items()}
 
+    @property
+    def ssim_references(self) -> dict[str, SSIMReference]:
+        """The cached-statistics SSIM of each scene, ``{"usaf", "white"}``."""
+        return self._ssim
+
     def coding_matrices(self, phi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``Pc`` (R × N) and ``Qc`` (S × M) of φ, relative irradiance per display unit."""
         return self.gen_p.coding(phi), self.gen_q.coding(phi)
