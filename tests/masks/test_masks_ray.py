@@ -219,7 +219,8 @@ def test_a_paper_scale_generation_on_ray(cluster_address) -> None:
     config = GAConfig(population=4, generations=1, seed=0)
     with RayFitnessPool(ev, batch_size=1, device="cpu") as pool:
         state = run_ga(770, config, ev.fitness, batch_fitness=pool)
-        assert sum(s.genes for s in pool.history) >= 5  # 4 initial + new children
+        # the initial population on Ray; a child equal to a known gene is not evaluated again
+        assert pool.history[0].genes == 4
         assert pool.cluster_slots() == 2
     assert state.generation == 1 and state.population.shape == (4, 770)
     with blas_threads(1):
