@@ -12,6 +12,7 @@ demo: setup
 lint: setup
 	.venv/bin/ruff check thintact_sdk plugins tests tools
 	.venv/bin/mypy
+	.venv/bin/lint-imports
 
 test: lint
 	.venv/bin/python -m pytest -q

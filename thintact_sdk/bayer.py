@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from thintact_sdk.errors import InvalidShapeError, InvalidValueError
+
 # offsets (row, col) of R, G1, G2, B inside the 2×2 cell for each CFA layout
 _CFA_OFFSETS: dict[str, tuple[tuple[int, int], tuple[int, int], tuple[int, int], tuple[int, int]]] = {
     "RGGB": ((0, 0), (0, 1), (1, 0), (1, 1)),
@@ -46,15 +48,15 @@ def bin_bayer(raw: np.ndarray, pattern: str = "RGGB", out: np.ndarray | None = N
     """
     if pattern == "none":
         if raw.ndim != 3 or raw.shape[2] != 3:
-            raise ValueError(f"pattern 'none' needs an H×W×3 frame, got shape {raw.shape}")
+            raise InvalidShapeError(f"pattern 'none' needs an H×W×3 frame, got shape {raw.shape}")
         return raw.astype(np.float32, copy=False)
     if pattern not in _CFA_OFFSETS:
-        raise ValueError(f"unknown Bayer pattern {pattern!r}; one of {', '.join(_CFA_OFFSETS)} or 'none'")
+        raise InvalidValueError(f"unknown Bayer pattern {pattern!r}; one of {', '.join(_CFA_OFFSETS)} or 'none'")
     if raw.ndim != 2:
-        raise ValueError(f"a Bayer mosaic is 2-D, got shape {raw.shape}")
+        raise InvalidShapeError(f"a Bayer mosaic is 2-D, got shape {raw.shape}")
     h, w = raw.shape
     if h % 2 or w % 2:
-        raise ValueError(f"a Bayer mosaic needs even height and width, got {h}×{w}")
+        raise InvalidShapeError(f"a Bayer mosaic needs even height and width, got {h}×{w}")
     (rr, rc), (g1r, g1c), (g2r, g2c), (br, bc) = _CFA_OFFSETS[pattern]
     if out is None:
         out = np.empty((h // 2, w // 2, 3), dtype=np.float32)
@@ -72,7 +74,7 @@ def mosaic_from_rgb(rgb: np.ndarray, pattern: str = "RGGB") -> np.ndarray:
     The dtype of ``rgb`` is kept.
     """
     if pattern not in _CFA_OFFSETS:
-        raise ValueError(f"unknown Bayer pattern {pattern!r}")
+        raise InvalidValueError(f"unknown Bayer pattern {pattern!r}")
     r, s, _ = rgb.shape
     mos = np.empty((2 * r, 2 * s), dtype=rgb.dtype)
     (rr, rc), (g1r, g1c), (g2r, g2c), (br, bc) = _CFA_OFFSETS[pattern]

@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from thintact_sdk.bayer import bin_bayer, pattern_from_pixel_format
-from thintact_sdk.errors import DeviceError, ProfileError
+from thintact_sdk.errors import DeviceError, PluginError, ProfileError
 from thintact_sdk.frames import Measurement, RawFrame
 from thintact_sdk.interfaces import Camera
 from thintact_sdk.plugin_manager import PluginRegistry, get_registry
@@ -170,6 +170,18 @@ def to_measurement(
         exposure_us=raw.exposure_us,
         meta=meta,
     )
+
+
+def camera_is_simulated(profile: Profile, registry: PluginRegistry | None = None) -> bool:
+    """Whether the profile's camera plugin declares the ``"simulated"`` trait (it renders the
+    simulator's world, e.g. the virtual sensor); False without a camera or a known plugin."""
+    if profile.camera is None:
+        return False
+    try:
+        comp = (registry or get_registry()).get("camera", profile.camera.plugin)
+    except PluginError:
+        return False
+    return "simulated" in comp.traits
 
 
 def create_camera(

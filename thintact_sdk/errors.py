@@ -62,3 +62,15 @@ class EndOfStreamError(DeviceError):
 class OutputError(ThinTactError):
     """An output path the user named cannot be used: empty, the wrong kind, or already
     holding data that would be overwritten without ``--force``."""
+
+
+class InvalidShapeError(ThinTactError, ValueError):
+    """An array the user supplied (a frame, measurement, scene, mask vector) has the wrong shape
+    or number of channels; the message gives the expected and the actual shape. Also a
+    :class:`ValueError`, for code that catches that."""
+
+
+class InvalidValueError(ThinTactError, ValueError):
+    """A parameter or setting the user supplied is outside its valid set or range (τ, a Bayer
+    pattern, a backend name, an LED level); the message names it and what is allowed. Also a
+    :class:`ValueError`, for code that catches that."""

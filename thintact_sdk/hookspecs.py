@@ -15,6 +15,10 @@ thintact_masks            ``factory() -> MaskDesigner``
 thintact_decoders         ``factory(profile: Profile, settings: dict) -> Decoder``
 thintact_displays         ``factory(profile: Profile, settings: dict) -> Display``
 thintact_cli_commands     ``factory(subparsers) -> None`` (adds argparse subcommands)
+thintact_benchmarks       ``factory(parser) -> None`` (a ``thintact bench NAME``: adds its
+                          arguments and ``set_defaults(func=run)``)
+thintact_device_listers   ``factory(source: str) -> list[dict]`` (the devices a
+                          source offers, for ``thintact devices``; the name is the source kind)
 ========================  =====================================================
 """
 
@@ -30,7 +34,8 @@ PROJECT = "thintact"
 hookspec = pluggy.HookspecMarker(PROJECT)
 hookimpl = pluggy.HookimplMarker(PROJECT)
 
-KINDS = ("camera", "light_controller", "mask", "decoder", "display", "cli_command")
+KINDS = ("camera", "light_controller", "mask", "decoder", "display", "cli_command", "benchmark",
+         "device_lister")
 
 
 @dataclass
@@ -47,12 +52,23 @@ class Component:
         One line shown by ``thintact plugins``.
     plugin
         Name of the providing plugin (filled in by the plugin manager).
+    traits
+        What the core may rely on without knowing the plugin, from :data:`TRAITS`
+        (e.g. a camera with ``"simulated"`` renders a simulated world, so a simulated
+        photometric LUT is valid for it).
     """
 
     name: str
     factory: Callable[..., Any]
     description: str = ""
     plugin: str = ""
+    traits: tuple[str, ...] = ()
+
+
+TRAITS = {
+    "simulated": "camera: frames are rendered by the simulator (the virtual sensor)",
+}
+"""Traits a component may declare, and what each promises."""
 
 
 class ThinTactSpec:
@@ -86,4 +102,14 @@ class ThinTactSpec:
     @hookspec
     def thintact_cli_commands(self) -> list[Component]:
         """Extra ``thintact`` subcommands."""
+        return []
+
+    @hookspec
+    def thintact_benchmarks(self) -> list[Component]:
+        """Extra ``thintact bench`` benchmarks (a plugin benchmarks what it provides)."""
+        return []
+
+    @hookspec
+    def thintact_device_listers(self) -> list[Component]:
+        """Device enumerators for ``thintact devices`` (e.g. the devices of a GenTL producer)."""
         return []

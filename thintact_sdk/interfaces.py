@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import abc
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -188,6 +188,30 @@ class Decoder(abc.ABC):
     @abc.abstractmethod
     def decode(self, signal: np.ndarray) -> np.ndarray:
         """Reconstruct one scene, ``N × M × C`` float32."""
+
+
+@runtime_checkable
+class RawDecoder(Protocol):
+    """A decoder that also takes raw binned DN and folds the black level into the solve
+    (no per-frame subtraction); :meth:`thintact_sdk.sensor.Sensor.reconstruct` prefers it."""
+
+    def decode_raw(self, raw: np.ndarray, black_level_dn: float) -> np.ndarray:
+        """``R × S × C`` DN with the black level included → ``N × M × C`` float32."""
+        ...
+
+
+@runtime_checkable
+class TunableDecoder(Protocol):
+    """A decoder whose Tikhonov weight τ (DN²) changes without rebuilding it (closed forms);
+    calibration sweeps τ through it."""
+
+    def set_tau(self, tau: float) -> None:
+        """Use ``tau`` (DN², > 0) from the next decode on."""
+        ...
+
+    def decode(self, signal: np.ndarray) -> np.ndarray:
+        """Reconstruct one scene, ``N × M × C`` float32."""
+        ...
 
 
 class Display(abc.ABC):

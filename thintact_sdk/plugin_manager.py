@@ -15,12 +15,13 @@ from __future__ import annotations
 import importlib.metadata as md
 import traceback
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Literal, overload
 
 import pluggy
 
 from thintact_sdk.errors import PluginError
 from thintact_sdk.hookspecs import KINDS, PROJECT, Component, ThinTactSpec
+from thintact_sdk.interfaces import Camera, Decoder, Display, LightController, MaskDesigner
 
 ENTRY_POINT_GROUP = "thintact"
 
@@ -31,6 +32,8 @@ _HOOK_OF_KIND = {
     "decoder": "thintact_decoders",
     "display": "thintact_displays",
     "cli_command": "thintact_cli_commands",
+    "benchmark": "thintact_benchmarks",
+    "device_lister": "thintact_device_listers",
 }
 
 
@@ -162,8 +165,23 @@ class PluginRegistry:
                                                  for p in ps)) or "(none installed)"
         raise PluginError(f"no {kind.replace('_', ' ')} plugin named {name!r}; available: {known}{hint}")
 
+    @overload
+    def create(self, kind: Literal["camera"], name: str, *args: Any, **kwargs: Any) -> Camera: ...
+    @overload
+    def create(self, kind: Literal["decoder"], name: str, *args: Any, **kwargs: Any) -> Decoder: ...
+    @overload
+    def create(self, kind: Literal["display"], name: str, *args: Any, **kwargs: Any) -> Display: ...
+    @overload
+    def create(self, kind: Literal["light_controller"], name: str, *args: Any,
+               **kwargs: Any) -> LightController: ...
+    @overload
+    def create(self, kind: Literal["mask"], name: str, *args: Any, **kwargs: Any) -> MaskDesigner: ...
+    @overload
+    def create(self, kind: str, name: str, *args: Any, **kwargs: Any) -> Any: ...
+
     def create(self, kind: str, name: str, *args: Any, **kwargs: Any) -> Any:
-        """Build component ``name`` of ``kind`` with its factory."""
+        """Build component ``name`` of ``kind`` with its factory (signatures per kind:
+        :mod:`thintact_sdk.hookspecs`); typed by kind for the kinds with an interface."""
         return self.get(kind, name).factory(*args, **kwargs)
 
 

@@ -26,17 +26,16 @@ from typing import Any
 
 import numpy as np
 
-from thintact_sdk.capture import FrameGapCounter, create_camera, to_measurement
+from thintact_sdk.capture import FrameGapCounter, camera_is_simulated, create_camera, to_measurement
 from thintact_sdk.errors import DeviceError, ProfileError
 from thintact_sdk.frames import Measurement, RawFrame, TactileFrame
-from thintact_sdk.interfaces import Camera, Decoder, LightController
+from thintact_sdk.interfaces import Camera, Decoder, LightController, RawDecoder
 from thintact_sdk.plugin_manager import PluginRegistry, get_registry
 from thintact_sdk.profile import Profile
 from thintact_sdk.tactile.interpreter import TactileInterpreter
 from thintact_sdk.tactile.photometric import PhotometricLUT
 from thintact_sdk.tactile.store import lut_for_profile
 
-VIRTUAL_CAMERAS = ("virtual",)
 AGE_HISTORY = 10_000  # delivered frames whose age StreamStats keeps
 
 
@@ -258,8 +257,8 @@ class Sensor:
     def lut(self) -> PhotometricLUT:
         """The photometric-stereo LUT in use (loaded or built on first use)."""
         if self._lut is None:
-            cam = self.profile.camera.plugin if self.profile.camera is not None else None
-            self._lut = lut_for_profile(self.profile, allow_simulated=cam in VIRTUAL_CAMERAS)
+            self._lut = lut_for_profile(
+                self.profile, allow_simulated=camera_is_simulated(self.profile, self.registry))
         return self._lut
 
     @lut.setter
@@ -308,9 +307,8 @@ class Sensor:
         level folded into the solve), else ``decode(signal)``.
         """
         decoder = self.decoder
-        decode_raw = getattr(decoder, "decode_raw", None)
-        if decode_raw is not None:
-            out = decode_raw(measurement.data, measurement.black_level_dn)
+        if isinstance(decoder, RawDecoder):
+            out = decoder.decode_raw(measurement.data, measurement.black_level_dn)
         else:
             out = decoder.decode(measurement.signal())
         return np.asarray(out, np.float32)

@@ -27,7 +27,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-from thintact_replay.rawframes import save_raw_frame
 
 from thintact_sdk.capture import create_camera, to_measurement
 from thintact_sdk.cli.commands.record import storage_array
@@ -35,6 +34,7 @@ from thintact_sdk.frames import RawFrame, TactileFrame
 from thintact_sdk.mcaplog import McapLogWriter
 from thintact_sdk.profile import load_profile
 from thintact_sdk.recording import RecordingWriter
+from thintact_sdk.recording_raw import save_raw_frame
 
 
 def paper_frames(n: int) -> tuple[object, list[RawFrame]]:

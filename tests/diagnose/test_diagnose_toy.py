@@ -100,3 +100,11 @@ def test_toy_names_an_indistinguishable_effect_as_alternative() -> None:
     assert len(f) == 1
     assert {f[0]["effect"], *f[0]["alternatives"]} == {"sensor_blur", "scene_blur"}
     assert "To tell" in f[0]["evidence"]
+
+
+def test_toy_spent_time_budget_stops_the_selection_with_a_valid_report() -> None:
+    opts = DiagnoseOptions(candidates=OPTS.candidates, time_budget_s=1e-9)
+    d = diagnose(_data({"sensor_blur": {"sigma_um": 12.0}}), toy_simulate, toy_variance, opts)
+    assert d.report["findings"] == []
+    assert "time budget reached: selection stopped" in d.selection.log
+    assert np.isfinite(d.report["final"]["chi2_per_dof"])

@@ -75,3 +75,17 @@ def test_uvc_backend_error_in_read_is_device_lost(tmp_path) -> None:  # type: ig
         with pytest.raises(DeviceLostError, match="failed while reading"):
             cam.read(timeout_s=5.0)
         cam._cap = real
+
+
+@pytest.mark.parametrize(("key", "value", "reason"), [
+    ("exposur_us", 100, "unknown"),
+    ("raw", True, "unknown"),  # a recording directory's option, meaningless for an MCAP log
+    ("speed", 0, ""),
+    ("rate", "slow", ""),
+    ("loop", "no", ""),
+])
+def test_mcap_replay_settings_are_checked_like_every_camera(key: str, value: object, reason: str) -> None:
+    """The MCAP source of the replay camera uses the same settings model discipline."""
+    settings = {"path": "log.mcap", key: value}
+    with pytest.raises(CameraSettingsError, match=rf"camera\.settings\.{key}: {reason}"):
+        get_registry().create("camera", "replay", load_profile("virtual-mini"), settings)

@@ -7,7 +7,6 @@ import time
 import numpy as np
 import pytest
 from thintact_replay import EndOfRecording
-from thintact_replay.rawframes import save_raw_frame
 
 from thintact_sdk.bayer import mosaic_from_rgb
 from thintact_sdk.capture import FrameGapCounter, create_camera, to_measurement
@@ -15,6 +14,7 @@ from thintact_sdk.errors import DeviceTimeoutError, ProfileError, RecordingError
 from thintact_sdk.frames import RawFrame
 from thintact_sdk.profile import load_profile
 from thintact_sdk.recording import RecordingWriter
+from thintact_sdk.recording_raw import save_raw_frame
 
 
 def _profile(path, pattern="RGGB", **settings):

@@ -5,7 +5,8 @@ from __future__ import annotations
 import argparse
 import json
 
-from thintact_sdk.benchmarks import reconstruct
+from thintact_decoders import bench_reconstruct as reconstruct
+
 from thintact_sdk.machine import host_capabilities
 
 

@@ -56,14 +56,15 @@ def _progress() -> Any:
 
 def accuracy(args: argparse.Namespace, out: dict[str, Any]) -> None:
     """Depth table and marker error on ``args.profile`` through its virtual camera."""
+    from thintact_sdk.capture import camera_is_simulated
     from thintact_sdk.errors import ThinTactError
     from thintact_sdk.profile import load_profile
-    from thintact_sdk.sensor import VIRTUAL_CAMERAS, Sensor
+    from thintact_sdk.sensor import Sensor
     from thintact_sdk.tactile.device_calibration import calibrate_virtual, scene_slot
     from thintact_sdk.tactile.evaluation import PAPER_TABLE_MM, evaluate_depth, evaluate_markers
 
     profile = load_profile(args.profile)
-    if profile.camera is None or profile.camera.plugin not in VIRTUAL_CAMERAS:
+    if not camera_is_simulated(profile):
         raise ThinTactError(f"--profile {args.profile}: the accuracy test needs a virtual camera")
     settings = {"slot": "bench-tactile", "fps": 0, "seed": args.seed}
     from thintact_sdk.errors import CalibrationError
@@ -147,7 +148,7 @@ def _simulator_decoder(sensor: Any, slot: Any, name: str) -> tuple[Any, float]:
     profile = sensor.profile
     sim = Simulator(profile)
     try:
-        from thintact_virtual.bench import signal_scale_dn
+        from thintact_sdk.virtual_bench import signal_scale_dn
 
         scale = signal_scale_dn(profile, sensor.camera_settings)
     except ImportError:
@@ -187,10 +188,11 @@ def _latency_decoder(profile: Any, name: str | None = None) -> tuple[Any, Any, s
     except CalibrationError:
         pass
     from thintact_sdk.imaging.calibration_bundle import CalibrationBundle
+    from thintact_sdk.imaging.noise import default_white_level_dn
     from thintact_sdk.imaging.t2s import SystemMatrices
 
     nz = profile.noise
-    sm = SystemMatrices.direct(profile, scale_dn=0.6 * (nz.saturation_dn - nz.black_level_dn))
+    sm = SystemMatrices.direct(profile, scale_dn=default_white_level_dn(nz))
     tau = float(settings.get("tau", 0.01)) * float(np.linalg.norm(sm.Pc[0], 2) *
                                                    np.linalg.norm(sm.Qc[0], 2)) ** 2
     bundle = CalibrationBundle.create(profile, sm, None, tau=tau, source="simulator")

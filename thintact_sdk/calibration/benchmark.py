@@ -22,6 +22,7 @@ import numpy as np
 
 from thintact_sdk.calibration.pipeline import CalibrationOptions, calibrate_recording
 from thintact_sdk.calibration.plan import DEFAULT_VALIDATION, build_plan
+from thintact_sdk.imaging.noise import signal_variance_dn
 from thintact_sdk.profile import Profile, load_profile
 from thintact_sdk.recording import Recording, RecordingWriter
 
@@ -73,7 +74,7 @@ def simulate_recording(profile: Profile, root: Path, case: Case, seed: int = 0) 
         scene = s.make()
         factor = 1.0 + case.exposure_jitter * float(rng.uniform(-1.0, 1.0))
         signal = sim.predict_signal_dn(scene, gain) * factor
-        var = (nz.read_noise_dn**2 + np.maximum(signal, 0.0) / nz.electrons_per_dn) / k
+        var = signal_variance_dn(signal, nz, k)
         dn = signal + rng.standard_normal(signal.shape) * np.sqrt(var) + nz.black_level_dn + case.black_offset_dn
         dn = np.clip(dn, 0.0, nz.saturation_dn).astype(np.float32)
         extra: dict[str, Any] = {"frames": k}

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from thintact_sdk.capture import to_measurement
-from thintact_sdk.errors import CalibrationError, UnsupportedFeatureError
+from thintact_sdk.errors import CalibrationError, InvalidValueError, UnsupportedFeatureError
 from thintact_sdk.interfaces import Camera, Display
 from thintact_sdk.profile import Profile
 
@@ -57,7 +57,7 @@ def capture_average(
         Per-frame read timeout (s).
     """
     if frames < 1:
-        raise ValueError("frames must be >= 1")
+        raise InvalidValueError("frames must be >= 1")
     for _ in range(flush):
         camera.read(timeout_s=timeout_s)
     acc = np.zeros((profile.sensor.rows, profile.sensor.cols, 3), np.float64)

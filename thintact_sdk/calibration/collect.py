@@ -24,7 +24,7 @@ from thintact_sdk.calibration.sumrule import (
     fit_white_gains,
     unit_slit_frames,
 )
-from thintact_sdk.errors import CalibrationError
+from thintact_sdk.errors import CalibrationError, InvalidValueError
 from thintact_sdk.recording import Recording
 
 Progress = Callable[[int, int, str], None]
@@ -217,7 +217,7 @@ def collect_slits(
             progress(done, total, recording.frames[i].label or recording.frames[i].measurement)
     out.slit_frames = total
     if frame_gains not in ("auto", "on", "off"):
-        raise ValueError(f"frame_gains must be auto, on or off, got {frame_gains!r}")
+        raise InvalidValueError(f"frame_gains must be auto, on or off, got {frame_gains!r}")
     for c in range(n_ch):
         if not h[c][0] or not v[c][0]:
             raise CalibrationError(

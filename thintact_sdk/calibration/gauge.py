@@ -19,13 +19,10 @@ both sets were put in this gauge.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 from scipy.linalg import eigh
 
-if TYPE_CHECKING:
-    from thintact_sdk.calibration.solver import ChannelMatrices
+from thintact_sdk.calibration.channel_matrices import ChannelMatrices
 
 
 def _roughness(a: np.ndarray, b: np.ndarray) -> float:
@@ -50,8 +47,6 @@ def _smoothest_direction(first: np.ndarray, second: np.ndarray) -> np.ndarray:
 
 def balance_frobenius(m: ChannelMatrices) -> ChannelMatrices:
     """Scale each term so that ``‖Po‖_F = ‖Qo‖_F`` and ``‖Pc‖_F = ‖Qc‖_F`` (paper Alg. 3)."""
-    from thintact_sdk.calibration.solver import ChannelMatrices
-
     out = []
     for p, q in ((m.Po, m.Qo), (m.Pc, m.Qc)):
         npn, nqn = np.linalg.norm(p), np.linalg.norm(q)
@@ -65,8 +60,6 @@ def fix_gauge(m: ChannelMatrices) -> ChannelMatrices:
 
     The products ``Po X Qoᵀ + Pc X Qcᵀ`` are unchanged (to rounding).
     """
-    from thintact_sdk.calibration.solver import ChannelMatrices
-
     a1 = _smoothest_direction(m.Po, m.Pc)
     b1 = _smoothest_direction(m.Qo, m.Qc)
     dot = float(a1 @ b1)

@@ -14,6 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from thintact_sdk.errors import InvalidShapeError
+
 DEFAULT_RANK = 8
 
 
@@ -69,7 +71,7 @@ def compress(image: np.ndarray, rank: int = DEFAULT_RANK, seed: int = 0) -> LowR
     """
     y = np.asarray(image, dtype=np.float64)
     if y.ndim != 2:
-        raise ValueError(f"compress expects an R×S image, got shape {y.shape}")
+        raise InvalidShapeError(f"compress expects an R×S image, got shape {y.shape}")
     r, s = y.shape
     k = max(2, min(rank, r, s))
     width = min(k + 8, r, s)

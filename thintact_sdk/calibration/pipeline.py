@@ -6,7 +6,7 @@ Used by both ``thintact calibrate --from-recording`` and the wizard (which recor
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -14,11 +14,12 @@ import numpy as np
 
 from thintact_sdk.calibration.collect import Progress, SlitCollection, collect_slits, signal_of
 from thintact_sdk.calibration.gauge import operator_error, term_errors
-from thintact_sdk.calibration.health import HealthReport, NoiseEstimate, assess
+from thintact_sdk.calibration.health import NoiseEstimate, assess
 from thintact_sdk.calibration.lowrank import DEFAULT_RANK
-from thintact_sdk.calibration.prediction import Prediction, predict_validation
+from thintact_sdk.calibration.outcome import CalibrationOutcome
+from thintact_sdk.calibration.prediction import predict_validation
 from thintact_sdk.calibration.registration import RegistrationResult
-from thintact_sdk.calibration.selection import TAU_KEYS, TauSelection, select, validation_frames
+from thintact_sdk.calibration.selection import TAU_KEYS, select, validation_frames
 from thintact_sdk.calibration.solver import ChannelMatrices, Method, SolveReport, solve_channel
 from thintact_sdk.calibration.tau import TauCurve
 from thintact_sdk.calibration.validation import (
@@ -30,7 +31,7 @@ from thintact_sdk.calibration.validation import (
     make_decoder,
     score,
 )
-from thintact_sdk.calibration.verdict import Verdict, judge
+from thintact_sdk.calibration.verdict import judge
 from thintact_sdk.errors import CalibrationError
 from thintact_sdk.imaging.calibration_bundle import CalibrationBundle
 from thintact_sdk.imaging.t2s import SystemMatrices
@@ -84,25 +85,6 @@ class CalibrationOptions:
     decoder: str | None = None
     frames_averaged: int | None = None
     predict: bool = True
-
-
-@dataclass
-class CalibrationOutcome:
-    """What a calibration produced."""
-
-    bundle: CalibrationBundle
-    path: Path
-    reports: list[SolveReport]
-    collection: SlitCollection
-    validation: list[ValidationResult]
-    passed: bool
-    registration: RegistrationResult | None = None
-    reference: dict[str, Any] = field(default_factory=dict)
-    tau_table: dict[str, float] = field(default_factory=dict)
-    selection: TauSelection | None = None
-    health: HealthReport | None = None
-    prediction: Prediction | None = None
-    verdict: Verdict | None = None
 
 
 def channel_matrices(sm: SystemMatrices, c: int) -> ChannelMatrices:

@@ -10,14 +10,12 @@ import base64
 import html
 import io
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
+from thintact_sdk.calibration.outcome import CalibrationOutcome
 from thintact_sdk.profile import Profile
-
-if TYPE_CHECKING:
-    from thintact_sdk.calibration.pipeline import CalibrationOutcome
 
 
 def _png(fig: Any) -> str:

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from thintact_sdk.calibration.lowrank import LowRankImage
+from thintact_sdk.errors import InvalidValueError
 
 
 @dataclass
@@ -46,7 +47,7 @@ class SlitStack:
     ) -> SlitStack:
         """Stack compressed images (already oriented) with their indices and profiles."""
         if not images:
-            raise ValueError("a slit stack needs at least one image")
+            raise InvalidValueError("a slit stack needs at least one image")
         k = max(im.left.shape[1] for im in images)
 
         def pad(a: np.ndarray) -> np.ndarray:

@@ -25,36 +25,12 @@ from typing import Literal
 
 import numpy as np
 
+from thintact_sdk.calibration.channel_matrices import ChannelMatrices
 from thintact_sdk.calibration.gauge import balance_frobenius, fix_gauge
 from thintact_sdk.calibration.slits import ChannelSlits, SlitStack
 from thintact_sdk.errors import CalibrationError
 
 Method = Literal["lsq", "paper"]
-
-
-@dataclass
-class ChannelMatrices:
-    """T2S system matrices of one channel, DN (above dark) per display unit per scene pixel.
-
-    Attributes
-    ----------
-    Po, Pc
-        ``R × N`` float64.
-    Qo, Qc
-        ``S × M`` float64.
-    """
-
-    Po: np.ndarray
-    Qo: np.ndarray
-    Pc: np.ndarray
-    Qc: np.ndarray
-
-    def forward(self, scene: np.ndarray) -> np.ndarray:
-        """``Po X Qoᵀ + Pc X Qcᵀ`` for an ``N × M`` scene → ``R × S``."""
-        return self.Po @ scene @ self.Qo.T + self.Pc @ scene @ self.Qc.T
-
-    def copy(self) -> ChannelMatrices:
-        return ChannelMatrices(self.Po.copy(), self.Qo.copy(), self.Pc.copy(), self.Qc.copy())
 
 
 @dataclass

@@ -11,9 +11,12 @@ from typing import Any
 
 import numpy as np
 
+from thintact_sdk.errors import InvalidValueError
 from thintact_sdk.imaging.calibration_bundle import CalibrationBundle
 from thintact_sdk.imaging.filter_training import scene_for_channels
 from thintact_sdk.imaging.metrics import psnr, ssim
+from thintact_sdk.imaging.noise import signal_variance_dn
+from thintact_sdk.imaging.tau_sweep import sweep_tau
 from thintact_sdk.imaging.tikhonov import TikhonovSolver
 from thintact_sdk.interfaces import Decoder
 from thintact_sdk.plugin_manager import get_registry
@@ -100,31 +103,27 @@ def choose_tau(
         The chosen τ (DN²) and ``{f"{tau:.3g}": mean PSNR dB}`` for every candidate.
     """
     if bundle.filter is None:
-        raise ValueError("choose_tau needs a bundle with a trained filter")
+        raise InvalidValueError("choose_tau needs a bundle with a trained filter")
     rng = np.random.default_rng(seed)
     sm = bundle.system_matrices
     coding = []
     scenes = [scene_for_channels(x, sm.channels) for x in scenes]
     for x in scenes:
         y = sm.forward(x)
-        var = noise.read_noise_dn**2 + np.maximum(y, 0) / noise.electrons_per_dn
+        var = signal_variance_dn(y, noise)
         y = y + rng.standard_normal(y.shape) * np.sqrt(var)
         coding.append(np.asarray(bundle.filter.coding_component(y), np.float64))
     solvers = [TikhonovSolver(sm.Pc[c], sm.Qc[c], 1.0) for c in range(sm.channels)]
     spectra = [np.outer(s.singular_values_p**2, s.singular_values_q**2) for s in solvers]
     unit = max(float(sp.max()) for sp in spectra)
-    table: dict[str, float] = {}
-    best_tau, best = float("nan"), -np.inf
-    for rel in TAU_GRID:
-        tau = rel * unit
+    def mean_psnr(tau: float) -> float:
         for solver, spec in zip(solvers, spectra, strict=True):
             solver.inv_denom = 1.0 / (spec + tau)
         values = []
         for yc, x in zip(coding, scenes, strict=True):
             est = np.stack([solvers[c].solve(yc[..., c]) for c in range(sm.channels)], axis=-1)
             values.append(score("", est, x).psnr_db)
-        value = float(np.mean(values))
-        table[f"{tau:.3g}"] = value
-        if value > best:
-            best_tau, best = tau, value
-    return best_tau, table
+        return float(np.mean(values))
+
+    sweep = sweep_tau([rel * unit for rel in TAU_GRID], mean_psnr)
+    return sweep.tau, {f"{tau:.3g}": value for tau, value in sweep.scores}

@@ -89,3 +89,76 @@ non_negative_int = int_range(0)
 
 seed = int_range(0, MAX_SEED)
 """A random seed: an integer in 0..2**63-1."""
+
+
+KEY_VALUE_HELP = ("KEY=VALUE, VALUE read as YAML 1.2: 30, 2.5e3, true, null, [1, 2], {a: 1}, "
+                  "'quoted text' or plain text (yes/no/on/off stay text); an empty VALUE is the "
+                  "empty string; only the first '=' splits (a=b=c sets a to 'b=c')")
+"""How every ``KEY=VALUE`` option of the CLI reads its value (one parser: :func:`key_value`)."""
+
+
+def _yaml12_loader() -> type:
+    """A safe YAML loader resolving plain scalars by the YAML 1.2 core schema (as JSON does:
+    ``2.5e3`` is a number, ``yes``/``on`` are text), not PyYAML's YAML 1.1 rules."""
+    import re
+
+    import yaml
+
+    class Loader(yaml.SafeLoader):
+        pass
+
+    Loader.yaml_implicit_resolvers = {}  # drop the YAML 1.1 resolvers, add the 1.2 core ones
+    rules = [
+        ("tag:yaml.org,2002:null", r"^(?:~|null|Null|NULL|)$", "~nN"),
+        ("tag:yaml.org,2002:bool", r"^(?:true|True|TRUE|false|False|FALSE)$", "tTfF"),
+        ("tag:yaml.org,2002:int", r"^(?:[-+]?[0-9]+|0o[0-7]+|0x[0-9a-fA-F]+)$", "-+0123456789"),
+        ("tag:yaml.org,2002:float",
+         r"^(?:[-+]?(?:\.[0-9]+|[0-9]+(?:\.[0-9]*)?)(?:[eE][-+]?[0-9]+)?"
+         r"|[-+]?\.(?:inf|Inf|INF)|\.(?:nan|NaN|NAN))$", "-+.0123456789"),
+    ]
+    for tag, pattern, first in rules:
+        Loader.add_implicit_resolver(tag, re.compile(pattern), list(first))
+
+    def construct_float(loader: yaml.SafeLoader, node: yaml.Node) -> float:
+        text = loader.construct_scalar(node)  # type: ignore[arg-type]
+        low = str(text).lower().lstrip("+")
+        if low in (".inf", "-.inf"):
+            return float(low.replace(".", ""))
+        return float("nan") if low == ".nan" else float(text)
+
+    def construct_int(loader: yaml.SafeLoader, node: yaml.Node) -> int:
+        text = str(loader.construct_scalar(node))  # type: ignore[arg-type]
+        return int(text, 0) if text.startswith(("0o", "0x")) else int(text, 10)
+
+    Loader.add_constructor("tag:yaml.org,2002:float", construct_float)
+    Loader.add_constructor("tag:yaml.org,2002:int", construct_int)
+    return Loader
+
+
+def key_value(text: str) -> tuple[str, object]:
+    """``"KEY=VALUE"`` → ``(KEY, value)``, the value parsed as one YAML document.
+
+    The key is stripped and must be non-empty without whitespace inside; the value follows
+    :data:`KEY_VALUE_HELP`. YAML also reads every JSON value the same way JSON does.
+    """
+    import yaml
+
+    key, sep, raw = text.partition("=")
+    key = key.strip()
+    if not sep or not key or any(ch.isspace() for ch in key):
+        raise argparse.ArgumentTypeError(f"expected KEY=VALUE, got {text!r}")
+    if raw.strip() == "":
+        return key, ""
+    try:
+        value = yaml.load(raw, Loader=_yaml12_loader())  # noqa: S506 - a SafeLoader subclass
+    except yaml.YAMLError as err:
+        first = str(err).splitlines()[0]
+        raise argparse.ArgumentTypeError(f"{key}: value {raw!r} is not valid YAML ({first})") from None
+    if isinstance(value, float) and not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"{key}: expected a finite number, got {raw!r}")
+    return key, value
+
+
+def key_values(pairs: list[tuple[str, object]] | None) -> dict[str, object]:
+    """The ``(key, value)`` pairs of a repeated :func:`key_value` option as a dict (last wins)."""
+    return dict(pairs or [])

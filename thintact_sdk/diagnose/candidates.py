@@ -1,251 +1,126 @@
-"""The diagnosis's view of the CONTRACTS §5 effects: how each one is fitted.
+"""The diagnosis's view of the effects: each registered effect that declares a
+:class:`~thintact_sdk.physics.FitSpec` is a :class:`Candidate`.
 
-Every effect becomes a :class:`Candidate` with a flat vector of fit parameters, its null
-value (the effect absent), a typical step (the amplitude used for its first-order
-signature), physical bounds, and converters to and from the contract's ``physics``
-parameters. ``domain`` says who computes it:
+Nothing about a particular effect is written here: its flat fit vector, null value,
+typical step, bounds (the effect's own physical bounds unless its fit declares others),
+converters and fitting hints all come from its declaration in :mod:`thintact_sdk.physics`.
+``domain`` says who computes it:
 
 - ``"optical"``: the simulator (``profile.physics``), re-simulating every frame;
-- ``"post"``: a linear map of the simulated signal (colour crosstalk, veiling glare),
-  applied here without re-simulating;
-- ``"dn"``: the digital-number domain after the gain (sensor gamma, saturation);
+- ``"post"``: a map of the simulated signal, applied with the effect's ``forward``
+  without re-simulating (colour crosstalk, veiling glare);
+- ``"dn"``: the digital-number domain after the gain (``dn_response``: sensor gamma, saturation);
 - ``"linear"``: additive terms fitted in closed form next to the gains (stray light).
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from dataclasses import dataclass, field
-from typing import Any, Literal
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
+from thintact_sdk.physics import EFFECTS, DataSearch, EffectSpec, FitSpec, Proxy
+from thintact_sdk.physics._spec import Domain
 from thintact_sdk.profile import Profile
-
-Domain = Literal["optical", "post", "dn", "linear"]
-#: polynomial terms of the stray-light surface: (power of x, power of y)
-STRAY_TERMS: tuple[tuple[int, int], ...] = ((0, 0), (1, 0), (0, 1), (2, 0), (1, 1), (0, 2))
-DEFAULT_WAVELENGTHS_NM = (625.0, 530.0, 465.0)
 
 
 @dataclass(frozen=True)
 class Candidate:
-    """One effect as the diagnosis fits it.
+    """One effect as the diagnosis fits it (a view of its :class:`EffectSpec`)."""
 
-    Attributes
-    ----------
-    name
-        CONTRACTS §5 effect name.
-    domain
-        Who computes it (module docstring).
-    labels
-        Names of the flat fit parameters, with units.
-    null, step, lower, upper
-        Functions of the profile giving ``(k,)`` vectors: the null value (effect absent),
-        the typical amplitude of the first-order signature, and physical bounds.
-    slow_params
-        Parameters that switch the simulator to its slow (non-separable) path: left at
-        their null value in the score and refined last, time permitting.
-    channelwise
-        Parameter i acts only on channel i (diffraction wavelengths), so one simulation
-        with every parameter stepped gives every column of the Jacobian.
-    costly
-        Every simulation rebuilds an expensive kernel (the rotated mask's): its full fit may
-        use all the time left rather than a share of it.
-    """
+    spec: EffectSpec
 
-    name: str
-    domain: Domain
-    labels: tuple[str, ...]
-    null: Callable[[Profile], np.ndarray]
-    step: Callable[[Profile], np.ndarray]
-    lower: Callable[[Profile], np.ndarray]
-    upper: Callable[[Profile], np.ndarray]
-    to_params: Callable[[np.ndarray, Profile], dict[str, Any]]
-    from_params: Callable[[dict[str, Any], Profile], np.ndarray]
-    channelwise: bool = False
-    signed: tuple[bool, ...] = field(default=())
-    slow_params: tuple[int, ...] = ()
-    costly: bool = False
+    @property
+    def fit(self) -> FitSpec:
+        assert self.spec.fit is not None
+        return self.spec.fit
+
+    @property
+    def name(self) -> str:
+        return self.spec.name
+
+    @property
+    def domain(self) -> Domain:
+        return self.fit.domain
+
+    @property
+    def labels(self) -> tuple[str, ...]:
+        return self.fit.labels
 
     @property
     def k(self) -> int:
-        return len(self.labels)
+        return self.fit.k
+
+    @property
+    def channelwise(self) -> bool:
+        return self.fit.channelwise
+
+    @property
+    def signed(self) -> tuple[bool, ...]:
+        return self.fit.signed
+
+    @property
+    def slow_params(self) -> tuple[int, ...]:
+        return self.fit.slow_params
+
+    @property
+    def costly(self) -> bool:
+        return self.fit.costly
+
+    @property
+    def joint_refit(self) -> bool:
+        return self.fit.joint_refit
+
+    @property
+    def search(self) -> DataSearch | None:
+        return self.fit.search
+
+    @property
+    def proxy(self) -> Proxy | None:
+        return self.fit.proxy
+
+    def null(self, p: Profile) -> np.ndarray:
+        """``(k,)`` value with the effect absent."""
+        return np.asarray(self.fit.null(p), np.float64)
+
+    def step(self, p: Profile) -> np.ndarray:
+        """``(k,)`` typical amplitude of the first-order signature."""
+        return np.asarray(self.fit.step(p), np.float64)
+
+    def lower(self, p: Profile) -> np.ndarray:
+        """``(k,)`` lower physical bounds."""
+        return self.spec.fit_bounds(p)[0]
+
+    def upper(self, p: Profile) -> np.ndarray:
+        """``(k,)`` upper physical bounds."""
+        return self.spec.fit_bounds(p)[1]
+
+    def to_params(self, v: np.ndarray, p: Profile) -> dict[str, Any]:
+        """The effect's parameters for the flat vector ``v``."""
+        return self.fit.to_params(v, p)
+
+    def from_params(self, d: Mapping[str, Any], p: Profile) -> np.ndarray:
+        """The flat vector of the effect's parameters ``d``."""
+        return np.asarray(self.fit.from_params(d, p), np.float64)
 
 
-def _const(*v: float) -> Callable[[Profile], np.ndarray]:
-    arr = np.asarray(v, np.float64)
-    return lambda _p: arr.copy()
+class _Candidates(Mapping[str, Candidate]):
+    """Live view of :data:`thintact_sdk.physics.EFFECTS`: the effects that declare a fit,
+    in registration order (an effect registered later is a candidate at once)."""
+
+    def __getitem__(self, name: str) -> Candidate:
+        spec = EFFECTS.get(name)
+        if spec is None or spec.fit is None:
+            raise KeyError(name)
+        return Candidate(spec)
+
+    def __iter__(self) -> Iterator[str]:
+        return iter([n for n, s in EFFECTS.items() if s.fit is not None])
+
+    def __len__(self) -> int:
+        return sum(1 for s in EFFECTS.values() if s.fit is not None)
 
 
-def _scalar(name: str, key: str) -> tuple[Callable[..., dict[str, Any]], Callable[..., np.ndarray]]:
-    def to(v: np.ndarray, _p: Profile) -> dict[str, Any]:
-        return {key: round(float(v[0]), 6)}
-
-    def frm(d: dict[str, Any], _p: Profile) -> np.ndarray:
-        return np.array([float(d[key])])
-
-    return to, frm
-
-
-def _wl_to(v: np.ndarray, _p: Profile) -> dict[str, Any]:
-    return {"wavelength_nm": [round(float(x), 2) for x in v]}
-
-
-def _wl_from(d: dict[str, Any], _p: Profile) -> np.ndarray:
-    wl = d["wavelength_nm"]
-    return np.asarray(wl if isinstance(wl, list) else [wl] * 3, np.float64)
-
-
-def _mis_to(v: np.ndarray, _p: Profile) -> dict[str, Any]:
-    return {"angle_deg": round(float(v[0]), 5), "dx_um": round(float(v[1]), 4), "dy_um": round(float(v[2]), 4)}
-
-
-def _mis_from(d: dict[str, Any], _p: Profile) -> np.ndarray:
-    return np.array([float(d.get("angle_deg", 0.0)), float(d.get("dx_um", 0.0)), float(d.get("dy_um", 0.0))])
-
-
-def _geo_null(p: Profile) -> np.ndarray:
-    return np.array([p.geometry.scene_to_mask_mm, p.geometry.mask_to_sensor_mm])
-
-
-def _geo_to(v: np.ndarray, _p: Profile) -> dict[str, Any]:
-    return {"scene_to_mask_mm": round(float(v[0]), 5), "mask_to_sensor_mm": round(float(v[1]), 5)}
-
-
-def _geo_from(d: dict[str, Any], p: Profile) -> np.ndarray:
-    return np.array(
-        [
-            float(d.get("scene_to_mask_mm", p.geometry.scene_to_mask_mm)),
-            float(d.get("mask_to_sensor_mm", p.geometry.mask_to_sensor_mm)),
-        ]
-    )
-
-
-_XT_IDX = ((0, 1), (0, 2), (1, 0), (1, 2), (2, 0), (2, 1))
-
-
-def crosstalk_matrix(v: np.ndarray) -> np.ndarray:
-    """3×3 colour-crosstalk matrix with unit diagonal from its six off-diagonal terms."""
-    m = np.eye(3)
-    for (i, j), x in zip(_XT_IDX, v, strict=True):
-        m[i, j] = x
-    return m
-
-
-def _xt_to(v: np.ndarray, _p: Profile) -> dict[str, Any]:
-    return {"matrix": [[round(float(x), 6) for x in row] for row in crosstalk_matrix(v)]}
-
-
-def _xt_from(d: dict[str, Any], _p: Profile) -> np.ndarray:
-    m = np.asarray(d["matrix"], np.float64)
-    return np.array([m[i, j] for i, j in _XT_IDX])
-
-
-def _sat_null(p: Profile) -> np.ndarray:
-    return np.array([p.noise.saturation_dn])
-
-
-def _sat_lower(p: Profile) -> np.ndarray:
-    return np.array([p.noise.black_level_dn + 1.0])
-
-
-def _stray_to(v: np.ndarray, _p: Profile) -> dict[str, Any]:
-    c = np.asarray(v, np.float64).reshape(-1, len(STRAY_TERMS))
-    return {
-        "mean_dn": [round(float(x), 3) for x in c[:, 0]],
-        "polynomial_dn": [[round(float(x), 4) for x in row] for row in c],
-        "polynomial_terms": ["1", "x", "y", "x^2", "xy", "y^2"],
-        "coordinates": "x, y in units of the sensor half-width/half-height",
-    }
-
-
-def _stray_from(d: dict[str, Any], _p: Profile) -> np.ndarray:
-    if "polynomial_dn" in d:
-        return np.asarray(d["polynomial_dn"], np.float64).ravel()
-    c = np.zeros((3, len(STRAY_TERMS)))
-    c[:, 0] = np.asarray(d.get("mean_dn", [0.0, 0.0, 0.0]), np.float64)
-    return c.ravel()
-
-
-def _build() -> dict[str, Candidate]:
-    inf = np.inf
-    cands: list[Candidate] = []
-    to, frm = _scalar("pixel_angular_response", "exponent")
-    cands.append(
-        Candidate("pixel_angular_response", "optical", ("exponent",), _const(0.0), _const(4.0),
-                  _const(0.0), _const(50.0), to, frm, signed=(False,))
-    )
-    cands.append(
-        Candidate("diffraction", "optical", ("wavelength_nm R", "wavelength_nm G", "wavelength_nm B"),
-                  _const(0.0, 0.0, 0.0), _const(*DEFAULT_WAVELENGTHS_NM), _const(1.0, 1.0, 1.0),
-                  _const(2000.0, 2000.0, 2000.0), _wl_to, _wl_from, channelwise=True,
-                  signed=(False, False, False))
-    )
-    to, frm = _scalar("refraction", "n_scene_side")
-    cands.append(
-        Candidate("refraction", "optical", ("n_scene_side",), _const(1.0), _const(0.4), _const(1.0),
-                  _const(3.0), to, frm, signed=(False,))
-    )
-    cands.append(
-        Candidate("mask_misalignment", "optical", ("angle_deg", "dx_um", "dy_um"), _const(0, 0, 0),
-                  _const(0.3, 5.0, 5.0), _const(-10.0, -500.0, -500.0), _const(10.0, 500.0, 500.0),
-                  _mis_to, _mis_from, signed=(True, True, True), costly=True)
-    )
-    to, frm = _scalar("mask_leakage", "transmittance")
-    cands.append(
-        Candidate("mask_leakage", "optical", ("transmittance",), _const(0.0), _const(0.03),
-                  _const(0.0), _const(1.0), to, frm, signed=(False,))
-    )
-    cands.append(
-        Candidate("geometry", "optical", ("scene_to_mask_mm", "mask_to_sensor_mm"), _geo_null,
-                  _const(0.15, 0.03), _const(0.05, 0.05), _const(100.0, 20.0), _geo_to, _geo_from,
-                  signed=(True, True))
-    )
-    to, frm = _scalar("sensor_blur", "sigma_um")
-    cands.append(
-        Candidate("sensor_blur", "optical", ("sigma_um",), _const(0.0), _const(8.0), _const(0.0),
-                  _const(500.0), to, frm, signed=(False,))
-    )
-    to, frm = _scalar("scene_blur", "sigma_um")
-    cands.append(
-        Candidate("scene_blur", "optical", ("sigma_um",), _const(0.0), _const(30.0), _const(0.0),
-                  _const(2000.0), to, frm, signed=(False,))
-    )
-    to, frm = _scalar("display_gamma", "gamma")
-    cands.append(
-        Candidate("display_gamma", "optical", ("gamma",), _const(1.0), _const(0.15), _const(0.2),
-                  _const(5.0), to, frm, signed=(True,))
-    )
-    cands.append(
-        Candidate("color_crosstalk", "post", tuple(f"matrix[{i}][{j}]" for i, j in _XT_IDX),
-                  _const(*([0.0] * 6)), _const(*([0.03] * 6)), _const(*([-0.5] * 6)),
-                  _const(*([0.5] * 6)), _xt_to, _xt_from, signed=(True,) * 6)
-    )
-    to, frm = _scalar("veiling_glare", "fraction")
-    cands.append(
-        Candidate("veiling_glare", "post", ("fraction",), _const(0.0), _const(0.03), _const(0.0),
-                  _const(1.0), to, frm, signed=(False,))
-    )
-    to, frm = _scalar("sensor_gamma", "gamma")
-    cands.append(
-        Candidate("sensor_gamma", "dn", ("gamma",), _const(1.0), _const(0.05), _const(0.2),
-                  _const(5.0), to, frm, signed=(True,))
-    )
-    to, frm = _scalar("saturation", "level_dn")
-    cands.append(
-        Candidate("saturation", "dn", ("level_dn",), _sat_null, _const(-100.0), _sat_lower,
-                  _sat_null, to, frm, signed=(True,))
-    )
-    n_stray = 3 * len(STRAY_TERMS)
-    cands.append(
-        Candidate("stray_light", "linear",
-                  tuple(f"{ch} {t}" for ch in "RGB" for t in ("1", "x", "y", "x2", "xy", "y2")),
-                  _const(*([0.0] * n_stray)), _const(*([5.0] * n_stray)), _const(*([-inf] * n_stray)),
-                  _const(*([inf] * n_stray)), _stray_to, _stray_from, signed=(True,) * n_stray)
-    )
-    return {c.name: c for c in cands}
-
-
-CANDIDATES: dict[str, Candidate] = _build()
-OPTICAL = tuple(n for n, c in CANDIDATES.items() if c.domain == "optical")
+CANDIDATES: Mapping[str, Candidate] = _Candidates()

@@ -3,13 +3,15 @@
 Prediction of one frame (all arrays ``F × R × S × C``)::
 
     A   = simulator irradiance with the optical effects          (arbitrary units)
-    A'  = crosstalk(A) + glare·mean(A)                            (post effects)
-    L_c = g_c·A'_c + stray_c(x, y)                                (DN, linear; g_c free)
-    DN  = black + min(FS·(L/FS)^gamma, level − black)             (DN effects)
+    A'  = post effects' forward(A), in stage order                (e.g. crosstalk, glare)
+    L_c = g_c·A'_c + Σ_t b_ct·basis_t(x, y)                       (DN, linear; g_c, b free)
+    DN  = black + h(L), h the DN effects' responses chained       (e.g. gamma, then a clip)
 
-The per-channel gains ``g_c`` (and the stray-light polynomial when that effect is on)
-are solved in closed form (weighted least squares, Gauss-Newton when gamma ≠ 1) at every
-evaluation: they are nuisances, never findings.
+Which effects are optical, post, DN or linear, their forward maps, DN responses and
+additive bases are the effects' own declarations (:class:`thintact_sdk.physics.FitSpec`);
+nothing here names an effect. The per-channel gains ``g_c`` (and the linear effects'
+coefficients) are solved in closed form (weighted least squares, Gauss-Newton when a DN
+effect is on) at every evaluation: they are nuisances, never findings.
 """
 
 from __future__ import annotations
@@ -22,9 +24,10 @@ from typing import Any
 
 import numpy as np
 
-from thintact_sdk.diagnose.candidates import CANDIDATES, STRAY_TERMS, crosstalk_matrix
+from thintact_sdk.diagnose.candidates import CANDIDATES, Candidate
 from thintact_sdk.diagnose.data import DiagnosisData
 from thintact_sdk.diagnose.stats import VarianceFn
+from thintact_sdk.physics import STAGES
 from thintact_sdk.profile import Profile
 
 #: simulate(profile_with_physics, scenes F×N×M×C) -> irradiance F×R×S×C
@@ -51,7 +54,8 @@ class Evaluation:
         Σ over fit pixels of w·(measured − predicted)² (w from the reference variance,
         systematic allowance included).
     beta
-        ``C × B`` closed-form coefficients (gain first, then stray-light terms), per channel.
+        ``C × B`` closed-form coefficients per channel: the gain first, then the terms of
+        each linear-domain effect (:meth:`DiagnosisModel.linear_slices`).
     linear_dn
         ``F × R × S × C`` linear signal L before the DN effects.
     """
@@ -110,10 +114,7 @@ class DiagnosisModel:
         if exclude is not None:
             self.fit_mask &= ~exclude[None, :, :, None]
         self.n_fit = int(self.fit_mask.sum())
-        f, r, s, c = m.shape
-        y = np.linspace(-1.0, 1.0, r)[:, None] * np.ones((1, s))
-        x = np.ones((r, 1)) * np.linspace(-1.0, 1.0, s)[None, :]
-        self.stray_basis = np.stack([x**a * y**b for a, b in STRAY_TERMS])  # T × R × S
+        self._bases: dict[str, np.ndarray] = {}
         self.base_physics = dict(self.profile.physics)
         self.weights = np.zeros_like(m)
         self.set_reference(None)
@@ -160,41 +161,62 @@ class DiagnosisModel:
         return irr
 
     # ------------------------------------------------------------------ evaluation
+    def _in_order(self, values: Values, domain: str) -> list[tuple[Candidate, np.ndarray]]:
+        """The ``domain`` effects of ``values`` in their stage order."""
+        found = [(CANDIDATES[n], v) for n, v in values.items() if CANDIDATES[n].domain == domain]
+        return sorted(found, key=lambda cv: (STAGES.index(cv[0].spec.stage), cv[0].spec.order))
+
+    def basis(self, name: str) -> np.ndarray:
+        """``T × R × S`` additive terms of the linear-domain effect ``name``."""
+        if name not in self._bases:
+            make = CANDIDATES[name].fit.basis
+            assert make is not None, f"{name}: a linear-domain effect declares its basis"
+            _, r, s, _ = self.data.measured_dn.shape
+            self._bases[name] = np.asarray(make(r, s), np.float64)
+        return self._bases[name]
+
+    def linear_slices(self, values: Values) -> dict[str, slice]:
+        """Where each linear-domain effect's coefficients sit in a row of ``beta``."""
+        out: dict[str, slice] = {}
+        at = 1
+        for cand, _v in self._in_order(values, "linear"):
+            t = self.basis(cand.name).shape[0]
+            out[cand.name] = slice(at, at + t)
+            at += t
+        return out
+
     def _post(self, irr: np.ndarray, values: Values) -> np.ndarray:
         out = irr
-        if "color_crosstalk" in values and out.shape[3] == 3:
-            out = np.einsum("ck,frsk->frsc", crosstalk_matrix(values["color_crosstalk"]), out)
-        if "veiling_glare" in values:
-            out = out + float(values["veiling_glare"][0]) * out.mean(axis=(1, 2), keepdims=True)
+        for cand, vec in self._in_order(values, "post"):
+            assert cand.spec.forward is not None
+            out = cand.spec.forward(out, cand.to_params(vec, self.profile), self.profile)
         return out
 
     def _dn(self, lin: np.ndarray, values: Values) -> tuple[np.ndarray, np.ndarray]:
-        """DN-domain map h(L) and its derivative h'(L)."""
-        fs = self.full_scale
-        if "sensor_gamma" in values:
-            g = float(values["sensor_gamma"][0])
-            lp = np.maximum(lin, 1e-6 * fs)
-            out = fs * (lp / fs) ** g
-            der = g * out / lp
-        else:
-            out = lin.copy()
-            der = np.ones_like(lin)
-        if "saturation" in values:
-            lev = float(values["saturation"][0]) - self.black
-            clip = out >= lev
-            out = np.where(clip, lev, out)
-            der = np.where(clip, 0.0, der)
+        """DN-domain map h(L) and its derivative h'(L) (the DN effects' responses chained)."""
+        out = lin.copy()
+        der = np.ones_like(lin)
+        for cand, vec in self._in_order(values, "dn"):
+            respond = cand.fit.dn_response
+            assert respond is not None, f"{cand.name}: a DN-domain effect declares dn_response"
+            out, d = respond(out, vec, self.profile)
+            der = der * d
         return out, der
 
+    def has_dn_effects(self, values: Values) -> bool:
+        """True when a DN-domain effect is on (the gains then need Gauss-Newton)."""
+        return any(CANDIDATES[n].domain == "dn" for n in values)
+
     def columns(self, values: Values) -> list[np.ndarray]:
-        """Per channel, the ``B × F × R × S`` closed-form columns (gain, stray terms)."""
+        """Per channel, the ``B × F × R × S`` closed-form columns (gain, linear terms)."""
         sig = self._post(self.irradiance(values), values)
         f = sig.shape[0]
+        extra = [self.basis(c.name) for c, _v in self._in_order(values, "linear")]
         cols = []
         for c in range(sig.shape[3]):
             cc = [sig[..., c]]
-            if "stray_light" in values:
-                cc += [np.broadcast_to(b[None], (f, *b.shape)) for b in self.stray_basis]
+            for basis in extra:
+                cc += [np.broadcast_to(b[None], (f, *b.shape)) for b in basis]
             cols.append(np.stack(cc))
         return cols
 
@@ -222,7 +244,7 @@ class DiagnosisModel:
         y = meas.ravel()
         a = (b * wv) @ b.T
         beta = np.linalg.lstsq(a, (b * wv) @ y, rcond=None)[0]
-        if "sensor_gamma" not in values and "saturation" not in values:
+        if not self.has_dn_effects(values):
             return beta
         for _ in range(6):
             lin = beta @ b

@@ -10,8 +10,9 @@ from typing import Any
 import numpy as np
 
 from thintact_sdk.blas import blas_threads
-from thintact_sdk.diagnose.candidates import CANDIDATES, STRAY_TERMS
+from thintact_sdk.diagnose.candidates import CANDIDATES
 from thintact_sdk.diagnose.data import DiagnosisData
+from thintact_sdk.diagnose.deadline import Deadline
 from thintact_sdk.diagnose.locate import Location, locate
 from thintact_sdk.diagnose.model import (
     DiagnosisModel,
@@ -31,6 +32,7 @@ from thintact_sdk.diagnose.stats import (
 )
 from thintact_sdk.diagnose.structure import Structure, find_structure
 from thintact_sdk.diagnose.words import describe_effect, tell_apart
+from thintact_sdk.physics import EFFECTS
 from thintact_sdk.profile import Profile
 
 
@@ -99,35 +101,24 @@ class Diagnosis:
 
 
 def known_candidates(profile: Profile) -> list[str]:
-    """Effects the diagnosis can try: the vocabulary the simulator implements, minus those
-    already in the profile's physics."""
-    try:
-        from thintact_sdk.physics import EFFECTS
-
-        known = set(EFFECTS)
-    except ImportError:
-        known = {n for n, c in CANDIDATES.items() if c.domain != "optical"}
-    return [n for n in CANDIDATES if n in known and n not in profile.physics]
+    """Effects the diagnosis can try: every registered effect that declares a fit, minus
+    those already in the profile's physics."""
+    return [n for n in CANDIDATES if n not in profile.physics]
 
 
-def contract_params(name: str, vec: np.ndarray, model: DiagnosisModel, beta: np.ndarray) -> dict[str, Any]:
-    """Contract parameters of an accepted effect (stray light: mean DN from the fitted
-    polynomial, plus the polynomial itself)."""
-    if name != "stray_light":
-        return CANDIDATES[name].to_params(vec, model.profile)
-    coef = beta[:, 1 : 1 + len(STRAY_TERMS)]
-    surf = np.tensordot(coef, model.stray_basis, axes=1)  # C × R × S
-    out = CANDIDATES[name].to_params(coef.ravel(), model.profile)
-    out["mean_dn"] = [round(float(x), 3) for x in surf.mean(axis=(1, 2))]
-    return out
+def contract_params(name: str, vec: np.ndarray, model: DiagnosisModel, beta: np.ndarray,
+                    values: Values) -> dict[str, Any]:
+    """Contract parameters of an accepted effect; a linear-domain effect's come from its
+    coefficients in the final closed-form fit (``beta``, with every effect of ``values``)."""
+    cand = CANDIDATES[name]
+    if cand.domain != "linear" or cand.fit.report is None:
+        return cand.to_params(vec, model.profile)
+    coef = beta[:, model.linear_slices(values)[name]]
+    return cand.fit.report(coef, model.basis(name), model.profile)
 
 
 def profile_params(name: str, params: dict[str, Any]) -> dict[str, Any]:
     """Only the parameters the simulator's effect accepts (for ``fitted_profile.json``)."""
-    try:
-        from thintact_sdk.physics import EFFECTS
-    except ImportError:
-        return params
     spec = EFFECTS.get(name)
     if spec is None:
         return params
@@ -139,9 +130,18 @@ def profile_params(name: str, params: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
+def _clip_level_dn(profile: Profile, values: Values) -> float | None:
+    """The lowest clip level (absolute DN) an effect of ``values`` declares, if any."""
+    levels = [
+        clip(v, profile) for n, v in values.items()
+        if (clip := CANDIDATES[n].fit.clip_level_dn) is not None
+    ]
+    return min(levels) if levels else None
+
+
 def _view(model: DiagnosisModel, data: DiagnosisData, pred: np.ndarray, values: Values) -> ModelView:
     var = model.variance(pred)
-    lev = float(values["saturation"][0]) if "saturation" in values else None
+    lev = _clip_level_dn(data.profile, values)
     valid = valid_pixels(data.measured_dn, pred, data.profile.noise, lev)
     return ModelView(pred, var, valid, fit_stats(data.measured_dn, pred, var, valid))
 
@@ -193,7 +193,7 @@ def _diagnose(
     progress: Callable[[str], None] | None,
 ) -> Diagnosis:
     t_start = time.perf_counter()
-    deadline = t_start + opt.time_budget_s
+    deadline = Deadline.after(opt.time_budget_s)
     say = progress or (lambda _m: None)
     sim = simulate or default_simulate
     var_fn = variance_fn or default_variance_fn()
@@ -223,7 +223,7 @@ def _diagnose(
     ev1 = _evaluate_full(model, sel.values)
     final = _view(model, data, ev1.pred_dn, sel.values)
     struct = _structure(final, data, black)
-    if struct.significant and time.perf_counter() < deadline - 0.25 * opt.time_budget_s:
+    if struct.significant and deadline.remaining_s() > 0.25 * opt.time_budget_s:
         # a local defect biases the effect fits: fit again without its pixels
         say("local defect found: refitting the effects without it")
         fit2 = DiagnosisModel(sub, sim, var_fn, sys_frac=opt.sys_frac, exclude=struct.mask)
@@ -250,7 +250,7 @@ def _diagnose(
         else:
             ev_r = _evaluate_full(model, accepted)
             view = _view(model, data, ev_r.pred_dn, accepted)
-        findings.append(_finding(rnd, fit_model, sub, prof, view, ev1.beta))
+        findings.append(_finding(rnd, fit_model, sub, prof, view, ev1.beta, sel.values))
         history.append((f"+ {rnd.name}", view.stats.rms_dn, view.stats.chi2_per_dof))
         phys[rnd.name] = profile_params(rnd.name, findings[-1]["params"])
     fitted = prof.with_physics(phys)
@@ -299,11 +299,12 @@ def _finding(
     prof: Profile,
     view: ModelView,
     final_beta: np.ndarray,
+    final_values: Values,
 ) -> dict[str, Any]:
     """One ``findings`` entry; ``view`` is the whole recording with effects up to ``rnd``;
-    closed-form terms (stray light) are reported from the final fit (``final_beta``), where
-    every accepted effect is in the model."""
-    params = contract_params(rnd.name, rnd.vector, model, final_beta)
+    closed-form terms (linear-domain effects) are reported from the final fit
+    (``final_beta`` with ``final_values``), where every accepted effect is in the model."""
+    params = contract_params(rnd.name, rnd.vector, model, final_beta, final_values)
     ev_txt = (
         f"{describe_effect(rnd.name, params, prof)} Adding it lowers χ² by {rnd.dchi2:.0f} "
         f"(with a {model.sys_frac:.1%} systematic allowance), above the {rnd.threshold:.0f} that "

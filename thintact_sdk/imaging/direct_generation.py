@@ -30,6 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from thintact_sdk.errors import InvalidShapeError, InvalidValueError
 from thintact_sdk.profile import Profile
 
 #: Line-source falloff of the baseline physics, (1 + (Δ/H)²)^(-3/2), has its half maximum
@@ -220,7 +221,7 @@ class DirectGenerator:
         self.axis = axis
         self.stripe = axis.stripe_parameters(d_stripe_px)
         if not self.stripe.d_stripe_px > 0:
-            raise ValueError(f"d_stripe_px must be > 0, got {self.stripe.d_stripe_px}")
+            raise InvalidValueError(f"d_stripe_px must be > 0, got {self.stripe.d_stripe_px}")
         z_um, d_um = axis.z_mm * 1e3, axis.d_mm * 1e3
         h_um = z_um + d_um
         y_sensor = _centred(axis.n_sensor, axis.sensor_pitch_um)[:, None]
@@ -255,7 +256,7 @@ class DirectGenerator:
     def _padded(self, phi: np.ndarray) -> np.ndarray:
         phi = np.asarray(phi, dtype=np.float64)
         if phi.shape[-1] != self.axis.K:
-            raise ValueError(f"phi has {phi.shape[-1]} entries, the mask has K={self.axis.K}")
+            raise InvalidShapeError(f"phi has {phi.shape[-1]} entries, the mask has K={self.axis.K}")
         pad = [(0, 0)] * (phi.ndim - 1) + [(self._pad, self._pad)]
         return np.pad(phi, pad)
 
@@ -309,9 +310,9 @@ def direct_system_matrices(
     rows_phi = phi_arr if phi_rows is None else np.asarray(phi_rows)
     for name, vec in (("phi", phi_arr), ("phi_rows", rows_phi)):
         if vec.ndim != 1 or vec.shape != phi_arr.shape or vec.size == 0:
-            raise ValueError(f"{name} must be a non-empty (K,) vector, got shape {vec.shape}")
+            raise InvalidShapeError(f"{name} must be a non-empty (K,) vector, got shape {vec.shape}")
         if not np.all(np.abs(vec) == 1):
-            raise ValueError(f"{name} entries must be +1 or -1")
+            raise InvalidShapeError(f"{name} entries must be +1 or -1")
     k = int(phi_arr.shape[0])
     gen_p = DirectGenerator(AxisGeometry.rows_of(profile, k), d_stripe_px)
     gen_q = DirectGenerator(AxisGeometry.cols_of(profile, k), d_stripe_px)

@@ -24,8 +24,10 @@ from typing import Any
 import numpy as np
 from scipy.ndimage import gaussian_filter
 
-from thintact_sdk.imaging.dct import dct2, dct_matrix, idct2
-from thintact_sdk.imaging.recon_filter import JointFilter
+from thintact_sdk.errors import InvalidShapeError, InvalidValueError
+from thintact_sdk.imaging.dct import SeparableDCT, dct2
+from thintact_sdk.imaging.noise import signal_variance_dn
+from thintact_sdk.imaging.recon_filter import JointFilter, joint_filter_open
 from thintact_sdk.imaging.scenes import gelsight, gelsight_count, make_scene
 from thintact_sdk.imaging.t2s import SystemMatrices
 
@@ -54,7 +56,7 @@ def scene_for_channels(scene: np.ndarray, channels: int) -> np.ndarray:
     if x.ndim == 2:
         x = x[..., None]
     if x.ndim != 3:
-        raise ValueError(f"scene must be N×M or N×M×C, got shape {x.shape}")
+        raise InvalidShapeError(f"scene must be N×M or N×M×C, got shape {x.shape}")
     have = x.shape[2]
     if have == channels:
         return x
@@ -62,7 +64,7 @@ def scene_for_channels(scene: np.ndarray, channels: int) -> np.ndarray:
         return x.mean(axis=2, keepdims=True, dtype=np.float64).astype(x.dtype, copy=False)
     if have == 1:
         return np.repeat(x, channels, axis=2)
-    raise ValueError(f"scene has {have} channels but the device has {channels}")
+    raise InvalidShapeError(f"scene has {have} channels but the device has {channels}")
 
 
 def training_scenes(n: int, m: int, count: int = 32, seed: int = 0) -> list[np.ndarray]:
@@ -133,32 +135,18 @@ def make_training_data(
         yo = system_matrices.forward_open(x)
         y = yo + system_matrices.forward_coding(x)
         if noise is not None:
-            var = noise.read_noise_dn**2 + np.maximum(y, 0) / noise.electrons_per_dn
+            var = signal_variance_dn(y, noise)
             y = y + rng.standard_normal(y.shape) * np.sqrt(var)
         ys.append(np.moveaxis(y, -1, 0).astype(np.float32))
         yos.append(np.moveaxis(yo, -1, 0).astype(np.float32))
     return TrainingData(np.stack(ys), np.stack(yos))
 
 
-class _Transform:
-    """DCT (full, scipy) or a low-frequency block DCT (matrices) of ``... × R × S`` arrays."""
-
-    def __init__(self, shape: tuple[int, int], low_block: tuple[int, int] | None) -> None:
-        self.shape = shape
-        self.block = low_block
-        if low_block is not None:
-            self.dr = dct_matrix(shape[0])[: low_block[0]].astype(np.float32)
-            self.ds = dct_matrix(shape[1])[: low_block[1]].astype(np.float32)
-
-    def fwd(self, y: np.ndarray) -> np.ndarray:
-        if self.block is None:
-            return dct2(y)
-        return self.dr @ y @ self.ds.T
-
-    def inv(self, z: np.ndarray) -> np.ndarray:
-        if self.block is None:
-            return idct2(z)
-        return self.dr.T @ z @ self.ds
+def _transform(shape: tuple[int, int], low_block: tuple[int, int] | None) -> SeparableDCT:
+    """Full DCT (scipy) or a low-frequency block DCT by float32 matrices."""
+    if low_block is None:
+        return SeparableDCT(shape)
+    return SeparableDCT(shape, low_block, to_backend=lambda a: a.astype(np.float32))
 
 
 def _fit_phi_s(h: np.ndarray, k: np.ndarray, rank: int | None, iters: int = 30) -> np.ndarray:
@@ -183,16 +171,16 @@ def _fit_phi_s(h: np.ndarray, k: np.ndarray, rank: int | None, iters: int = 30) 
     return out
 
 
-def _loss(data: TrainingData, tr: _Transform, phi_f: np.ndarray, phi_s: np.ndarray) -> float:
+def _loss(data: TrainingData, tr: SeparableDCT, phi_f: np.ndarray, phi_s: np.ndarray) -> float:
     err = 0.0
     for f in range(data.y.shape[0]):
-        g = phi_s * tr.inv(phi_f * tr.fwd(data.y[f]))
+        g = joint_filter_open(phi_s, phi_f, data.y[f], tr)
         err += float(np.sum((g - data.y_open[f]) ** 2))
     return err / float(np.sum(data.y_open.astype(np.float64) ** 2))
 
 
 def _closed_form(
-    data: TrainingData, tr: _Transform, rank: int | None, rounds: int
+    data: TrainingData, tr: SeparableDCT, rank: int | None, rounds: int
 ) -> tuple[np.ndarray, np.ndarray, list[float]]:
     zy = np.stack([tr.fwd(y) for y in data.y])  # F × C × (block)
     zz = np.sum(zy.astype(np.float64) ** 2, axis=0)
@@ -236,8 +224,7 @@ def _refine_torch(
 
     c, r, s = data.y.shape[1:]
     kr, ks = low_block if low_block is not None else (r, s)
-    dr = torch.from_numpy(dct_matrix(r)[:kr].astype(np.float32))
-    ds = torch.from_numpy(dct_matrix(s)[:ks].astype(np.float32))
+    tr = SeparableDCT((r, s), (kr, ks), to_backend=lambda a: torch.from_numpy(a.astype(np.float32)))
     y = torch.from_numpy(data.y)
     yo = torch.from_numpy(data.y_open)
     norm = float(torch.sum(yo.double() ** 2))
@@ -258,7 +245,7 @@ def _refine_torch(
     # Adam steps are scale-free; step sizes relative to each parameter's typical magnitude
     scales = [float(torch.mean(torch.abs(p.detach()))) + 1e-12 for p in params]
     opt = torch.optim.Adam([{"params": [p], "lr": lr * sc} for p, sc in zip(params, scales, strict=True)])
-    zy = dr @ y @ ds.T  # F × C × kr × ks, fixed
+    zy = tr.fwd(y)  # F × C × kr × ks, fixed
 
     def current_phi_s() -> torch.Tensor:
         return ps if rank is None else pu @ pv.transpose(-1, -2)
@@ -267,7 +254,7 @@ def _refine_torch(
     best = (start_loss, phi_f, phi_s)
     for step in range(steps):
         opt.zero_grad()
-        g = current_phi_s() * (dr.T @ (pf * zy) @ ds)
+        g = current_phi_s() * tr.inv(pf * zy)  # the joint filter on the fixed spectrum
         loss = torch.sum((g - yo) ** 2) / norm
         loss.backward()
         opt.step()
@@ -349,13 +336,13 @@ def train_joint_filter(
     block: tuple[int, int] | None
     if isinstance(low_block, str):
         if low_block != "auto":
-            raise ValueError(f"low_block must be (kr, ks), 'auto' or None, got {low_block!r}")
+            raise InvalidValueError(f"low_block must be (kr, ks), 'auto' or None, got {low_block!r}")
         block = auto_low_block(data)
     else:
         block = None if low_block is None else (int(low_block[0]), int(low_block[1]))
     if block is not None and (block[0] >= r and block[1] >= s):
         block = None
-    tr = _Transform((r, s), block)
+    tr = _transform((r, s), block)
     phi_f, phi_s, hist_cf = _closed_form(data, tr, phi_s_rank, max(1, closed_form_rounds))
     hist_gd: list[float] = []
     if steps > 0:

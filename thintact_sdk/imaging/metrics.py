@@ -9,10 +9,18 @@ from __future__ import annotations
 import numpy as np
 from scipy.ndimage import gaussian_filter
 
+from thintact_sdk.errors import InvalidShapeError
+
 
 def psnr(estimate: np.ndarray, truth: np.ndarray, data_range: float = 1.0) -> float:
-    """Peak signal-to-noise ratio in dB: ``10 log10(data_range² / MSE)``."""
-    mse = float(np.mean((np.asarray(estimate, np.float64) - np.asarray(truth, np.float64)) ** 2))
+    """Peak signal-to-noise ratio in dB: ``10 log10(data_range² / MSE)`` (shapes must match or
+    broadcast, e.g. one truth channel against three)."""
+    x, y = np.asarray(estimate, np.float64), np.asarray(truth, np.float64)
+    try:
+        np.broadcast_shapes(x.shape, y.shape)
+    except ValueError:
+        raise InvalidShapeError(f"psnr: estimate shape {x.shape} does not match truth {y.shape}") from None
+    mse = float(np.mean((x - y) ** 2))
     if mse == 0.0:
         return float("inf")
     return 10.0 * np.log10(data_range**2 / mse)
@@ -26,7 +34,7 @@ def ssim(estimate: np.ndarray, truth: np.ndarray, data_range: float = 1.0, sigma
     x = np.asarray(estimate, np.float64)
     y = np.asarray(truth, np.float64)
     if x.shape != y.shape:
-        raise ValueError(f"shape mismatch {x.shape} vs {y.shape}")
+        raise InvalidShapeError(f"shape mismatch {x.shape} vs {y.shape}")
     if x.ndim == 3:
         return float(np.mean([ssim(x[..., c], y[..., c], data_range, sigma) for c in range(x.shape[2])]))
     c1 = (0.01 * data_range) ** 2

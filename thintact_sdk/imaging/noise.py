@@ -58,6 +58,20 @@ def signal_to_dn(
     return np.clip(np.round(dn), 0.0, top)
 
 
+def default_white_level_dn(noise: NoiseSpec) -> float:
+    """DN above black of a fully white display pixel when nothing says otherwise: 60 % of the
+    range between black level and saturation (the virtual camera's default exposure level)."""
+    return 0.6 * (noise.saturation_dn - noise.black_level_dn)
+
+
+def signal_variance_dn(signal_dn: np.ndarray | float, noise: NoiseSpec, frames: int = 1) -> np.ndarray:
+    """Variance (DN²) of the mean of ``frames`` frames at ``signal_dn`` DN *above black*:
+    ``(max(signal, 0)/electrons_per_dn + read_noise²) / frames`` (shot and read noise, the
+    Gaussian approximation used to draw simulated noise; no rounding term)."""
+    shot = np.maximum(np.asarray(signal_dn, dtype=float), 0.0) / noise.electrons_per_dn
+    return (shot + noise.read_noise_dn**2) / frames
+
+
 def noise_variance_dn(predicted_dn: np.ndarray, noise: NoiseSpec) -> np.ndarray:
     """Variance (DN²) of the noise model at predicted DN values (black level included).
 
@@ -65,5 +79,4 @@ def noise_variance_dn(predicted_dn: np.ndarray, noise: NoiseSpec) -> np.ndarray:
     read noise, rounding), the σ² of CONTRACTS §6's χ².
     """
     pred = np.asarray(predicted_dn, dtype=float)
-    shot = np.clip(pred - noise.black_level_dn, 0.0, None) / noise.electrons_per_dn
-    return shot + noise.read_noise_dn**2 + QUANTISATION_VARIANCE_DN2
+    return signal_variance_dn(pred - noise.black_level_dn, noise) + QUANTISATION_VARIANCE_DN2

@@ -16,10 +16,26 @@ from typing import Any
 
 import numpy as np
 
-from thintact_sdk.errors import CalibrationError
-from thintact_sdk.imaging.dct import dct2, idct2
+from thintact_sdk.errors import CalibrationError, InvalidShapeError
+from thintact_sdk.imaging.dct import SeparableDCT
 
 FILTER_FORMAT = "thintact-joint-filter/1"
+
+
+def joint_filter_open(phi_s: Any, phi_f: Any, y: Any, transform: SeparableDCT) -> Any:
+    """``Φs ⊙ IDCT(Φf ⊙ DCT(Y))``: the joint filter's estimate of the open component, on any
+    array backend (the one implementation; ``Φ`` broadcast against channel-first ``Y``).
+
+    Parameters
+    ----------
+    phi_s, phi_f
+        ``C × R × S`` (or ``R × S``) spatial and frequency weights, dimensionless.
+    y
+        ``... × C × R × S`` measurement signal, DN (channel-first).
+    transform
+        The DCT for this array type and sensor shape.
+    """
+    return phi_s * transform.inv(phi_f * transform.fwd(y))
 
 
 @dataclass
@@ -66,8 +82,8 @@ class JointFilter:
         """Estimated open component ``F(Y)`` of ``signal`` (``R × S × C``, DN) → ``R × S × C``."""
         y = np.moveaxis(np.asarray(signal), -1, 0)
         if y.shape[1:] != self.sensor_shape:
-            raise ValueError(f"signal must be {self.sensor_shape}×C, got {np.shape(signal)}")
-        out = self.phi_s * idct2(self.phi_f * dct2(y))
+            raise InvalidShapeError(f"signal must be {self.sensor_shape}×C, got {np.shape(signal)}")
+        out = joint_filter_open(self.phi_s, self.phi_f, y, SeparableDCT(self.sensor_shape))
         return np.moveaxis(out, 0, -1)
 
     def coding_component(self, signal: np.ndarray) -> np.ndarray:

@@ -20,8 +20,13 @@ from thintact_sdk.imaging.calibration_bundle import CalibrationBundle
 from thintact_sdk.imaging.filter_training import TrainingData, train_joint_filter, training_scenes
 from thintact_sdk.imaging.metrics import psnr, ssim
 from thintact_sdk.imaging.scenes import make_scene
+from thintact_sdk.imaging.simulator import Simulator
 from thintact_sdk.imaging.t2s import SystemMatrices
+from thintact_sdk.imaging.tau_sweep import tune_decoder_tau
+from thintact_sdk.interfaces import TunableDecoder
+from thintact_sdk.plugin_manager import get_registry
 from thintact_sdk.profile import Profile
+from thintact_sdk.virtual_bench import REFERENCE_EXPOSURE_US, signal_scale_dn
 
 #: τ candidates relative to the mean squared singular value of the coding operator.
 TAU_GRID_REL = (0.1, 0.2, 0.4, 0.7, 1.0, 1.5, 2.0, 3.0, 5.0, 8.0)
@@ -101,16 +106,6 @@ def make_virtual_bundle(
         ``source="simulator"``; ``metrics`` holds the fit error, filter loss, τ table and the
         per-scene PSNR/SSIM of the non-iterative decoder and of FlatCam.
     """
-    from thintact_decoders import (
-        FlatCamDecoder,
-        NonIterativeDecoder,
-        T2SClosedFormDecoder,
-        T2SIterativeDecoder,
-    )
-    from thintact_virtual.bench import REFERENCE_EXPOSURE_US, signal_scale_dn
-
-    from thintact_sdk.imaging.simulator import Simulator
-
     opts = options or VirtualCalibrationOptions()
     say = progress or (lambda _msg: None)
     sim = Simulator(profile)
@@ -130,7 +125,14 @@ def make_virtual_bundle(
     val_scenes = [make_scene(name, n, m, i) for name, i in VALIDATION_SCENES]
     val_y, _ = simulate_measurements(sim, scale, val_scenes, profile.noise, opts.seed + 1)
     unit = coding_power(sm)
-    ni, cf = NonIterativeDecoder(sm, jf, unit), T2SClosedFormDecoder(sm, unit)
+    # the decoders come from the registry (no plugin is imported), on an in-memory bundle
+    provisional = CalibrationBundle.create(profile, sm, jf, tau=unit, source="simulator",
+                                           scale_dn_per_unit=scale)
+
+    def decoder(name: str, **settings: Any) -> Any:
+        return get_registry().create("decoder", name, profile, {"bundle": provisional, **settings})
+
+    ni, cf = decoder("thintact-noniterative"), decoder("t2s-closed-form")
     tau, table = choose_tau(ni, unit, val_y, val_scenes)
     tau_cf, table_cf = choose_tau(cf, unit, val_y, val_scenes)
     say("validation")
@@ -138,8 +140,8 @@ def make_virtual_bundle(
     decoders = {
         "": ni.decode,
         "t2s_closed_form_": cf.decode,
-        "iterative800_": T2SIterativeDecoder(sm, tau_cf, iterations=800).decode,
-        "flatcam_": FlatCamDecoder(sm, tau).decode,
+        "iterative800_": decoder("t2s-iterative", tau=tau_cf, iterations=800).decode,
+        "flatcam_": decoder("flatcam", tau=tau).decode,
     }
     metrics: dict[str, Any] = {
         "two_term_fit_relative_error": sm.meta["fit_relative_error"],
@@ -160,17 +162,9 @@ def make_virtual_bundle(
 
 
 def choose_tau(
-    decoder: Any, unit: float, measurements: np.ndarray, scenes: Sequence[np.ndarray]
+    decoder: TunableDecoder, unit: float, measurements: np.ndarray, scenes: Sequence[np.ndarray]
 ) -> tuple[float, dict[str, float]]:
-    """τ from ``TAU_GRID_REL × unit`` maximising the mean PSNR of ``decoder`` (which has
-    ``set_tau``); leaves the decoder at that τ and returns it with the table."""
-    table: dict[str, float] = {}
-    best = (-np.inf, unit)
-    for rel in TAU_GRID_REL:
-        decoder.set_tau(rel * unit)
-        value = float(np.mean(evaluate(decoder.decode, measurements, scenes)[0]))
-        table[f"{rel * unit:.4g}"] = round(value, 2)
-        if value > best[0]:
-            best = (value, rel * unit)
-    decoder.set_tau(best[1])
-    return best[1], table
+    """τ from ``TAU_GRID_REL × unit`` maximising the mean PSNR of ``decoder``; leaves the
+    decoder at that τ and returns it with the table ``{f"{tau:.4g}": mean PSNR dB}``."""
+    sweep = tune_decoder_tau(decoder, [rel * unit for rel in TAU_GRID_REL], list(measurements), scenes)
+    return sweep.tau, {f"{tau:.4g}": round(value, 2) for tau, value in sweep.scores}

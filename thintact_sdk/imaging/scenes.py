@@ -10,6 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
+from thintact_sdk.errors import InvalidValueError
+
 _DATA = Path(__file__).resolve().parents[1] / "data" / "gelsight"
 
 
@@ -103,5 +105,5 @@ def make_scene(name: str, n: int, m: int, index: int = 0) -> np.ndarray:
     if name == "random":
         return random_pixels(n, m, index)
     if name not in LIBRARY:
-        raise ValueError(f"unknown scene {name!r}; one of {', '.join(LIBRARY)}")
+        raise InvalidValueError(f"unknown scene {name!r}; one of {', '.join(LIBRARY)}")
     return LIBRARY[name](n, m)  # type: ignore[operator]

@@ -18,15 +18,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from thintact_sdk.errors import ThinTactError
+from thintact_sdk.imaging.sim_params import KernelParams
 from thintact_sdk.physics import mask_misalignment, refraction
-
-if TYPE_CHECKING:
-    from thintact_sdk.imaging.simulator import KernelParams
 
 STEP_FRACTION = 0.25
 """Fine-grid step as a fraction of the smallest of cell size and the two blur widths."""

@@ -29,17 +29,14 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from thintact_sdk.imaging.sim_axis import AxisGrid, mask_cell_edges_mm
+from thintact_sdk.imaging.sim_params import KernelParams
 from thintact_sdk.imaging.sim_radiometry import SeparableExpansion
 from thintact_sdk.imaging.sim_separable import SeparableTerm, axis_term_matrices, compress_terms
 from thintact_sdk.physics import diffraction, mask_leakage
-
-if TYPE_CHECKING:
-    from thintact_sdk.imaging.simulator import KernelParams
 
 FactorDerivs = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]]
 """The radiometric factors of one axis with their derivatives (see ``axis_term_matrices``)."""

@@ -2,17 +2,23 @@
 
 Stages, in order (CONTRACTS §4 baseline plus the effects of ``profile.physics``, §5):
 
-1. scene effects (``display_gamma``, ``scene_blur``) on the ``N × M × C`` display values;
+1. scene-stage effects on the ``N × M × C`` display values (e.g. ``display_gamma``,
+   ``scene_blur``);
 2. the imaging kernel: box integration over every sensor pixel's and every scene pixel's
-   square of ``cos^q θ/H² · T(m)`` (kernel effects: ``diffraction``,
+   square of ``cos^q θ/H² · T(m)``; kernel-stage effects (``diffraction``,
    ``pixel_angular_response``, ``refraction``, ``mask_misalignment``, ``mask_leakage``,
-   ``geometry``). Separable physics uses ``Y_c = Σ_k P_k X_c Q_kᵀ``
+   ``geometry``) set the kernel's parameters through their declaration's ``kernel``.
+   Separable physics uses ``Y_c = Σ_k P_k X_c Q_kᵀ``
    (:mod:`~thintact_sdk.imaging.sim_separable`, rotated masks
    :mod:`~thintact_sdk.imaging.sim_rotated`); refraction uses the direct path
    (:mod:`~thintact_sdk.imaging.sim_direct`);
-3. linear signal effects (``sensor_blur``, ``color_crosstalk``, ``veiling_glare``);
+3. signal-stage effects, linear (e.g. ``sensor_blur``, ``color_crosstalk``, ``veiling_glare``);
 4. **the gain enters here**: ``L = gain_dn_per_unit[c] · signal`` (DN above black);
-5. DN effects (``stray_light``, ``sensor_gamma``, ``saturation``).
+5. DN-stage effects (e.g. ``stray_light``, ``sensor_gamma``, ``saturation``).
+
+Stages 1, 3 and 5 apply every effect of ``profile.physics`` that declares that stage, in
+its declared order, through its ``forward`` (:func:`thintact_sdk.physics.stage_effects`):
+an effect added with :func:`thintact_sdk.physics.register_effect` needs nothing here.
 
 Units: the kernel output is the pixel-averaged irradiance per unit scene radiance
 (dimensionless, an unbounded open aperture would give π); it is the same for every frame
@@ -24,14 +30,16 @@ effects (if any) applied at :meth:`Simulator.reference_gain` and divided back ou
 from __future__ import annotations
 
 from collections import OrderedDict
-from dataclasses import dataclass, replace
-from typing import Any
+from dataclasses import replace
+from typing import Any, TypeAlias, TypeVar
 
 import numpy as np
 
 from thintact_sdk.errors import ThinTactError
 from thintact_sdk.imaging import sim_rotated
 from thintact_sdk.imaging.sim_axis import AxisGrid, mask_cell_edges_mm
+from thintact_sdk.imaging.sim_direct import DirectKernel, build_direct_kernel
+from thintact_sdk.imaging.sim_params import KernelParams, kernel_params
 from thintact_sdk.imaging.sim_radiometry import SeparableExpansion
 from thintact_sdk.imaging.sim_separable import (
     SeparableKernel,
@@ -41,19 +49,12 @@ from thintact_sdk.imaging.sim_separable import (
 )
 from thintact_sdk.interfaces import ImagingModel
 from thintact_sdk.physics import (
-    color_crosstalk,
+    EFFECTS,
+    Stage,
     diffraction,
-    display_gamma,
-    geometry,
     mask_leakage,
-    pixel_angular_response,
     resolve_physics,
-    saturation,
-    scene_blur,
-    sensor_blur,
-    sensor_gamma,
-    stray_light,
-    veiling_glare,
+    stage_effects,
 )
 from thintact_sdk.profile import Profile
 
@@ -61,87 +62,17 @@ WHITE_FRACTION = 0.6
 """Default DN level of the brightest all-white pixel, as a fraction of (saturation - black)."""
 
 
-@dataclass(frozen=True)
-class KernelParams:
-    """Everything the imaging kernel depends on (the cache key)."""
+ImagingKernel: TypeAlias = SeparableKernel | DirectKernel
+"""What :func:`get_kernel` returns: ``apply(scenes F×N×M×C, precision) -> F×R×S×C`` signal
+and an ``info`` dict; the separable one also has its ``terms`` per channel."""
 
-    rows: int
-    cols: int
-    pitch_um: float
-    scene_rows: int
-    scene_cols: int
-    scene_pitch_um: float
-    feature_um: float
-    phi: tuple[int, ...]
-    phi_rows: tuple[int, ...]
-    z_mm: float
-    d_mm: float
-    q: float
-    leakage: float
-    wavelengths_nm: tuple[float, ...] | None
-    angle_deg: float
-    dx_um: float
-    dy_um: float
-    n_scene_side: float
-    channels: int
-    n_sub: int
-    rank_tol: float
-    force_direct: bool = False
-    compress_tol: float = 1e-5
-
-    @property
-    def separable(self) -> bool:
-        """True unless the scene side refracts or the direct path is forced."""
-        return self.n_scene_side == 1.0 and not self.force_direct
-
-    def grid_x(self) -> AxisGrid:
-        return AxisGrid(self.cols, self.pitch_um * 1e-3, self.scene_cols, self.scene_pitch_um * 1e-3)
-
-    def grid_y(self) -> AxisGrid:
-        return AxisGrid(self.rows, self.pitch_um * 1e-3, self.scene_rows, self.scene_pitch_um * 1e-3)
-
-
-_KERNEL_CACHE: OrderedDict[KernelParams, Any] = OrderedDict()
+_KERNEL_CACHE: OrderedDict[KernelParams, ImagingKernel] = OrderedDict()
 _CACHE_SIZE = 4
 
 
 def clear_kernel_cache() -> None:
     """Forget every cached kernel (frees memory)."""
     _KERNEL_CACHE.clear()
-
-
-def kernel_params(profile: Profile, physics: dict[str, dict[str, Any]],
-                  n_sub: int | None = None, rank_tol: float = 1e-7,
-                  force_direct: bool = False) -> KernelParams:
-    """The kernel parameters of a profile with resolved physics (``n_sub=None``: 2 when a
-    pixel pair is under 1 % of H across, else 4)."""
-    g = physics.get("geometry", {})
-    z, d = geometry.distances_mm(profile.geometry.scene_to_mask_mm,
-                                 profile.geometry.mask_to_sensor_mm,
-                                 g.get("scene_to_mask_mm"), g.get("mask_to_sensor_mm"))
-    if n_sub is None:
-        pair_mm = (profile.sensor.pixel_pitch_um + profile.scene.pixel_pitch_um) * 1e-3
-        n_sub = 2 if pair_mm < 0.01 * (z + d) else 4
-    mis = physics.get("mask_misalignment", {})
-    diff = physics.get("diffraction")
-    return KernelParams(
-        rows=profile.sensor.rows, cols=profile.sensor.cols,
-        pitch_um=profile.sensor.pixel_pitch_um,
-        scene_rows=profile.scene.rows, scene_cols=profile.scene.cols,
-        scene_pitch_um=profile.scene.pixel_pitch_um,
-        feature_um=profile.mask.feature_um,
-        phi=tuple(profile.mask.phi), phi_rows=tuple(profile.mask.rows_vector),
-        z_mm=z, d_mm=d,
-        q=pixel_angular_response.radiometric_exponent(
-            physics.get("pixel_angular_response", {}).get("exponent", 0.0)),
-        leakage=physics.get("mask_leakage", {}).get("transmittance", 0.0),
-        wavelengths_nm=None if diff is None else tuple(diff["wavelength_nm"]),
-        angle_deg=mis.get("angle_deg", 0.0), dx_um=mis.get("dx_um", 0.0),
-        dy_um=mis.get("dy_um", 0.0),
-        n_scene_side=physics.get("refraction", {}).get("n_scene_side", 1.0),
-        channels=len(profile.sensor.channels), n_sub=n_sub, rank_tol=rank_tol,
-        force_direct=force_direct,
-    )
 
 
 def _expansion(kp: KernelParams) -> SeparableExpansion:
@@ -240,20 +171,39 @@ def _build_rotated_kernel(kp: KernelParams, exp: SeparableExpansion,
     return SeparableKernel(per_channel, info)
 
 
-def get_kernel(kp: KernelParams) -> Any:
+def get_kernel(kp: KernelParams) -> ImagingKernel:
     """The (cached) kernel for these parameters: separable or direct."""
-    if kp in _KERNEL_CACHE:
-        _KERNEL_CACHE.move_to_end(kp)
-        return _KERNEL_CACHE[kp]
-    if kp.separable and kp.wavelengths_nm is None and kp.leakage != 0.0:
-        # geometric leakage only rescales the open and coding halves: reuse the t = 0 kernel
-        kern: Any = _rescaled_for_leakage(get_kernel(replace(kp, leakage=0.0)), kp.leakage)
-    elif kp.separable:
-        kern = build_separable_kernel(kp)
-    else:
-        from thintact_sdk.imaging.sim_direct import build_direct_kernel
+    if kp.separable:
+        return _separable_kernel(kp)
+    hit = _cache_get(kp)
+    if hit is not None:
+        return hit
+    return _cache_put(kp, build_direct_kernel(kp))
 
-        kern = build_direct_kernel(kp)
+
+def _separable_kernel(kp: KernelParams) -> SeparableKernel:
+    hit = _cache_get(kp)
+    if isinstance(hit, SeparableKernel):
+        return hit
+    if kp.wavelengths_nm is None and kp.leakage != 0.0:
+        # geometric leakage only rescales the open and coding halves: reuse the t = 0 kernel
+        kern = _rescaled_for_leakage(_separable_kernel(replace(kp, leakage=0.0)), kp.leakage)
+    else:
+        kern = build_separable_kernel(kp)
+    return _cache_put(kp, kern)
+
+
+def _cache_get(kp: KernelParams) -> ImagingKernel | None:
+    hit = _KERNEL_CACHE.get(kp)
+    if hit is not None:
+        _KERNEL_CACHE.move_to_end(kp)
+    return hit
+
+
+K = TypeVar("K", SeparableKernel, DirectKernel)
+
+
+def _cache_put(kp: KernelParams, kern: K) -> K:
     _KERNEL_CACHE[kp] = kern
     while len(_KERNEL_CACHE) > _CACHE_SIZE:
         _KERNEL_CACHE.popitem(last=False)
@@ -306,17 +256,17 @@ class Simulator(ImagingModel):
         self.profile = profile
         self.physics = resolve_physics(profile.physics)
         self.kernel_params = kernel_params(profile, self.physics, n_sub, rank_tol, direct)
-        if "diffraction" in self.physics and not self.kernel_params.separable:
+        if self.kernel_params.wavelengths_nm is not None and not self.kernel_params.separable:
             raise ThinTactError(
                 "physics: diffraction cannot be combined with refraction (the simulator's "
                 "diffraction model needs straight rays in air)"
             )
-        self._kernel: Any = None
+        self._kernel: ImagingKernel | None = None
         self._ref_gain: float | None = None
 
     # -- kernel ---------------------------------------------------------------------------
     @property
-    def kernel(self) -> Any:
+    def kernel(self) -> ImagingKernel:
         """The imaging kernel (built on first use, shared through the cache)."""
         if self._kernel is None:
             self._kernel = get_kernel(self.kernel_params)
@@ -342,39 +292,25 @@ class Simulator(ImagingModel):
         return x
 
     # -- stages ---------------------------------------------------------------------------
-    def _scene_stage(self, x: np.ndarray) -> np.ndarray:
-        ph = self.physics
-        if "display_gamma" in ph:
-            x = display_gamma.apply(x, ph["display_gamma"]["gamma"])
-        if "scene_blur" in ph:
-            x = scene_blur.apply(x, ph["scene_blur"]["sigma_um"], self.profile.scene.pixel_pitch_um)
+    def _apply_stage(self, stage: Stage, x: np.ndarray) -> np.ndarray:
+        """Apply the effects of ``stage`` that the physics switches on, in their order."""
+        for spec in stage_effects(stage):
+            if spec.name in self.physics and spec.forward is not None:
+                x = spec.forward(x, self.physics[spec.name], self.profile)
         return x
 
+    def _scene_stage(self, x: np.ndarray) -> np.ndarray:
+        return self._apply_stage("scene", x)
+
     def _signal_stage(self, y: np.ndarray) -> np.ndarray:
-        ph = self.physics
-        if "sensor_blur" in ph:
-            y = sensor_blur.apply(y, ph["sensor_blur"]["sigma_um"], self.profile.sensor.pixel_pitch_um)
-        if "color_crosstalk" in ph:
-            y = color_crosstalk.apply(y, ph["color_crosstalk"]["matrix"])
-        if "veiling_glare" in ph:
-            y = veiling_glare.apply(y, ph["veiling_glare"]["fraction"])
-        return y
+        return self._apply_stage("signal", y)
 
     def _dn_stage(self, signal_dn: np.ndarray) -> np.ndarray:
-        ph = self.physics
-        nz = self.profile.noise
-        if "stray_light" in ph:
-            signal_dn = stray_light.apply(signal_dn, ph["stray_light"]["mean_dn"])
-        if "sensor_gamma" in ph:
-            signal_dn = sensor_gamma.apply(signal_dn, ph["sensor_gamma"]["gamma"],
-                                           nz.saturation_dn - nz.black_level_dn)
-        if "saturation" in ph:
-            signal_dn = saturation.apply(signal_dn, ph["saturation"]["level_dn"], nz.black_level_dn)
-        return signal_dn
+        return self._apply_stage("dn", signal_dn)
 
     @property
     def has_dn_effects(self) -> bool:
-        return any(e in self.physics for e in ("stray_light", "sensor_gamma", "saturation"))
+        return any(EFFECTS[e].stage == "dn" for e in self.physics)
 
     def linear_batch(self, scenes: np.ndarray) -> np.ndarray:
         """Stages 1-3: ``F × N × M × C`` → ``F × R × S × C`` linear signal (simulator units)."""
@@ -459,48 +395,29 @@ class Simulator(ImagingModel):
         """The separable expansion split into the all-open half (T = 1/2) and the coding
         half (φφᵀ/2); with diffraction the squared-field terms are "open" and the
         aperture-coding cross terms "coding" (the split they tend to as λ → 0)."""
-        blockers = [e for e in ("color_crosstalk", "display_gamma", "stray_light",
-                                "sensor_gamma", "saturation") if e in self.physics]
-        if not self.separable or blockers:
+        ph = self.physics
+        mapped = [s for st in ("scene", "signal") for s in stage_effects(st) if s.name in ph]
+        blockers = [e for e in ph if EFFECTS[e].stage != "kernel" and EFFECTS[e].separable_terms is None]
+        kernel = self.kernel if self.separable else None
+        if not isinstance(kernel, SeparableKernel) or blockers:
             why = "refraction or the forced direct path" if not self.separable \
                 else ", ".join(blockers)
             raise ThinTactError(f"the physics of {self.profile.name!r} is not separable ({why})")
         if not 0 <= channel < self.n_channels:
             raise ThinTactError(f"channel {channel} out of range 0..{self.n_channels - 1}")
-        left, right = self._linear_operators()
+        maps = [s.separable_terms(ph[s.name], self.profile) for s in mapped if s.separable_terms]
         open_t: list[tuple[np.ndarray, np.ndarray]] = []
         coding_t: list[tuple[np.ndarray, np.ndarray]] = []
-        glare = self.physics.get("veiling_glare", {}).get("fraction", 0.0)
-        for t in self.kernel.terms[channel]:
-            p, q = t.P, t.Q
-            if left is not None:
-                p = left[0] @ p @ left[1]
-                q = right[0] @ q @ right[1]
-            dest = open_t if t.part == "open" else coding_t
-            dest.append((p, q))
-            if glare:
-                r, s = p.shape[0], q.shape[0]
-                dest.append((glare / r * np.ones((r, r)) @ p, 1.0 / s * np.ones((s, s)) @ q))
+        for t in kernel.terms[channel]:
+            terms = [(t.P, t.Q)]
+            for split in maps:
+                terms = [out for p, q in terms for out in split(p, q)]
+            (open_t if t.part == "open" else coding_t).extend(terms)
         return open_t, coding_t
-
-    def _linear_operators(self) -> tuple[Any, Any]:
-        """Blur matrices ``((B_rows, G_rows), (B_cols, G_cols))`` for scene and sensor blur."""
-        ph = self.physics
-        if "scene_blur" not in ph and "sensor_blur" not in ph:
-            return None, None
-        from thintact_sdk.physics._blur import blur_matrix
-
-        s_sc = ph.get("scene_blur", {}).get("sigma_um", 0.0) / self.profile.scene.pixel_pitch_um
-        s_se = ph.get("sensor_blur", {}).get("sigma_um", 0.0) / self.profile.sensor.pixel_pitch_um
-        kp = self.kernel_params
-        return (
-            (blur_matrix(kp.rows, s_se), blur_matrix(kp.scene_rows, s_sc)),
-            (blur_matrix(kp.cols, s_se), blur_matrix(kp.scene_cols, s_sc)),
-        )
 
     def info(self) -> dict[str, float]:
         """Figures about the kernel (rank of the radiometric expansion and its error)."""
-        return dict(getattr(self.kernel, "info", {}))
+        return dict(self.kernel.info)
 
 
 def white_level_gain(sim: Simulator, fraction: float = WHITE_FRACTION) -> float:
@@ -509,4 +426,7 @@ def white_level_gain(sim: Simulator, fraction: float = WHITE_FRACTION) -> float:
     return sim.reference_gain(fraction * (nz.saturation_dn - nz.black_level_dn))
 
 
-__all__ = ["KernelParams", "Simulator", "WHITE_FRACTION", "clear_kernel_cache", "white_level_gain"]
+__all__ = [
+    "ImagingKernel", "KernelParams", "Simulator", "WHITE_FRACTION", "clear_kernel_cache", "get_kernel",
+    "kernel_params", "white_level_gain",
+]

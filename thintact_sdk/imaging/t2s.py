@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from thintact_sdk.errors import CalibrationError
+from thintact_sdk.errors import CalibrationError, InvalidShapeError
 
 if TYPE_CHECKING:
     from thintact_sdk.profile import Profile
@@ -108,9 +108,9 @@ class SystemMatrices:
         if x.ndim == 2:
             x = x[..., None]
         if x.ndim != 3 or x.shape[:2] != self.scene_shape:
-            raise ValueError(f"scene must be {self.scene_shape[0]}×{self.scene_shape[1]}×C, got {x.shape}")
+            raise InvalidShapeError(f"scene must be {self.scene_shape[0]}×{self.scene_shape[1]}×C, got {x.shape}")
         if x.shape[2] != self.channels and self.channels != 1:
-            raise ValueError(f"scene has {x.shape[2]} channels, system matrices {self.channels}")
+            raise InvalidShapeError(f"scene has {x.shape[2]} channels, system matrices {self.channels}")
         return x
 
     def _apply(self, P: np.ndarray, Q: np.ndarray, scene: np.ndarray) -> np.ndarray:  # noqa: N803
@@ -192,7 +192,7 @@ class SystemMatrices:
             Object with ``open_coding_terms(channel) -> (open_terms, coding_terms)``, lists of
             ``(P: R×N, Q: S×M)`` (the SIM contract) and a ``profile``.
         scale_dn
-            DN per simulator unit (``thintact_virtual.bench.signal_scale_dn``).
+            DN per simulator unit (``thintact_sdk.virtual_bench.signal_scale_dn``).
         channels
             Channels to fit; default all of the simulator's profile.
 

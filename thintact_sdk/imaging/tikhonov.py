@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from thintact_sdk.errors import InvalidValueError
+
 
 class TikhonovSolver:
     """Precomputed closed-form Tikhonov inverse for one channel.
@@ -30,7 +32,7 @@ class TikhonovSolver:
 
     def __init__(self, Pc: np.ndarray, Qc: np.ndarray, tau: float, dtype: type = np.float64) -> None:  # noqa: N803
         if tau < 0:
-            raise ValueError("tau must be >= 0")
+            raise InvalidValueError("tau must be >= 0")
         up, sp, vpt = np.linalg.svd(np.asarray(Pc, np.float64), full_matrices=False)
         uq, sq, vqt = np.linalg.svd(np.asarray(Qc, np.float64), full_matrices=False)
         self.tau = float(tau)
@@ -38,7 +40,7 @@ class TikhonovSolver:
         self.right: np.ndarray = (uq * sq[None, :]).astype(dtype)  # U_Q Σ_Q : S × k_Q
         denom = np.outer(sp**2, sq**2) + self.tau
         if np.any(denom == 0):
-            raise ValueError("tau = 0 with a singular system matrix: use tau > 0")
+            raise InvalidValueError("tau = 0 with a singular system matrix: use tau > 0")
         self.inv_denom: np.ndarray = (1.0 / denom).astype(dtype)  # k_P × k_Q
         self.vp: np.ndarray = vpt.T.astype(dtype)  # N × k_P
         self.vqt: np.ndarray = vqt.astype(dtype)  # k_Q × M

@@ -4,23 +4,18 @@ Each camera frame goes to ``/thintact/raw`` as delivered; with ``tactile`` (defa
 also turned into a tactile frame by :meth:`thintact_sdk.sensor.Sensor.process` (binning,
 decoding, photometric stereo, markers) and its image, depth, markers and contact topics
 are written with the same stamp. Capture, drop accounting and the progress bar are those
-of ``thintact record`` (:mod:`thintact_sdk.cli.commands.record`).
+of ``thintact record`` (:func:`thintact_sdk.capture_run.capture_frames`).
 """
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
 from typing import Any
 
-from thintact_sdk.capture import FrameGapCounter, create_camera
-from thintact_sdk.cli.commands.record import (
-    MAX_GAP_NOTES,
-    RecordSummary,
-    _BufferedReader,
-    _Progress,
-)
-from thintact_sdk.errors import DeviceError, EndOfStreamError, RecordingError, ThinTactError
+from thintact_sdk.capture import create_camera
+from thintact_sdk.capture_run import RecordSummary, capture_frames
+from thintact_sdk.errors import RecordingError, ThinTactError
+from thintact_sdk.frames import RawFrame
 from thintact_sdk.mcaplog.writer import DEFAULT_CHUNK_BYTES, McapLogWriter
 from thintact_sdk.profile import Profile
 from thintact_sdk.sensor import Sensor
@@ -56,43 +51,34 @@ def record_mcap(
         raise RecordingError(f"{out} already exists; choose a new --out (MCAP logs are not appended to)")
     sensor = Sensor(profile, camera_settings=settings) if tactile else None
     camera = create_camera(profile, settings=settings)
-    gaps = FrameGapCounter()
-    summary = RecordSummary()
-    stamps: list[int] = []
-    t0 = time.monotonic()
-    reader: _BufferedReader | None = None
-    log: McapLogWriter | None = None
-    try:
-        camera.open()
-        log = McapLogWriter(out, profile, compression=compression, chunk_bytes=chunk_bytes,
-                            image_encoding=image_encoding)
-        reader = _BufferedReader(camera, frames, timeout_s, buffer_mb * 2**20)
-        with _Progress(frames, enabled=progress) as bar:
-            for _ in range(frames):
-                try:
-                    raw = reader.next()
-                except EndOfStreamError as err:
-                    summary.ended_early = str(err)
-                    break
-                missing = gaps.update(raw.frame_id)
-                if missing and len(gaps.gaps) <= MAX_GAP_NOTES:
-                    bar.note(f"{missing} frame(s) dropped before frame id {raw.frame_id}")
-                log.write_raw(raw)
-                if sensor is not None:
-                    log.write_tactile(sensor.process(raw))
-                stamps.append(raw.timestamp_ns)
-                summary.frames += 1
-                bar.advance(summary.frames, time.monotonic() - t0, gaps.dropped, reader.buffered)
-    except DeviceError as err:
-        raise type(err)(f"{err} ({summary.frames} frame(s) were saved in {out})") from None
-    finally:
-        if reader is not None:
-            reader.stop()
-        camera.close()
-        if log is not None:
-            log.close()
-    summary.elapsed_s = time.monotonic() - t0
-    summary.dropped, summary.gaps = gaps.dropped, list(gaps.gaps)
-    if len(stamps) > 1 and stamps[-1] > stamps[0]:
-        summary.camera_fps = (len(stamps) - 1) * 1e9 / (stamps[-1] - stamps[0])
-    return summary
+    sink = _McapSink(out, profile, sensor, compression=compression, chunk_bytes=chunk_bytes,
+                     image_encoding=image_encoding)
+    return capture_frames(camera, profile, frames, sink, saved_in=out, timeout_s=timeout_s,
+                          buffer_mb=buffer_mb, progress=progress)
+
+
+class _McapSink:
+    """Writes each raw frame (and, with a sensor, its tactile frame) to an MCAP log."""
+
+    def __init__(self, out: Path, profile: Profile, sensor: Sensor | None, *, compression: str,
+                 chunk_bytes: int, image_encoding: str) -> None:
+        self.out = out
+        self.profile = profile
+        self.sensor = sensor
+        self.options: dict[str, Any] = {"compression": compression, "chunk_bytes": chunk_bytes,
+                                        "image_encoding": image_encoding}
+        self._log: McapLogWriter | None = None
+
+    def start(self) -> None:
+        self._log = McapLogWriter(self.out, self.profile, **self.options)
+
+    def write(self, index: int, raw: RawFrame, dropped_before: int) -> None:
+        assert self._log is not None
+        self._log.write_raw(raw)
+        if self.sensor is not None:
+            self._log.write_tactile(self.sensor.process(raw))
+
+    def close(self) -> None:
+        """Finish the log (summary and index), also after a camera fault."""
+        if self._log is not None:
+            self._log.close()

@@ -1,13 +1,18 @@
 """Physical effects the baseline simulation leaves out (CONTRACTS §5), one module each.
 
-``EFFECTS`` maps every effect name to its :class:`EffectSpec` (parameters with units,
-defaults, physical bounds, a one-line description). A profile switches effects on by
-listing them in ``profile.physics``; :func:`resolve_physics` validates such a dict and fills
-in the defaults. :class:`thintact_sdk.imaging.simulator.Simulator` applies them.
+``EFFECTS`` maps every effect name to its :class:`EffectSpec`: stage, parameters with units,
+defaults and physical bounds, how it is applied, its words and how the diagnosis fits it
+(see :mod:`thintact_sdk.physics._spec`). A profile switches effects on by listing them in
+``profile.physics``; :func:`resolve_physics` validates such a dict and fills in the
+defaults. :class:`thintact_sdk.imaging.simulator.Simulator` applies them stage by stage
+(:func:`stage_effects`) and :mod:`thintact_sdk.diagnose` fits them.
+
+A new effect is one module with a ``SPEC``, added with :func:`register_effect`.
 """
 
 from __future__ import annotations
 
+from types import ModuleType
 from typing import Any
 
 import numpy as np
@@ -29,22 +34,74 @@ from thintact_sdk.physics import (
     stray_light,
     veiling_glare,
 )
-from thintact_sdk.physics._spec import STAGES, EffectSpec, ParamSpec
+from thintact_sdk.physics._spec import (
+    STAGES,
+    DataSearch,
+    EffectSpec,
+    FitSpec,
+    ParamSpec,
+    Proxy,
+    Stage,
+)
 
-__all__ = ["EFFECTS", "STAGES", "EffectSpec", "ParamSpec", "PhysicsError", "resolve_physics"]
-
-EFFECTS: dict[str, EffectSpec] = {
-    m.SPEC.name: m.SPEC
-    for m in (
-        diffraction, pixel_angular_response, refraction, mask_misalignment, mask_leakage,
-        geometry, sensor_gamma, saturation, sensor_blur, scene_blur, display_gamma,
-        color_crosstalk, veiling_glare, stray_light,
-    )
-}
+__all__ = [
+    "EFFECTS", "STAGES", "DataSearch", "EffectSpec", "FitSpec", "ParamSpec", "PhysicsError",
+    "Proxy", "Stage", "register_effect", "resolve_physics", "stage_effects", "unregister_effect",
+]
 
 
 class PhysicsError(ThinTactError):
     """A ``physics`` entry names an unknown effect or parameter, or a value out of bounds."""
+
+
+EFFECTS: dict[str, EffectSpec] = {}
+"""Every known effect by name, in registration order (the order the diagnosis tries them)."""
+_BUILT_IN = frozenset({
+    "pixel_angular_response", "diffraction", "refraction", "mask_misalignment", "mask_leakage",
+    "geometry", "sensor_blur", "scene_blur", "display_gamma", "color_crosstalk",
+    "veiling_glare", "sensor_gamma", "saturation", "stray_light",
+})
+
+
+def register_effect(effect: EffectSpec | ModuleType, *, replace: bool = False) -> EffectSpec:
+    """Add an effect (its :class:`EffectSpec`, or a module with a ``SPEC``) to :data:`EFFECTS`.
+
+    The simulator then applies it in its stage and the diagnosis tries it (when it declares
+    a ``fit``). Returns the spec.
+
+    Raises
+    ------
+    PhysicsError
+        The name is taken (unless ``replace``), or a module has no ``SPEC``.
+    """
+    spec = getattr(effect, "SPEC", None) if isinstance(effect, ModuleType) else effect
+    if not isinstance(spec, EffectSpec):
+        raise PhysicsError(f"register_effect: {effect!r} is not an EffectSpec nor a module with a SPEC")
+    if spec.name in EFFECTS and not replace:
+        raise PhysicsError(f"register_effect: an effect named {spec.name!r} is already registered")
+    EFFECTS[spec.name] = spec
+    return spec
+
+
+def unregister_effect(name: str) -> None:
+    """Remove an effect added by :func:`register_effect` (the CONTRACTS §5 ones stay)."""
+    if name in _BUILT_IN:
+        raise PhysicsError(f"unregister_effect: {name!r} is a CONTRACTS §5 effect")
+    EFFECTS.pop(name, None)
+
+
+def stage_effects(stage: Stage) -> list[EffectSpec]:
+    """The effects acting in ``stage``, in the order they are applied."""
+    found = [s for s in EFFECTS.values() if s.stage == stage]
+    return sorted(found, key=lambda s: s.order)
+
+
+for _module in (
+    pixel_angular_response, diffraction, refraction, mask_misalignment, mask_leakage, geometry,
+    sensor_blur, scene_blur, display_gamma, color_crosstalk, veiling_glare, sensor_gamma,
+    saturation, stray_light,
+):
+    register_effect(_module)
 
 
 def _check_value(effect: str, name: str, spec: ParamSpec, value: Any) -> Any:
@@ -103,7 +160,7 @@ def resolve_physics(physics: dict[str, dict[str, Any]] | None) -> dict[str, dict
         params = {}
         for p, ps in spec.params.items():
             params[p] = _check_value(name, p, ps, given.get(p, ps.default))
-        if name == "color_crosstalk":
-            color_crosstalk.check_diagonal(params["matrix"])
+        if spec.validate is not None:
+            spec.validate(params)
         out[name] = params
     return out

@@ -17,21 +17,12 @@ axis: four separable terms per wavelength. As λ → 0 this tends to the geometr
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 from scipy.special import fresnel
 
-from thintact_sdk.physics._spec import EffectSpec, ParamSpec
-
-SPEC = EffectSpec(
-    name="diffraction",
-    stage="kernel",
-    description="light bends at the mask cell edges (wave optics, Fresnel), per colour",
-    params={
-        "wavelength_nm": ParamSpec("nm", [625.0, 530.0, 465.0], (1e-3, 2000.0),
-                                   "centre wavelength of the R, G, B channels", shape=(3,))
-    },
-)
+from thintact_sdk.physics._spec import DeviceProfile, EffectSpec, FitSpec, Params, ParamSpec, const
 
 
 def fresnel_width_mm(wavelength_nm: float, z_mm: float, d_mm: float) -> float:
@@ -170,3 +161,46 @@ def axis_intensity_profiles(
     values = np.stack([np.abs(va) ** 2 + tail[0, 0], np.abs(vp) ** 2 + tail[1, 1],
                        cross.real + tail[0, 1], cross.imag])
     return edges, values
+
+
+DEFAULT_WAVELENGTHS_NM = (625.0, 530.0, 465.0)
+
+
+def _to_params(v: np.ndarray, _p: DeviceProfile) -> dict[str, Any]:
+    return {"wavelength_nm": [round(float(x), 2) for x in v]}
+
+
+def _from_params(d: Params, _p: DeviceProfile) -> np.ndarray:
+    wl = d["wavelength_nm"]
+    return np.asarray(wl if isinstance(wl, list) else [wl] * 3, np.float64)
+
+
+def describe(params: Params, p: DeviceProfile) -> str:
+    """The finding in words."""
+    d_mm = p.geometry.mask_to_sensor_mm
+    wl = [float(x) for x in params["wavelength_nm"]]
+    blur = [math.sqrt(w * 1e-6 * d_mm) * 1e3 for w in wl]
+    return (
+        f"Fresnel diffraction at the mask: with wavelengths {', '.join(f'{w:.0f}' for w in wl)} nm "
+        f"the {p.mask.feature_um:g} um cells blur by about {min(blur):.0f}-{max(blur):.0f} um "
+        f"(sqrt(λ·d)) over the {d_mm:g} mm gap; the model assumed sharp geometric shadows."
+    )
+
+
+SPEC = EffectSpec(
+    name="diffraction",
+    stage="kernel",
+    description="light bends at the mask cell edges (wave optics, Fresnel), per colour",
+    params={
+        "wavelength_nm": ParamSpec("nm", list(DEFAULT_WAVELENGTHS_NM), (1e-3, 2000.0),
+                                   "centre wavelength of the R, G, B channels", shape=(3,))
+    },
+    kernel=lambda params, _p: {"wavelengths_nm": tuple(params["wavelength_nm"])},
+    describe=describe,
+    fit=FitSpec(
+        # null 0 nm: the geometric-optics limit (the effect absent)
+        "optical", ("wavelength_nm R", "wavelength_nm G", "wavelength_nm B"), const(0.0, 0.0, 0.0),
+        const(*DEFAULT_WAVELENGTHS_NM), _to_params, _from_params, channelwise=True,
+        signed=(False, False, False),
+    ),
+)

@@ -10,14 +10,7 @@ from __future__ import annotations
 
 import math
 
-from thintact_sdk.physics._spec import EffectSpec, ParamSpec
-
-SPEC = EffectSpec(
-    name="mask_leakage",
-    stage="kernel",
-    description="the opaque mask cells are not fully opaque",
-    params={"transmittance": ParamSpec("1", 0.0, (0.0, 1.0), "intensity transmittance of closed cells")},
-)
+from thintact_sdk.physics._spec import DeviceProfile, EffectSpec, Params, ParamSpec, scalar_fit
 
 
 def intensity_coefficients(transmittance: float) -> tuple[float, float]:
@@ -29,3 +22,22 @@ def amplitude_coefficients(transmittance: float) -> tuple[float, float]:
     """``(c_open, c_coding)`` of the amplitude transmittance (for diffraction)."""
     r = math.sqrt(transmittance)
     return (1.0 + r) / 2.0, (1.0 - r) / 2.0
+
+
+def describe(params: Params, _p: DeviceProfile) -> str:
+    """The finding in words."""
+    return (
+        f"The closed mask cells pass {float(params['transmittance']):.2%} of the light; the "
+        "model assumed them opaque."
+    )
+
+
+SPEC = EffectSpec(
+    name="mask_leakage",
+    stage="kernel",
+    description="the opaque mask cells are not fully opaque",
+    params={"transmittance": ParamSpec("1", 0.0, (0.0, 1.0), "intensity transmittance of closed cells")},
+    kernel=lambda params, _p: {"leakage": params["transmittance"]},
+    describe=describe,
+    fit=scalar_fit("transmittance", 0.0, 0.03, signed=False),
+)

@@ -5,21 +5,11 @@ simulator then uses its direct, non-separable path); a pure shift keeps it."""
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
-from thintact_sdk.physics._spec import EffectSpec, ParamSpec
-
-SPEC = EffectSpec(
-    name="mask_misalignment",
-    stage="kernel",
-    description="the mask is rotated and/or shifted relative to the sensor",
-    params={
-        "angle_deg": ParamSpec("deg", 0.0, (-10.0, 10.0), "rotation, +x towards +y"),
-        "dx_um": ParamSpec("um", 0.0, (-2000.0, 2000.0), "shift along x (columns)"),
-        "dy_um": ParamSpec("um", 0.0, (-2000.0, 2000.0), "shift along y (rows)"),
-    },
-)
+from thintact_sdk.physics._spec import DeviceProfile, EffectSpec, FitSpec, Params, ParamSpec, const
 
 
 def pattern_coordinates(
@@ -32,3 +22,41 @@ def pattern_coordinates(
     c, s = math.cos(a), math.sin(a)
     # Rot(-a) = [[c, s], [-s, c]]
     return c * x + s * y, -s * x + c * y
+
+
+def _to_params(v: np.ndarray, _p: DeviceProfile) -> dict[str, Any]:
+    return {"angle_deg": round(float(v[0]), 5), "dx_um": round(float(v[1]), 4),
+            "dy_um": round(float(v[2]), 4)}
+
+
+def _from_params(d: Params, _p: DeviceProfile) -> np.ndarray:
+    return np.array([float(d.get("angle_deg", 0.0)), float(d.get("dx_um", 0.0)),
+                     float(d.get("dy_um", 0.0))])
+
+
+def describe(params: Params, _p: DeviceProfile) -> str:
+    """The finding in words."""
+    return (
+        f"The mask is turned by {float(params['angle_deg']):+.3f}° and shifted by "
+        f"({float(params['dx_um']):+.1f}, {float(params['dy_um']):+.1f}) um relative to the sensor; "
+        "the model assumed it centred and square."
+    )
+
+
+SPEC = EffectSpec(
+    name="mask_misalignment",
+    stage="kernel",
+    description="the mask is rotated and/or shifted relative to the sensor",
+    params={
+        "angle_deg": ParamSpec("deg", 0.0, (-10.0, 10.0), "rotation, +x towards +y"),
+        "dx_um": ParamSpec("um", 0.0, (-2000.0, 2000.0), "shift along x (columns)"),
+        "dy_um": ParamSpec("um", 0.0, (-2000.0, 2000.0), "shift along y (rows)"),
+    },
+    kernel=lambda params, _p: {k: params[k] for k in ("angle_deg", "dx_um", "dy_um")},
+    describe=describe,
+    fit=FitSpec(
+        "optical", ("angle_deg", "dx_um", "dy_um"), const(0.0, 0.0, 0.0), const(0.3, 5.0, 5.0),
+        _to_params, _from_params, signed=(True, True, True),
+        costly=True,  # every rotated kernel is rebuilt (seconds each)
+    ),
+)

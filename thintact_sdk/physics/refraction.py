@@ -14,13 +14,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from thintact_sdk.physics._spec import EffectSpec, ParamSpec
-
-SPEC = EffectSpec(
-    name="refraction",
-    stage="kernel",
-    description="the elastomer between scene and mask bends the rays (Snell's law)",
-    params={"n_scene_side": ParamSpec("1", 1.0, (1.0, 3.0), "refractive index of the scene-to-mask gap")},
+from thintact_sdk.physics._spec import (
+    DeviceProfile,
+    EffectSpec,
+    Params,
+    ParamSpec,
+    Proxy,
+    scalar_fit,
 )
 
 
@@ -78,3 +78,42 @@ def crossing_fraction_and_factor(
     sin_over_rho = np.where(small, 1.0 / (d_mm + z_mm / n), sin_t / safe_rho)
     factor = cos_t ** (1 + exponent) * sin_over_rho / (n**2 * drho)
     return kappa, factor
+
+
+def from_geometry_fit(geometry_fit: np.ndarray, p: DeviceProfile) -> np.ndarray | None:
+    """Start for the fit: near the axis refraction acts like a shorter scene gap (z/n at the
+    same d), so when the geometry fit (``scene_to_mask_mm, mask_to_sensor_mm``) shortens
+    z/d, n = (z/d)_profile / (z/d)_fit; None when it does not."""
+    ratio0 = p.geometry.scene_to_mask_mm / p.geometry.mask_to_sensor_mm
+    ratio = float(geometry_fit[0] / geometry_fit[1])
+    if ratio > 0.995 * ratio0:
+        return None
+    return np.array([ratio0 / ratio])
+
+
+def describe(params: Params, p: DeviceProfile) -> str:
+    """The finding in words."""
+    n = float(params["n_scene_side"])
+    z = p.geometry.scene_to_mask_mm
+    return (
+        f"The {z:g} mm scene-to-mask gap is a medium of refractive index {n:.3f} (elastomer, "
+        f"glass), not air: rays bend at the mask, so the scene looks about {z / n:.2f} mm away "
+        "near the axis; the model assumed straight rays in air."
+    )
+
+
+SPEC = EffectSpec(
+    name="refraction",
+    stage="kernel",
+    description="the elastomer between scene and mask bends the rays (Snell's law)",
+    params={"n_scene_side": ParamSpec("1", 1.0, (1.0, 3.0), "refractive index of the scene-to-mask gap")},
+    kernel=lambda params, _p: {"n_scene_side": params["n_scene_side"]},
+    describe=describe,
+    distinguish={"geometry": (
+        "a measured gap (or a second recording with the scene at another distance), or scenes with "
+        "bright content far off-axis, where Snell's law departs from a changed straight-ray distance"
+    )},
+    # every simulation takes the simulator's slow direct path: scored through the geometry fit
+    fit=scalar_fit("n_scene_side", 1.0, 0.4, signed=False,
+                   proxy=Proxy("geometry", from_geometry_fit)),
+)

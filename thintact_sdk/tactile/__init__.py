@@ -21,6 +21,7 @@ from thintact_sdk.tactile.calibration import (
     random_ball_presses,
     scene_level_lut,
 )
+from thintact_sdk.tactile.colour_change import fill_masked
 from thintact_sdk.tactile.grid import TactileParams, pixel_grid_mm
 from thintact_sdk.tactile.indenters import (
     INDENTERS,
@@ -33,7 +34,7 @@ from thintact_sdk.tactile.indenters import (
     Texture,
     make_indenter,
 )
-from thintact_sdk.tactile.interpreter import TactileInterpreter, fill_masked
+from thintact_sdk.tactile.interpreter import TactileInterpreter
 from thintact_sdk.tactile.lighting import LED, PhongShading, default_leds
 from thintact_sdk.tactile.markers import (
     MarkerDetection,

@@ -22,9 +22,9 @@ from scipy.ndimage import gaussian_filter
 
 from thintact_sdk.errors import CalibrationError
 from thintact_sdk.profile import Profile
+from thintact_sdk.tactile.colour_change import colour_change, fill_masked
 from thintact_sdk.tactile.grid import TactileParams, bin_image, binned_params, working_factor
 from thintact_sdk.tactile.indenters import Sphere
-from thintact_sdk.tactile.interpreter import colour_change, fill_masked
 from thintact_sdk.tactile.markers import detect_markers
 from thintact_sdk.tactile.photometric import PhotometricLUT, calibrate_lut
 from thintact_sdk.tactile.poisson import integrate_gradients

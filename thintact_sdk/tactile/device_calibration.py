@@ -32,6 +32,7 @@ from thintact_sdk.tactile.calibration import (
 )
 from thintact_sdk.tactile.photometric import PhotometricLUT
 from thintact_sdk.tactile.simulate import TactileSimulator
+from thintact_sdk.virtual_bench import get_scene_slot
 
 Progress = Callable[[int, int], None]
 
@@ -44,14 +45,9 @@ def _mean_image(read: Callable[[], np.ndarray], frames: int) -> np.ndarray:
 
 
 def scene_slot(sensor: Any) -> Any:
-    """The virtual camera's scene slot of ``sensor`` (``thintact_virtual.bench``)."""
-    try:
-        from thintact_virtual.bench import get_scene_slot
-    except ImportError as err:
-        raise CalibrationError(
-            f"the virtual camera plugin is not installed ({err}); "
-            "pip install -e plugins/thintact_virtual"
-        ) from None
+    """The virtual bench's scene slot that ``sensor``'s simulated camera renders
+    (:mod:`thintact_sdk.virtual_bench`; the key is the camera's ``slot`` setting or the
+    profile name)."""
     key = sensor.camera_settings.get("slot")
     if key is None and sensor.profile.camera is not None:
         key = sensor.profile.camera.settings.get("slot")

@@ -159,7 +159,7 @@ def evaluate_gelsight_image_only(
     """
     from thintact_sdk.profile import SceneSpec, TactileConfig, load_profile
     from thintact_sdk.tactile.calibration import BallPress, calibrate_from_presses
-    from thintact_sdk.tactile.interpreter import colour_change
+    from thintact_sdk.tactile.colour_change import colour_change
 
     pack = load_pack(path)
     n = len(pack["imgs"])

@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 from scipy.ndimage import map_coordinates
 
+from thintact_sdk.errors import InvalidValueError
 from thintact_sdk.tactile.elastic import Elastomer, solve_normal_contact, tangential_displacement
 from thintact_sdk.tactile.force import ForceModel, fit_gain, fit_gains, loaded_core
 from thintact_sdk.tactile.grid import TactileParams
@@ -95,7 +96,7 @@ def simulate_loaded_press(
         Coefficient of friction μ.
     """
     if not 0.0 <= stick_fraction <= 1.0:
-        raise ValueError(f"stick_fraction must be in [0, 1], got {stick_fraction}")
+        raise InvalidValueError(f"stick_fraction must be in [0, 1], got {stick_fraction}")
     p = sim.params
     full = solve_normal_contact(interference_mm(sim, indenter, depth_mm, center_mm, angle_deg),
                                 p.mm_per_px, elastomer)

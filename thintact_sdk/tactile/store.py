@@ -13,6 +13,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from thintact_sdk.capture import camera_is_simulated
 from thintact_sdk.profile import Profile
 from thintact_sdk.tactile.photometric import PhotometricLUT
 
@@ -112,7 +113,7 @@ def lut_for_profile(profile: Profile, allow_simulated: bool | None = None) -> Ph
     if lut is not None:
         return lut
     if allow_simulated is None:
-        allow_simulated = profile.camera is not None and profile.camera.plugin == "virtual"
+        allow_simulated = camera_is_simulated(profile)
     if not allow_simulated:
         from thintact_sdk.errors import CalibrationError
 

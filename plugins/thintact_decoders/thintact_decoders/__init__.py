@@ -26,7 +26,12 @@ from typing import Any
 
 import thintact_sdk
 from thintact_decoders.backend import ArrayBackend
-from thintact_decoders.candidates import candidate_specs, parse_preference, preference_from_settings
+from thintact_decoders.candidates import (
+    BackendSpec,
+    candidate_specs,
+    parse_preference,
+    preference_from_settings,
+)
 from thintact_decoders.flatcam import FlatCamDecoder
 from thintact_decoders.identity import IdentityDecoder, make_identity
 from thintact_decoders.iterative import T2SIterativeDecoder
@@ -79,6 +84,7 @@ def _selected(name: str, profile: Profile, settings: dict[str, Any], sm: SystemM
     dtype = str(settings.get("dtype", "float32"))
     caps = host_capabilities()
     env = os.environ.get("THINTACT_BACKEND", "").strip()
+    preferred: BackendSpec | None
     try:
         if env:
             preferred, source = parse_preference(env, dtype), "THINTACT_BACKEND"
@@ -165,3 +171,17 @@ def thintact_decoders() -> list[thintact_sdk.Component]:
         thintact_sdk.Component("identity", make_identity,
                                "lens-based sensors (DIGIT, GelSight Mini): the camera image, scaled and resampled"),
     ]
+
+
+def _reconstruct_benchmark(parser: Any) -> None:
+    from thintact_decoders import bench_reconstruct
+
+    bench_reconstruct.add_arguments(parser)
+    parser.set_defaults(func=bench_reconstruct.run)
+
+
+@thintact_sdk.hookimpl
+def thintact_benchmarks() -> list[thintact_sdk.Component]:
+    return [thintact_sdk.Component(
+        "reconstruct", _reconstruct_benchmark,
+        "decoder latency (per backend, roofline ratio), quality and backend selection on a virtual device")]

@@ -13,6 +13,8 @@ from typing import Any
 
 import numpy as np
 
+from thintact_sdk.errors import InvalidValueError
+
 _NP_DTYPES = {"float32": np.float32, "float64": np.float64}
 
 
@@ -39,12 +41,12 @@ class ArrayBackend:
         gemm_dtype: str | None = None,
     ) -> None:
         if name not in ("numpy", "torch"):
-            raise ValueError(f"backend must be 'numpy' or 'torch', got {name!r}")
+            raise InvalidValueError(f"backend must be 'numpy' or 'torch', got {name!r}")
         if dtype not in _NP_DTYPES:
-            raise ValueError(f"dtype must be float32 or float64, got {dtype!r}")
+            raise InvalidValueError(f"dtype must be float32 or float64, got {dtype!r}")
         gemm_dtype = gemm_dtype or dtype
         if gemm_dtype == "bfloat16" and name != "torch":
-            raise ValueError("gemm_dtype bfloat16 needs the torch backend")
+            raise InvalidValueError("gemm_dtype bfloat16 needs the torch backend")
         self.name = name
         self.dtype_name = dtype
         self.gemm_dtype_name = gemm_dtype

@@ -12,6 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from thintact_decoders.backend import ArrayBackend
+from thintact_sdk.errors import InvalidValueError
 from thintact_sdk.machine import HostCapabilities
 
 
@@ -81,14 +82,14 @@ def parse_preference(text: str, dtype: str = "float32") -> BackendSpec:
     head, _, gemm = text.strip().lower().partition("-")
     gemm = gemm or dtype
     if gemm not in ("float32", "float64", "bfloat16"):
-        raise ValueError(f"backend {text!r}: precision must be float32, float64 or bfloat16")
+        raise InvalidValueError(f"backend {text!r}: precision must be float32, float64 or bfloat16")
     if head == "numpy" and gemm == "bfloat16":
-        raise ValueError(f"backend {text!r}: bfloat16 products need torch (torch-bfloat16)")
+        raise InvalidValueError(f"backend {text!r}: bfloat16 products need torch (torch-bfloat16)")
     if head in ("numpy", "torch"):
         return BackendSpec(head, "cpu", dtype, gemm)
     if head in ("cuda", "mps"):
         return BackendSpec("torch", head, dtype, gemm)
-    raise ValueError(f"backend {text!r}: expected numpy, torch, cuda or mps (optionally -float32/-bfloat16)")
+    raise InvalidValueError(f"backend {text!r}: expected numpy, torch, cuda or mps (optionally -float32/-bfloat16)")
 
 
 def preference_from_settings(settings: dict[str, object], dtype: str = "float32") -> BackendSpec | None:
@@ -100,10 +101,10 @@ def preference_from_settings(settings: dict[str, object], dtype: str = "float32"
                               else "numpy"))
     device = str(settings.get("device") or "cpu")
     if engine == "numpy" and device != "cpu":
-        raise ValueError(f"decoder settings: device {device!r} needs backend torch")
+        raise InvalidValueError(f"decoder settings: device {device!r} needs backend torch")
     gemm = str(settings.get("gemm_dtype") or dtype)
     if engine == "numpy" and gemm == "bfloat16":
-        raise ValueError("decoder settings: gemm_dtype bfloat16 needs backend torch")
+        raise InvalidValueError("decoder settings: gemm_dtype bfloat16 needs backend torch")
     if engine not in ("numpy", "torch"):
-        raise ValueError(f"decoder settings: backend must be 'numpy' or 'torch', got {engine!r}")
+        raise InvalidValueError(f"decoder settings: backend must be 'numpy' or 'torch', got {engine!r}")
     return BackendSpec(engine, device, dtype, gemm)

@@ -57,7 +57,7 @@ class IdentityDecoder(Decoder):
 
     def decode(self, signal: np.ndarray) -> np.ndarray:
         """``R × S × 3`` DN above black → ``N × M × 3`` float32 display units (≥ 0)."""
-        img = np.ascontiguousarray(signal, np.float32) / np.float32(self.white_level_dn)
+        img: np.ndarray = np.ascontiguousarray(signal, np.float32) / np.float32(self.white_level_dn)
         n, m = self.scene_shape
         if img.shape[:2] != (n, m):
             shrinking = img.shape[0] >= n and img.shape[1] >= m

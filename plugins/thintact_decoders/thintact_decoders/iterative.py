@@ -17,6 +17,8 @@ import numpy as np
 
 from thintact_decoders.backend import ArrayBackend
 from thintact_decoders.shapes import check_measurement_shape
+from thintact_sdk.errors import InvalidValueError
+from thintact_sdk.imaging.first_order import largest_eigenvalue, nesterov
 from thintact_sdk.imaging.t2s import SystemMatrices
 from thintact_sdk.interfaces import Decoder
 
@@ -53,9 +55,9 @@ class T2SIterativeDecoder(Decoder):
         gradient: str = "gram",
     ) -> None:
         if iterations < 1:
-            raise ValueError("iterations must be >= 1")
+            raise InvalidValueError("iterations must be >= 1")
         if gradient not in ("gram", "direct"):
-            raise ValueError(f"gradient must be 'gram' or 'direct', got {gradient!r}")
+            raise InvalidValueError(f"gradient must be 'gram' or 'direct', got {gradient!r}")
         self.gradient = gradient
         self.xp = backend or ArrayBackend("numpy")
         self.tau = float(tau)
@@ -79,15 +81,8 @@ class T2SIterativeDecoder(Decoder):
         return self.xp.sum_axis(self._gl @ x[:, None] @ self._gr, 1)
 
     def _lambda_max(self, iterations: int) -> float:
-        rng = np.random.default_rng(0)
-        x = self.xp.asarray(rng.standard_normal((self.channels, *self.scene_shape)))
-        lam = 0.0
-        for _ in range(iterations):
-            x = x / np.sqrt(self.xp.sum_squares(x))
-            y = self._gram(x)
-            lam = float((x * y).sum())
-            x = y
-        return max(lam, 1e-30)
+        start = self.xp.asarray(np.random.default_rng(0).standard_normal((self.channels, *self.scene_shape)))
+        return largest_eigenvalue(self._gram, start, iterations, self.xp.sum_squares)
 
     def adjoint(self, y_cf: Any) -> Any:
         """``Aᵀ Y = Poᵀ Y Qo + Pcᵀ Y Qc`` for channel-first ``C × R × S`` Y."""
@@ -101,22 +96,15 @@ class T2SIterativeDecoder(Decoder):
 
     def solve(self, y_cf: Any, iterations: int | None = None) -> Any:
         """Run Nesterov from 0 on channel-first ``y_cf``; returns ``C × N × M`` (backend array)."""
-        xp = self.xp
         b = self.adjoint(y_cf)
-        step = 1.0 / self.lipschitz
-        x = xp.zeros_like(b)
-        z = x
-        t = 1.0
-        for _ in range(self.iterations if iterations is None else iterations):
+
+        def gradient(z: Any) -> Any:
             if self.gradient == "gram":
-                grad = 2.0 * (self._gram(z) - b) + (2.0 * self.tau) * z
-            else:
-                grad = 2.0 * self.adjoint(self.forward_cf(z) - y_cf) + (2.0 * self.tau) * z
-            x_new = z - step * grad
-            t_new = (1.0 + np.sqrt(1.0 + 4.0 * t * t)) / 2.0
-            z = x_new + ((t - 1.0) / t_new) * (x_new - x)
-            x, t = x_new, t_new
-        return x
+                return 2.0 * (self._gram(z) - b) + (2.0 * self.tau) * z
+            return 2.0 * self.adjoint(self.forward_cf(z) - y_cf) + (2.0 * self.tau) * z
+
+        return nesterov(gradient, self.xp.zeros_like(b), 1.0 / self.lipschitz,
+                        self.iterations if iterations is None else iterations)
 
     def decode(self, signal: np.ndarray) -> np.ndarray:
         """Reconstruct ``N × M × C`` float32 from ``R × S × C`` DN above black."""

@@ -6,6 +6,7 @@ import os
 from pathlib import Path
 from typing import Any
 
+from thintact_sdk.capture import camera_is_simulated
 from thintact_sdk.errors import CalibrationError
 from thintact_sdk.imaging.calibration_bundle import CalibrationBundle, find_latest
 from thintact_sdk.profile import Profile
@@ -44,7 +45,7 @@ def resolve_bundle(profile: Profile, settings: dict[str, Any]) -> CalibrationBun
         bundle = CalibrationBundle.load(Path(str(settings["calibration"])).expanduser())
     elif profile.decoder is not None and profile.decoder.calibration:
         bundle = CalibrationBundle.load(profile.resolve_path(profile.decoder.calibration))
-    elif profile.camera is not None and profile.camera.plugin == "virtual":
+    elif camera_is_simulated(profile):
         for root in calibration_roots():
             if (root / profile.name).is_dir():
                 try:

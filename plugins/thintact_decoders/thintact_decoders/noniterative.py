@@ -24,8 +24,9 @@ import numpy as np
 from thintact_decoders.backend import ArrayBackend, synthesis_macs
 from thintact_decoders.modes import DEFAULT_MODE_RTOL, kept_mode_counts
 from thintact_decoders.shapes import check_measurement_shape
-from thintact_sdk.imaging.dct import dct2, dct_matrix, idct2
-from thintact_sdk.imaging.recon_filter import JointFilter
+from thintact_sdk.errors import InvalidValueError
+from thintact_sdk.imaging.dct import SeparableDCT, dct_matrix
+from thintact_sdk.imaging.recon_filter import JointFilter, joint_filter_open
 from thintact_sdk.imaging.t2s import SystemMatrices
 from thintact_sdk.imaging.tikhonov import TikhonovSolver
 from thintact_sdk.interfaces import Decoder
@@ -111,7 +112,7 @@ class NonIterativeDecoder(Decoder):
         mode_rtol: float = DEFAULT_MODE_RTOL,
     ) -> None:
         if fold not in ("auto", "never", "approx"):
-            raise ValueError(f"fold must be 'auto', 'never' or 'approx', got {fold!r}")
+            raise InvalidValueError(f"fold must be 'auto', 'never' or 'approx', got {fold!r}")
         self.xp = backend or ArrayBackend("numpy")
         self.tau = float(tau)
         self.mode_rtol = float(mode_rtol)
@@ -146,8 +147,7 @@ class NonIterativeDecoder(Decoder):
                 self._ek_t = self.xp.asarray(dct_matrix(s)[:ks].T, gemm=True)  # S × ks
                 self.kr, self.rank = kr, rank
             elif self.xp.name == "torch":
-                self._dr = self.xp.asarray(dct_matrix(r))
-                self._ds = self.xp.asarray(dct_matrix(s))
+                self._dct = SeparableDCT((r, s), to_backend=self.xp.asarray)
                 self._pf = self.xp.asarray(joint_filter.phi_f)
                 self._ps = self.xp.asarray(joint_filter.phi_s)
         self.filter_info["folded"] = self.folded
@@ -179,7 +179,7 @@ class NonIterativeDecoder(Decoder):
     def set_tau(self, tau: float) -> None:
         """Change τ without recomputing the SVDs (the modes kept follow the new τ)."""
         if tau <= 0:
-            raise ValueError("tau must be > 0")
+            raise InvalidValueError("tau must be > 0")
         self.tau = float(tau)
         kept = kept_mode_counts(self._sp, self._sq, self.tau, self.mode_rtol)
         if kept != self.kept_modes:
@@ -238,7 +238,7 @@ class NonIterativeDecoder(Decoder):
 
     def _filter_unfolded(self, y_np: np.ndarray) -> np.ndarray:
         assert self._jf is not None
-        return y_np - self._jf.phi_s * idct2(self._jf.phi_f * dct2(y_np, workers=-1), workers=-1)
+        return y_np - joint_filter_open(self._jf.phi_s, self._jf.phi_f, y_np, SeparableDCT(self.sensor_shape))
 
     def _solve(self, y_cf: Any, black_dn: float = 0.0) -> np.ndarray:
         xp = self.xp
@@ -247,7 +247,7 @@ class NonIterativeDecoder(Decoder):
                 y_cf = xp.asarray(self._filter_unfolded(np.asarray(y_cf, np.float64)), gemm=True)
             else:
                 y32 = xp.cast(y_cf, gemm=False)
-                f = self._ps * (xp.swap(self._dr) @ (self._pf * (self._dr @ y32 @ xp.swap(self._ds))) @ self._ds)
+                f = joint_filter_open(self._ps, self._pf, y32, self._dct)
                 y_cf = xp.cast(y32 - f, gemm=True)
         core = self._core(y_cf)  # this frame's own array: updated in place
         if black_dn:
@@ -264,8 +264,7 @@ class NonIterativeDecoder(Decoder):
                 if xp.name == "numpy":
                     y = xp.asarray(self._filter_unfolded(ones.astype(np.float64)), gemm=True)
                 else:
-                    f = self._ps * (xp.swap(self._dr) @ (self._pf * (self._dr @ xp.cast(y, False)
-                                                                    @ xp.swap(self._ds))) @ self._ds)
+                    f = joint_filter_open(self._ps, self._pf, xp.cast(y, False), self._dct)
                     y = xp.cast(xp.cast(y, False) - f, gemm=True)
             self._unit_core = self._core(y)
         return self._unit_core

@@ -29,6 +29,8 @@ import numpy as np
 from thintact_decoders.backend import ArrayBackend, synthesis_macs
 from thintact_decoders.modes import DEFAULT_MODE_RTOL, kept_mode_counts
 from thintact_decoders.shapes import check_measurement_shape
+from thintact_sdk.errors import InvalidShapeError, InvalidValueError
+from thintact_sdk.imaging.first_order import largest_eigenvalue, nesterov
 from thintact_sdk.imaging.t2s import SystemMatrices
 from thintact_sdk.imaging.tikhonov import TikhonovSolver
 from thintact_sdk.interfaces import Decoder
@@ -77,7 +79,7 @@ class T2SClosedFormDecoder(Decoder):
         sm = system_matrices
         (r, s), (n, m) = sm.sensor_shape, sm.scene_shape
         if r < n or s < m:
-            raise ValueError("t2s-closed-form needs at least as many sensor rows/cols as scene rows/cols")
+            raise InvalidShapeError("t2s-closed-form needs at least as many sensor rows/cols as scene rows/cols")
         self.channels, self.sensor_shape, self.scene_shape = sm.channels, (r, s), (n, m)
         self.tau = float(tau)
         svds = []
@@ -161,7 +163,7 @@ class T2SClosedFormDecoder(Decoder):
         """Change τ without recomputing any SVD (only the 2K × 2K system and ``1/(σ² + τ)``;
         the coding modes kept follow the new τ)."""
         if tau <= 0:
-            raise ValueError("tau must be > 0")
+            raise InvalidValueError("tau must be > 0")
         self.tau = float(tau)
         kept = kept_mode_counts(self._sp, self._sq, self.tau, self.mode_rtol)
         if kept != self.kept_modes:
@@ -225,23 +227,14 @@ class T2SClosedFormDecoder(Decoder):
         xp = self.xp
         core, e = self._linear(xp.channels_first(signal, gemm=True))
         rhs = core + self._a @ e @ xp.swap(self._b)  # Aᵀ y in coefficients
-        rng = np.random.default_rng(0)
-        v = xp.asarray(rng.standard_normal(tuple(rhs.shape)))
-        lam = 0.0
-        for _ in range(power_iterations):
-            v = v / np.sqrt(xp.sum_squares(v))
-            w = self._normal_op(v)
-            lam = float((v * w).sum())
-            v = w
+        start = xp.asarray(np.random.default_rng(0).standard_normal(tuple(rhs.shape)))
+        lam = largest_eigenvalue(self._normal_op, start, power_iterations, xp.sum_squares)
         step = 1.0 / (2.0 * (lam * 1.02 + self.tau))
-        x = xp.zeros_like(rhs)
-        z, t = x, 1.0
-        for _ in range(iterations):
-            grad = 2.0 * (self._normal_op(z) - rhs) + (2.0 * self.tau) * z
-            x_new = z - step * grad
-            t_new = (1.0 + np.sqrt(1.0 + 4.0 * t * t)) / 2.0
-            z = x_new + ((t - 1.0) / t_new) * (x_new - x)
-            x, t = x_new, t_new
+
+        def gradient(z: Any) -> Any:
+            return 2.0 * (self._normal_op(z) - rhs) + (2.0 * self.tau) * z
+
+        x = nesterov(gradient, xp.zeros_like(rhs), step, iterations)
         return xp.synthesise(self._vp, x, self._vqt)
 
     def _check(self, signal: np.ndarray) -> None:

@@ -9,7 +9,7 @@ Display components (``factory(profile, settings) -> thintact_sdk.interfaces.Disp
     elsewhere. See :mod:`thintact_displays.pygame_display`.
 ``virtual``
     Puts the scene in the virtual sensor's scene slot
-    (``thintact_virtual.bench.get_scene_slot(key).set(scene)``), so the virtual camera
+    (``thintact_sdk.virtual_bench.get_scene_slot(key).set(scene)``), so the virtual camera
     renders it. See :mod:`thintact_displays.virtual_display`.
 """
 

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from thintact_sdk.errors import DeviceError, ProfileError
+from thintact_sdk.errors import DeviceError, InvalidShapeError, ProfileError
 from thintact_sdk.profile import Profile
 
 
@@ -87,7 +87,7 @@ def scene_to_rgb8(scene: np.ndarray, block_px: int = 1) -> np.ndarray:
     if x.ndim == 2:
         x = np.repeat(x[..., None], 3, axis=2)
     if x.ndim != 3 or x.shape[2] != 3:
-        raise ValueError(f"a scene is N×M×3, got shape {np.shape(scene)}")
+        raise InvalidShapeError(f"a scene is N×M×3, got shape {np.shape(scene)}")
     rgb = np.rint(np.clip(x, 0.0, 1.0) * 255.0).astype(np.uint8)
     if block_px > 1:
         rgb = np.repeat(np.repeat(rgb, block_px, axis=0), block_px, axis=1)
@@ -98,4 +98,4 @@ def check_scene_shape(scene: np.ndarray, profile: Profile) -> None:
     """Raise ValueError unless ``scene`` is the profile's ``N × M × 3``."""
     want = (profile.scene.rows, profile.scene.cols, 3)
     if tuple(np.shape(scene)) != want:
-        raise ValueError(f"scene must be {want[0]}×{want[1]}×3 for profile {profile.name!r}, got {np.shape(scene)}")
+        raise InvalidShapeError(f"scene must be {want[0]}×{want[1]}×3 for profile {profile.name!r}, got {np.shape(scene)}")

@@ -50,7 +50,7 @@ class VirtualDisplay(Display):
 
     def open(self) -> None:
         try:
-            from thintact_virtual.bench import get_scene_slot
+            from thintact_sdk.virtual_bench import get_scene_slot
         except ImportError as err:
             raise PluginError(
                 "the virtual display needs the virtual sensor plugin (thintact-virtual); "

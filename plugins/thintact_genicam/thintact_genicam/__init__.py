@@ -29,3 +29,15 @@ def thintact_cameras() -> list[Component]:
             "GenICam/GenTL camera via harvesters (settings.cti names the vendor's producer)",
         )
     ]
+
+
+def _list_producer_devices(source: str) -> list[dict[str, Any]]:
+    from thintact_genicam.producers import list_devices
+
+    return list_devices(source)
+
+
+@hookimpl
+def thintact_device_listers() -> list[Component]:
+    return [Component("genicam", _list_producer_devices,
+                      "the devices a GenTL producer (.cti file) offers, via harvesters")]

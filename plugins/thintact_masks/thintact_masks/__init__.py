@@ -57,3 +57,15 @@ def thintact_masks() -> list[Component]:
         Component("random", RandomDesigner, "seeded uniform random +1/-1 vector"),
         Component("ga", GADesigner, "genetic-algorithm optimised phi for a device (paper III-C)"),
     ]
+
+
+def _register_mask_command(subparsers: Any) -> None:
+    from thintact_masks.cli import register
+
+    register(subparsers)
+
+
+@hookimpl
+def thintact_cli_commands() -> list[Component]:
+    return [Component("mask", _register_mask_command,
+                      "thintact mask: design, optimise (GA), show, compare and apply mask patterns")]

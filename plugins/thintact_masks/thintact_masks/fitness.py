@@ -37,9 +37,11 @@ from typing import Any
 import numpy as np
 from scipy.ndimage import gaussian_filter
 
+from thintact_sdk.errors import InvalidShapeError, InvalidValueError
 from thintact_sdk.imaging import scenes
 from thintact_sdk.imaging.direct_generation import AxisGeometry, DirectGenerator
 from thintact_sdk.imaging.metrics import psnr
+from thintact_sdk.imaging.noise import default_white_level_dn, signal_variance_dn
 from thintact_sdk.profile import Profile
 
 #: Floor of 1 − SSIM and of the white image's total variation (keeps f finite for a
@@ -187,12 +189,11 @@ class FitnessEvaluator:
             "white": scenes.white(n, m)[..., 0].astype(np.float64),
         }
         noise = profile.noise
-        white_dn = s.white_level_dn if s.white_level_dn is not None else 0.6 * (
-            noise.saturation_dn - noise.black_level_dn)
+        white_dn = s.white_level_dn if s.white_level_dn is not None else default_white_level_dn(noise)
         if s.frames_averaged < 1:
-            raise ValueError(f"frames_averaged must be >= 1, got {s.frames_averaged}")
+            raise InvalidValueError(f"frames_averaged must be >= 1, got {s.frames_averaged}")
         if not white_dn > 0:
-            raise ValueError(f"white_level_dn must be > 0, got {white_dn}")
+            raise InvalidValueError(f"white_level_dn must be > 0, got {white_dn}")
         self.white_level_dn = float(white_dn)
         #: DN per relative-irradiance unit: the fully open white response is 2× the white level
         self.dn_per_unit = 2.0 * self.white_level_dn
@@ -202,7 +203,7 @@ class FitnessEvaluator:
         self.noise_draws: dict[str, np.ndarray] = {}
         for name, x in self.scenes.items():
             mean_dn = self.dn_per_unit * float((po @ x @ qo.T).mean())  # open half ≈ mean signal
-            var_dn = (mean_dn / noise.electrons_per_dn + noise.read_noise_dn**2) / s.frames_averaged
+            var_dn = float(signal_variance_dn(mean_dn, noise, s.frames_averaged))
             self.sigma_rel[name] = math.sqrt(var_dn) / self.dn_per_unit if s.noise else 0.0
             self.noise_draws[name] = rng.standard_normal((n, m))
         if s.tau is not None:
@@ -212,7 +213,7 @@ class FitnessEvaluator:
         else:
             self.tau = 1e-9
         if not self.tau > 0:
-            raise ValueError(f"tau must be > 0, got {self.tau}")
+            raise InvalidValueError(f"tau must be > 0, got {self.tau}")
         self._ssim = {k: SSIMReference(v) for k, v in self.scenes.items()}
         self._cast_scenes = {k: v.astype(self._dtype) for k, v in self.scenes.items()}
         self._cast_noise = {k: v.astype(self._dtype) for k, v in self.noise_draws.items()}
@@ -259,7 +260,7 @@ class FitnessEvaluator:
         """Fitness of one φ (``(K,)`` ±1)."""
         phi = np.asarray(phi)
         if phi.shape != (self.K,):
-            raise ValueError(f"phi must have shape ({self.K},), got {phi.shape}")
+            raise InvalidShapeError(f"phi must have shape ({self.K},), got {phi.shape}")
         return self.score(self.reconstruct(phi), keep_reconstructions)
 
     def evaluate_matrices(self, pc: np.ndarray, qc: np.ndarray,

@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from thintact_sdk.errors import InvalidValueError
 from thintact_sdk.interfaces import Mask, MaskDesigner
 
 #: Exponents of primitive polynomials x^n + ... + 1 over GF(2) (feedback taps), n = 2..16.
@@ -29,7 +30,7 @@ def mls_bits(bits: int = 8) -> np.ndarray:
     :data:`PRIMITIVE_TAPS`; the output is the register's last stage.
     """
     if bits not in PRIMITIVE_TAPS:
-        raise ValueError(f"MLS order must be in {min(PRIMITIVE_TAPS)}..{max(PRIMITIVE_TAPS)}, got {bits}")
+        raise InvalidValueError(f"MLS order must be in {min(PRIMITIVE_TAPS)}..{max(PRIMITIVE_TAPS)}, got {bits}")
     taps = PRIMITIVE_TAPS[bits]
     state = [1] * bits
     out = np.empty(2**bits - 1, np.int8)
@@ -50,7 +51,7 @@ def mls_sequence(bits: int = 8) -> np.ndarray:
 def repeat_to_length(seq: np.ndarray, K: int) -> np.ndarray:  # noqa: N803
     """``seq`` repeated and truncated to exactly ``K`` entries (255 → 765 is the paper's 3×)."""
     if K <= 0:
-        raise ValueError(f"K must be positive, got {K}")
+        raise InvalidValueError(f"K must be positive, got {K}")
     reps = -(-K // seq.size)
     return np.tile(seq, reps)[:K].copy()
 
@@ -78,7 +79,7 @@ class RandomDesigner(MaskDesigner):
     def design(self, K: int, feature_um: float, **options: Any) -> Mask:  # noqa: N803
         """Random mask of ``K`` cells of side ``feature_um`` (um); option ``seed`` (default 0)."""
         if K <= 0:
-            raise ValueError(f"K must be positive, got {K}")
+            raise InvalidValueError(f"K must be positive, got {K}")
         seed = int(options.get("seed", 0))
         phi = random_phi(K, seed)
         return Mask(phi=phi, feature_um=float(feature_um), design="random",

@@ -15,6 +15,7 @@ from thintact_masks.fitness import FitnessEvaluator, FitnessSettings
 from thintact_masks.ga import GAConfig, ProgressFn, run_ga
 from thintact_masks.mls import MLSDesigner, random_phi
 from thintact_sdk.blas import blas_threads
+from thintact_sdk.errors import InvalidValueError
 from thintact_sdk.interfaces import Mask
 from thintact_sdk.profile import Profile
 
@@ -118,4 +119,4 @@ def baseline_phi(name: str, K: int, seed: int = 0) -> np.ndarray:  # noqa: N803
         return MLSDesigner().design(K, 1.0).phi
     if name == "random":
         return random_phi(K, seed)
-    raise ValueError(f"unknown baseline {name!r}; use 'mls' or 'random'")
+    raise InvalidValueError(f"unknown baseline {name!r}; use 'mls' or 'random'")

@@ -42,12 +42,11 @@ from typing import Any, Literal
 import numpy as np
 from pydantic import Field
 
-from thintact_replay.rawframes import RAW_FIELD, load_raw_data
+from thintact_replay.pacing import wait_until_due
 from thintact_sdk.bayer import mosaic_from_rgb
 from thintact_sdk.camera_settings import CameraSettings, parse_camera_settings
 from thintact_sdk.errors import (
     DeviceError,
-    DeviceTimeoutError,
     EndOfStreamError,
     RecordingError,
 )
@@ -55,6 +54,7 @@ from thintact_sdk.frames import RawFrame
 from thintact_sdk.interfaces import Camera, CameraCapabilities
 from thintact_sdk.profile import Profile
 from thintact_sdk.recording import Recording
+from thintact_sdk.recording_raw import RAW_FIELD, load_raw_data
 
 
 class EndOfRecording(EndOfStreamError):
@@ -91,14 +91,19 @@ def _check_frame_files(rec: Recording, scenes: bool) -> None:
                 )
 
 
-class ReplayCameraSettings(CameraSettings):
-    """``camera.settings`` of the replay camera (see the module docstring)."""
+class ReplaySourceSettings(CameraSettings):
+    """``camera.settings`` every replay source takes (a recording directory or an MCAP log)."""
 
-    path: str = Field(min_length=1, description="the recording directory to play")
+    path: str = Field(min_length=1, description="the recording directory or .mcap log to play")
     rate: Literal["recorded", "fast"] = "recorded"
     speed: float = Field(default=1.0, gt=0, le=1000)
-    fps: float = Field(default=0.0, ge=0, le=10_000)
     loop: bool = Field(default=False, strict=True)
+
+
+class ReplayCameraSettings(ReplaySourceSettings):
+    """``camera.settings`` of the replay camera on a recording directory (module docstring)."""
+
+    fps: float = Field(default=0.0, ge=0, le=10_000)
     raw: bool = Field(default=True, strict=True)
     scenes: bool = Field(default=True, strict=True)
 
@@ -224,16 +229,8 @@ class ReplayCamera(Camera):
         if self.rate == "recorded":
             period_ns = self._times_ns[-1] / (n - 1) if n > 1 else 0.0
             cycle_ns = self._times_ns[-1] + period_ns
-            due = self._t0 + (self._loops * cycle_ns + self._times_ns[i]) / 1e9 / self.speed
-            wait = due - time.monotonic()
-            if wait > timeout_s:
-                time.sleep(max(timeout_s, 0.0))
-                raise DeviceTimeoutError(
-                    f"replay: frame {i} is due in {wait:.2f} s, beyond the read timeout "
-                    f"of {timeout_s:.2f} s"
-                )
-            if wait > 0:
-                time.sleep(wait)
+            wait_until_due(self._t0, self._loops * cycle_ns + self._times_ns[i], self.speed,
+                           timeout_s, f"frame {i}")
         data, pixel_format = self._frame_data(i)
         fr = rec.frames[i]
         span = self._ids[-1] - self._ids[0] + 1

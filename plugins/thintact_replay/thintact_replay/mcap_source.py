@@ -19,8 +19,10 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-from thintact_replay.camera import EndOfRecording
-from thintact_sdk.errors import DeviceError, DeviceTimeoutError, ProfileError, RecordingError
+from thintact_replay.camera import EndOfRecording, ReplaySourceSettings
+from thintact_replay.pacing import wait_until_due
+from thintact_sdk.camera_settings import parse_camera_settings
+from thintact_sdk.errors import DeviceError, RecordingError
 from thintact_sdk.frames import RawFrame
 from thintact_sdk.interfaces import Camera, CameraCapabilities
 from thintact_sdk.mcaplog import McapLog
@@ -40,15 +42,12 @@ class McapReplayCamera(Camera):
     name = "replay"
 
     def __init__(self, profile: Profile, settings: dict[str, Any]) -> None:
+        parsed = parse_camera_settings(ReplaySourceSettings, settings, "replay (MCAP log)")
         self.profile = profile
-        self.path: Path = profile.resolve_path(str(settings["path"]))
-        self.rate = str(settings.get("rate", "recorded"))
-        if self.rate not in ("recorded", "fast"):
-            raise ProfileError(f"camera.settings.rate must be 'recorded' or 'fast', not {self.rate!r}")
-        self.speed = float(settings.get("speed", 1.0))
-        if self.speed <= 0:
-            raise ProfileError("camera.settings.speed must be > 0")
-        self.loop = bool(settings.get("loop", False))
+        self.path: Path = profile.resolve_path(parsed.path)
+        self.rate = parsed.rate
+        self.speed = parsed.speed
+        self.loop = parsed.loop
         self._log: McapLog | None = None
         self._frames: Iterator[RawFrame] | None = None
         self._pending: RawFrame | None = None
@@ -131,13 +130,8 @@ class McapReplayCamera(Camera):
         frame = self._peek()
         if self.rate == "recorded":
             offset_ns = self._loops * self._cycle_ns + frame.timestamp_ns - self._first_stamp
-            wait = self._t0 + offset_ns / 1e9 / self.speed - time.monotonic()
-            if wait > timeout_s:
-                time.sleep(max(timeout_s, 0.0))
-                raise DeviceTimeoutError(f"replay: frame {self._index} of {self.path} is due in "
-                                         f"{wait:.2f} s, beyond the read timeout of {timeout_s:.2f} s")
-            if wait > 0:
-                time.sleep(wait)
+            wait_until_due(self._t0, offset_ns, self.speed, timeout_s,
+                           f"frame {self._index} of {self.path}")
         self._pending, self._last = None, frame
         meta = {"index": self._index, "loop": self._loops, "source": str(self.path),
                 "recorded_timestamp_ns": frame.timestamp_ns}

@@ -31,6 +31,8 @@ from thintact_sdk.errors import (
     DeviceLostError,
     DeviceNotFoundError,
     DeviceTimeoutError,
+    InvalidShapeError,
+    InvalidValueError,
     ProtocolError,
 )
 from thintact_sdk.interfaces import LightController
@@ -125,13 +127,13 @@ class SerialLedController(LightController):
     def set_intensity(self, index: int, level: float) -> None:
         """Set LED ``index`` (0-based) to ``level`` in [0, 1] (12-bit on the wire)."""
         if not 0 <= index < self._led_count:
-            raise ValueError(f"LED index {index} outside 0..{self._led_count - 1}")
+            raise InvalidValueError(f"LED index {index} outside 0..{self._led_count - 1}")
         self.request(f"SET {index} {level_to_wire(level)}")
 
     def set_all(self, levels: list[float]) -> None:
         """Set every LED at once (one ``ALL`` command, applied atomically by the board)."""
         if len(levels) != self._led_count:
-            raise ValueError(f"set_all needs {self._led_count} levels, got {len(levels)}")
+            raise InvalidShapeError(f"set_all needs {self._led_count} levels, got {len(levels)}")
         self.request("ALL " + " ".join(str(level_to_wire(v)) for v in levels))
 
     def get_intensities(self) -> list[float]:

@@ -23,6 +23,7 @@ import time
 import tty
 from dataclasses import dataclass, field
 
+from thintact_sdk.errors import InvalidShapeError
 from thintact_serial_led.protocol import (
     ERROR_SEQ,
     LEVEL_MAX,
@@ -75,7 +76,7 @@ class LedFirmwareEmulator:
 
     def __init__(self, led_count: int = 10, colors: str = DEFAULT_COLORS) -> None:
         if len(colors) != led_count:
-            raise ValueError(f"colors {colors!r} must have one letter per LED ({led_count})")
+            raise InvalidShapeError(f"colors {colors!r} must have one letter per LED ({led_count})")
         self.state = EmulatorState(levels=[0] * led_count, colors=colors)
         self.silent = False
         self.garbage_replies = False

@@ -13,6 +13,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from thintact_sdk.errors import InvalidValueError
+
 PROTOCOL_VERSION = 1
 MAX_LINE_BYTES = 96
 """Longest line either side accepts, newline included; longer input is garbage."""
@@ -132,7 +134,7 @@ def decode_line(raw: bytes) -> Line:
 def level_to_wire(level: float) -> int:
     """Map an intensity in [0, 1] to the 12-bit wire level (rounded)."""
     if not 0.0 <= level <= 1.0:
-        raise ValueError(f"LED level {level} outside [0, 1]")
+        raise InvalidValueError(f"LED level {level} outside [0, 1]")
     return int(round(level * LEVEL_MAX))
 
 

@@ -35,7 +35,7 @@ from thintact_sdk.imaging.scenes import LIBRARY, make_scene
 from thintact_sdk.imaging.simulator import Simulator
 from thintact_sdk.interfaces import Camera, CameraCapabilities, Range
 from thintact_sdk.profile import Profile
-from thintact_virtual.bench import REFERENCE_EXPOSURE_US, get_scene_slot, white_level_dn
+from thintact_sdk.virtual_bench import REFERENCE_EXPOSURE_US, get_scene_slot, white_level_dn
 from thintact_virtual.tactile_scenes import CYCLE, TACTILE_SCENE, tactile_scene
 
 EXPOSURE_RANGE_US = Range(10.0, 1_000_000.0, "us")

@@ -1,4 +1,5 @@
-"""``thintact bench NAME``: benchmarks discovered from :mod:`thintact_sdk.benchmarks`."""
+"""``thintact bench NAME``: the core's benchmarks (:mod:`thintact_sdk.benchmarks`) and those plugins
+contribute through the ``thintact_benchmarks`` hook (e.g. ``reconstruct`` from the decoders plugin)."""
 
 from __future__ import annotations
 
@@ -7,6 +8,8 @@ import importlib
 import pkgutil
 
 import thintact_sdk.benchmarks as benchmarks
+from thintact_sdk.errors import ThinTactError
+from thintact_sdk.plugin_manager import get_registry
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -20,3 +23,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         bp = bsub.add_parser(info.name, help=doc, description=mod.__doc__)
         mod.add_arguments(bp)
         bp.set_defaults(func=mod.run)
+    try:
+        contributed = get_registry().components("benchmark")
+    except ThinTactError:  # a broken plugin set still leaves the core's benchmarks
+        contributed = {}
+    for name, comp in sorted(contributed.items()):
+        bp = bsub.add_parser(name, help=comp.description, description=comp.description)
+        comp.factory(bp)

@@ -7,7 +7,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 from typing import Any
 
@@ -21,7 +20,14 @@ from rich.progress import (
     TimeRemainingColumn,
 )
 
-from thintact_sdk.cli.argtypes import non_negative_int, positive_float, positive_int
+from thintact_sdk.cli.argtypes import (
+    KEY_VALUE_HELP,
+    key_value,
+    key_values,
+    non_negative_int,
+    positive_float,
+    positive_int,
+)
 from thintact_sdk.cli.output_path import add_force_argument, claim_output
 from thintact_sdk.errors import ThinTactError
 
@@ -55,8 +61,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="per-slit-frame gains from the white frame (unrecorded exposure or "
                    "brightness drift); only for well-averaged recordings (noise leaks in)")
     p.add_argument("--filter-steps", type=non_negative_int, default=100, help="Adam steps of the filter training")
-    p.add_argument("--camera-set", action="append", default=[], metavar="KEY=VALUE",
-                   help="override a camera setting (value parsed as JSON when possible)")
+    p.add_argument("--camera-set", action="append", default=[], metavar="KEY=VALUE", type=key_value,
+                   help="override a camera setting (" + KEY_VALUE_HELP + ")")
     p.add_argument("--no-registration-check", action="store_true",
                    help="wizard: continue even if the registration check fails")
     p.add_argument("--compare-reference", action="store_true",
@@ -65,21 +71,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_force_argument(p, "the bundle into an existing non-empty --out (an unfinished wizard "
                        "capture there is resumed without it)")
     p.set_defaults(func=run)
-
-
-def _parse_settings(pairs: list[str]) -> dict[str, Any]:
-    from thintact_sdk.errors import ProfileError
-
-    out: dict[str, Any] = {}
-    for item in pairs:
-        key, sep, value = item.partition("=")
-        if not sep or not key:
-            raise ProfileError(f"--camera-set expects KEY=VALUE, got {item!r}")
-        try:
-            out[key] = json.loads(value)
-        except json.JSONDecodeError:
-            out[key] = value
-    return out
 
 
 def _progress(disabled: bool, console: Console) -> Progress:
@@ -151,7 +142,7 @@ def _reference(profile: Any, camera_settings: dict[str, Any]) -> Any:
     from thintact_sdk.imaging.t2s import SystemMatrices
 
     try:
-        from thintact_virtual.bench import signal_scale_dn
+        from thintact_sdk.virtual_bench import signal_scale_dn
     except ImportError:
         raise PluginError("--compare-reference needs the virtual sensor plugin (thintact-virtual)") from None
     settings = dict(profile.camera.settings) if profile.camera is not None else {}
@@ -181,7 +172,7 @@ def _wizard(args: argparse.Namespace, options: Any, console: Console) -> Any:
         new_bundle_dir,
         run_wizard,
     )
-    from thintact_sdk.capture import create_camera
+    from thintact_sdk.capture import camera_is_simulated, create_camera
     from thintact_sdk.errors import ProfileError
     from thintact_sdk.plugin_manager import get_registry
     from thintact_sdk.profile import load_profile
@@ -194,7 +185,7 @@ def _wizard(args: argparse.Namespace, options: Any, console: Console) -> Any:
             f"profile {profile.name!r} has no display section: add display.plugin (pygame or "
             "virtual), display_index, origin_px and pixel_pitch_um"
         )
-    cam_settings = _parse_settings(args.camera_set)
+    cam_settings = key_values(args.camera_set)
     if args.out is not None:
         bundle_dir = _wizard_out(args)
     else:
@@ -204,7 +195,7 @@ def _wizard(args: argparse.Namespace, options: Any, console: Console) -> Any:
             console.print(f"resuming the unfinished calibration in {unfinished} (--restart for a new one)")
     if args.restart and (bundle_dir / "capture").exists():
         raise ProfileError(f"--restart: {bundle_dir} already holds a capture; choose another --out")
-    virtual = profile.camera.plugin == "virtual"
+    virtual = camera_is_simulated(profile)
     frames = args.frames if args.frames is not None else (8 if virtual else 100)
     camera = create_camera(profile, settings=cam_settings)
     display = get_registry().create("display", profile.display.plugin, profile, dict(profile.display.settings))

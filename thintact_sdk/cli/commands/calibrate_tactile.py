@@ -38,9 +38,10 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from rich.progress import Progress
 
+    from thintact_sdk.capture import camera_is_simulated
     from thintact_sdk.errors import OutputError
     from thintact_sdk.profile import load_profile
-    from thintact_sdk.sensor import VIRTUAL_CAMERAS, Sensor
+    from thintact_sdk.sensor import Sensor
     from thintact_sdk.tactile import device_calibration as dc
     from thintact_sdk.tactile.store import device_lut_path, user_calibrations_root
 
@@ -53,7 +54,7 @@ def run(args: argparse.Namespace) -> int:
         target = claim_output(device_lut_path(profile, user_calibrations_root()), "file",
                               force=args.force, option="the device LUT")
     claim_output(target.with_suffix(".json"), "file", force=args.force, option="the LUT's metadata")
-    virtual = profile.camera is not None and profile.camera.plugin in VIRTUAL_CAMERAS
+    virtual = camera_is_simulated(profile)
     with Progress(transient=True) as bar:
         task = bar.add_task("ball presses", total=args.presses)
 

@@ -17,12 +17,12 @@ from typing import Any
 
 import numpy as np
 
+from thintact_sdk.capture import camera_is_simulated
 from thintact_sdk.cli.argtypes import finite_float, positive_float
 from thintact_sdk.cli.output_path import add_force_argument, claim_output
-from thintact_sdk.errors import PluginError, ThinTactError
+from thintact_sdk.errors import ThinTactError
 from thintact_sdk.profile import Profile, load_profile
-
-VIRTUAL_CAMERA = "virtual"
+from thintact_sdk.virtual_bench import get_scene_slot
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -44,10 +44,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _scene_slot(profile: Profile) -> Any:
-    try:
-        from thintact_virtual.bench import get_scene_slot
-    except ImportError as err:
-        raise PluginError(f"the virtual camera plugin (thintact-virtual) is not installed: {err}") from None
+    """The virtual bench's slot the profile's simulated camera renders (keyed by profile name)."""
     return get_scene_slot(profile.name)
 
 
@@ -66,7 +63,7 @@ def run(args: argparse.Namespace) -> int:
 
     out = claim_output(args.out, "directory", force=args.force)
     profile = load_profile(args.profile)
-    if profile.camera is None or profile.camera.plugin != VIRTUAL_CAMERA:
+    if not camera_is_simulated(profile):
         raise ThinTactError(
             f"the demo needs a profile whose camera is the virtual sensor; {profile.name!r} uses "
             f"{profile.camera.plugin if profile.camera else 'no camera'} (try --profile virtual-finger)"

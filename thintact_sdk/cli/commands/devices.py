@@ -27,7 +27,8 @@ import os
 from pathlib import Path
 from typing import Any
 
-from thintact_sdk.errors import ThinTactError
+from thintact_sdk.errors import PluginError, ThinTactError
+from thintact_sdk.plugin_manager import get_registry
 from thintact_sdk.profile import available_profiles, read_profile_file
 
 GENTL_PATH_ENV = "GENICAM_GENTL64_PATH"
@@ -111,11 +112,11 @@ def genicam_devices(extra: list[str], from_profiles: bool = True,
             entry["error"] = "producer file not found (install the camera vendor's GenTL SDK)"
         else:
             try:
-                from thintact_genicam.producers import list_devices
-            except ImportError:
+                lister = get_registry().get("device_lister", "genicam").factory
+            except PluginError:
                 entry["error"] = "the thintact-genicam plugin (harvesters) is not installed"
             else:
-                entry["devices"], entry["error"] = _bounded(list_devices, cti, timeout_s)
+                entry["devices"], entry["error"] = _bounded(lister, cti, timeout_s)
         out.append(entry)
     return out
 

@@ -7,7 +7,7 @@ Each manifest entry carries ``timestamp_ns``, ``frame_id``, ``exposure_us`` (and
 ``gain_db``, ``device_timestamp_ns``, ``dropped_before`` when known). A ground-truth scene
 that the camera reports (``meta["scene"]``, e.g. the virtual camera) is saved as the
 frame's scene. ``--raw`` also keeps each raw mosaic (``raw/<index>.npy``, see
-:mod:`thintact_replay.rawframes`), which the ``replay`` camera then delivers as recorded.
+:mod:`thintact_sdk.recording_raw`), which the ``replay`` camera then delivers as recorded.
 
 Dropped frames (gaps in the camera's frame ids) are never silent: each gap is reported,
 the count is printed at the end, and ``--fail-on-drop`` turns any drop into an error.
@@ -16,30 +16,27 @@ the count is printed at the end, and ``--fail-on-drop`` turns any drop into an e
 from __future__ import annotations
 
 import argparse
-import queue
 import sys
-import threading
-import time
-import warnings
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
-from thintact_sdk.capture import (
-    FrameGapCounter,
-    bit_depth_problem,
-    create_camera,
-    to_measurement,
+from thintact_sdk.capture import create_camera, to_measurement
+from thintact_sdk.capture_run import RecordSummary, capture_frames
+from thintact_sdk.cli.argtypes import (
+    KEY_VALUE_HELP,
+    key_value,
+    key_values,
+    positive_float,
+    positive_int,
 )
-from thintact_sdk.cli.argtypes import positive_float, positive_int
 from thintact_sdk.cli.output_path import add_force_argument, claim_output
-from thintact_sdk.errors import DeviceError, EndOfStreamError, RecordingError, ThinTactError
+from thintact_sdk.errors import DeviceError, RecordingError, ThinTactError
 from thintact_sdk.frames import RawFrame
 from thintact_sdk.profile import Profile, load_profile
 from thintact_sdk.recording import RecordingWriter, check_appendable
+from thintact_sdk.recording_raw import save_raw_frame
 
 CLI_DESCRIPTION = """\
 Capture N frames from the profile's camera into a thintact-recording/1 directory.
@@ -58,10 +55,6 @@ the raw frames and, unless --no-tactile, each frame's reconstruction, depth, mar
 contact (topics, types and how to open it: docs/logging.md).
 """
 
-MAX_GAP_NOTES = 10
-"""Gaps reported one by one while recording; later ones are only counted."""
-
-
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "record",
@@ -77,8 +70,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--raw", action="store_true", help="also keep the raw mosaics (raw/*.npy)")
     p.add_argument("--timeout", type=positive_float, default=5.0, metavar="S",
                    help="longest wait for one frame in seconds (default 5)")
-    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                   help="override a camera setting (YAML value), e.g. --set fps=0")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", type=key_value,
+                   help="override a camera setting, e.g. --set fps=0 (" + KEY_VALUE_HELP + ")")
     p.add_argument("--append", action="store_true",
                    help="add frames to an existing recording of the same device (resume)")
     p.add_argument("--fail-on-drop", action="store_true",
@@ -100,30 +93,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_force_argument(p, "a new recording into an existing non-empty directory that is not "
                        "a recording (an existing recording needs --append)")
     p.set_defaults(func=run)
-
-
-@dataclass
-class RecordSummary:
-    """What a recording run did."""
-
-    frames: int = 0
-    dropped: int = 0
-    gaps: list[tuple[int, int]] = field(default_factory=list)
-    elapsed_s: float = 0.0
-    camera_fps: float | None = None
-    """Frame rate from the frames' own timestamps (first to last)."""
-    ended_early: str | None = None
-
-
-def parse_settings(pairs: list[str]) -> dict[str, Any]:
-    """``["key=value", ...]`` → dict with YAML-typed values."""
-    out: dict[str, Any] = {}
-    for pair in pairs:
-        key, sep, value = pair.partition("=")
-        if not sep or not key:
-            raise ThinTactError(f"--set needs KEY=VALUE, got {pair!r}")
-        out[key.strip()] = yaml.safe_load(value)
-    return out
 
 
 def storage_array(data: np.ndarray) -> np.ndarray:
@@ -172,7 +141,7 @@ def record(
     A capture thread reads the camera into a queue of at most ``buffer_mb`` MiB of frames
     while this thread bins and writes them, so a burst faster than the disk is absorbed;
     when the queue is full the capture thread waits and the camera drops frames, which the
-    frame-id gaps then report.
+    frame-id gaps then report (:func:`thintact_sdk.capture_run.capture_frames`).
 
     Raises
     ------
@@ -187,203 +156,44 @@ def record(
         if not append:
             raise RecordingError(f"{out} already holds a recording; choose a new --out or pass --append")
         check_appendable(out, profile)  # before the camera is opened
-    save_raw = None
-    if keep_raw:
-        try:
-            from thintact_replay.rawframes import save_raw_frame
-        except ImportError:
-            raise ThinTactError("--raw needs the thintact-replay plugin (plugins/thintact_replay)") from None
-        save_raw = save_raw_frame
+    save_raw = save_raw_frame if keep_raw else None
     camera = create_camera(profile, settings=settings)
-    gaps = FrameGapCounter()
-    summary = RecordSummary()
-    stamps: list[int] = []
-    t0 = time.monotonic()
-    bar = _Progress(frames, enabled=progress)
-    reader: _BufferedReader | None = None
-    try:
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
-            camera.open()
-        opened_with = [str(w.message) for w in caught]
-        for message in opened_with:
-            _Progress.warn(message)
-        writer = RecordingWriter(out, profile)  # only once the camera works
-        first_index = len(writer.frames)
-        reader = _BufferedReader(camera, frames, timeout_s, buffer_mb * 2**20)
-        with bar:
-            for i in range(frames):
-                try:
-                    raw = reader.next()
-                except EndOfStreamError as err:
-                    summary.ended_early = str(err)
-                    break
-                missing = gaps.update(raw.frame_id)
-                if missing and len(gaps.gaps) <= MAX_GAP_NOTES:
-                    bar.note(f"{missing} frame(s) dropped before frame id {raw.frame_id}"
-                             + ("; further gaps are counted, not listed"
-                                if len(gaps.gaps) == MAX_GAP_NOTES else ""))
-                if i == 0:
-                    depth_problem = bit_depth_problem(raw.pixel_format, profile)
-                    if depth_problem and not any(depth_problem in m for m in opened_with):
-                        bar.note(depth_problem)
-                meas = to_measurement(raw, profile)
-                extra = _frame_fields(raw, missing)
-                index = first_index + i
-                if save_raw is not None:
-                    extra.update(save_raw(out, index, raw))
-                writer.add(
-                    storage_array(meas.data),
-                    scene=_scene_of(raw, profile) if scenes else None,
-                    label=f"frame{index:06d}",
-                    **extra,
-                )
-                stamps.append(raw.timestamp_ns)
-                summary.frames += 1
-                bar.advance(summary.frames, time.monotonic() - t0, gaps.dropped, reader.buffered)
-    except DeviceError as err:
-        raise type(err)(f"{err} ({summary.frames} frame(s) were saved in {out})") from None
-    finally:
-        if reader is not None:
-            reader.stop()
-        camera.close()
-    summary.elapsed_s = time.monotonic() - t0
-    summary.dropped, summary.gaps = gaps.dropped, list(gaps.gaps)
-    if len(stamps) > 1 and stamps[-1] > stamps[0]:
-        summary.camera_fps = (len(stamps) - 1) * 1e9 / (stamps[-1] - stamps[0])
-    return summary
+    sink = _RecordingSink(out, profile, save_raw=save_raw, scenes=scenes)
+    return capture_frames(camera, profile, frames, sink, saved_in=out, timeout_s=timeout_s,
+                          buffer_mb=buffer_mb, progress=progress)
 
 
-class _BufferedReader:
-    """Reads ``frames`` frames from an opened camera on a thread into a bounded queue.
+class _RecordingSink:
+    """Bins each frame and appends it to a ``thintact-recording/1`` directory."""
 
-    The queue holds at most ``buffer_bytes`` of frame data (at least two frames); camera
-    errors travel through the queue and are raised by :meth:`next` in order.
-    """
+    def __init__(self, out: Path, profile: Profile, *, save_raw: Any, scenes: bool) -> None:
+        self.out = out
+        self.profile = profile
+        self.save_raw = save_raw
+        self.scenes = scenes
+        self._writer: RecordingWriter | None = None
+        self._first_index = 0
 
-    def __init__(self, camera: Any, frames: int, timeout_s: float, buffer_bytes: float) -> None:
-        self.camera = camera
-        self.frames = frames
-        self.timeout_s = timeout_s
-        self.buffer_bytes = buffer_bytes
-        self._queue: queue.Queue[tuple[RawFrame | None, BaseException | None]] | None = None
-        self._ready = threading.Event()
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, name="record-capture", daemon=True)
-        self._first: tuple[RawFrame | None, BaseException | None] | None = None
-        self._thread.start()
+    def start(self) -> None:
+        self._writer = RecordingWriter(self.out, self.profile)
+        self._first_index = len(self._writer.frames)
 
-    @property
-    def buffered(self) -> int:
-        """Frames read from the camera and not yet taken by :meth:`next`."""
-        return self._queue.qsize() if self._queue is not None else 0
+    def write(self, index: int, raw: RawFrame, dropped_before: int) -> None:
+        assert self._writer is not None
+        meas = to_measurement(raw, self.profile)
+        extra = _frame_fields(raw, dropped_before)
+        at = self._first_index + index
+        if self.save_raw is not None:
+            extra.update(self.save_raw(self.out, at, raw))
+        self._writer.add(
+            storage_array(meas.data),
+            scene=_scene_of(raw, self.profile) if self.scenes else None,
+            label=f"frame{at:06d}",
+            **extra,
+        )
 
-    def _put(self, item: tuple[RawFrame | None, BaseException | None]) -> bool:
-        assert self._queue is not None
-        while not self._stop.is_set():
-            try:
-                self._queue.put(item, timeout=0.1)
-                return True
-            except queue.Full:
-                continue
-        return False
-
-    def _run(self) -> None:
-        try:
-            first = self.camera.read(timeout_s=self.timeout_s)
-        except BaseException as err:  # noqa: BLE001 - handed to the consumer
-            self._first = (None, err)
-            self._ready.set()
-            return
-        slots = max(2, int(self.buffer_bytes // max(first.data.nbytes, 1)))
-        self._queue = queue.Queue(maxsize=slots)
-        self._first = (first, None)
-        self._ready.set()
-        for _ in range(self.frames - 1):
-            if self._stop.is_set():
-                return
-            try:
-                item: tuple[RawFrame | None, BaseException | None] = (
-                    self.camera.read(timeout_s=self.timeout_s), None)
-            except BaseException as err:  # noqa: BLE001
-                item = (None, err)
-            if not self._put(item) or item[1] is not None:
-                return
-
-    def next(self) -> RawFrame:
-        """The next frame, or the camera's error in its place."""
-        if self._first is None or not self._ready.is_set():
-            while not self._ready.wait(0.1):
-                if not self._thread.is_alive() and not self._ready.is_set():
-                    raise DeviceError("the capture thread ended without a frame")
-        if self._first is not None:
-            item, self._first = self._first, None
-        else:
-            assert self._queue is not None
-            while True:
-                try:
-                    item = self._queue.get(timeout=0.1)
-                    break
-                except queue.Empty:
-                    if not self._thread.is_alive() and self._queue.empty():
-                        raise DeviceError("the capture thread ended early") from None
-        raw, err = item
-        if err is not None:
-            raise err
-        assert raw is not None
-        return raw
-
-    def stop(self) -> None:
-        """Stop reading and wait for the thread (bounded by the read timeout)."""
-        self._stop.set()
-        self._thread.join(timeout=self.timeout_s + 1.0)
-
-
-class _Progress:
-    """A rich progress bar with a live fps and drop count (or nothing when disabled)."""
-
-    def __init__(self, total: int, enabled: bool) -> None:
-        self.total = total
-        self.enabled = enabled
-        self._progress: Any = None
-        self._task: Any = None
-
-    def __enter__(self) -> _Progress:
-        if self.enabled:
-            from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
-
-            self._progress = Progress(
-                TextColumn("recording"), BarColumn(), MofNCompleteColumn(),
-                TextColumn("{task.fields[fps]:.1f} fps"), TextColumn("{task.fields[queued]}"),
-                TextColumn("{task.fields[drops]}"),
-                transient=False,
-            )
-            self._progress.__enter__()
-            self._task = self._progress.add_task("record", total=self.total, fps=0.0, drops="",
-                                                queued="")
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        if self._progress is not None:
-            self._progress.__exit__(None, None, None)
-
-    def advance(self, done: int, elapsed_s: float, dropped: int, queued: int) -> None:
-        if self._progress is not None:
-            fps = done / elapsed_s if elapsed_s > 0 else 0.0
-            self._progress.update(self._task, completed=done, fps=fps,
-                                  drops=f"{dropped} dropped" if dropped else "",
-                                  queued=f"{queued} queued" if queued else "")
-
-    @staticmethod
-    def warn(message: str) -> None:
-        """One warning line on stderr (camera setting and bit-depth warnings at open)."""
-        print(f"warning: {message}", file=sys.stderr)
-
-    def note(self, message: str) -> None:
-        if self._progress is not None:
-            self._progress.console.print(f"[yellow]warning:[/yellow] {message}")
-        else:
-            print(f"warning: {message}", file=sys.stderr)
+    def close(self) -> None:
+        """Nothing to finish: every frame is in the manifest as soon as it is added."""
 
 
 def _record_mcap(args: argparse.Namespace, profile: Profile, out: Path) -> RecordSummary:
@@ -398,7 +208,7 @@ def _record_mcap(args: argparse.Namespace, profile: Profile, out: Path) -> Recor
     out.unlink(missing_ok=True)  # only there when claim_output was given --force
     return record_mcap(
         profile, args.frames, out, tactile=not args.no_tactile, timeout_s=args.timeout,
-        settings=parse_settings(args.set), compression=args.compression,
+        settings=key_values(args.set), compression=args.compression,
         image_encoding=args.image_encoding, progress=not args.quiet, buffer_mb=args.buffer_mb,
     )
 
@@ -425,7 +235,7 @@ def run(args: argparse.Namespace) -> int:
     else:
         summary = record(
             profile, args.frames, out,
-            keep_raw=args.raw, timeout_s=args.timeout, settings=parse_settings(args.set),
+            keep_raw=args.raw, timeout_s=args.timeout, settings=key_values(args.set),
             append=args.append, scenes=not args.no_scenes, progress=not args.quiet,
             buffer_mb=args.buffer_mb,
         )

@@ -12,7 +12,7 @@ import argparse
 import sys
 import time
 
-from thintact_sdk.cli.commands.record import parse_settings
+from thintact_sdk.cli.argtypes import KEY_VALUE_HELP, key_value, key_values
 from thintact_sdk.errors import ThinTactError
 from thintact_sdk.viewer import LiveView, ViewerServer
 
@@ -29,8 +29,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("profile", metavar="PROFILE", help="profile name or file")
     p.add_argument("--port", type=int, default=DEFAULT_PORT,
                    help=f"TCP port on 127.0.0.1 (default {DEFAULT_PORT}; 0 picks a free one)")
-    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                   help="override a camera setting (YAML value), e.g. --set fps=10")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", type=key_value,
+                   help="override a camera setting, e.g. --set fps=10 (" + KEY_VALUE_HELP + ")")
     p.add_argument("--reference-frames", type=int, default=1, metavar="N",
                    help="frames averaged into the no-contact reference at start (default 1)")
     p.add_argument("--duration", type=float, default=None, metavar="S",
@@ -45,7 +45,7 @@ def run(args: argparse.Namespace) -> int:
         raise ThinTactError(f"--port must be 0..65535, not {args.port}")
     if args.reference_frames < 1:
         raise ThinTactError("--reference-frames must be at least 1")
-    settings = parse_settings(args.set)
+    settings = key_values(args.set)
     with ViewerServer(args.port) as server, thintact.open(
             args.profile, camera_settings=settings,
             reference_frames=args.reference_frames) as sensor:

@@ -69,8 +69,6 @@ class _Device:
     """Simulator, two-term fit, measurements and trained filter of one profile."""
 
     def __init__(self, profile: Any, train_count: int, say: Callable[[str], None]) -> None:
-        from thintact_virtual.bench import signal_scale_dn
-
         from thintact_sdk.imaging.filter_training import (
             make_training_data,
             train_joint_filter,
@@ -80,6 +78,7 @@ class _Device:
         from thintact_sdk.imaging.scenes import make_scene
         from thintact_sdk.imaging.simulator import Simulator
         from thintact_sdk.imaging.t2s import SystemMatrices
+        from thintact_sdk.virtual_bench import signal_scale_dn
 
         self.profile = profile
         say(f"{profile.name}: simulator and two-term fit")
@@ -127,22 +126,16 @@ def _quality(decode: Callable[[np.ndarray], np.ndarray], dev: _Device,
 def _best_tau(dec: Any, dev: _Device) -> float:
     """τ (coarse grid × the coding power) maximising mean PSNR over the USAF and GelSight frames
     (the white frame is kept for the uniformity figure); leaves ``dec`` set to it."""
-    from thintact_sdk.imaging.metrics import psnr
+    from thintact_sdk.imaging.tau_sweep import tune_decoder_tau
 
-    best = (-np.inf, dev.unit)
-    for rel in (0.01, 0.03, 0.1, 0.3, 1.0, 3.0):
-        dec.set_tau(rel * dev.unit)
-        value = np.mean([psnr(np.clip(dec.decode(y), 0, 1), x)
-                         for x, y in zip(dev.scenes[1:], dev.signal[1:], strict=True)])
-        if value > best[0]:
-            best = (float(value), rel * dev.unit)
-    dec.set_tau(best[1])
-    return best[1]
+    grid = [rel * dev.unit for rel in (0.01, 0.03, 0.1, 0.3, 1.0, 3.0)]
+    return tune_decoder_tau(dec, grid, list(dev.signal[1:]), list(dev.scenes[1:])).tau
 
 
 def run(args: argparse.Namespace) -> int:
     """Run the benchmark and print its figures (table or ``--json``)."""
     from rich.console import Console
+
     from thintact_decoders import (
         ArrayBackend,
         NonIterativeDecoder,
@@ -152,7 +145,6 @@ def run(args: argparse.Namespace) -> int:
     from thintact_decoders.backend_cache import BackendCache
     from thintact_decoders.candidates import candidate_specs
     from thintact_decoders.selection import Probe, select_backend
-
     from thintact_sdk.machine import host_capabilities, machine_summary
     from thintact_sdk.profile import load_profile
     from thintact_sdk.roofline import measure_sgemm_gflops, roofline_ratio
@@ -251,7 +243,6 @@ def run(args: argparse.Namespace) -> int:
 def _mask_compare(profile: Any, dev: _Device, result: dict[str, Any], args: argparse.Namespace,
                   say: Callable[[str], None]) -> dict[str, Any]:
     from thintact_decoders import NonIterativeDecoder, T2SClosedFormDecoder
-
     from thintact_sdk.profile import profile_from_dict
 
     out: dict[str, Any] = {"mls": {

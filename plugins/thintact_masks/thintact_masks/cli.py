@@ -1,6 +1,8 @@
 """``thintact mask ...``: design, optimise (GA), show, compare and apply mask patterns.
 
 The designs come from the ``mask`` plugins (``thintact-masks``: ``mls``, ``random``, ``ga``).
+This plugin contributes the command to the core CLI through the ``thintact_cli_commands``
+hook; the core knows nothing of it.
 """
 
 from __future__ import annotations
@@ -11,15 +13,12 @@ from pathlib import Path
 from typing import Any
 
 from thintact_sdk.cli.output_path import add_force_argument, claim_output
-from thintact_sdk.errors import PluginError, ThinTactError
+from thintact_sdk.errors import ThinTactError
 
 
 def _plugin() -> Any:
-    try:
-        import thintact_masks
-    except ImportError:
-        raise PluginError("mask commands need the thintact-masks plugin: "
-                          "pip install -e plugins/thintact_masks") from None
+    import thintact_masks
+
     return thintact_masks
 
 
@@ -117,9 +116,9 @@ def run_optimize(args: argparse.Namespace) -> int:
         TextColumn,
         TimeRemainingColumn,
     )
+
     from thintact_masks.ga import CHECKPOINT_NAME, GAConfig
     from thintact_masks.optimize import DESIGN_NAME, PLOT_NAME, optimize_mask
-
     from thintact_sdk.profile import load_profile
 
     if not (Path(args.out) / CHECKPOINT_NAME).is_file() or not str(args.out).strip():
@@ -171,11 +170,11 @@ def run_show(args: argparse.Namespace) -> int:
 def run_compare(args: argparse.Namespace) -> int:
     _plugin()
     import numpy as np
+
     from thintact_masks.compare import score_masks, score_masks_exact
     from thintact_masks.design_io import load_design
     from thintact_masks.devices import scaled_profile
     from thintact_masks.optimize import baseline_phi
-
     from thintact_sdk.interfaces import Mask
     from thintact_sdk.profile import load_profile
 
@@ -215,7 +214,6 @@ def run_compare(args: argparse.Namespace) -> int:
 def run_design(args: argparse.Namespace) -> int:
     _plugin()
     from thintact_masks.design_io import design_record, write_json_atomic
-
     from thintact_sdk.plugin_manager import get_registry
 
     out = claim_output(args.out, "file", force=args.force)
@@ -233,7 +231,6 @@ def run_design(args: argparse.Namespace) -> int:
 def run_apply(args: argparse.Namespace) -> int:
     _plugin()
     from thintact_masks.design_io import load_design
-
     from thintact_sdk.profile import load_profile, profile_from_dict, write_profile
 
     out = claim_output(args.out, "file", force=args.force)
