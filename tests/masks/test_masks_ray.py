@@ -226,3 +226,23 @@ def test_a_paper_scale_generation_on_ray(cluster_address) -> None:
     with blas_threads(1):
         assert state.best_fitness == ev.fitness(state.best_phi)
 
+
+
+def test_cli_ray_run_equals_the_local_run(cluster_address, tmp_path) -> None:
+    """`thintact mask optimize --ray ADDRESS` on a running cluster: the same design, history and
+    checkpoint-resumable output as the local path (the GA's randomness stays in the driver)."""
+    import json
+
+    from thintact_sdk.cli.main import main
+    from thintact_sdk.profile import write_profile
+
+    tiny_profile_file = write_profile(make_profile(), tmp_path / "tiny.yaml")
+    common = ["mask", "optimize", "--profile", str(tiny_profile_file), "--population", "6",
+              "--generations", "2", "--seed", "3", "--no-progress", "--device", "cpu"]
+    assert main([*common, "--out", str(tmp_path / "local")]) == 0
+    assert main([*common, "--out", str(tmp_path / "ray"), "--ray", cluster_address,
+                 "--ray-batch", "2"]) == 0
+    local, on_ray = (json.loads((tmp_path / d / "design.json").read_text()) for d in ("local", "ray"))
+    assert on_ray["phi"] == local["phi"]
+    assert on_ray["history"] == local["history"]
+    assert main([*common, "--out", str(tmp_path / "bad"), "--ray-batch", "2"]) == 2  # needs --ray

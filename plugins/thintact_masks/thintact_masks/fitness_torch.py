@@ -7,11 +7,9 @@ the closed-form Tikhonov reconstructions of the two scenes, SSIM (the same 11-ta
 window as :class:`~thintact_masks.fitness.SSIMReference`, with scipy's ``reflect`` borders),
 PSNR and ``f_GRAD``; the parts are combined by :func:`~thintact_masks.fitness.combine`.
 
-One difference is inherent: the fixed noise draw lives in the Gram eigenbases, whose column
-signs are the LAPACK implementation's choice. torch's CPU LAPACK chooses as numpy's does on
-the test devices (tested: equal fitness to 1e-9 relative); cuSOLVER may choose other signs for
-some columns, which gives an equally distributed but different noise realisation, so a GPU
-run is reproducible on GPUs but not bit-for-bit the CPU run.
+The fixed noise draw lives in the Gram eigenbases, whose column signs are each LAPACK's own
+choice; both paths fix them by one convention (:func:`~thintact_masks.fitness.canonical_signs`),
+so the torch fitness is the numpy fitness up to rounding (tested on the CPU to 1e-9 relative).
 """
 
 from __future__ import annotations
@@ -23,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from thintact_masks.errors import MaskDesignError
-from thintact_masks.fitness import FitnessEvaluator, combine
+from thintact_masks.fitness import FitnessEvaluator, combine, sign_reference
 
 #: ``--device`` values: ``auto`` (CUDA when torch sees a GPU, else numpy), ``cpu`` (numpy, the
 #: local path), ``cuda`` (torch on the GPU; an error without one)
@@ -155,7 +153,9 @@ class TorchBatchFitness:
         import torch
 
         lam, v = torch.linalg.eigh(a.transpose(1, 2) @ a)
-        return lam.clamp_min(0.0), v
+        ref = torch.as_tensor(sign_reference(v.shape[-2]), dtype=v.dtype, device=v.device)
+        proj = torch.einsum("bnk,n->bk", v, ref)  # the numpy path's sign convention
+        return lam.clamp_min(0.0), v * torch.where(proj < 0, -1.0, 1.0).to(v.dtype)[:, None, :]
 
     def reconstruct(self, genes: np.ndarray) -> dict[str, Any]:
         """Batched reconstructions ``{"usaf", "white"}``: ``(G, N, M)`` float64 tensors."""
