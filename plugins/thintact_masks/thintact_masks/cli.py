@@ -44,8 +44,17 @@ def register(sub: argparse._SubParsersAction) -> None:
     o.add_argument("--tau", type=float, default=None,
                    help="Tikhonov weight in relative-irradiance units (default: Wiener value)")
     o.add_argument("--float32", action="store_true", help="single precision eigen-decompositions")
-    o.add_argument("--workers", type=int, default=1,
-                   help="individuals evaluated at once, one BLAS thread each (result unchanged)")
+    o.add_argument("--workers", type=int, default=None,
+                   help="individuals evaluated at once, one BLAS thread each (default 1; with "
+                   "--ray auto: CPUs of the local cluster, default all); result unchanged")
+    o.add_argument("--ray", nargs="?", const="auto", default=None, metavar="ADDRESS",
+                   help="evaluate each generation's individuals as Ray tasks: on a private "
+                   "local cluster (--ray or --ray auto) or on the cluster at ADDRESS "
+                   "(HOST:6379 or ray://HOST:10001); result unchanged")
+    o.add_argument("--ray-batch", type=int, default=None, metavar="N",
+                   help="individuals per Ray task (default: about two tasks per worker)")
+    o.add_argument("--device", choices=("auto", "cpu", "cuda"), default="auto",
+                   help="fitness on torch CUDA (cuda), numpy (cpu) or CUDA when present (auto)")
     o.add_argument("--no-progress", action="store_true", help="no progress bar")
     add_force_argument(o, "into an existing non-empty --out that holds no checkpoint to resume")
     o.set_defaults(func=run_optimize)
@@ -119,8 +128,12 @@ def run_optimize(args: argparse.Namespace) -> int:
         raise ThinTactError(f"--K must be at least 2, got {args.K}")
     config = GAConfig(population=args.population, generations=args.generations, seed=args.seed)
     config.validate(args.K if args.K is not None else profile.mask.K)
-    if args.workers < 1:
+    if args.workers is not None and args.workers < 1:
         raise ThinTactError(f"--workers must be >= 1, got {args.workers}")
+    if args.ray_batch is not None and args.ray_batch < 1:
+        raise ThinTactError(f"--ray-batch must be >= 1, got {args.ray_batch}")
+    if args.ray_batch is not None and args.ray is None:
+        raise ThinTactError("--ray-batch needs --ray")
     settings = _fitness_settings(args)
     bar = Progress(TextColumn("[bold]GA[/]"), BarColumn(), MofNCompleteColumn(),
                    TextColumn("best {task.fields[best]:.4f}  mean {task.fields[mean]:.4f}"),
@@ -133,7 +146,7 @@ def run_optimize(args: argparse.Namespace) -> int:
                        mean=state.mean_history[-1])
 
         _, rec = optimize_mask(profile, config, args.K, settings, args.scale, args.out, progress,
-                               args.workers)
+                               args.workers, args.ray, args.ray_batch, args.device)
     out = Path(args.out)
     base = rec["baselines"]
     print(f"best fitness {rec['fitness']:.4f} after {len(rec['history']['best']) - 1} generations "

@@ -161,6 +161,22 @@ def combine(parts: dict[str, float]) -> float:
     return 2.0 * fu * fw / (fu + fw) + 0.5 * (parts["psnr_usaf"] + parts["psnr_white"]) + parts["f_grad"]
 
 
+def sign_reference(n: int) -> np.ndarray:
+    """A fixed generic length-``n`` vector (seeded): eigenvectors are oriented against it."""
+    return np.random.default_rng(20261124).standard_normal(n)
+
+
+def canonical_signs(v: np.ndarray) -> np.ndarray:
+    """``±1`` per eigenvector (column of ``... × n × k`` ``v``) making its projection on the fixed
+    :func:`sign_reference` positive. The fixed noise draw lives in the Gram eigenbases, and an
+    eigenvector's sign is the LAPACK implementation's choice; with this convention the fitness
+    is the same draw whatever library and precision computed the eigenvectors (numpy here,
+    torch on a GPU). A projection on a generic vector is far from 0, unlike a comparison of
+    entries, so rounding does not flip the choice."""
+    proj = np.einsum("...nk,n->...k", v, sign_reference(v.shape[-2]).astype(v.dtype))
+    return np.where(proj < 0, -1.0, 1.0).astype(v.dtype)[..., None, :]
+
+
 class FitnessEvaluator:
     """Evaluates the fitness of mask vectors for one device.
 
@@ -218,6 +234,11 @@ class FitnessEvaluator:
         self._cast_scenes = {k: v.astype(self._dtype) for k, v in self.scenes.items()}
         self._cast_noise = {k: v.astype(self._dtype) for k, v in self.noise_draws.items()}
 
+    @property
+    def ssim_references(self) -> dict[str, SSIMReference]:
+        """The cached-statistics SSIM of each scene, ``{"usaf", "white"}``."""
+        return self._ssim
+
     def coding_matrices(self, phi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``Pc`` (R × N) and ``Qc`` (S × M) of φ, relative irradiance per display unit."""
         return self.gen_p.coding(phi), self.gen_q.coding(phi)
@@ -225,7 +246,7 @@ class FitnessEvaluator:
     def _eig(self, a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         a = a.astype(self._dtype, copy=False)
         lam, v = np.linalg.eigh(a.T @ a)
-        return np.maximum(lam, 0.0), v
+        return np.maximum(lam, 0.0), v * canonical_signs(v)
 
     def reconstruct(self, phi: np.ndarray) -> dict[str, np.ndarray]:
         """Tikhonov reconstructions ``{"usaf", "white"}`` (``N × M`` float64) for φ."""

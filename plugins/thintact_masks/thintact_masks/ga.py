@@ -165,15 +165,19 @@ class GAState:
 
 
 FitnessFn = Callable[[np.ndarray], float]
+#: ``G × K`` int8 genes → ``(G,)`` fitness, in order (a Ray pool, a batched torch evaluator)
+BatchFitnessFn = Callable[[np.ndarray], np.ndarray]
 
 
 def evaluate_population(population: np.ndarray, fitness_fn: FitnessFn,
-                        known: dict[bytes, float] | None = None, workers: int = 1) -> np.ndarray:
+                        known: dict[bytes, float] | None = None, workers: int = 1,
+                        batch_fitness: BatchFitnessFn | None = None) -> np.ndarray:
     """Fitness of every row of ``population``.
 
     Genes found in ``known`` (and duplicates) are evaluated once; with ``workers > 1`` the
     new genes are evaluated concurrently in threads (numpy releases the GIL in LAPACK), the
-    results being the same as a serial evaluation.
+    results being the same as a serial evaluation. With ``batch_fitness`` the new genes go
+    to it in one ``G × K`` array instead (``fitness_fn`` and ``workers`` are then unused).
     """
     known = {} if known is None else known
     todo: dict[bytes, np.ndarray] = {}
@@ -181,7 +185,9 @@ def evaluate_population(population: np.ndarray, fitness_fn: FitnessFn,
         key = g.tobytes()
         if key not in known and key not in todo:
             todo[key] = g
-    if workers > 1 and len(todo) > 1:
+    if batch_fitness is not None:
+        values = _batch_values(batch_fitness, todo) if todo else []
+    elif workers > 1 and len(todo) > 1:
         with ThreadPoolExecutor(max_workers=workers) as pool:
             values = list(pool.map(fitness_fn, todo.values()))
     else:
@@ -191,8 +197,17 @@ def evaluate_population(population: np.ndarray, fitness_fn: FitnessFn,
     return np.array([known[g.tobytes()] for g in population])
 
 
+def _batch_values(batch_fitness: BatchFitnessFn, todo: dict[bytes, np.ndarray]) -> list[float]:
+    genes = np.stack(list(todo.values()))
+    values = np.asarray(batch_fitness(genes), np.float64)
+    if values.shape != (genes.shape[0],):
+        raise MaskDesignError(f"the batch fitness returned shape {values.shape} for "
+                              f"{genes.shape[0]} genes")
+    return [float(v) for v in values]
+
+
 def initial_state(K: int, config: GAConfig, fitness_fn: FitnessFn,  # noqa: N803
-                  workers: int = 1) -> GAState:
+                  workers: int = 1, batch_fitness: BatchFitnessFn | None = None) -> GAState:
     """Seeded random initial population (plus the MLS baseline), evaluated."""
     config.validate(K)
     rng = np.random.default_rng(config.seed)
@@ -200,13 +215,13 @@ def initial_state(K: int, config: GAConfig, fitness_fn: FitnessFn,  # noqa: N803
     if config.include_mls:
         pop[0] = repeat_to_length(mls_sequence(8), K)
     t0 = time.perf_counter()
-    fit = evaluate_population(pop, fitness_fn, workers=workers)
+    fit = evaluate_population(pop, fitness_fn, workers=workers, batch_fitness=batch_fitness)
     return GAState(0, pop, fit, [float(fit.max())], [float(fit.mean())],
                    dict(rng.bit_generator.state), time.perf_counter() - t0)
 
 
 def next_generation(state: GAState, config: GAConfig, fitness_fn: FitnessFn,
-                    workers: int = 1) -> GAState:
+                    workers: int = 1, batch_fitness: BatchFitnessFn | None = None) -> GAState:
     """One generation: elitism, tournament selection, crossover, mutation, evaluation."""
     rng = np.random.default_rng()
     rng.bit_generator.state = state.rng_state
@@ -224,7 +239,7 @@ def next_generation(state: GAState, config: GAConfig, fitness_fn: FitnessFn,
             children.append(np.array(child, np.int8, copy=True))
     pop = np.stack(children[: config.population])
     known = {g.tobytes(): float(f) for g, f in zip(state.population, state.fitness, strict=True)}
-    fit = evaluate_population(pop, fitness_fn, known, workers)
+    fit = evaluate_population(pop, fitness_fn, known, workers, batch_fitness)
     return GAState(state.generation + 1, pop, fit,
                    state.best_history + [float(fit.max())],
                    state.mean_history + [float(fit.mean())],
@@ -275,7 +290,8 @@ ProgressFn = Callable[[GAState], None]
 
 def run_ga(K: int, config: GAConfig, fitness_fn: FitnessFn,  # noqa: N803
            out_dir: str | os.PathLike[str] | None = None, run_key: dict[str, Any] | None = None,
-           progress: ProgressFn | None = None, workers: int = 1) -> GAState:
+           progress: ProgressFn | None = None, workers: int = 1,
+           batch_fitness: BatchFitnessFn | None = None) -> GAState:
     """Run (or resume) the GA up to ``config.generations`` generations.
 
     Parameters
@@ -296,6 +312,11 @@ def run_ga(K: int, config: GAConfig, fitness_fn: FitnessFn,  # noqa: N803
         Called with the state after the initial population and after every generation.
     workers
         Individuals evaluated concurrently (does not change the result).
+    batch_fitness
+        Evaluates each generation's new genes in one call instead of ``fitness_fn``
+        (:class:`thintact_masks.ray_pool.RayFitnessPool`, :class:`thintact_masks.fitness_torch.
+        TorchBatchFitness`); it must give the values ``fitness_fn`` would. The GA's random
+        draws stay here, in the driver, so the run does not depend on where genes are evaluated.
     """
     config.validate(K)
     key = {"ga": config.resume_key(), "K": K, **(run_key or {})}
@@ -307,14 +328,14 @@ def run_ga(K: int, config: GAConfig, fitness_fn: FitnessFn,  # noqa: N803
                 f"the checkpoint in {out_dir} belongs to a different run (other profile, K, seed "
                 "or settings); use another --out directory or the same settings")
     else:
-        state = initial_state(K, config, fitness_fn, workers)
+        state = initial_state(K, config, fitness_fn, workers, batch_fitness)
         state.meta = {"run_key": key}
         if out_dir is not None:
             save_checkpoint(out_dir, state)
     if progress is not None:
         progress(state)
     while state.generation < config.generations:
-        state = next_generation(state, config, fitness_fn, workers)
+        state = next_generation(state, config, fitness_fn, workers, batch_fitness)
         if out_dir is not None:
             save_checkpoint(out_dir, state)
         if progress is not None:

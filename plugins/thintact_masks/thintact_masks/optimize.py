@@ -10,6 +10,7 @@ import numpy as np
 
 from thintact_masks.design_io import design_record, plot_fitness, write_json_atomic
 from thintact_masks.devices import scaled_profile
+from thintact_masks.engines import open_engine
 from thintact_masks.fitness import FitnessEvaluator, FitnessSettings
 from thintact_masks.ga import GAConfig, ProgressFn, run_ga
 from thintact_masks.mls import MLSDesigner, random_phi
@@ -25,7 +26,9 @@ PLOT_NAME = "fitness.png"
 def optimize_mask(profile: Profile, config: GAConfig, K: int | None = None,  # noqa: N803
                   settings: FitnessSettings | None = None, scale: float = 1.0,
                   out_dir: str | os.PathLike[str] | None = None,
-                  progress: ProgressFn | None = None, workers: int = 1
+                  progress: ProgressFn | None = None, workers: int | None = None,
+                  ray: str | None = None, ray_batch: int | None = None,
+                  fitness_device: str = "auto"
                   ) -> tuple[Mask, dict[str, Any]]:
     """Optimise φ for ``profile`` with the paper's GA; resumable through ``out_dir``.
 
@@ -47,8 +50,18 @@ def optimize_mask(profile: Profile, config: GAConfig, K: int | None = None,  # n
     progress
         Called with the GA state after every generation.
     workers
-        Individuals evaluated concurrently, each with single-threaded BLAS (the result does
-        not depend on it).
+        Individuals evaluated concurrently, each with single-threaded BLAS (default 1; the
+        result does not depend on it); with ``ray="auto"`` the CPUs of the local Ray cluster
+        (default: this machine's).
+    ray
+        Evaluate each generation's individuals as Ray tasks: ``"auto"`` (a private local
+        cluster) or a cluster address (:mod:`thintact_masks.ray_pool`); ``None`` evaluates here.
+        The result does not depend on it.
+    ray_batch
+        Individuals per Ray task (default: about two tasks per worker and generation).
+    fitness_device
+        ``"auto"`` (torch CUDA when a GPU is there, else numpy), ``"cpu"`` or ``"cuda"``
+        (:mod:`thintact_masks.engines`).
 
     Returns
     -------
@@ -61,8 +74,10 @@ def optimize_mask(profile: Profile, config: GAConfig, K: int | None = None,  # n
     evaluator = FitnessEvaluator(device, k, settings)
     run_key = {"profile_hash": profile.content_hash(), "scale": scale,
                "fitness": settings.to_dict()}
-    with blas_threads(1):
-        state = run_ga(k, config, evaluator.fitness, out_dir, run_key, progress, workers)
+    with (blas_threads(1),
+          open_engine(evaluator, ray, workers, ray_batch, fitness_device) as engine):
+        state = run_ga(k, config, evaluator.fitness, out_dir, {**run_key, **engine.run_key()},
+                       progress, workers or 1, engine.batch_fitness)
         best = state.best_phi
         best_eval = evaluator.evaluate(best)
         baselines = {
