@@ -136,3 +136,19 @@ def test_lint_imports_contract_holds() -> None:
     from importlinter.cli import lint_imports
 
     assert lint_imports(config_filename=str(ROOT / "pyproject.toml"), no_cache=True) == 0
+
+
+def test_the_public_algorithm_api_resolves_every_name_it_lists() -> None:
+    """Every name plugins may import from ``thintact_sdk.algorithms`` loads (lazily) and is the
+    implementing module's object; an unknown name is an AttributeError."""
+    import importlib
+
+    api = importlib.import_module("thintact_sdk.algorithms")
+    for name in api.__all__:
+        value = getattr(api, name)
+        assert value is not None, name
+    from thintact_sdk.imaging.t2s import SystemMatrices
+
+    assert api.SystemMatrices is SystemMatrices
+    with pytest.raises(AttributeError, match="no attribute 'nope'"):
+        api.nope  # noqa: B018

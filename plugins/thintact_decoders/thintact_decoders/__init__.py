@@ -40,8 +40,8 @@ from thintact_decoders.modes import DEFAULT_MODE_RTOL
 from thintact_decoders.noniterative import NonIterativeDecoder
 from thintact_decoders.selection import BackendPreferenceWarning, make_probes, select_backend
 from thintact_decoders.t2s_closed_form import T2SClosedFormDecoder
+from thintact_sdk.algorithms import SystemMatrices
 from thintact_sdk.errors import CalibrationError
-from thintact_sdk.imaging.t2s import SystemMatrices
 from thintact_sdk.interfaces import Decoder
 from thintact_sdk.machine import host_capabilities, host_fingerprint
 from thintact_sdk.profile import Profile

@@ -69,15 +69,16 @@ class _Device:
     """Simulator, two-term fit, measurements and trained filter of one profile."""
 
     def __init__(self, profile: Any, train_count: int, say: Callable[[str], None]) -> None:
-        from thintact_sdk.imaging.filter_training import (
+        from thintact_sdk.algorithms import (
+            Simulator,
+            SystemMatrices,
+            coding_power,
+            make_scene,
             make_training_data,
+            simulate_measurements,
             train_joint_filter,
             training_scenes,
         )
-        from thintact_sdk.imaging.recon_virtual import coding_power, simulate_measurements
-        from thintact_sdk.imaging.scenes import make_scene
-        from thintact_sdk.imaging.simulator import Simulator
-        from thintact_sdk.imaging.t2s import SystemMatrices
         from thintact_sdk.virtual_bench import signal_scale_dn
 
         self.profile = profile
@@ -112,7 +113,7 @@ def _from_signal(dec: Any, black: float) -> Callable[[np.ndarray], np.ndarray]:
 
 def _quality(decode: Callable[[np.ndarray], np.ndarray], dev: _Device,
              signals: list[np.ndarray] | None = None) -> dict[str, Any]:
-    from thintact_sdk.imaging.metrics import psnr, ssim
+    from thintact_sdk.algorithms import psnr, ssim
 
     out: dict[str, Any] = {}
     for (name, _), x, y in zip(SCENES, dev.scenes, signals or dev.signal, strict=True):
@@ -126,7 +127,7 @@ def _quality(decode: Callable[[np.ndarray], np.ndarray], dev: _Device,
 def _best_tau(dec: Any, dev: _Device) -> float:
     """τ (coarse grid × the coding power) maximising mean PSNR over the USAF and GelSight frames
     (the white frame is kept for the uniformity figure); leaves ``dec`` set to it."""
-    from thintact_sdk.imaging.tau_sweep import tune_decoder_tau
+    from thintact_sdk.algorithms import tune_decoder_tau
 
     grid = [rel * dev.unit for rel in (0.01, 0.03, 0.1, 0.3, 1.0, 3.0)]
     return tune_decoder_tau(dec, grid, list(dev.signal[1:]), list(dev.scenes[1:])).tau

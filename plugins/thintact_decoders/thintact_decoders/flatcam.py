@@ -14,8 +14,7 @@ import numpy as np
 from thintact_decoders.backend import ArrayBackend, synthesis_macs
 from thintact_decoders.modes import DEFAULT_MODE_RTOL, kept_mode_counts
 from thintact_decoders.shapes import check_measurement_shape
-from thintact_sdk.imaging.t2s import SystemMatrices
-from thintact_sdk.imaging.tikhonov import TikhonovSolver
+from thintact_sdk.algorithms import SystemMatrices, TikhonovSolver
 from thintact_sdk.interfaces import Decoder
 
 

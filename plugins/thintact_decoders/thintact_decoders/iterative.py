@@ -17,9 +17,8 @@ import numpy as np
 
 from thintact_decoders.backend import ArrayBackend
 from thintact_decoders.shapes import check_measurement_shape
+from thintact_sdk.algorithms import SystemMatrices, largest_eigenvalue, nesterov
 from thintact_sdk.errors import InvalidValueError
-from thintact_sdk.imaging.first_order import largest_eigenvalue, nesterov
-from thintact_sdk.imaging.t2s import SystemMatrices
 from thintact_sdk.interfaces import Decoder
 
 

@@ -6,9 +6,9 @@ import os
 from pathlib import Path
 from typing import Any
 
+from thintact_sdk.algorithms import CalibrationBundle, find_latest
 from thintact_sdk.capture import camera_is_simulated
 from thintact_sdk.errors import CalibrationError
-from thintact_sdk.imaging.calibration_bundle import CalibrationBundle, find_latest
 from thintact_sdk.profile import Profile
 
 REPO_CALIBRATIONS = Path(__file__).resolve().parents[3] / "calibrations"

@@ -24,11 +24,15 @@ import numpy as np
 from thintact_decoders.backend import ArrayBackend, synthesis_macs
 from thintact_decoders.closed_form_base import ClosedFormDecoder
 from thintact_decoders.modes import DEFAULT_MODE_RTOL, kept_mode_counts
+from thintact_sdk.algorithms import (
+    JointFilter,
+    SeparableDCT,
+    SystemMatrices,
+    TikhonovSolver,
+    dct_matrix,
+    joint_filter_open,
+)
 from thintact_sdk.errors import InvalidValueError
-from thintact_sdk.imaging.dct import SeparableDCT, dct_matrix
-from thintact_sdk.imaging.recon_filter import JointFilter, joint_filter_open
-from thintact_sdk.imaging.t2s import SystemMatrices
-from thintact_sdk.imaging.tikhonov import TikhonovSolver
 
 
 def low_rank_factors(phi_s: np.ndarray, max_rank: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray, float]:

@@ -23,8 +23,7 @@ import numpy as np
 from thintact_decoders.backend import ArrayBackend
 from thintact_decoders.backend_cache import BackendCache
 from thintact_decoders.candidates import BackendSpec
-from thintact_sdk.imaging.metrics import psnr
-from thintact_sdk.imaging.t2s import SystemMatrices
+from thintact_sdk.algorithms import SystemMatrices, psnr
 from thintact_sdk.interfaces import Decoder
 from thintact_sdk.profile import NoiseSpec
 
@@ -50,8 +49,7 @@ class Probe:
 def make_probes(sm: SystemMatrices, noise: NoiseSpec, seed: int = 0) -> list[Probe]:
     """Raw frames of the bench scenes (USAF, a GelSight press) through ``sm`` with the sensor
     noise of ``noise`` (fixed seed): accuracy is judged where it matters, on noisy frames."""
-    from thintact_sdk.imaging.noise import signal_to_dn
-    from thintact_sdk.imaging.scenes import make_scene
+    from thintact_sdk.algorithms import make_scene, signal_to_dn
 
     n, m = sm.scene_shape
     rng = np.random.default_rng(seed)

@@ -29,10 +29,8 @@ import numpy as np
 from thintact_decoders.backend import ArrayBackend, synthesis_macs
 from thintact_decoders.closed_form_base import ClosedFormDecoder
 from thintact_decoders.modes import DEFAULT_MODE_RTOL, kept_mode_counts
+from thintact_sdk.algorithms import SystemMatrices, TikhonovSolver, largest_eigenvalue, nesterov
 from thintact_sdk.errors import InvalidShapeError, InvalidValueError
-from thintact_sdk.imaging.first_order import largest_eigenvalue, nesterov
-from thintact_sdk.imaging.t2s import SystemMatrices
-from thintact_sdk.imaging.tikhonov import TikhonovSolver
 
 
 def _truncated_svd(a: np.ndarray, rtol: float, max_rank: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

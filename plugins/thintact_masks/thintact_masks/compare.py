@@ -11,8 +11,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from thintact_masks.fitness import Evaluation, FitnessEvaluator, FitnessSettings
+from thintact_sdk.algorithms import direct_system_matrices
 from thintact_sdk.blas import blas_threads
-from thintact_sdk.imaging.direct_generation import direct_system_matrices
 from thintact_sdk.interfaces import Mask
 from thintact_sdk.profile import Profile
 
@@ -75,8 +75,7 @@ def simulator_coding_matrices(profile: Profile, phi: np.ndarray,
     """``Pc``, ``Qc`` of φ on ``profile`` from the exact simulator (best rank-1 fit of its
     coding part), in the relative units of direct generation (white scene through a fully
     open mask = 1 at the sensor centre, from the fitted open part)."""
-    from thintact_sdk.imaging.simulator import Simulator
-    from thintact_sdk.imaging.t2s import SystemMatrices
+    from thintact_sdk.algorithms import Simulator, SystemMatrices
 
     phi_list = [int(v) for v in np.asarray(phi)]
     prof = profile.model_copy(update={"mask": profile.mask.model_copy(
@@ -109,8 +108,7 @@ def direct_vs_simulator(profile: Profile, d_stripe_px: float | None = None,
     Needs :class:`thintact_sdk.imaging.simulator.Simulator` and
     :meth:`thintact_sdk.imaging.t2s.SystemMatrices.two_term_fit`.
     """
-    from thintact_sdk.imaging.simulator import Simulator
-    from thintact_sdk.imaging.t2s import SystemMatrices, kron_sum_norm2
+    from thintact_sdk.algorithms import Simulator, SystemMatrices, kron_sum_norm2
 
     fit = SystemMatrices.two_term_fit(Simulator(profile), channels=[channel])
     po_f, qo_f, pc_f, qc_f = fit.channel(0)

@@ -37,11 +37,16 @@ from typing import Any
 import numpy as np
 from scipy.ndimage import gaussian_filter
 
+from thintact_sdk.algorithms import (
+    AxisGeometry,
+    DirectGenerator,
+    default_white_level_dn,
+    psnr,
+    signal_variance_dn,
+    usaf,
+    white,
+)
 from thintact_sdk.errors import InvalidShapeError, InvalidValueError
-from thintact_sdk.imaging import scenes
-from thintact_sdk.imaging.direct_generation import AxisGeometry, DirectGenerator
-from thintact_sdk.imaging.metrics import psnr
-from thintact_sdk.imaging.noise import default_white_level_dn, signal_variance_dn
 from thintact_sdk.profile import Profile
 
 #: Floor of 1 − SSIM and of the white image's total variation (keeps f finite for a
@@ -201,8 +206,8 @@ class FitnessEvaluator:
         self.gen_q = DirectGenerator(AxisGeometry.cols_of(profile, self.K), s.d_stripe_px)
         n, m = profile.scene.rows, profile.scene.cols
         self.scenes: dict[str, np.ndarray] = {
-            "usaf": scenes.usaf(n, m)[..., 0].astype(np.float64),
-            "white": scenes.white(n, m)[..., 0].astype(np.float64),
+            "usaf": usaf(n, m)[..., 0].astype(np.float64),
+            "white": white(n, m)[..., 0].astype(np.float64),
         }
         noise = profile.noise
         white_dn = s.white_level_dn if s.white_level_dn is not None else default_white_level_dn(noise)

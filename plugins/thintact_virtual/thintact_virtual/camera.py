@@ -26,13 +26,11 @@ from typing import Any
 import numpy as np
 from pydantic import Field
 
+from thintact_sdk.algorithms import SCENE_LIBRARY, Simulator, make_scene, signal_to_dn
 from thintact_sdk.bayer import mosaic_from_rgb
 from thintact_sdk.camera_settings import CameraSettings, parse_camera_settings
 from thintact_sdk.errors import DeviceError, ThinTactError, UnsupportedFeatureError
 from thintact_sdk.frames import RawFrame
-from thintact_sdk.imaging.noise import signal_to_dn
-from thintact_sdk.imaging.scenes import LIBRARY, make_scene
-from thintact_sdk.imaging.simulator import Simulator
 from thintact_sdk.interfaces import Camera, CameraCapabilities, Range
 from thintact_sdk.profile import Profile
 from thintact_sdk.virtual_bench import REFERENCE_EXPOSURE_US, get_scene_slot, white_level_dn
@@ -67,10 +65,10 @@ class VirtualCamera(Camera):
         names = parsed.scenes
         self.scene_names: list[str] = [names] if isinstance(names, str) else list(names)
         for n in self.scene_names:
-            if n not in LIBRARY and n != TACTILE_SCENE:
+            if n not in SCENE_LIBRARY and n != TACTILE_SCENE:
                 raise ThinTactError(
                     f"virtual camera: unknown scene {n!r}; library scenes: "
-                    f"{', '.join([*LIBRARY, TACTILE_SCENE])}"
+                    f"{', '.join([*SCENE_LIBRARY, TACTILE_SCENE])}"
                 )
         if not self.scene_names:
             raise ThinTactError("virtual camera: 'scenes' is an empty list")
@@ -188,7 +186,7 @@ class VirtualCamera(Camera):
         name = self.scene_names[k % len(self.scene_names)]
         index = k // len(self.scene_names)
         if name == "gelsight":
-            from thintact_sdk.imaging.scenes import gelsight_count
+            from thintact_sdk.algorithms import gelsight_count
 
             index %= gelsight_count()
         elif name == TACTILE_SCENE:

@@ -10,10 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from thintact_sdk.algorithms import Sphere, TactileSimulator, ball_radius_for_field
 from thintact_sdk.profile import Profile
-from thintact_sdk.tactile.calibration import ball_radius_for_field
-from thintact_sdk.tactile.indenters import Sphere
-from thintact_sdk.tactile.simulate import TactileSimulator
 
 TACTILE_SCENE = "tactile"
 """Scene name selecting this source in the camera's ``scenes`` setting."""
