@@ -26,3 +26,15 @@ def test_no_field_keeps_constant_gain() -> None:
     fit = fit_illumination_field(real, sim, noise_sigma=0.01)
     assert fit.order == 0
     np.testing.assert_allclose(fit.gain, 1.0, atol=0.005)
+
+
+def test_falloff_below_per_pixel_noise_is_still_found() -> None:
+    # 0.4 % fall-off at the edge against 1 % per-pixel noise (2.5x below the noise).
+    rng = np.random.default_rng(2)
+    sim = 0.3 + 0.4 * rng.random((4, 48, 64, 3))
+    y = np.linspace(-1, 1, 48)[None, :, None, None]
+    real = sim * (1.0 - 0.004 * y) + rng.normal(0, 0.01, sim.shape)
+    fit = fit_illumination_field(real, sim, noise_sigma=0.01)
+    assert fit.order == 1
+    assert fit.bic[0] - fit.bic[1] > 10.0
+    np.testing.assert_allclose(fit.gain[-1, 0], 0.996, atol=0.0015)
