@@ -33,6 +33,9 @@ from thintact_masks.errors import MaskDesignError
 
 #: ``--ray auto``: start a private local cluster (loopback only) for this run
 AUTO_ADDRESS = "auto"
+#: object store of a private local cluster: the evaluator (~70 MB at paper scale) and the
+#: generation's genes and results fit many times over; Ray's default would reserve 30 % of RAM
+LOCAL_OBJECT_STORE_BYTES = 512 * 2**20
 #: set in the driver before Ray starts (a local cluster's processes inherit it): no usage
 #: statistics are collected or sent
 _RAY_ENV = {"RAY_USAGE_STATS_ENABLED": "0"}
@@ -83,7 +86,8 @@ def connect(address: str = AUTO_ADDRESS, num_cpus: int | None = None) -> bool:
             if num_cpus is not None and num_cpus < 1:
                 raise MaskDesignError(f"a local Ray cluster needs >= 1 CPU, got {num_cpus}")
             with _loopback_node():
-                ray.init(address="local", num_cpus=num_cpus, include_dashboard=False, **common)
+                ray.init(address="local", num_cpus=num_cpus, include_dashboard=False,
+                         object_store_memory=LOCAL_OBJECT_STORE_BYTES, **common)
         elif _is_loopback(address):  # a local cluster started by another driver
             with _loopback_node():
                 ray.init(address=address, **common)
