@@ -19,7 +19,7 @@ This module is the *policy* (which effects to try, in which order, what to accep
 numerical work is done by the generic optimisers of :mod:`~thintact_sdk.diagnose.optimise`
 on a :class:`Trial` (the model as a function of a flat parameter vector). What is special
 about an effect (a start read off the data, a proxy, per-channel parameters, whether it may
-move later) is declared with the effect (:class:`~thintact_sdk.diagnose.candidates.Candidate`),
+move later) is declared with the effect (its :class:`~thintact_sdk.physics.FitSpec`),
 never tested here by name. One :class:`~thintact_sdk.diagnose.deadline.Deadline` bounds it all.
 """
 
