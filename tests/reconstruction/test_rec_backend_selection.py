@@ -112,6 +112,24 @@ def test_second_open_is_a_cache_hit_that_measures_nothing(operator, tmp_path) ->
     assert second.measured_ms == first.measured_ms and second.chosen == first.chosen
 
 
+def test_a_cached_backend_that_is_no_candidate_now_is_never_chosen(operator, tmp_path) -> None:
+    """A cache written when a (fast) backend was a candidate must not let that backend be
+    chosen once it is not one: found on an AMX host, where the cache held torch-bfloat16 and
+    a later selection without native bfloat16 still chose among the cached timings."""
+    fast = FakeSpec("numpy-fast", lambda: ArrayBackend("numpy", "float32"))
+    plain = BackendSpec("numpy")
+    _select(operator, [plain, fast], tmp_path)
+    cache = BackendCache(tmp_path / "backends.json")
+    record = cache.get("test-host|flatcam|small")
+    assert record is not None
+    record["measured_ms"]["numpy-fast"] = 1e-6  # the no-longer-candidate looks unbeatable
+    cache.put("test-host|flatcam|small", record)
+    with pytest.warns(BackendPreferenceWarning, match="numpy-fast from test not used"):
+        _, choice = _select(operator, [plain], tmp_path, preferred=fast)
+    assert choice.from_cache and choice.chosen == "numpy-float32"
+    assert "numpy-fast" not in choice.measured_ms
+
+
 def test_preference_is_honoured_within_20_percent_only() -> None:
     ms, cost = {"numpy-float32": 10.0, "torch-float32": 11.5}, {"numpy-float32": 0.0, "torch-float32": 0.0}
     assert decide(ms, cost, "torch-float32") == ("torch-float32", None)

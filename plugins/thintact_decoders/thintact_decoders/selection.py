@@ -224,9 +224,12 @@ def select_backend(
     from_cache = record is not None and {s.key for s in specs} <= (
         set(record.get("measured_ms", {})) | set(record.get("unavailable", {})))
     if record is not None and from_cache:
-        measured = {k: float(v) for k, v in record["measured_ms"].items()}
-        cost = {k: float(v) for k, v in record["psnr_cost_db"].items()}
-        unavailable.update(record.get("unavailable", {}))
+        # Only today's candidates may be chosen: a cached entry can hold a backend that is not
+        # one here now (e.g. bfloat16 measured before the host lost native support).
+        keys = {s.key for s in specs}
+        measured = {k: float(v) for k, v in record["measured_ms"].items() if k in keys}
+        cost = {k: float(v) for k, v in record["psnr_cost_db"].items() if k in keys}
+        unavailable.update({k: v for k, v in record.get("unavailable", {}).items() if k in keys})
     else:
         measured, cost, failed, built = measure_backends(build, probes(), specs, repeats)
         unavailable.update(failed)
