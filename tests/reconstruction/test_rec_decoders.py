@@ -122,3 +122,26 @@ def test_iterative_direct_gradient_gives_the_same_iterates(synthetic) -> None:
     np.testing.assert_allclose(direct, gram, atol=1e-5 * np.abs(gram).max())
     with pytest.raises(ValueError, match="gradient"):
         T2SIterativeDecoder(sm, 1e-3, gradient="fast")
+
+
+@pytest.mark.parametrize("src", ["uint16", "uint8", "float32", "float64", "uint16-strided", "uint16-reversed"])
+@pytest.mark.parametrize("gemm", ["float32", "bfloat16"])
+def test_torch_channels_first_one_pass_equals_the_numpy_conversion(src: str, gemm: str) -> None:
+    """The torch CPU fast path (permuted copy straight into the GEMM precision) gives exactly
+    what converting through a float32 channel-first buffer gives, for camera DN and floats,
+    strided and reversed views included."""
+    import torch
+
+    rng = np.random.default_rng(3)
+    base = rng.integers(0, 4096, (18, 22, 3))
+    dtype = src.split("-")[0]
+    image = base.astype(dtype) if "float" not in dtype else (base / 4096.0).astype(dtype)
+    if src.endswith("strided"):
+        image = image[::2, 1::2]
+    elif src.endswith("reversed"):
+        image = image[::-1]
+    xp = ArrayBackend("torch", "float32", device="cpu", gemm_dtype=gemm)
+    got = xp.channels_first(image, gemm=True)
+    want = torch.from_numpy(np.moveaxis(image.astype(np.float32), -1, 0).copy()).to(getattr(torch, gemm))
+    assert got.dtype == want.dtype and got.is_contiguous()
+    assert torch.equal(got, want)

@@ -16,6 +16,8 @@ import numpy as np
 from thintact_sdk.errors import InvalidValueError
 
 _NP_DTYPES = {"float32": np.float32, "float64": np.float64}
+# input dtypes torch reads in place and converts in one pass (camera DN and float images)
+_TORCH_COPYABLE = {np.dtype(t) for t in (np.uint8, np.uint16, np.int16, np.int32, np.float32, np.float64)}
 
 
 class ArrayBackend:
@@ -131,16 +133,22 @@ class ArrayBackend:
     def channels_first(self, image: np.ndarray, gemm: bool = False) -> Any:
         """``R × S × C`` numpy image (any real dtype, e.g. uint16 DN) → ``C × R × S`` on this backend.
 
-        One pass that converts and de-interleaves (numpy ``copyto`` into a channel-first buffer).
+        One pass that converts and de-interleaves: numpy ``copyto`` into a channel-first buffer,
+        or on a torch CPU backend a ``copy_`` of the permuted input straight into the target
+        precision (uint16 → bfloat16 without a float32 intermediate).
         """
         c = image.shape[-1]
-        buf = np.empty((c, *image.shape[:-1]), np.float32 if self.name == "torch" else self.gemm_dtype
-                       if gemm else self.dtype)
+        target = self.gemm_dtype if gemm else self.dtype
+        if (self.name == "torch" and self.device == "cpu" and image.dtype in _TORCH_COPYABLE
+                and min(image.strides, default=0) >= 0):
+            out = self._torch.empty((c, *image.shape[:-1]), dtype=target)
+            out.copy_(self._torch.from_numpy(np.asarray(image)).permute(2, 0, 1))
+            return out
+        buf = np.empty((c, *image.shape[:-1]), np.float32 if self.name == "torch" else target)
         np.copyto(buf, np.moveaxis(image, -1, 0), casting="unsafe")
         if self.name == "numpy":
             return buf
-        t = self._torch.from_numpy(buf).to(self.device)
-        return t.to(self.gemm_dtype if gemm else self.dtype)
+        return self._torch.from_numpy(buf).to(self.device).to(target)
 
     def synthesise(self, vp: Any, coef: Any, vqt: Any) -> np.ndarray:
         """``vp @ coef @ vqt`` (``C × N × kP``, ``C × kP × kQ``, ``C × kQ × M``; ``vp``/``vqt`` in
