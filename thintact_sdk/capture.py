@@ -29,6 +29,7 @@ from thintact_sdk.frames import Measurement, RawFrame
 from thintact_sdk.interfaces import Camera
 from thintact_sdk.plugin_manager import PluginRegistry, get_registry
 from thintact_sdk.profile import Profile
+from thintact_sdk.tone_curve import linearize
 
 __all__ = [
     "DroppedFramesWarning",
@@ -108,7 +109,11 @@ def bit_depth_problem(pixel_format: str, profile: Profile) -> str | None:
 def to_measurement(
     raw: RawFrame, profile: Profile, out: np.ndarray | None = None
 ) -> Measurement:
-    """Bin one raw frame into a measurement with the profile's black level.
+    """Linearise and bin one raw frame into a measurement with the profile's black level.
+
+    A tone curve declared in ``sensor.tone_curve`` is undone first
+    (:func:`thintact_sdk.tone_curve.linearize`), before binning, so that the two green sites
+    are averaged in linear light and every decoder sees linear DN.
 
     Parameters
     ----------
@@ -124,18 +129,26 @@ def to_measurement(
     Returns
     -------
     Measurement
-        ``data`` ``R × S × 3`` float32 DN with the black level *not* removed; timestamps,
+        ``data`` ``R × S × 3`` float32 linear DN with the black level *not* removed; timestamps,
         frame id and exposure copied from ``raw``; ``meta`` holds the raw frame's meta plus
-        ``pixel_format``, ``gain_db`` and ``device_timestamp_ns``.
+        ``pixel_format``, ``gain_db``, ``device_timestamp_ns`` (and ``tone_curve``, the kind
+        undone, when the profile declares one).
 
     Raises
     ------
     DeviceError
-        When the frame's size does not give the profile's sensor size after binning.
+        When the frame's size does not give the profile's sensor size after binning, or it
+        holds codes beyond the declared tone-curve table.
     """
     data = raw.data
     if data.ndim == 3 and data.shape[2] == 4:
         data = data[..., :3]
+    tone = profile.sensor.tone_curve
+    if tone is not None:
+        try:
+            data = linearize(data, profile, f"{raw.pixel_format} frame {raw.frame_id}")
+        except ValueError as err:
+            raise DeviceError(str(err)) from None
     pattern = binning_pattern(raw, profile)
     try:
         binned = bin_bayer(data, pattern, out=out if pattern != "none" else None)
@@ -162,6 +175,8 @@ def to_measurement(
         device_timestamp_ns=raw.device_timestamp_ns,
         bayer_pattern=pattern,
     )
+    if tone is not None:
+        meta["tone_curve"] = tone.kind
     return Measurement(
         data=binned,
         black_level_dn=float(profile.noise.black_level_dn),

@@ -23,6 +23,7 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from thintact_sdk.errors import ProfileError, ThinTactError
+from thintact_sdk.tone_curve import ToneCurveSpec, check_table_file
 
 PROFILE_FORMAT = "thintact-profile/1"
 SHIPPED_PROFILE_DIR = Path(__file__).parent / "profiles"
@@ -68,6 +69,10 @@ class SensorSpec(_Section):
     cols: Count = Field(description="S, measurement columns after binning")
     pixel_pitch_um: PitchUm = Field(description="binned pixel pitch p in um")
     channels: list[str] = Field(default_factory=lambda: ["R", "G", "B"], min_length=1, max_length=3)
+    tone_curve: ToneCurveSpec | None = Field(
+        default=None, description="the camera's tone curve, undone before binning and decoding "
+        "(thintact_sdk.tone_curve); absent: the camera delivers linear DN",
+    )
 
     @field_validator("channels")
     @classmethod
@@ -375,6 +380,10 @@ def read_profile_file(path: str | os.PathLike[str]) -> Profile:
         raise ProfileError(f"cannot parse profile {p}: {err}") from None
     prof = profile_from_dict(data, where=str(p))
     prof._source = p.resolve()
+    try:
+        check_table_file(prof)
+    except ProfileError as err:
+        raise ProfileError(f"invalid profile {p}: {err}") from None
     return prof
 
 

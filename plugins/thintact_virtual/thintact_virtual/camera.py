@@ -15,6 +15,9 @@ Settings (``profile.camera.settings`` merged with the factory's ``settings``):
 ``white_level_dn``  DN above black of the brightest all-white pixel at 10 000 us
                     (default 0.6·(saturation - black)).
 ``exposure_us``     exposure (default 10 000 us); the signal scales linearly with it.
+
+A profile declaring ``sensor.tone_curve`` gets frames encoded with that curve (as a camera's
+ISP would); :func:`thintact_sdk.capture.to_measurement` undoes it.
 """
 
 from __future__ import annotations
@@ -33,6 +36,7 @@ from thintact_sdk.errors import DeviceError, ThinTactError, UnsupportedFeatureEr
 from thintact_sdk.frames import RawFrame
 from thintact_sdk.interfaces import Camera, CameraCapabilities, Range
 from thintact_sdk.profile import Profile
+from thintact_sdk.tone_curve import encode as encode_tone
 from thintact_sdk.virtual_bench import REFERENCE_EXPOSURE_US, get_scene_slot, white_level_dn
 from thintact_virtual.tactile_scenes import CYCLE, TACTILE_SCENE, tactile_scene
 
@@ -162,6 +166,8 @@ class VirtualCamera(Camera):
                                                  self.gain_dn_per_unit)[0]
         rng = self._rng if self.noise else None
         dn = signal_to_dn(signal, self.profile.noise, rng, saturation_dn=self._level)
+        if self.profile.sensor.tone_curve is not None:  # the camera's ISP encodes it
+            dn = np.clip(encode_tone(dn, self.profile), 0, self.profile.noise.saturation_dn)
         dn16 = np.round(dn).astype(np.uint16)
         frame = RawFrame(
             data=mosaic_from_rgb(dn16, "RGGB"),
