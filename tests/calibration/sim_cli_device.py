@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from pathlib import Path
+from typing import Literal
 
 import numpy as np
 from independent_device import TRUE_PHYSICS, validation_scenes
@@ -41,6 +42,7 @@ def simulate_recording(
     profile: Profile,
     *,
     encode: Callable[[np.ndarray], np.ndarray] | None = None,
+    file_format: Literal["npy", "png", "jpg"] = "npy",
     seed: int = 0,
 ) -> Recording:
     """Simulate the calibration scenes with ``thintact simulate --noise`` and record them.
@@ -54,6 +56,8 @@ def simulate_recording(
     encode
         Optional ``F × R × S × C`` raw DN → the measurement stack to store (e.g. the camera's
         tone curve and 8-bit quantisation); by default the DN are stored as uint16.
+    file_format
+        How the measurements are stored (``jpg``: 8-bit JPEG, as a UVC camera delivers them).
     """
     scratch = root.parent / f"{root.name}_sim"
     scratch.mkdir(parents=True, exist_ok=True)
@@ -69,5 +73,5 @@ def simulate_recording(
     stored = encode(dn) if encode is not None else dn.astype(np.uint16)
     w = RecordingWriter(root, profile)
     for (label, scene), meas in zip(labelled, stored, strict=True):
-        w.add(meas, scene, label=label)
+        w.add(meas, scene, label=label, file_format=file_format)
     return Recording(root)
