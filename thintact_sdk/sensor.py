@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from thintact_sdk.bayer import planes_to_rgb
 from thintact_sdk.capture import FrameGapCounter, camera_is_simulated, create_camera, to_measurement
 from thintact_sdk.errors import DeviceError, ProfileError
 from thintact_sdk.frames import Measurement, RawFrame, TactileFrame
@@ -355,7 +356,7 @@ class Sensor:
         assert item.image is not None
         t0 = time.perf_counter()
         raw = item.raw
-        frame = self.interpreter.interpret(item.image, raw.timestamp_ns, raw.frame_id)
+        frame = self.interpreter.interpret(planes_to_rgb(item.image), raw.timestamp_ns, raw.frame_id)
         item.compute_ms += (time.perf_counter() - t0) * 1e3
         frame.latency_ms = item.compute_ms
         if "scene" in raw.meta:

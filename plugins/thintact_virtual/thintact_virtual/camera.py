@@ -1,4 +1,5 @@
-"""The virtual camera: simulated ThinTact frames as a Bayer ``RGGB`` mosaic.
+"""The virtual camera: simulated ThinTact frames as a Bayer ``RGGB`` mosaic (a plain frame for
+a monochrome profile; distinct Gr and Gb sites for a profile with per-site planes).
 
 Settings (``profile.camera.settings`` merged with the factory's ``settings``):
 
@@ -29,8 +30,14 @@ from typing import Any
 import numpy as np
 from pydantic import Field
 
-from thintact_sdk.algorithms import SCENE_LIBRARY, Simulator, make_scene, signal_to_dn
-from thintact_sdk.bayer import mosaic_from_rgb
+from thintact_sdk.algorithms import (
+    SCENE_LIBRARY,
+    Simulator,
+    make_scene,
+    scene_for_channels,
+    signal_to_dn,
+)
+from thintact_sdk.bayer import mosaic_from_planes, mosaic_from_rgb
 from thintact_sdk.camera_settings import CameraSettings, parse_camera_settings
 from thintact_sdk.errors import DeviceError, ThinTactError, UnsupportedFeatureError
 from thintact_sdk.frames import RawFrame
@@ -94,7 +101,10 @@ class VirtualCamera(Camera):
         self._is_open = False
         self._level: float | None = None
         nz = profile.noise
-        self.pixel_format = "BayerRG12" if nz.saturation_dn <= 4095 else "BayerRG16"
+        bits = 12 if nz.saturation_dn <= 4095 else 16
+        mono = len(profile.sensor.channels) == 1
+        self.pixel_format = f"Mono{bits}" if mono else f"BayerRG{bits}"
+        self._site = 1 if mono else 2  # raw pixels per measurement pixel along each axis
 
     @staticmethod
     def _check_exposure(exposure_us: float) -> None:
@@ -119,8 +129,8 @@ class VirtualCamera(Camera):
 
     def capabilities(self) -> CameraCapabilities:
         return CameraCapabilities(
-            width=2 * self.profile.sensor.cols,
-            height=2 * self.profile.sensor.rows,
+            width=self._site * self.profile.sensor.cols,
+            height=self._site * self.profile.sensor.rows,
             pixel_formats=[self.pixel_format],
             pixel_format=self.pixel_format,
             fps=self.fps or None,
@@ -170,7 +180,7 @@ class VirtualCamera(Camera):
             dn = np.clip(encode_tone(dn, self.profile), 0, self.profile.noise.saturation_dn)
         dn16 = np.round(dn).astype(np.uint16)
         frame = RawFrame(
-            data=mosaic_from_rgb(dn16, "RGGB"),
+            data=self._mosaic(dn16),
             timestamp_ns=time.monotonic_ns(),
             frame_id=self._frame_id,
             pixel_format=self.pixel_format,
@@ -183,6 +193,12 @@ class VirtualCamera(Camera):
         return frame
 
     # -- rendering ------------------------------------------------------------------------
+    def _mosaic(self, dn: np.ndarray) -> np.ndarray:
+        """The sensor's raw frame: an RGGB mosaic, or the plain frame of a monochrome sensor."""
+        if dn.shape[2] == 1:
+            return dn[..., 0]
+        return mosaic_from_planes(dn, "RGGB") if dn.shape[2] == 4 else mosaic_from_rgb(dn, "RGGB")
+
     def _current_scene(self) -> tuple[np.ndarray, tuple[Any, ...]]:
         version, slot_scene = get_scene_slot(self.slot_key).snapshot()
         if slot_scene is not None:
@@ -219,6 +235,7 @@ class VirtualCamera(Camera):
                 f"virtual camera: scene shape {x.shape} does not match the profile's "
                 f"{self.profile.scene.rows}×{self.profile.scene.cols}×3"
             )
+        x = scene_for_channels(x, len(self.profile.sensor.channels))  # mono, R/Gr/Gb/B
         lin = self._sim.linear_batch(x[None])[0]
         self._linear_cache[key] = lin
         limit = max(2, int(256e6 // max(lin.nbytes, 1)))
