@@ -60,3 +60,24 @@ def test_every_decoder_reconstructs_the_monochrome_recording(
             assert truth is not None
             psnrs.append(score("gel", est, truth).psnr_db)
     assert len(psnrs) == 3 and min(psnrs) > DECODERS[decoder], psnrs
+
+
+def test_the_capture_path_passes_monochrome_frames_through() -> None:
+    from thintact_sdk.capture import open_camera, to_measurement
+    from thintact_sdk.errors import DeviceError
+    from thintact_sdk.frames import RawFrame
+    from thintact_sdk.profile import profile_from_dict
+
+    d = small_profile(("mono",)).contract_dict()
+    d["camera"] = {"plugin": "virtual", "settings": {"noise": False}}
+    prof = profile_from_dict(d)
+    with open_camera(prof) as cam:
+        raw = cam.read()
+    assert raw.data.shape == (64, 80) and raw.pixel_format == "Mono12"
+    m = to_measurement(raw, prof)
+    assert m.data.shape == (64, 80, 1)
+    np.testing.assert_array_equal(m.data[..., 0], raw.data)  # no Bayer binning
+    rgb = RawFrame(data=np.zeros((64, 80, 3), np.uint16), timestamp_ns=0, frame_id=1, pixel_format="RGB8",
+                   exposure_us=None, gain_db=None)
+    with pytest.raises(DeviceError, match="monochrome sensor delivers 2-D frames"):
+        to_measurement(rgb, prof)
