@@ -120,3 +120,24 @@ def test_the_capture_path_delivers_linear_dn(curve: dict[str, Any]) -> None:
     # not undone (the same frames read as if linear): hundreds of DN off
     as_linear = to_measurement(raw, linear_prof).data
     assert float(np.max(np.abs(as_linear - ref))) > 200.0
+
+
+def test_a_gamma_curve_undoes_the_contract_sensor_gamma_effect() -> None:
+    """``tone_curve: {kind: gamma, gamma: g}`` is the inverse of the ``sensor_gamma`` effect with
+    the same g, so a ``thintact diagnose`` finding can be declared as it is reported."""
+    from thintact_sdk.imaging.scenes import make_scene
+    from thintact_sdk.imaging.simulator import Simulator
+
+    linear_prof = load_profile("virtual-mini")
+    g = 0.6
+    toned = linear_prof.with_physics({"sensor_gamma": {"gamma": g}})
+    scene = make_scene("gelsight", linear_prof.scene.rows, linear_prof.scene.cols, 0)
+    lin_sim = Simulator(linear_prof)
+    gain = lin_sim.reference_gain()
+    black = linear_prof.noise.black_level_dn
+    expected = lin_sim.predict_signal_dn(scene, gain) + black
+    delivered = Simulator(toned).predict_signal_dn(scene, gain) + black
+    assert float(np.max(np.abs(delivered - expected))) > 100.0
+    d = linear_prof.contract_dict()
+    d["sensor"]["tone_curve"] = {"kind": "gamma", "gamma": g}
+    np.testing.assert_allclose(linearize(delivered, profile_from_dict(d)), expected, rtol=1e-4, atol=1e-2)
