@@ -298,11 +298,14 @@ class Sensor:
         return raw
 
     def read_measurement(self) -> Measurement:
-        """The next frame binned to ``R × S × 3`` DN (black level not removed)."""
+        """The next frame as ``R × S × C`` linear DN in the profile's channel layout (black level
+        not removed; see :func:`thintact_sdk.capture.to_measurement`)."""
         return to_measurement(self.read_raw(), self.profile)
 
     def reconstruct(self, measurement: Measurement) -> np.ndarray:
-        """Decode a measurement into the ``N × M × 3`` float32 scene (display units).
+        """Decode a measurement into the ``N × M × C`` float32 scene (display units), one channel
+        per sensor channel (4 planes R, Gr, Gb, B for a per-site profile; the tactile stage gets
+        them combined to RGB by :func:`thintact_sdk.bayer.planes_to_rgb`).
 
         Uses the decoder's ``decode_raw(data, black_level_dn)`` when it has one (the black
         level folded into the solve), else ``decode(signal)``.
@@ -315,7 +318,7 @@ class Sensor:
         return np.asarray(out, np.float32)
 
     def read_image(self) -> np.ndarray:
-        """The next reconstructed membrane image, ``N × M × 3`` float32."""
+        """The next reconstructed membrane image, ``N × M × C`` float32 (see :meth:`reconstruct`)."""
         return self.reconstruct(self.read_measurement())
 
     def process(self, raw: RawFrame) -> TactileFrame:
