@@ -33,6 +33,7 @@ name                         what it is
 ``make_training_data``,      data and closed-form/Adam training of the joint filter
 ``train_joint_filter``,
 ``training_scenes``
+``scene_for_channels``       an RGB (or grey) scene as the device's channels (mono, R/Gr/Gb/B)
 ``TactileSimulator``         tactile scenes of an indenter pressing the gel; ``Sphere``
 ``ball_radius_for_field``    a calibration ball sized to a field of view
 ===========================  ===============================================================
@@ -52,7 +53,7 @@ _WHERE = {
     "AxisGeometry": "imaging.direct_generation", "DirectGenerator": "imaging.direct_generation",
     "direct_system_matrices": "imaging.direct_generation",
     "make_training_data": "imaging.filter_training", "train_joint_filter": "imaging.filter_training",
-    "training_scenes": "imaging.filter_training",
+    "training_scenes": "imaging.filter_training", "scene_for_channels": "imaging.filter_training",
     "largest_eigenvalue": "imaging.first_order", "nesterov": "imaging.first_order",
     "psnr": "imaging.metrics", "ssim": "imaging.metrics",
     "default_white_level_dn": "imaging.noise", "signal_to_dn": "imaging.noise",

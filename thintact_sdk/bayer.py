@@ -1,6 +1,12 @@
-"""Raw Bayer mosaic → 3-channel measurement (paper §IV: R, mean of the two G, B).
+"""Raw Bayer mosaic → measurement channels.
 
-Every camera plugin goes through :func:`bin_bayer`, so binning is done one way only.
+The paper's layout (§IV) bins each 2×2 cell to R, mean of the two G, B (:func:`bin_bayer`).
+A profile with ``sensor.channels: [R, Gr, Gb, B]`` keeps the four sites as separate planes
+instead (FlatCam's layout, :func:`split_bayer`): Gr is the green on the red row, Gb the green
+on the blue row; each plane is calibrated and decoded on its own and :func:`planes_to_rgb`
+combines Gr and Gb after decoding where RGB is needed (the tactile pipeline).
+Every camera frame goes through :func:`thintact_sdk.capture.to_measurement`, which picks
+one of these, so binning is done one way only.
 """
 
 from __future__ import annotations
@@ -65,6 +71,69 @@ def bin_bayer(raw: np.ndarray, pattern: str = "RGGB", out: np.ndarray | None = N
     out[..., 1] *= np.float32(0.5)
     out[..., 2] = raw[br::2, bc::2]
     return out
+
+
+PLANES = ("R", "Gr", "Gb", "B")
+"""The per-Bayer-site channel layout (FlatCam's), in this order."""
+
+
+def _site_offsets(pattern: str) -> tuple[tuple[int, int], ...]:
+    """(row, col) offsets of R, Gr, Gb, B for a CFA layout (Gr shares R's row)."""
+    if pattern not in _CFA_OFFSETS:
+        raise InvalidValueError(f"unknown Bayer pattern {pattern!r}; one of {', '.join(_CFA_OFFSETS)}")
+    r, g1, g2, b = _CFA_OFFSETS[pattern]
+    gr, gb = (g1, g2) if g1[0] == r[0] else (g2, g1)
+    return r, gr, gb, b
+
+
+def split_bayer(raw: np.ndarray, pattern: str = "RGGB", out: np.ndarray | None = None) -> np.ndarray:
+    """Split a Bayer mosaic into its four site planes, ``H/2 × W/2 × 4``: R, Gr, Gb, B.
+
+    Parameters
+    ----------
+    raw
+        ``H × W`` mosaic in DN; H and W even.
+    pattern
+        CFA layout: ``RGGB``, ``BGGR``, ``GRBG`` or ``GBRG``.
+    out
+        Optional preallocated ``H/2 × W/2 × 4`` float32 array.
+
+    Returns
+    -------
+    numpy.ndarray
+        float32 DN (black level untouched), planes in :data:`PLANES` order.
+    """
+    offsets = _site_offsets(pattern)
+    if raw.ndim != 2:
+        raise InvalidShapeError(f"a Bayer mosaic is 2-D, got shape {raw.shape}")
+    h, w = raw.shape
+    if h % 2 or w % 2:
+        raise InvalidShapeError(f"a Bayer mosaic needs even height and width, got {h}×{w}")
+    if out is None:
+        out = np.empty((h // 2, w // 2, 4), dtype=np.float32)
+    for k, (r0, c0) in enumerate(offsets):
+        out[..., k] = raw[r0::2, c0::2]
+    return out
+
+
+def mosaic_from_planes(planes: np.ndarray, pattern: str = "RGGB") -> np.ndarray:
+    """Inverse of :func:`split_bayer` for simulation: ``R × S × 4`` → ``2R × 2S`` (dtype kept)."""
+    offsets = _site_offsets(pattern)
+    if planes.ndim != 3 or planes.shape[2] != 4:
+        raise InvalidShapeError(f"per-site planes are R×S×4, got shape {planes.shape}")
+    r, s, _ = planes.shape
+    mos = np.empty((2 * r, 2 * s), dtype=planes.dtype)
+    for k, (r0, c0) in enumerate(offsets):
+        mos[r0::2, c0::2] = planes[..., k]
+    return mos
+
+
+def planes_to_rgb(x: np.ndarray) -> np.ndarray:
+    """``… × 4`` (R, Gr, Gb, B) → ``… × 3`` (R, (Gr + Gb)/2, B), e.g. a decoded scene for RGB
+    consumers; other channel counts are returned unchanged."""
+    if x.shape[-1] != 4:
+        return x
+    return np.stack([x[..., 0], 0.5 * (x[..., 1] + x[..., 2]), x[..., 3]], axis=-1).astype(x.dtype, copy=False)
 
 
 def mosaic_from_rgb(rgb: np.ndarray, pattern: str = "RGGB") -> np.ndarray:

@@ -23,18 +23,20 @@ from typing import Any
 
 import numpy as np
 
-from thintact_sdk.bayer import bin_bayer, pattern_from_pixel_format
-from thintact_sdk.errors import DeviceError, PluginError, ProfileError
+from thintact_sdk.bayer import bin_bayer, pattern_from_pixel_format, split_bayer
+from thintact_sdk.errors import DeviceError, InvalidShapeError, PluginError, ProfileError
 from thintact_sdk.frames import Measurement, RawFrame
 from thintact_sdk.interfaces import Camera
 from thintact_sdk.plugin_manager import PluginRegistry, get_registry
-from thintact_sdk.profile import Profile
+from thintact_sdk.profile import BAYER_PLANES, Profile
+from thintact_sdk.tone_curve import linearize
 
 __all__ = [
     "DroppedFramesWarning",
     "FrameGapCounter",
     "binning_pattern",
     "bit_depth_problem",
+    "channel_layout",
     "create_camera",
     "open_camera",
     "pixel_format_bits",
@@ -79,6 +81,26 @@ def binning_pattern(raw: RawFrame, profile: Profile) -> str:
     return declared
 
 
+def channel_layout(profile: Profile) -> str:
+    """How raw frames become the profile's channels: ``binned`` (R, mean G, B),
+    ``planes`` (R, Gr, Gb, B kept apart) or ``mono`` (one channel, no Bayer filter)."""
+    channels = list(profile.sensor.channels)
+    if channels == BAYER_PLANES:
+        return "planes"
+    return "mono" if channels == ["mono"] else "binned"
+
+
+def _bin(data: np.ndarray, pattern: str, layout: str, out: np.ndarray | None) -> np.ndarray:
+    """The frame in the profile's channel layout (float32 DN)."""
+    if layout == "mono":
+        if data.ndim != 2:
+            raise InvalidShapeError(f"a monochrome sensor delivers 2-D frames, got shape {data.shape}")
+        return data.astype(np.float32, copy=False)[..., None]
+    if layout == "planes":
+        return split_bayer(data, pattern, out=out)
+    return bin_bayer(data, pattern, out=out if pattern != "none" else None)
+
+
 def pixel_format_bits(pixel_format: str) -> int | None:
     """Bits per sample named by a GenICam pixel format (``BayerRG12p`` → 12), or None."""
     digits = re.search(r"(\d+)(?:p|Packed|_?Planar)?f?$", pixel_format)
@@ -108,47 +130,71 @@ def bit_depth_problem(pixel_format: str, profile: Profile) -> str | None:
 def to_measurement(
     raw: RawFrame, profile: Profile, out: np.ndarray | None = None
 ) -> Measurement:
-    """Bin one raw frame into a measurement with the profile's black level.
+    """Linearise and bin one raw frame into a measurement with the profile's black level.
+
+    The profile's ``sensor.channels`` pick the layout (:func:`channel_layout`): R, mean G, B
+    (the paper's), the four Bayer sites R, Gr, Gb, B kept apart (FlatCam's,
+    :func:`thintact_sdk.bayer.split_bayer`), or one monochrome channel (an ``R × S`` frame,
+    no binning).
+
+    A tone curve declared in ``sensor.tone_curve`` is undone first
+    (:func:`thintact_sdk.tone_curve.linearize`), before binning, so that the two green sites
+    are averaged in linear light and every decoder sees linear DN.
 
     Parameters
     ----------
     raw
-        ``2R × 2S`` Bayer mosaic (integer DN), or ``R × S × 3`` (or ``× 4``, alpha dropped)
-        RGB frame that is passed through unbinned.
+        ``2R × 2S`` Bayer mosaic (integer DN), ``R × S`` monochrome frame, or ``R × S × 3``
+        (or ``× 4``, alpha dropped) RGB frame that is passed through unbinned.
     profile
         Supplies the expected sensor size ``R × S``, the CFA layout
         (``camera.bayer_pattern``) and ``noise.black_level_dn``.
     out
-        Optional preallocated ``R × S × 3`` float32 array for the binned data.
+        Optional preallocated ``R × S × C`` float32 array for the binned data.
 
     Returns
     -------
     Measurement
-        ``data`` ``R × S × 3`` float32 DN with the black level *not* removed; timestamps,
+        ``data`` ``R × S × C`` float32 linear DN with the black level *not* removed; timestamps,
         frame id and exposure copied from ``raw``; ``meta`` holds the raw frame's meta plus
-        ``pixel_format``, ``gain_db`` and ``device_timestamp_ns``.
+        ``pixel_format``, ``gain_db``, ``device_timestamp_ns`` (and ``tone_curve``, the kind
+        undone, when the profile declares one).
 
     Raises
     ------
     DeviceError
-        When the frame's size does not give the profile's sensor size after binning.
+        When the frame's size does not give the profile's sensor size after binning, or it
+        holds codes beyond the declared tone-curve table.
     """
     data = raw.data
     if data.ndim == 3 and data.shape[2] == 4:
         data = data[..., :3]
-    pattern = binning_pattern(raw, profile)
+    tone = profile.sensor.tone_curve
+    if tone is not None:
+        try:
+            data = linearize(data, profile, f"{raw.pixel_format} frame {raw.frame_id}")
+        except ValueError as err:
+            raise DeviceError(str(err)) from None
+    layout = channel_layout(profile)
+    pattern = "mono" if layout == "mono" else binning_pattern(raw, profile)
+    if layout == "planes" and pattern == "none":
+        raise DeviceError(
+            f"profile {profile.name!r} keeps the Bayer sites apart (sensor.channels "
+            f"{BAYER_PLANES}) but the camera delivers an already binned {raw.pixel_format} "
+            f"frame of shape {data.shape}; deliver the raw mosaic"
+        )
     try:
-        binned = bin_bayer(data, pattern, out=out if pattern != "none" else None)
+        binned = _bin(data, pattern, layout, out)
     except ValueError as err:
         raise DeviceError(f"cannot bin the {raw.pixel_format} frame {raw.frame_id}: {err}") from None
-    if pattern == "none" and out is not None:
+    if pattern in ("none", "mono") and out is not None:
         out[...] = binned
         binned = out
     expected = (profile.sensor.rows, profile.sensor.cols)
     if binned.shape[:2] != expected:
-        need = f"{2 * expected[0]}×{2 * expected[1]} mosaic" if pattern != "none" else (
-            f"{expected[0]}×{expected[1]}×3 RGB frame"
-        )
+        need = {"none": f"{expected[0]}×{expected[1]}×3 RGB frame",
+                "mono": f"{expected[0]}×{expected[1]} monochrome frame"}.get(
+            pattern, f"{2 * expected[0]}×{2 * expected[1]} mosaic")
         raise DeviceError(
             f"the camera delivers {data.shape[0]}×{data.shape[1]} {raw.pixel_format} frames, "
             f"binned to {binned.shape[0]}×{binned.shape[1]}, but profile {profile.name!r} "
@@ -162,6 +208,8 @@ def to_measurement(
         device_timestamp_ns=raw.device_timestamp_ns,
         bayer_pattern=pattern,
     )
+    if tone is not None:
+        meta["tone_curve"] = tone.kind
     return Measurement(
         data=binned,
         black_level_dn=float(profile.noise.black_level_dn),

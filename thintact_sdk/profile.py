@@ -23,6 +23,7 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from thintact_sdk.errors import ProfileError, ThinTactError
+from thintact_sdk.tone_curve import ToneCurveSpec, check_table_file
 
 PROFILE_FORMAT = "thintact-profile/1"
 SHIPPED_PROFILE_DIR = Path(__file__).parent / "profiles"
@@ -35,8 +36,11 @@ MAX_PITCH_UM = 10_000.0
 """Largest pixel pitch or mask feature in um (10 mm)."""
 MAX_DISTANCE_MM = 1000.0
 """Largest scene → mask or mask → sensor distance in mm."""
-KNOWN_CHANNELS = ("R", "G", "B", "mono")
-"""Channel names a profile may list: the Bayer-binned colours, or one monochrome channel."""
+KNOWN_CHANNELS = ("R", "G", "B", "mono", "Gr", "Gb")
+"""Channel names a profile may list: the Bayer-binned colours, one monochrome channel, or the
+four Bayer sites ``R, Gr, Gb, B`` kept apart (FlatCam's layout)."""
+BAYER_PLANES = ["R", "Gr", "Gb", "B"]
+"""The per-Bayer-site channel layout, in this order (:func:`thintact_sdk.bayer.split_bayer`)."""
 _NAME_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$")
 _PLUGIN_NAME_RE = re.compile(r"^([A-Za-z0-9][A-Za-z0-9._-]*:)?[A-Za-z0-9][A-Za-z0-9._-]{0,63}$")
 
@@ -67,7 +71,11 @@ class SensorSpec(_Section):
     rows: Count = Field(description="R, measurement rows after binning")
     cols: Count = Field(description="S, measurement columns after binning")
     pixel_pitch_um: PitchUm = Field(description="binned pixel pitch p in um")
-    channels: list[str] = Field(default_factory=lambda: ["R", "G", "B"], min_length=1, max_length=3)
+    channels: list[str] = Field(default_factory=lambda: ["R", "G", "B"], min_length=1, max_length=4)
+    tone_curve: ToneCurveSpec | None = Field(
+        default=None, description="the camera's tone curve, undone before binning and decoding "
+        "(thintact_sdk.tone_curve); absent: the camera delivers linear DN",
+    )
 
     @field_validator("channels")
     @classmethod
@@ -79,6 +87,8 @@ class SensorSpec(_Section):
             raise ValueError(f"channels repeat: {v}")
         if "mono" in v and len(v) > 1:
             raise ValueError("'mono' is the only channel of a monochrome sensor")
+        if ("Gr" in v or "Gb" in v or len(v) == 4) and v != BAYER_PLANES:
+            raise ValueError(f"per-Bayer-site planes are exactly {BAYER_PLANES} (in this order), got {v}")
         return v
 
 
@@ -375,6 +385,10 @@ def read_profile_file(path: str | os.PathLike[str]) -> Profile:
         raise ProfileError(f"cannot parse profile {p}: {err}") from None
     prof = profile_from_dict(data, where=str(p))
     prof._source = p.resolve()
+    try:
+        check_table_file(prof)
+    except ProfileError as err:
+        raise ProfileError(f"invalid profile {p}: {err}") from None
     return prof
 
 

@@ -8,6 +8,15 @@ Layout::
     measurements/000_white.npy   uint16 or float32 R×S×C raw DN (black level not removed)
 
 Frames may omit ``scene``; scene and measurement files may also be 8/16-bit PNG or TIFF.
+
+Optional extension (CONTRACTS §3 allows optional fields): a measurement may also be an 8-bit
+JPEG (``.jpg``/``.jpeg``) or one frame of an MJPEG (or other ffmpeg-readable) video
+(``.avi``/``.mjpeg``/``.mjpg``/``.mkv``/``.mov``/``.mp4``, with the frame's index in the
+optional field ``video_frame``), as a camera that encodes its output delivers it. Such frames
+are *tone-mapped* by default (optional field ``tone_mapped``, default true for JPEG and video,
+false otherwise): when the profile declares ``sensor.tone_curve`` the reader undoes it
+(:func:`thintact_sdk.tone_curve.linearize`) and returns float32 linear DN. Scenes stay
+lossless (npy/PNG/TIFF): a JPEG scene is refused, compression would corrupt the ground truth.
 Every file the writer produces is written atomically (temp file + rename) and the
 manifest is rewritten after each frame, so a killed writer leaves a valid recording
 holding every frame completed before the kill; the temp files such a kill leaves behind
@@ -30,18 +39,23 @@ import tempfile
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 
 from thintact_sdk.errors import ProfileError, RecordingError
 from thintact_sdk.profile import Profile, read_profile_file
+from thintact_sdk.tone_curve import inline_table
 
 RECORDING_FORMAT = "thintact-recording/1"
 _IMAGE_SUFFIXES = (".png", ".tif", ".tiff")
+_JPEG_SUFFIXES = (".jpg", ".jpeg")
+_VIDEO_SUFFIXES = (".avi", ".mjpeg", ".mjpg", ".mkv", ".mov", ".mp4")
+TONE_MAPPED_FIELD = "tone_mapped"
+VIDEO_FRAME_FIELD = "video_frame"
 _NUMERIC_KINDS = "uif"
 """dtype kinds a scene or measurement may have (unsigned, signed integer, float)."""
-_COUNT_FIELDS = ("frame_id", "timestamp_ns", "device_timestamp_ns", "dropped_before")
+_COUNT_FIELDS = ("frame_id", "timestamp_ns", "device_timestamp_ns", "dropped_before", VIDEO_FRAME_FIELD)
 """Per-frame metadata that must be a non-negative integer when present."""
 SCENE_TOLERANCE = 1e-6
 """Scene values may exceed [0, 1] by this much (float rounding), no more."""
@@ -107,10 +121,52 @@ def _read_image_file(path: Path, is_scene: bool) -> np.ndarray:
     return np.ascontiguousarray(img)
 
 
-def read_array(path: Path, is_scene: bool) -> np.ndarray:
-    """Read a scene (→ float32 in [0, 1]) or measurement (→ as stored) from .npy/.png/.tif."""
+def is_encoded(path: Path) -> bool:
+    """Whether ``path`` is a camera-encoded (JPEG or video) measurement file."""
+    return path.suffix.lower() in _JPEG_SUFFIXES + _VIDEO_SUFFIXES
+
+
+def read_video_frame(path: Path, index: int, gray: bool) -> np.ndarray:
+    """Frame ``index`` of a video file (MJPEG etc., through OpenCV's ffmpeg), ``H × W × 3`` RGB
+    uint8, or ``H × W`` when ``gray`` (a monochrome sensor).
+
+    Raises
+    ------
+    RecordingError
+        The file is missing or unreadable, or holds fewer than ``index + 1`` frames.
+    """
+    import cv2
+
     if not path.is_file():
         raise RecordingError(f"missing file {path}")
+    cap = cv2.VideoCapture(str(path))
+    try:
+        if not cap.isOpened():
+            raise RecordingError(f"cannot open video {path}")
+        count = int(cap.get(cv2.CAP_PROP_FRAME_COUNT))
+        if index >= count > 0:
+            raise RecordingError(f"{path}: video_frame {index} but the video holds {count} frame(s)")
+        cap.set(cv2.CAP_PROP_POS_FRAMES, index)
+        ok, img = cap.read()
+    finally:
+        cap.release()
+    if not ok or img is None:
+        raise RecordingError(f"{path}: cannot decode video frame {index}")
+    if gray:
+        return np.ascontiguousarray(cv2.cvtColor(img, cv2.COLOR_BGR2GRAY))
+    return np.ascontiguousarray(img[..., ::-1])
+
+
+def read_array(path: Path, is_scene: bool) -> np.ndarray:
+    """Read a scene (→ float32 in [0, 1]) or measurement (→ as stored) from .npy/.png/.tif
+    (measurements also .jpg/.jpeg)."""
+    if not path.is_file():
+        raise RecordingError(f"missing file {path}")
+    if path.suffix.lower() in _JPEG_SUFFIXES:
+        if is_scene:
+            raise RecordingError(f"{path}: a scene must be lossless (npy, png, tif); JPEG "
+                                 "compression would corrupt the ground truth")
+        return _read_image_file(path, is_scene)
     if path.suffix.lower() == ".npy":
         try:
             arr = np.load(path, allow_pickle=False)
@@ -124,7 +180,10 @@ def read_array(path: Path, is_scene: bool) -> np.ndarray:
         return arr
     if path.suffix.lower() in _IMAGE_SUFFIXES:
         return _read_image_file(path, is_scene)
-    raise RecordingError(f"unsupported file type {path.suffix!r} for {path} (npy, png, tif)")
+    if path.suffix.lower() in _VIDEO_SUFFIXES:
+        raise RecordingError(f"{path}: a video needs the frame's 'video_frame' index")
+    raise RecordingError(f"unsupported file type {path.suffix!r} for {path} (npy, png, tif; "
+                         "measurements also jpg and MJPEG video)")
 
 
 class Recording:
@@ -223,6 +282,12 @@ class Recording:
         if exposure is not None and not (_is_number(exposure) and exposure > 0):
             raise RecordingError(f"{where}: 'exposure_us' must be a positive number of microseconds, "
                                  f"got {exposure!r}")
+        tone = extra.get(TONE_MAPPED_FIELD)
+        if tone is not None and not isinstance(tone, bool):
+            raise RecordingError(f"{where}: {TONE_MAPPED_FIELD!r} must be true or false, got {tone!r}")
+        if Path(meas).suffix.lower() in _VIDEO_SUFFIXES and VIDEO_FRAME_FIELD not in extra:
+            raise RecordingError(f"{where}: measurement {meas!r} is a video; name the frame with "
+                                 f"'{VIDEO_FRAME_FIELD}' (0-based index)")
         for key in ("gain_db", "saturated_fraction"):
             v = extra.get(key)
             if v is not None and not _is_number(v):
@@ -236,22 +301,38 @@ class Recording:
         fr = self.frames[i]
         return f"frame {i} ({fr.label})" if fr.label else f"frame {i}"
 
+    def tone_mapped(self, i: int) -> bool:
+        """Whether frame ``i``'s stored values are camera-encoded (``tone_mapped`` field;
+        default true for JPEG and video files, false otherwise)."""
+        fr = self.frames[i]
+        flag = fr.extra.get(TONE_MAPPED_FIELD)
+        return bool(flag) if flag is not None else is_encoded(Path(fr.measurement))
+
     def measurement(self, i: int) -> np.ndarray:
-        """Frame ``i``'s measurement, ``R × S × C`` raw DN as stored (uint16 or float32).
+        """Frame ``i``'s measurement, ``R × S × C`` raw DN (black level not removed).
+
+        As stored (uint16, uint8 or float32), except for a tone-mapped frame
+        (:meth:`tone_mapped`) of a profile declaring ``sensor.tone_curve``: its curve is undone
+        and the result is float32 linear DN.
 
         Raises
         ------
         RecordingError
             When the file is unreadable, not numeric, of the wrong shape or channel count,
-            or holds NaN, Inf or negative values (the frame is named).
+            or holds NaN, Inf or negative values (the frame is named), or a frame marked
+            ``tone_mapped: true`` has no ``sensor.tone_curve`` to undo.
         """
-        rel = self.frames[i].measurement
+        fr = self.frames[i]
+        rel = fr.measurement
         path = self._inside(rel, f"frame {i} 'measurement'")
+        sensor = self.profile.sensor
         try:
-            arr = read_array(path, is_scene=False)
+            if path.suffix.lower() in _VIDEO_SUFFIXES:
+                arr = read_video_frame(path, int(fr.extra[VIDEO_FRAME_FIELD]), gray=len(sensor.channels) == 1)
+            else:
+                arr = read_array(path, is_scene=False)
         except RecordingError as err:
             raise RecordingError(f"{self._name(i)}: {err}") from None
-        sensor = self.profile.sensor
         exp = (sensor.rows, sensor.cols)
         n_ch = len(sensor.channels)
         if arr.ndim not in (2, 3) or arr.shape[:2] != exp:
@@ -266,7 +347,26 @@ class Recording:
                 f"({', '.join(sensor.channels)})"
             )
         _check_values(arr, f"{self._name(i)}: {rel}", low=0.0, high=None)
+        if self.tone_mapped(i):
+            arr = self._linearize(i, arr)
         return arr
+
+    def _linearize(self, i: int, arr: np.ndarray) -> np.ndarray:
+        """Undo the profile's tone curve on frame ``i``'s stored values."""
+        from thintact_sdk.tone_curve import linearize
+
+        if self.profile.sensor.tone_curve is None:
+            if self.frames[i].extra.get(TONE_MAPPED_FIELD) is True:
+                raise RecordingError(
+                    f"{self._name(i)}: marked '{TONE_MAPPED_FIELD}: true' but profile "
+                    f"{self.profile.name!r} declares no sensor.tone_curve to undo")
+            return arr  # a JPEG of a camera declared linear: read as stored
+        try:
+            out = linearize(arr, self.profile, f"{self._name(i)}: {self.frames[i].measurement}")
+        except (ValueError, ProfileError) as err:
+            raise RecordingError(str(err)) from None
+        _check_values(out, f"{self._name(i)}: {self.frames[i].measurement} (linearised)", low=0.0, high=None)
+        return out
 
     def scene(self, i: int) -> np.ndarray | None:
         """Frame ``i``'s scene, ``N × M × C`` float32 in [0, 1], or None for unknown scenes.
@@ -359,8 +459,8 @@ class RecordingWriter:
         (self.root / "scenes").mkdir(exist_ok=True)
         (self.root / "measurements").mkdir(exist_ok=True)
         ppath = self.root / "profile.json"
-        if not ppath.is_file():
-            text = json.dumps(profile.contract_dict(), indent=1) + "\n"
+        if not ppath.is_file():  # self-contained: a tone-curve table file is inlined
+            text = json.dumps(inline_table(profile).contract_dict(), indent=1) + "\n"
             atomic_write_bytes(ppath, text.encode("utf-8"))
         self._write_manifest()
 
@@ -376,6 +476,8 @@ class RecordingWriter:
         measurement: np.ndarray,
         scene: np.ndarray | None = None,
         label: str | None = None,
+        file_format: Literal["npy", "png", "jpg"] = "npy",
+        jpeg_quality: int = 95,
         **extra: Any,
     ) -> RecordingFrame:
         """Append one frame: files first (atomically), then the manifest.
@@ -388,6 +490,11 @@ class RecordingWriter:
             ``N × M × C`` float32 display values, or None for an unknown scene.
         label
             Short name; also used in the file names (``007_<label>.npy``).
+        file_format
+            ``npy`` (uint16 or float32), ``png`` (uint8 or uint16, lossless) or ``jpg`` (uint8,
+            a camera's encoded output; read back as tone-mapped, see the module docstring).
+        jpeg_quality
+            JPEG quality 1-100 with ``file_format="jpg"``.
         extra
             JSON-serialisable per-frame metadata (timestamp_ns, frame_id, exposure_us, ...).
         """
@@ -398,10 +505,14 @@ class RecordingWriter:
         _check_values(measurement, f"{what}: measurement", low=0.0, high=None)
         safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in (label or f"frame{idx}"))
         stem = f"{idx:03d}_{safe}" if idx < 1000 else f"{idx:06d}_{safe}"
-        mrel = f"measurements/{stem}.npy"
-        if measurement.dtype not in (np.uint16, np.float32):
-            measurement = measurement.astype(np.float32)
-        atomic_save_npy(self.root / mrel, measurement)
+        if file_format == "npy":
+            mrel = f"measurements/{stem}.npy"
+            if measurement.dtype not in (np.uint16, np.float32):
+                measurement = measurement.astype(np.float32)
+            atomic_save_npy(self.root / mrel, measurement)
+        else:
+            mrel = f"measurements/{stem}.{file_format}"
+            atomic_write_bytes(self.root / mrel, _encode_image(measurement, file_format, jpeg_quality, what))
         srel = None
         if scene is not None:
             srel = f"scenes/{stem}.npy"
@@ -420,6 +531,26 @@ class RecordingWriter:
         atomic_write_bytes(self.root / "manifest.json", (json.dumps(manifest, indent=1) + "\n").encode())
 
 
+def _encode_image(img: np.ndarray, file_format: str, quality: int, what: str) -> bytes:
+    """``R × S × C`` (C 1 or 3, RGB) as PNG/JPEG bytes; JPEG needs uint8, PNG uint8/uint16."""
+    import cv2
+
+    allowed = (np.uint8,) if file_format == "jpg" else (np.uint8, np.uint16)
+    if img.dtype not in allowed:
+        raise RecordingError(f"{what}: a {file_format} measurement must be "
+                             f"{' or '.join(np.dtype(a).name for a in allowed)}, got {img.dtype}")
+    if img.ndim == 3 and img.shape[2] == 1:
+        img = img[..., 0]
+    if img.ndim == 3 and img.shape[2] != 3:
+        raise RecordingError(f"{what}: {file_format} holds 1 or 3 channels, got {img.shape[2]}")
+    bgr = img[..., ::-1] if img.ndim == 3 else img
+    params = [int(cv2.IMWRITE_JPEG_QUALITY), int(quality)] if file_format == "jpg" else []
+    ok, buf = cv2.imencode(f".{file_format}", np.ascontiguousarray(bgr), params)
+    if not ok:
+        raise RecordingError(f"{what}: cannot encode the measurement as {file_format}")
+    return bytes(buf.tobytes())
+
+
 def check_appendable(root: str | os.PathLike[str], profile: Profile) -> Recording:
     """The existing recording at ``root``, after checking that frames of ``profile`` may be
     appended to it (same device physics and grids); raises RecordingError naming both."""
@@ -430,7 +561,7 @@ def check_appendable(root: str | os.PathLike[str], profile: Profile) -> Recordin
 
 def _check_same_device(existing: Profile, new: Profile, root: Path) -> None:
     """Refuse appending frames of another device (other grids or physics) to a recording."""
-    if existing.content_hash() == new.content_hash():
+    if inline_table(existing).content_hash() == inline_table(new).content_hash():
         return
 
     def describe(p: Profile) -> str:

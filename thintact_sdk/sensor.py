@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from thintact_sdk.bayer import planes_to_rgb
 from thintact_sdk.capture import FrameGapCounter, camera_is_simulated, create_camera, to_measurement
 from thintact_sdk.errors import DeviceError, ProfileError
 from thintact_sdk.frames import Measurement, RawFrame, TactileFrame
@@ -297,11 +298,14 @@ class Sensor:
         return raw
 
     def read_measurement(self) -> Measurement:
-        """The next frame binned to ``R × S × 3`` DN (black level not removed)."""
+        """The next frame as ``R × S × C`` linear DN in the profile's channel layout (black level
+        not removed; see :func:`thintact_sdk.capture.to_measurement`)."""
         return to_measurement(self.read_raw(), self.profile)
 
     def reconstruct(self, measurement: Measurement) -> np.ndarray:
-        """Decode a measurement into the ``N × M × 3`` float32 scene (display units).
+        """Decode a measurement into the ``N × M × C`` float32 scene (display units), one channel
+        per sensor channel (4 planes R, Gr, Gb, B for a per-site profile; the tactile stage gets
+        them combined to RGB by :func:`thintact_sdk.bayer.planes_to_rgb`).
 
         Uses the decoder's ``decode_raw(data, black_level_dn)`` when it has one (the black
         level folded into the solve), else ``decode(signal)``.
@@ -314,7 +318,7 @@ class Sensor:
         return np.asarray(out, np.float32)
 
     def read_image(self) -> np.ndarray:
-        """The next reconstructed membrane image, ``N × M × 3`` float32."""
+        """The next reconstructed membrane image, ``N × M × C`` float32 (see :meth:`reconstruct`)."""
         return self.reconstruct(self.read_measurement())
 
     def process(self, raw: RawFrame) -> TactileFrame:
@@ -355,7 +359,7 @@ class Sensor:
         assert item.image is not None
         t0 = time.perf_counter()
         raw = item.raw
-        frame = self.interpreter.interpret(item.image, raw.timestamp_ns, raw.frame_id)
+        frame = self.interpreter.interpret(planes_to_rgb(item.image), raw.timestamp_ns, raw.frame_id)
         item.compute_ms += (time.perf_counter() - t0) * 1e3
         frame.latency_ms = item.compute_ms
         if "scene" in raw.meta:

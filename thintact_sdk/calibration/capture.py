@@ -60,7 +60,7 @@ def capture_average(
         raise InvalidValueError("frames must be >= 1")
     for _ in range(flush):
         camera.read(timeout_s=timeout_s)
-    acc = np.zeros((profile.sensor.rows, profile.sensor.cols, 3), np.float64)
+    acc = np.zeros((profile.sensor.rows, profile.sensor.cols, len(profile.sensor.channels)), np.float64)
     sat_level = profile.noise.saturation_dn - 1.0
     sat = 0.0
     exposure = None

@@ -67,3 +67,12 @@ def is_dark(roles: list[ChannelRole]) -> bool:
 def is_slit(roles: list[ChannelRole]) -> bool:
     """At least one channel is a slit and none is *other*."""
     return any(r.kind in ("hslit", "vslit") for r in roles) and not any(r.kind == "other" for r in roles)
+
+
+def roles_for_channels(roles: list[ChannelRole], channels: int) -> list[ChannelRole]:
+    """A scene's per-channel roles as the device's channels: an RGB scene's G role serves
+    both green planes of a device keeping the Bayer sites apart (R, Gr, Gb, B); otherwise
+    unchanged (a monochrome device takes the first channel's role, as before)."""
+    if channels == 4 and len(roles) == 3:
+        return [roles[0], roles[1], roles[1], roles[2]]
+    return roles

@@ -13,7 +13,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from thintact_sdk.calibration.classify import ChannelRole, classify_scene, is_dark, is_slit
+from thintact_sdk.calibration.classify import (
+    ChannelRole,
+    classify_scene,
+    is_dark,
+    is_slit,
+    roles_for_channels,
+)
 from thintact_sdk.calibration.lowrank import DEFAULT_RANK, LowRankImage, compress
 from thintact_sdk.calibration.slits import ChannelSlits, SlitStack
 from thintact_sdk.calibration.sumrule import (
@@ -159,7 +165,7 @@ def collect_slits(
         scene = recording.scene(i)
         if scene is None:
             continue
-        r = classify_scene(scene)
+        r = roles_for_channels(classify_scene(scene), n_ch)
         if is_dark(r):
             dark_frames.append(i)
         elif is_slit(r):

@@ -45,12 +45,13 @@ def scene_for_channels(scene: np.ndarray, channels: int) -> np.ndarray:
     """``scene`` (``N × M`` or ``N × M × C``, display units) as ``N × M × channels``.
 
     A one-channel (monochrome) device sees the mean of the display's linear channels; a
-    one-channel scene is shown grey on every channel of a colour device.
+    one-channel scene is shown grey on every channel of a colour device; a device keeping the
+    four Bayer sites apart (R, Gr, Gb, B) sees an RGB scene's G on both green planes.
 
     Raises
     ------
     ValueError
-        When the channel counts cannot be matched (e.g. 3 scene channels for a 4-plane device).
+        When the channel counts cannot be matched (e.g. 4 scene channels for a 3-channel device).
     """
     x = np.asarray(scene)
     if x.ndim == 2:
@@ -64,6 +65,8 @@ def scene_for_channels(scene: np.ndarray, channels: int) -> np.ndarray:
         return x.mean(axis=2, keepdims=True, dtype=np.float64).astype(x.dtype, copy=False)
     if have == 1:
         return np.repeat(x, channels, axis=2)
+    if have == 3 and channels == 4:
+        return x[..., [0, 1, 1, 2]]
     raise InvalidShapeError(f"scene has {have} channels but the device has {channels}")
 
 

@@ -49,13 +49,13 @@ class Probe:
 def make_probes(sm: SystemMatrices, noise: NoiseSpec, seed: int = 0) -> list[Probe]:
     """Raw frames of the bench scenes (USAF, a GelSight press) through ``sm`` with the sensor
     noise of ``noise`` (fixed seed): accuracy is judged where it matters, on noisy frames."""
-    from thintact_sdk.algorithms import make_scene, signal_to_dn
+    from thintact_sdk.algorithms import make_scene, scene_for_channels, signal_to_dn
 
     n, m = sm.scene_shape
     rng = np.random.default_rng(seed)
     probes = []
     for name, index in PROBE_SCENES:
-        x = make_scene(name, n, m, index)[..., : sm.channels]
+        x = scene_for_channels(make_scene(name, n, m, index), sm.channels)
         dn = signal_to_dn(np.clip(sm.forward(x), 0, None), noise, rng)
         raw = np.clip(np.round(dn), 0, 65535).astype(np.uint16)
         probes.append(Probe(raw, float(noise.black_level_dn), x))

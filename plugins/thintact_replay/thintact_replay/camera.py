@@ -3,7 +3,10 @@
 Each recorded measurement (``R × S × 3`` raw DN) is delivered as a ``2R × 2S`` Bayer mosaic
 built with :func:`thintact_sdk.bayer.mosaic_from_rgb` in the profile's CFA layout, so
 :func:`thintact_sdk.capture.to_measurement` gives the recorded measurement back exactly
-(profile ``bayer_pattern: none`` delivers the ``R × S × 3`` frame itself). Frames recorded
+(profile ``bayer_pattern: none`` delivers the ``R × S × 3`` frame itself; a monochrome
+profile the ``R × S`` frame; an ``R, Gr, Gb, B`` profile the per-site mosaic). A profile with
+``sensor.tone_curve`` gets the linear measurement re-encoded with the curve (float32), as the
+camera delivered it, so that ``to_measurement`` undoes it once. Frames recorded
 with ``--raw`` are delivered as the camera gave them, unless ``settings.raw`` is false.
 
 Settings
@@ -43,8 +46,9 @@ import numpy as np
 from pydantic import Field
 
 from thintact_replay.pacing import wait_until_due
-from thintact_sdk.bayer import mosaic_from_rgb
+from thintact_sdk.bayer import mosaic_from_planes, mosaic_from_rgb
 from thintact_sdk.camera_settings import CameraSettings, parse_camera_settings
+from thintact_sdk.capture import channel_layout
 from thintact_sdk.errors import (
     DeviceError,
     EndOfStreamError,
@@ -55,6 +59,7 @@ from thintact_sdk.interfaces import Camera, CameraCapabilities
 from thintact_sdk.profile import Profile
 from thintact_sdk.recording import Recording
 from thintact_sdk.recording_raw import RAW_FIELD, load_raw_data
+from thintact_sdk.tone_curve import encode as encode_tone
 
 
 class EndOfRecording(EndOfStreamError):
@@ -190,18 +195,28 @@ class ReplayCamera(Camera):
         fr = rec.frames[i]
         if self.use_raw and isinstance(fr.extra.get(RAW_FIELD), str):
             return load_raw_data(rec.root, fr.extra)
-        meas = rec.measurement(i)
+        meas = rec.measurement(i)  # linear DN (a tone-mapped frame's curve already undone)
         if meas.ndim == 2:
             meas = meas[..., None]
-        if meas.shape[2] != 3:
+        layout = channel_layout(self.profile)
+        want = len(self.profile.sensor.channels)
+        if meas.shape[2] != want:
             raise RecordingError(
-                f"{fr.measurement}: {meas.shape[2]} channels; replay needs R, G, B measurements"
+                f"{fr.measurement}: {meas.shape[2]} channels; replay needs the profile's {want} "
+                f"({', '.join(self.profile.sensor.channels)})"
             )
+        if self.profile.sensor.tone_curve is not None:
+            # deliver what the camera delivered: to_measurement undoes the curve again
+            meas = encode_tone(meas, self.profile).astype(np.float32)
         suffix = "16" if meas.dtype == np.uint16 else "8" if meas.dtype == np.uint8 else "32f"
-        if self.pattern == "none":
+        if layout == "mono":
+            return np.ascontiguousarray(meas[..., 0]), f"Mono{suffix}"
+        if self.pattern == "none" and layout == "binned":
             return np.ascontiguousarray(meas), f"RGB{suffix}"
+        pattern = "RGGB" if self.pattern == "none" else self.pattern
         fmt = {"RGGB": "BayerRG", "BGGR": "BayerBG", "GRBG": "BayerGR", "GBRG": "BayerGB"}
-        return mosaic_from_rgb(meas, self.pattern), f"{fmt[self.pattern]}{suffix}"
+        mosaic = mosaic_from_planes(meas, pattern) if layout == "planes" else mosaic_from_rgb(meas, pattern)
+        return mosaic, f"{fmt[pattern]}{suffix}"
 
     def read(self, timeout_s: float = 2.0) -> RawFrame:
         """The next recorded frame, at its recorded time (``rate: recorded``) or at once.

@@ -1,4 +1,5 @@
-"""The virtual camera: simulated ThinTact frames as a Bayer ``RGGB`` mosaic.
+"""The virtual camera: simulated ThinTact frames as a Bayer ``RGGB`` mosaic (a plain frame for
+a monochrome profile; distinct Gr and Gb sites for a profile with per-site planes).
 
 Settings (``profile.camera.settings`` merged with the factory's ``settings``):
 
@@ -15,6 +16,9 @@ Settings (``profile.camera.settings`` merged with the factory's ``settings``):
 ``white_level_dn``  DN above black of the brightest all-white pixel at 10 000 us
                     (default 0.6·(saturation - black)).
 ``exposure_us``     exposure (default 10 000 us); the signal scales linearly with it.
+
+A profile declaring ``sensor.tone_curve`` gets frames encoded with that curve (as a camera's
+ISP would); :func:`thintact_sdk.capture.to_measurement` undoes it.
 """
 
 from __future__ import annotations
@@ -26,13 +30,20 @@ from typing import Any
 import numpy as np
 from pydantic import Field
 
-from thintact_sdk.algorithms import SCENE_LIBRARY, Simulator, make_scene, signal_to_dn
-from thintact_sdk.bayer import mosaic_from_rgb
+from thintact_sdk.algorithms import (
+    SCENE_LIBRARY,
+    Simulator,
+    make_scene,
+    scene_for_channels,
+    signal_to_dn,
+)
+from thintact_sdk.bayer import mosaic_from_planes, mosaic_from_rgb
 from thintact_sdk.camera_settings import CameraSettings, parse_camera_settings
 from thintact_sdk.errors import DeviceError, ThinTactError, UnsupportedFeatureError
 from thintact_sdk.frames import RawFrame
 from thintact_sdk.interfaces import Camera, CameraCapabilities, Range
 from thintact_sdk.profile import Profile
+from thintact_sdk.tone_curve import encode as encode_tone
 from thintact_sdk.virtual_bench import REFERENCE_EXPOSURE_US, get_scene_slot, white_level_dn
 from thintact_virtual.tactile_scenes import CYCLE, TACTILE_SCENE, tactile_scene
 
@@ -90,7 +101,10 @@ class VirtualCamera(Camera):
         self._is_open = False
         self._level: float | None = None
         nz = profile.noise
-        self.pixel_format = "BayerRG12" if nz.saturation_dn <= 4095 else "BayerRG16"
+        bits = 12 if nz.saturation_dn <= 4095 else 16
+        mono = len(profile.sensor.channels) == 1
+        self.pixel_format = f"Mono{bits}" if mono else f"BayerRG{bits}"
+        self._site = 1 if mono else 2  # raw pixels per measurement pixel along each axis
 
     @staticmethod
     def _check_exposure(exposure_us: float) -> None:
@@ -115,8 +129,8 @@ class VirtualCamera(Camera):
 
     def capabilities(self) -> CameraCapabilities:
         return CameraCapabilities(
-            width=2 * self.profile.sensor.cols,
-            height=2 * self.profile.sensor.rows,
+            width=self._site * self.profile.sensor.cols,
+            height=self._site * self.profile.sensor.rows,
             pixel_formats=[self.pixel_format],
             pixel_format=self.pixel_format,
             fps=self.fps or None,
@@ -162,9 +176,11 @@ class VirtualCamera(Camera):
                                                  self.gain_dn_per_unit)[0]
         rng = self._rng if self.noise else None
         dn = signal_to_dn(signal, self.profile.noise, rng, saturation_dn=self._level)
+        if self.profile.sensor.tone_curve is not None:  # the camera's ISP encodes it
+            dn = np.clip(encode_tone(dn, self.profile), 0, self.profile.noise.saturation_dn)
         dn16 = np.round(dn).astype(np.uint16)
         frame = RawFrame(
-            data=mosaic_from_rgb(dn16, "RGGB"),
+            data=self._mosaic(dn16),
             timestamp_ns=time.monotonic_ns(),
             frame_id=self._frame_id,
             pixel_format=self.pixel_format,
@@ -177,6 +193,12 @@ class VirtualCamera(Camera):
         return frame
 
     # -- rendering ------------------------------------------------------------------------
+    def _mosaic(self, dn: np.ndarray) -> np.ndarray:
+        """The sensor's raw frame: an RGGB mosaic, or the plain frame of a monochrome sensor."""
+        if dn.shape[2] == 1:
+            return dn[..., 0]
+        return mosaic_from_planes(dn, "RGGB") if dn.shape[2] == 4 else mosaic_from_rgb(dn, "RGGB")
+
     def _current_scene(self) -> tuple[np.ndarray, tuple[Any, ...]]:
         version, slot_scene = get_scene_slot(self.slot_key).snapshot()
         if slot_scene is not None:
@@ -213,6 +235,7 @@ class VirtualCamera(Camera):
                 f"virtual camera: scene shape {x.shape} does not match the profile's "
                 f"{self.profile.scene.rows}×{self.profile.scene.cols}×3"
             )
+        x = scene_for_channels(x, len(self.profile.sensor.channels))  # mono, R/Gr/Gb/B
         lin = self._sim.linear_batch(x[None])[0]
         self._linear_cache[key] = lin
         limit = max(2, int(256e6 // max(lin.nbytes, 1)))

@@ -18,7 +18,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         "simulate",
         help="simulate sensor images of scenes with a profile's physics",
         description=(
-            "Simulate F scenes (F×N×M×C float .npy, display values) with a device profile. "
+            "Simulate F scenes (F×N×M×C float .npy, display values; RGB or grey scenes are "
+            "shown to a monochrome or R/Gr/Gb/B sensor as its channels) with a device profile. "
             "Writes F×R×S×C float64: noiseless irradiance in simulator units, or with --noise "
             "raw DN (black level included) with Poisson + read noise, rounded and clipped."
         ),
@@ -71,6 +72,11 @@ def run(args: argparse.Namespace) -> int:
     profile = load_profile(args.profile)
     scenes = _load_scenes(args.scenes)
     want = (profile.scene.rows, profile.scene.cols, len(profile.sensor.channels))
+    if scenes.shape[1:3] == want[:2] and scenes.shape[3] in (1, 3) and scenes.shape[3] != want[2]:
+        from thintact_sdk.imaging.filter_training import scene_for_channels
+
+        # what the LCD shows (RGB or grey) as this sensor's channels: mono, R/Gr/Gb/B
+        scenes = np.stack([scene_for_channels(x, want[2]) for x in scenes])
     if scenes.shape[1:] != want:
         raise ThinTactError(
             f"scenes have shape {scenes.shape[1:]} per frame but profile {profile.name!r} "
