@@ -12,6 +12,7 @@ import json
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -157,7 +158,7 @@ def _capture_step(
 ) -> None:
     scene = step.make()
     frame = show_and_capture(display, camera, profile, scene, settings.frames, settings.flush)
-    extra: dict[str, object] = {
+    extra: dict[str, Any] = {
         "kind": step.kind,
         "frames": frame.frames,
         "saturated_fraction": frame.saturated_fraction,
