@@ -10,6 +10,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+from scipy.ndimage import gaussian_filter
 
 from thintact_sdk.errors import CalibrationError, ThinTactError
 from thintact_sdk.tactile.calibration import find_press_circle
@@ -43,7 +44,7 @@ def load_presses(path: str | Path) -> RealPresses:
 def initial_presses(images: np.ndarray, reference: np.ndarray, ball_radius_mm: float,
                     mm_per_px: float) -> list[Press]:
     """First nuisances from the images alone: the press circle in the colour change
-    (:func:`thintact_sdk.tactile.calibration.find_press_circle`) and the depth of a ball cap
+    (:func:`thintact_sdk.tactile.calibration.find_press_circle`, after a 1.5 px blur) and the depth of a ball cap
     with that contact radius.
 
     Raises
@@ -54,7 +55,8 @@ def initial_presses(images: np.ndarray, reference: np.ndarray, ball_radius_mm: f
     out = []
     for i, img in enumerate(images):
         try:
-            (row, col), radius_px = find_press_circle(img - reference)
+            change = gaussian_filter(img - reference, (1.5, 1.5, 0))  # per-pixel noise down
+            (row, col), radius_px = find_press_circle(change)
         except CalibrationError as exc:
             raise ThinTactError(f"press {i}: {exc}") from None
         a = min(radius_px * mm_per_px, 0.9 * ball_radius_mm)

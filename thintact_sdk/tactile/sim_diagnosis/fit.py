@@ -227,7 +227,7 @@ def _window(shape: tuple[int, int], press: Press, half: int) -> tuple[slice, sli
 
 
 def fit_presses(model: TactileModel, data: PressData, presses: list[Press],
-                max_iter: int = 60) -> list[Press]:
+                max_iter: int = 150) -> list[Press]:
     """Refit each press's centre and depth under ``model`` (Nelder–Mead on a window of
     ±(ball radius + 4 σ_e + 4 px) around it; centres within ±1 ball radius of the start,
     depths 0.02 mm .. 0.95 ball radius)."""

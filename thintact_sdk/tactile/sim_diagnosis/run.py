@@ -6,7 +6,8 @@
    σ_e = 0.25 mm) with one gain per channel (a nuisance, never a finding).
 3. Greedy forward selection over the vocabulary (:mod:`.vocabulary`): every effect not yet
    in the model is added and fitted; the one with the lowest BIC is accepted when it lowers
-   BIC by more than ``min_delta_bic`` and χ²/dof by more than ``min_rel_gain``. After an
+   BIC by more than ``min_delta_bic`` and explains at least ``min_excess_share`` of the
+   excess χ²/dof left (χ²/dof − 1). After an
    effect is accepted, the press nuisances are refitted under the new model, but only once the
    model carries fitted lights (``led_directions``): the baseline's light layout belongs to
    another sensor, and fitting press positions to it moves them away from the true ones.
@@ -47,7 +48,7 @@ class TactileDiagnosisOptions:
 
     max_effects: int = 8
     min_delta_bic: float = 10.0
-    min_rel_gain: float = 0.002
+    min_excess_share: float = 0.02
     unexplained_chi2: float = 1.5
     effects: tuple[str, ...] = tuple(PROPOSERS)
 
@@ -73,11 +74,13 @@ def _stats_json(s: Score) -> dict[str, float]:
             "bic": round(s.bic, 1)}
 
 
-def _fit_with_presses(m: TactileModel, data: PressData, presses: list[Press]
+def _fit_with_presses(m: TactileModel, data: PressData, presses: list[Press], passes: int = 1
                       ) -> tuple[TactileModel, list[Press], list[Normals]]:
-    presses = fit_presses(m, data, presses)
-    nrm = all_normals(data, presses, m.sigma_mm)
-    return fit_linear(m, data, nrm, iterations=5), presses, nrm
+    for _ in range(passes):
+        presses = fit_presses(m, data, presses)
+        nrm = all_normals(data, presses, m.sigma_mm)
+        m = fit_linear(m, data, nrm, iterations=5)
+    return m, presses, nrm
 
 
 def diagnose_tactile(
@@ -137,7 +140,8 @@ def diagnose_tactile(
         rounds.append(row)
         good = {k for k, v in tried.items()
                 if v[0].bic - current.bic < -opts.min_delta_bic
-                and v[0].chi2_per_dof < current.chi2_per_dof * (1 - opts.min_rel_gain)}
+                and current.chi2_per_dof - v[0].chi2_per_dof
+                > opts.min_excess_share * max(current.chi2_per_dof - 1.0, 0.0)}
         if findings:
             findings[-1]["alternatives"] = sorted(significant_before - good - {findings[-1]["effect"]})
         if not good:
@@ -146,7 +150,8 @@ def diagnose_tactile(
         significant_before = good - {best}
         sc, model, normals = tried[best]
         if "led_directions" in model.effects:
-            model, presses, normals = _fit_with_presses(model, data, presses)
+            model, presses, normals = _fit_with_presses(
+                model, data, presses, passes=2 if best == "led_directions" else 1)
             sc = score(model, data, normals)[0]
         delta = sc.bic - current.bic
         findings.append({
@@ -160,6 +165,9 @@ def diagnose_tactile(
         })
         say(f"accepted {best}: χ²/dof {sc.chi2_per_dof:.3f}")
         current = sc
+    accepted = {f["effect"] for f in findings}
+    for f in findings:  # an effect accepted later is not an alternative
+        f["alternatives"] = [a for a in f["alternatives"] if a not in accepted]
     final_score, final_pred = score(model, data, normals)
     final_loc = locate_residual(images, final_pred, variance(model, data, final_pred), data.valid,
                                 normals)
