@@ -90,6 +90,7 @@ def diagnose_tactile(
     indices: list[int] | None = None,
     options: TactileDiagnosisOptions | None = None,
     progress: Callable[[str], None] | None = None,
+    exclude: np.ndarray | None = None,
 ) -> TactileDiagnosis:
     """Diagnose the tactile simulation against real ball presses.
 
@@ -101,6 +102,9 @@ def diagnose_tactile(
         The indenter (known) and the image pixel size.
     indices
         Presses to use (default all); the others are never looked at.
+    exclude
+        Optional ``P × H × W`` boolean pixels to leave out of every fit (e.g. markers), one
+        frame per press used.
     """
     opts = options or TactileDiagnosisOptions()
     say = progress or (lambda _m: None)
@@ -110,7 +114,10 @@ def diagnose_tactile(
     reference = real.reference.astype(np.float64)
     presses = initial_presses(images, reference, ball_radius_mm, mm_per_px)
     sigma = estimate_noise(images, presses, ball_radius_mm, mm_per_px)
-    data = PressData(images, reference, clipped_mask(images), sigma, mm_per_px, ball_radius_mm)
+    valid = clipped_mask(images)
+    if exclude is not None:
+        valid &= ~np.asarray(exclude, bool)[..., None]
+    data = PressData(images, reference, valid, sigma, mm_per_px, ball_radius_mm)
     model = TactileModel()
     normals = all_normals(data, presses, model.sigma_mm)
     model = fit_linear(model, data, normals)
