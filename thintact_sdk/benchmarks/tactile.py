@@ -155,7 +155,7 @@ def _print_concealed(rows: list[Any], diag: dict[str, Any], seconds: float) -> N
     print(f"\nConcealed tactile effects through the lensless path (4 mm sphere; scenes × field "
           f"1 + {CONCEALED_FIELD[0, 1]:g}y {CONCEALED_FIELD[0, 2]:+g}x (R; G, B alike), exposure "
           f"sd {CONCEALED_EXPOSURE_SD:g}, emission γ {CONCEALED_GAMMA:g}; diagnosis on 8 "
-          f"reconstructed 3 mm-ball presses, markers masked, χ²/dof "
+          f"reconstructed 3 mm-ball presses (plain and concealed), markers masked, χ²/dof "
           f"{diag['baseline']['chi2_per_dof']:.2f} → {diag['final']['chi2_per_dof']:.2f}; "
           f"named: {named}; {seconds:.1f} s)")
     print(f"{'depth':>6s} {'no effects':>11s} {'concealed':>10s} {'corrected':>10s}")

@@ -4,15 +4,18 @@
 The membrane's scenes get effects the SDK's tactile simulation leaves out (an illumination
 field, a per-frame exposure drift, a response γ of the emitted light), are imaged by the
 virtual camera and decoded. The diagnosis (:func:`.run.diagnose_tactile`) is run on
-reconstructed presses of a calibration ball with the markers masked out, and its fitted model
-corrects the test presses (:func:`.correction.correct_frames`) before the sensor's LUT (which
-was calibrated on the plain simulation through the same path) reads them.
+reconstructed presses of a calibration ball with the markers masked out, twice: on the plain
+scenes (what the path itself does: the decoder's contrast loss and blur) and on the concealed
+ones. The correction inverts the second model (:func:`.correction.correct_frames`) and applies
+the first (background and response of the plain path), so the sensor's LUT, calibrated on the
+plain simulation through the same path, reads what it was calibrated on.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -71,21 +74,34 @@ def evaluate_concealed(sensor: object, show: Callable[[np.ndarray | None], None]
     ref = image(conceal(sim.flat().scene, ones), 4)
     ball = 1.5
     half = (p.cols / 2 * p.mm_per_px - 2 * ball, p.rows / 2 * p.mm_per_px - 2 * ball)
-    imgs, masks = [], []
+    calib = []
     for _ in range(calibration_presses):
         centre = (float(rng.uniform(-half[0], half[0])), float(rng.uniform(-half[1], half[1])))
-        sc = sim.press(Sphere(ball), float(rng.uniform(0.4, 1.0)), centre).scene
-        img = image(conceal(sc, 1 + CONCEALED_EXPOSURE_SD * rng.standard_normal(3)))
-        imgs.append(img)
-        masks.append(detect_markers(img, p).mask)
-    real = RealPresses(np.stack(imgs).astype(np.float32), ref.astype(np.float32), "lensless path")
-    diag = diagnose_tactile(real, ball, p.mm_per_px, exclude=np.stack(masks),
-                            options=TactileDiagnosisOptions(effects=(
-                                "illumination_field", "exposure_drift", "camera_gamma",
-                                "elastomer_blur")))
+        calib.append(sim.press(Sphere(ball), float(rng.uniform(0.4, 1.0)), centre).scene)
+    effects = ("illumination_field", "exposure_drift", "camera_gamma", "elastomer_blur")
+
+    def diagnose(scenes: list[np.ndarray], reference: np.ndarray) -> Any:
+        imgs = [image(sc) for sc in scenes]
+        masks = np.stack([detect_markers(im, p).mask for im in imgs])
+        real = RealPresses(np.stack(imgs).astype(np.float32), reference.astype(np.float32),
+                           "lensless path")
+        return diagnose_tactile(real, ball, p.mm_per_px, exclude=masks,
+                                options=TactileDiagnosisOptions(effects=effects))
+
+    # the path's own response (decoder contrast and blur) is diagnosed on the plain scenes and
+    # kept; only what the concealed scenes add is inverted
+    path = diagnose(calib, plain_ref).final
+    diag = diagnose([conceal(sc, 1 + CONCEALED_EXPOSURE_SD * rng.standard_normal(3))
+                     for sc in calib], ref)
     model = diag.final
-    flat = sim.flat().scene.reshape(-1, 3).max(axis=0)
-    corr_ref = correct_frames(model, ref[None], ref, ball, p.mm_per_px)[0] * flat
+    h, w = ref.shape[:2]
+    path_bg = path.background(polynomial_basis(h, w, path.field_order), np.zeros((h, w, 3)))
+
+    def correct(img: np.ndarray) -> np.ndarray:
+        shading = correct_frames(model, img[None], ref, ball, p.mm_per_px)[0]
+        return path.respond(path_bg * shading).astype(np.float32)
+
+    corr_ref = correct(ref)
     rows = []
     for depth in depths_mm:
         e_plain, e_conc, e_corr = [], [], []
@@ -98,10 +114,8 @@ def evaluate_concealed(sensor: object, show: Callable[[np.ndarray | None], None]
             img = image(conceal(truth.scene, 1 + CONCEALED_EXPOSURE_SD * rng.standard_normal(3)))
             interp.set_reference(ref.astype(np.float32))
             e_conc.append(depth_rms(interp.depth_from_image(img), truth.depth_mm, thr))
-            corrected = correct_frames(model, img[None], ref, 2.0, p.mm_per_px)[0] * flat
-            interp.set_reference(corr_ref.astype(np.float32))
-            e_corr.append(depth_rms(interp.depth_from_image(corrected.astype(np.float32)),
-                                    truth.depth_mm, thr))
+            interp.set_reference(corr_ref)
+            e_corr.append(depth_rms(interp.depth_from_image(correct(img)), truth.depth_mm, thr))
         rows.append(ConcealedRow(depth, float(np.nanmean(e_plain)), float(np.nanmean(e_conc)),
                                  float(np.nanmean(e_corr)), presses))
     show(None)
