@@ -119,10 +119,6 @@ def _mean_psnr(out_dir: Path, rec: Recording) -> float:
     return float(np.mean(values))
 
 
-@pytest.mark.xfail(strict=False, reason=(
-    "since the rotated mask is simulated exactly (issue 17's separable rotated kernel), this "
-    "recording's 0.03 deg rotation costs the cross-validated tau 0.41 dB: default 28.69 dB, "
-    "hindsight 29.10 dB, Alg. 1-3 + exact T2S 29.16 dB (2026-11-23); issue 12 stays open on it"))
 def test_default_reconstruct_is_near_the_best_tau_and_beats_the_paper_pipeline(
         healthy: tuple[Path, Path, Path], tmp_path: Path) -> None:
     rec_dir, cal, test_dir = healthy
@@ -133,7 +129,8 @@ def test_default_reconstruct_is_near_the_best_tau_and_beats_the_paper_pipeline(
     bundle = CalibrationBundle.load(cal)
     profile = test.profile
     dark = np.asarray(test.measurement(0), np.float64)
-    frames = [(signal_of(test, i, dark, None)[0].astype(np.float32), test.scene(i)) for i in range(1, len(test))]
+    frames = [(signal_of(test, i, dark, None)[0].astype(np.float32), np.asarray(test.scene(i)))
+              for i in range(1, len(test))]
     taus = np.geomspace(1e2, 1e7, 41)
 
     def best(decoder: object) -> float:

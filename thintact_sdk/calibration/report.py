@@ -101,8 +101,8 @@ def _tau_figure(outcome: CalibrationOutcome) -> str | None:
     sel = outcome.selection
     if sel is None or not sel.curves:
         return None
-    psnr_curves = [c for c in sel.curves if c.unit == "mean PSNR dB"]
-    noise_curves = [c for c in sel.curves if c.unit != "mean PSNR dB"]
+    psnr_curves = [c for c in sel.curves if c.unit.startswith("mean PSNR dB")]
+    noise_curves = [c for c in sel.curves if not c.unit.startswith("mean PSNR dB")]
     fig, axes = plt.subplots(1, 2, figsize=(11, 3.4), layout="constrained")
     for c in psnr_curves:
         line = axes[0].semilogx(c.taus, c.values, ".-", label=c.criterion)[0]

@@ -6,7 +6,11 @@ Three criteria, each a curve over a log grid of τ:
     The validation scenes are split into two folds (identical scenes, e.g. ``white`` and
     ``val_white``, always in the same fold). τ is tuned on one fold and the other fold is
     scored with it, and vice versa: the held-out PSNR of every scene comes from a τ that never
-    saw that scene. The τ written into the bundle is then the best over all scenes.
+    saw that scene. The τ written into the bundle is then the best over all scenes. Every
+    *distinct* scene weighs the same in these means: repeats of one scene (the recording's
+    ``white`` and the wizard's ``val_white``) share one scene's weight. Counted twice, the
+    white scene — whose PSNR still rises 7 dB between the τ the presses want and 5× that —
+    pulled the choice to 6.8e4 DN² and cost unseen scenes 0.35 dB (docs/calibration.md).
 ``gcv``
     Generalised cross-validation, which needs no scene: ``GCV(τ) = mean(r²/σ²) / (1 − tr(H)/n)²``
     with ``r = Y − A X̂_τ`` the residual of the full T2S model, ``σ²`` the noise model's
@@ -138,16 +142,32 @@ def refine(taus: np.ndarray, best: float) -> np.ndarray:
     return np.unique(np.concatenate([taus, fine]))
 
 
+def _scene_key(x: np.ndarray) -> str:
+    return hashlib.sha1(np.ascontiguousarray(np.asarray(x, np.float32)).tobytes()).hexdigest()
+
+
 def assign_folds(scenes: Sequence[np.ndarray]) -> list[int]:
     """Fold 0 or 1 for each scene: distinct scenes alternate, identical scenes share a fold."""
     keys: dict[str, int] = {}
     out = []
     for x in scenes:
-        key = hashlib.sha1(np.ascontiguousarray(np.asarray(x, np.float32)).tobytes()).hexdigest()
+        key = _scene_key(x)
         if key not in keys:
             keys[key] = len(keys) % 2
         out.append(keys[key])
     return out
+
+
+def scene_weights(scenes: Sequence[np.ndarray]) -> np.ndarray:
+    """Weight of each scene in a τ criterion: ``1 / (copies of that scene)``, so every
+    distinct scene counts once however often it was recorded."""
+    keys = [_scene_key(x) for x in scenes]
+    return np.array([1.0 / keys.count(k) for k in keys])
+
+
+def weighted_mean(table: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """Weighted mean over the rows of ``table`` (scenes × τ)."""
+    return np.asarray((weights[:, None] * table).sum(axis=0) / weights.sum())
 
 
 def _psnr_table(decoder: Any, signals: Sequence[np.ndarray], truths: Sequence[np.ndarray],
@@ -179,22 +199,23 @@ def cross_validate(decoder: Any, name: str, signals: Sequence[np.ndarray],
         τ grid (DN²).
     """
     folds = assign_folds(truths)
-    distinct = {(f, hashlib.sha1(np.ascontiguousarray(np.asarray(x, np.float32)).tobytes()).hexdigest())
-                for f, x in zip(folds, truths, strict=True)}
+    weights = scene_weights(truths)
+    distinct = {(f, _scene_key(x)) for f, x in zip(folds, truths, strict=True)}
     if any(sum(1 for f, _ in distinct if f == fold) < min_per_fold for fold in (0, 1)):
         return None
     fold_arr = np.asarray(folds)
     table = _psnr_table(decoder, signals, truths, taus)
-    fine = refine(taus, float(taus[int(np.argmax(table.mean(axis=0)))]))
+    fine = refine(taus, float(taus[int(np.argmax(weighted_mean(table, weights)))]))
     extra = np.setdiff1d(fine, taus)
     taus = np.concatenate([taus, extra])
     table = np.concatenate([table, _psnr_table(decoder, signals, truths, extra)], axis=1)
     order = np.argsort(taus)
     taus, table = taus[order], table[:, order]
-    fold_tau = [float(taus[int(np.argmax(table[fold_arr == f].mean(axis=0)))]) for f in (0, 1)]
-    mean = table.mean(axis=0)
+    fold_tau = [float(taus[int(np.argmax(weighted_mean(table[fold_arr == f], weights[fold_arr == f])))])
+                for f in (0, 1)]
+    mean = weighted_mean(table, weights)
     curve = TauCurve("cross-validation", [float(t) for t in taus], [float(v) for v in mean],
-                     float(taus[int(np.argmax(mean))]), "mean PSNR dB",
+                     float(taus[int(np.argmax(mean))]), "mean PSNR dB (each distinct scene once)",
                      f"two folds of {int(np.sum(fold_arr == 0))} and {int(np.sum(fold_arr == 1))} "
                      "scenes; each scene is scored with the tau tuned on the other fold")
     out = CrossValidation(name, curve, list(labels), folds, fold_tau)
