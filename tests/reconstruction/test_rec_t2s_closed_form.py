@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from thintact_decoders import ArrayBackend, T2SClosedFormDecoder, T2SIterativeDecoder
 
+from thintact_sdk.errors import InvalidValueError
 from thintact_sdk.imaging.t2s import SystemMatrices
 
 
@@ -130,3 +131,23 @@ def test_exact_in_any_gauge_of_the_same_operator() -> None:
     dec = T2SClosedFormDecoder(mixed, tau, ArrayBackend("numpy", "float64"), max_open_rank=4)
     assert max(dec.info["dropped_open_sv"][0]) < 1e-3
     np.testing.assert_allclose(dec.decode(y), exact, atol=1e-4 * np.abs(exact).max())
+
+
+def test_a_tau_per_channel_decodes_each_channel_at_its_own_tau() -> None:
+    from thintact_decoders import NonIterativeDecoder
+
+    sm = _low_rank_open_matrices(5)
+    rng = np.random.default_rng(6)
+    y = sm.forward(rng.random((*sm.scene_shape, 2))) + rng.standard_normal((*sm.sensor_shape, 2)) * 0.5
+    be = ArrayBackend("numpy", "float64")
+    for make in (lambda t: T2SClosedFormDecoder(sm, t, be), lambda t: NonIterativeDecoder(sm, None, t, be)):
+        both = make([0.01, 30.0])
+        np.testing.assert_allclose(both.decode(y)[..., 0], make(0.01).decode(y)[..., 0], rtol=1e-6, atol=1e-9)
+        np.testing.assert_allclose(both.decode(y)[..., 1], make(30.0).decode(y)[..., 1], rtol=1e-6, atol=1e-9)
+        changed = make(1.0)
+        changed.set_tau([0.01, 30.0])
+        np.testing.assert_allclose(changed.decode(y), both.decode(y), rtol=1e-6, atol=1e-9)
+        with pytest.raises(InvalidValueError):
+            changed.set_tau([1.0, 2.0, 3.0])  # three values for two channels
+        with pytest.raises(InvalidValueError):
+            changed.set_tau([1.0, 0.0])

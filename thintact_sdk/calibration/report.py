@@ -201,7 +201,34 @@ def _selection_text(outcome: CalibrationOutcome) -> str:
             f"<b>{html.escape(sel.criterion)}</b>. Cross-validation tunes τ on one fold of the validation "
             "scenes and scores the other fold with it, so no scene is scored with a τ tuned on it.</p>"
             + _table(rows, ["decoder", "τ (DN²)", "held-out mean PSNR (dB)"])
+            + _channel_tau_text(outcome)
             + "<p>τ each criterion would choose:</p>" + _table(crit, ["criterion", "τ (DN²)", "note"]))
+
+
+def _channel_tau_text(outcome: CalibrationOutcome) -> str:
+    """The per-channel τ check: each fold's τ per channel, the held-out means with one τ and
+    with a τ per channel, and what the bundle uses."""
+    sel = outcome.selection
+    if sel is None:
+        return ""
+    rows = []
+    for name, cv in sel.cross_validation.items():
+        if not cv.channel_fold_tau:
+            continue
+        used = ("per channel: " + ", ".join(f"{t:.4g}" for t in cv.channel_tau)) if cv.channel_tau else "one τ"
+        tuned = np.asarray(cv.channel_fold_tau)
+        ranges = ", ".join(f"{lo:.3g}–{hi:.3g}" for lo, hi in zip(tuned.min(axis=0), tuned.max(axis=0), strict=True))
+        gain = cv.held_out_channel_db - cv.held_out_shared_db
+        rows.append([name, ranges, f"{cv.held_out_shared_db:.2f}", f"{cv.held_out_channel_db:.2f}",
+                     f"{gain:+.2f} ± {cv.channel_gain_se_db:.2f}", used])
+    if not rows:
+        return ""
+    return ("<p>τ per channel: leaving out one distinct validation scene at a time, one τ and one τ per "
+            "channel are tuned on the others and the left-out scene is scored with both; the bundle "
+            "keeps a τ per channel only when the mean gain exceeds its standard error.</p>"
+            + _table(rows, ["decoder", "τ per channel tuned without each scene (DN², range)",
+                            "held out, one τ (dB)", "held out, τ per channel (dB)", "gain ± s.e. (dB)",
+                            "bundle uses"]))
 
 
 def _validation_table(outcome: CalibrationOutcome) -> str:

@@ -36,7 +36,13 @@ import numpy as np
 
 from thintact_decoders.backend import ArrayBackend, synthesis_macs
 from thintact_decoders.closed_form_base import ClosedFormDecoder
-from thintact_decoders.modes import DEFAULT_MODE_RTOL, kept_mode_counts
+from thintact_decoders.modes import (
+    DEFAULT_MODE_RTOL,
+    TauSpec,
+    channel_taus,
+    kept_mode_counts,
+    representative_tau,
+)
 from thintact_sdk.algorithms import (
     SystemMatrices,
     TikhonovSolver,
@@ -44,7 +50,7 @@ from thintact_sdk.algorithms import (
     largest_eigenvalue,
     nesterov,
 )
-from thintact_sdk.errors import InvalidShapeError, InvalidValueError
+from thintact_sdk.errors import InvalidShapeError
 
 
 def _truncated_svd(a: np.ndarray, rtol: float, max_rank: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -81,7 +87,7 @@ class T2SClosedFormDecoder(ClosedFormDecoder):
     def __init__(
         self,
         system_matrices: SystemMatrices,
-        tau: float,
+        tau: TauSpec,
         backend: ArrayBackend | None = None,
         open_rtol: float = 1e-6,
         max_open_rank: int = 8,
@@ -93,7 +99,8 @@ class T2SClosedFormDecoder(ClosedFormDecoder):
         if r < n or s < m:
             raise InvalidShapeError("t2s-closed-form needs at least as many sensor rows/cols as scene rows/cols")
         self.channels, self.sensor_shape, self.scene_shape = sm.channels, (r, s), (n, m)
-        self.tau = float(tau)
+        self.channel_tau = channel_taus(tau, sm.channels)
+        self.tau = representative_tau(self.channel_tau)
         svds = []
         for c in range(sm.channels):
             up, sp, vpo = _truncated_svd(sm.Po[c].astype(np.float64), open_rtol, max_open_rank)
@@ -109,14 +116,14 @@ class T2SClosedFormDecoder(ClosedFormDecoder):
         for c in range(sm.channels):
             up, sp, vpo = _pad(*svds[c][:3], kp)
             uq, sq, vqo = _pad(*svds[c][3:], kq)
-            sol = TikhonovSolver(sm.Pc[c], sm.Qc[c], self.tau, np.float64)
+            sol = TikhonovSolver(sm.Pc[c], sm.Qc[c], float(self.channel_tau[c]), np.float64)
             # scene images of F and G expressed in the SVD bases of Pc, Qc (separable there)
             a, b = sol.vp.T @ vpo, sol.vqt @ vqo  # kP × kp, kQ × kq
             a2, b2 = (sol.left @ up) * sp, (sol.right.T @ uq) * sq  # Vpᵀ Pcᵀ u s, Vqᵀ Qcᵀ u s
             sig2 = np.outer(sol.singular_values_p**2, sol.singular_values_q**2)
             part = (np.concatenate([a, a2], 1), np.concatenate([b, b2], 1), np.outer(sp**2, sq**2), sig2)
             self._parts.append(part)
-            per["small"].append(_small_inverse(part, kp, kq, self.tau))
+            per["small"].append(_small_inverse(part, kp, kq, float(self.channel_tau[c])))
             per["left"].append(sol.left)  # kP × R
             per["up_t"].append(up.T)  # kp × R
             per["right"].append(sol.right)
@@ -142,7 +149,7 @@ class T2SClosedFormDecoder(ClosedFormDecoder):
         self._sp, self._sq = np.stack(per["sp"]), np.stack(per["sq"])  # C × kP, C × kQ
         self._full_modes = (self._coding_left.shape[1], self._coding_right.shape[2])
         self.kept_modes = (0, 0)
-        self._place(*kept_mode_counts(self._sp, self._sq, self.tau, self.mode_rtol))
+        self._place(*kept_mode_counts(self._sp, self._sq, self.channel_tau, self.mode_rtol))
         self._uq = xp.asarray(np.stack(per["uq"]), gemm=True)  # C × S × kq
         st = {key: xp.asarray(np.stack(per[key]), gemm=key in ("vp", "vqt"))
               for key in ("den", "vp", "vqt", "scale", "a", "b", "a2", "b2", "small", "sig2")}
@@ -171,19 +178,19 @@ class T2SClosedFormDecoder(ClosedFormDecoder):
         woodbury = 3 * (big_p * ko_p * ko_q + big_p * ko_q * big_q) + 2 * (ko_p * big_p * big_q + ko_p * big_q * ko_q)
         return 2 * self.channels * (big + woodbury + synthesis_macs(n, big_p, big_q, m))
 
-    def set_tau(self, tau: float) -> None:
-        """Change τ without recomputing any SVD (only the 2K × 2K system and ``1/(σ² + τ)``;
-        the coding modes kept follow the new τ)."""
-        if tau <= 0:
-            raise InvalidValueError("tau must be > 0")
-        self.tau = float(tau)
-        kept = kept_mode_counts(self._sp, self._sq, self.tau, self.mode_rtol)
+    def set_tau(self, tau: TauSpec) -> None:
+        """Change τ (one value, or one per channel) without recomputing any SVD (only the
+        2K × 2K system and ``1/(σ² + τ)``; the coding modes kept follow the new τ)."""
+        self.channel_tau = channel_taus(tau, self.channels)
+        self.tau = representative_tau(self.channel_tau)
+        kept = kept_mode_counts(self._sp, self._sq, self.channel_tau, self.mode_rtol)
         if kept != self.kept_modes:
             self._place(*kept)
         xp = self.xp
-        self._den = xp.asarray(np.stack([1.0 / (p[3] + self.tau) for p in self._parts]))
-        self._small = xp.asarray(np.stack([_small_inverse(p, self._kp, self._kq, self.tau)
-                                           for p in self._parts]))
+        taus = [float(t) for t in self.channel_tau]
+        self._den = xp.asarray(np.stack([1.0 / (p[3] + t) for p, t in zip(self._parts, taus, strict=True)]))
+        self._small = xp.asarray(np.stack([_small_inverse(p, self._kp, self._kq, t)
+                                           for p, t in zip(self._parts, taus, strict=True)]))
 
     def _linear(self, y: Any) -> tuple[Any, Any]:
         """``(Σ_P U_Pᵀ Y U_Q Σ_Q, Eᵀ Y)`` for channel-first ``y`` (GEMM precision)."""
@@ -241,10 +248,11 @@ class T2SClosedFormDecoder(ClosedFormDecoder):
         rhs = core + self._a @ e @ xp.swap(self._b)  # Aᵀ y in coefficients
         start = xp.asarray(np.random.default_rng(0).standard_normal(tuple(rhs.shape)))
         lam = largest_eigenvalue(self._normal_op, start, power_iterations, xp.sum_squares)
-        step = 1.0 / (2.0 * (lam * 1.02 + self.tau))
+        step = 1.0 / (2.0 * (lam * 1.02 + float(self.channel_tau.max())))
+        tau = xp.asarray(self.channel_tau[:, None, None])
 
         def gradient(z: Any) -> Any:
-            return 2.0 * (self._normal_op(z) - rhs) + (2.0 * self.tau) * z
+            return 2.0 * (self._normal_op(z) - rhs) + (2.0 * tau) * z
 
         x = nesterov(gradient, xp.zeros_like(rhs), step, iterations)
         return xp.synthesise(self._vp, x, self._vqt)
