@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from independent_device import DimColumn, Dust, small_profile, write_recording
+from independent_device import DimColumn, Dust, Ghost, small_profile, write_recording
 
 from thintact_sdk.calibration.collect import collect_slits, signal_of
 from thintact_sdk.calibration.pipeline import CalibrationOptions, solve_matrices
@@ -174,6 +174,7 @@ def test_defective_unit_fails_naming_and_locating_each_defect(defective: tuple[i
     assert "dust speck" in whats and "dim column" in whats
     report = (cal / "report.html").read_text()
     assert "Suggested fix" in report and "dust speck at sensor rows" in report
+    assert "ghost" not in {d["kind"] for d in m["health"]["defects"]}
 
 
 class _ChannelScaledDecoder:
@@ -231,3 +232,28 @@ def test_bundle_tau_per_channel_is_used_unless_tau_is_given(tmp_path: Path) -> N
 
     with pytest.raises(CalibrationError, match="channel_tau"):
         CalibrationBundle.load(tmp_path / "cal")
+
+
+@pytest.fixture(scope="module", params=[Ghost(6, -9, 0.08), Ghost(0, 11, 0.08)], ids=["diagonal", "separable"])
+def ghosted(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory) -> tuple[Ghost, int, Path]:
+    ghost: Ghost = request.param
+    root = tmp_path_factory.mktemp("ghost")
+    write_recording(root / "rec", small_profile(("mono",)), seed=4, defects=[ghost])
+    rc = main(["calibrate", "--from-recording", str(root / "rec"), "--out", str(root / "cal"),
+               "--filter-steps", "0", "--no-progress"])
+    return ghost, rc, root / "cal"
+
+
+def test_a_ghost_fails_the_unit_with_its_offset_and_strength(ghosted: tuple[Ghost, int, Path]) -> None:
+    # a diagonal ghost cannot be separable and raises the slit residuals; one along an axis
+    # is absorbed exactly by the two-term matrices and shows only as an echo of the design
+    ghost, rc, cal = ghosted
+    assert rc == 1
+    m = json.loads((cal / "calibration.json").read_text())["metrics"]
+    ghosts = m["health"]["defects"]
+    assert [d["kind"] for d in ghosts] == ["ghost"]  # its edge band is not taken for dust
+    assert ghosts[0]["offset_px"] == [ghost.rows, ghost.cols]
+    assert ghosts[0]["strength"] == pytest.approx(ghost.strength, abs=0.02)
+    assert "ghost" in [f["what"] for f in m["verdict"]["failures"]]
+    report = (cal / "report.html").read_text()
+    assert f"displaced by {ghost.rows:+d} rows, {ghost.cols:+d} columns" in report and "Ghost search" in report

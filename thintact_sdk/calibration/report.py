@@ -134,7 +134,8 @@ def _health_figure(outcome: CalibrationOutcome, profile: Profile) -> str | None:
     h = outcome.health
     if h is None:
         return None
-    fig, axes = plt.subplots(1, 3, figsize=(15, 3.6), layout="constrained")
+    fig, axes = plt.subplots(1, 4 if h.ghost_scans else 3, figsize=(20 if h.ghost_scans else 15, 3.6),
+                             layout="constrained")
     vals = list(h.slit_chi2.values())
     axes[0].plot(range(len(vals)), vals, ".", ms=3)
     axes[0].axhline(1.0, color="gray", lw=0.8)
@@ -145,6 +146,8 @@ def _health_figure(outcome: CalibrationOutcome, profile: Profile) -> str | None:
     fig.colorbar(im, ax=axes[1], fraction=0.046)
     axes[1].set_title("Slit residual r²/σ² per sensor pixel (defects boxed)", fontsize=9)
     for d in h.defects:
+        if d.kind == "ghost":  # the whole image: its offset is in the ghost panel
+            continue
         axes[1].add_patch(Rectangle((d.col0 - 0.5, d.row0 - 0.5), d.col1 - d.col0, d.row1 - d.row0,
                                     fill=False, ec="cyan", lw=1.5))
         axes[1].annotate(d.kind, (d.col1, d.row0), color="cyan", fontsize=8)
@@ -157,6 +160,18 @@ def _health_figure(outcome: CalibrationOutcome, profile: Profile) -> str | None:
     axes[2].set_ylabel("open response vs neighbours (%)")
     axes[2].set_title("Dim or bright sensor lines", fontsize=9)
     axes[2].legend(fontsize=7)
+    if h.ghost_scans:
+        from thintact_sdk.calibration.ghost import MIN_STRENGTH
+
+        for g in h.ghost_scans:
+            line = axes[3].plot(g.lags, 100 * np.asarray(g.strength), ".-", ms=3, lw=0.8, label=g.name)[0]
+            if g.significant:
+                axes[3].plot([g.lag], [100 * g.value], "o", ms=9, mfc="none", color=line.get_color())
+        axes[3].axhline(100 * MIN_STRENGTH, color="gray", ls=":", lw=1, label="reported from")
+        axes[3].set_xlabel("offset (sensor pixels)")
+        axes[3].set_ylabel("ghost strength (% of the image)")
+        axes[3].set_title("Ghost search (a circle marks a ghost found)", fontsize=9)
+        axes[3].legend(fontsize=7)
     return _png(fig)
 
 
@@ -268,7 +283,14 @@ def _health_section(outcome: CalibrationOutcome, profile: Profile) -> list[str]:
             f"<li>{html.escape(d.describe())}</li>" for d in h.defects) + "</ul>")
     else:
         out.append("<p>No defect located: no structure beyond noise in the slit residuals, no dim or "
-                   "bright sensor line.</p>")
+                   "bright sensor line, no ghost.</p>")
+    if h.ghost_scans:
+        out.append("<p>Ghost search: a faint displaced copy of the image is looked for in the slit frames "
+                   "(not separable: the copy widens the slits' column/row space) and as an echo of the "
+                   "design's coding pattern in the calibrated matrices (separable: absorbed by them). "
+                   "Strongest candidate of each scan:</p>"
+                   + _table([[g.name, f"{g.lag:+d}", f"{100 * g.value:.2f} %", "yes" if g.significant else "no"]
+                             for g in h.ghost_scans], ["scan", "offset (px)", "strength", "ghost"]))
     fig = _health_figure(outcome, profile)
     if fig:
         out.append(f"<img src='{fig}'>")
