@@ -177,13 +177,22 @@ def echo_scan(coding: np.ndarray, design: np.ndarray, design_open: np.ndarray, l
     d = np.gradient(design, axis=0)
     u = (np.arange(design.shape[0]) - design.shape[0] / 2.0)[:, None]
     base = np.stack([m.ravel() for m in (design, d, u * d, design_open, u * design_open)], axis=1)
+    base /= np.maximum(np.linalg.norm(base, axis=0), 1e-300)  # columns of one size: normal equations
+    gram_b = base.T @ base
+    scale_a = float(np.linalg.norm(design))
+    ys = [np.asarray(coding[c], np.float64).ravel() for c in range(coding.shape[0])]
+    bys = [base.T @ y for y in ys]
     values = np.zeros(len(lags))
-    for c in range(coding.shape[0]):
-        y = np.asarray(coding[c], np.float64).ravel()
-        for k, lag in enumerate(lags):
-            a = np.concatenate([base, _shift(design, lag).ravel()[:, None]], axis=1)
-            coef = np.linalg.lstsq(a, y, rcond=None)[0]
-            values[k] += coef[-1] / coef[0] if coef[0] != 0 else 0.0
+    for k, lag in enumerate(lags):  # one shifted design at a time (memory: one S × M array)
+        sh = _shift(design, lag).ravel()
+        norm = max(float(np.linalg.norm(sh)), 1e-300)
+        col = sh / norm
+        bs = base.T @ col
+        a = np.block([[gram_b, bs[:, None]], [bs[None, :], np.array([[col @ col]])]])
+        for y, by in zip(ys, bys, strict=True):
+            coef = np.linalg.lstsq(a, np.append(by, col @ y), rcond=None)[0]
+            # b/a in the design's own units: undo the two columns' normalisations
+            values[k] += (coef[-1] / norm) / (coef[0] / scale_a) if coef[0] != 0 else 0.0
     return GhostScan(name, lags, [float(v) for v in values / coding.shape[0]]).decide()
 
 
