@@ -14,6 +14,7 @@ name                         what it is
 ===========================  ===============================================================
 ``SystemMatrices``           the T2S model ``Y = Po X Qoᵀ + Pc X Qcᵀ`` (C × R × N, C × S × M)
 ``kron_sum_norm2``           squared Frobenius norm of a sum of Kronecker products
+``canonical_gauge``          the same T2S operator with a smooth (low-rank) open term
 ``CalibrationBundle``        a device's calibration (matrices, filter, τ); ``find_latest``
 ``TikhonovSolver``           closed-form separable Tikhonov solve (SVDs once, any τ)
 ``JointFilter``              the paper's Φs/Φf joint filter; ``joint_filter_open`` applies it
@@ -48,6 +49,7 @@ if TYPE_CHECKING:  # the names, for type checkers; at run time they load on firs
     pass
 
 _WHERE = {
+    "canonical_gauge": "calibration.gauge",
     "CalibrationBundle": "imaging.calibration_bundle", "find_latest": "imaging.calibration_bundle",
     "SeparableDCT": "imaging.dct", "dct_matrix": "imaging.dct",
     "AxisGeometry": "imaging.direct_generation", "DirectGenerator": "imaging.direct_generation",

@@ -6,7 +6,8 @@ integration) with a *true* physics that differs from the profile (slightly diffe
 distances, a shifted and slightly rotated mask), the contract's noise (Poisson, read noise,
 rounding, clipping), one capture per scene (no averaging), and optional defects the
 calibration must find: a dust speck (a dark, soft, round spot on the sensor image), a dim
-sensor column.
+sensor column, a ghost (a faint displaced copy of the whole sensor image, as a reflection
+between the mask and the sensor's cover glass makes).
 """
 
 from __future__ import annotations
@@ -49,6 +50,23 @@ class DimColumn:
     gain: float = 0.85
 
 
+@dataclass(frozen=True)
+class Ghost:
+    """A faint copy of the sensor image, ``strength`` times as bright, displaced by
+    ``(rows, cols)`` sensor pixels (linear interpolation for fractions, dark outside)."""
+
+    rows: float
+    cols: float
+    strength: float = 0.05
+
+    def apply(self, signal: np.ndarray) -> np.ndarray:
+        """``signal + strength · shift(signal)`` for an ``R × S × C`` signal."""
+        from scipy import ndimage
+
+        moved = ndimage.shift(signal, (self.rows, self.cols, 0), order=1, mode="constant", cval=0.0)
+        return np.asarray(signal + self.strength * moved)
+
+
 def small_profile(channels: tuple[str, ...] = ("R", "G", "B"), seed: int = 11,
                   rows: int = 64, cols: int = 80, scene: tuple[int, int] = (24, 32)) -> Profile:
     """virtual-mini's optics on a small sensor with a random φ (and a different φ_rows)."""
@@ -74,10 +92,12 @@ def validation_scenes(n: int, m: int) -> list[tuple[str, np.ndarray]]:
     return [(label, np.asarray(x, np.float32)) for label, x in out]
 
 
-def _defect_gain(shape: tuple[int, int], defects: list[Dust | DimColumn]) -> np.ndarray:
+def _defect_gain(shape: tuple[int, int], defects: list[Dust | DimColumn | Ghost]) -> np.ndarray:
     gain = np.ones(shape)
     yy, xx = np.mgrid[0 : shape[0], 0 : shape[1]]
     for d in defects:
+        if isinstance(d, Ghost):
+            continue
         if isinstance(d, Dust):
             gain *= 1.0 - d.depth * np.exp(-((yy - d.row) ** 2 + (xx - d.col) ** 2) / (2 * d.sigma_px**2))
         else:
@@ -86,7 +106,7 @@ def _defect_gain(shape: tuple[int, int], defects: list[Dust | DimColumn]) -> np.
 
 
 def write_recording(root: Path, profile: Profile, *, seed: int = 0, white_fraction: float = 0.7,
-                    defects: list[Dust | DimColumn] | None = None,
+                    defects: list[Dust | DimColumn | Ghost] | None = None,
                     physics: dict[str, dict[str, Any]] | None = None) -> Recording:
     """Dark, white, every row and column slit, validation scenes: one noisy capture each.
 
@@ -101,11 +121,15 @@ def write_recording(root: Path, profile: Profile, *, seed: int = 0, white_fracti
     gain = white_fraction * (nz.saturation_dn - nz.black_level_dn) / float(
         np.max(sim.linear_batch(np.ones((1, n, m, c)))))
     defect = _defect_gain((profile.sensor.rows, profile.sensor.cols), defects or [])[..., None]
+    ghosts = [d for d in defects or [] if isinstance(d, Ghost)]
     rng = np.random.default_rng(seed)
     w = RecordingWriter(root, profile)
 
     def add(scene: np.ndarray, label: str) -> None:
-        signal = sim.predict_signal_dn(scene_for_channels(scene, c), gain) * defect
+        signal = sim.predict_signal_dn(scene_for_channels(scene, c), gain)
+        for ghost in ghosts:  # the reflection happens before the sensor's own defects
+            signal = ghost.apply(signal)
+        signal = signal * defect
         w.add(signal_to_dn(signal, nz, rng).astype(np.uint16), scene, label=label)
 
     zero = np.zeros((n, m, 3), np.float32)

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from thintact_decoders import ArrayBackend, T2SClosedFormDecoder, T2SIterativeDecoder
 
+from thintact_sdk.errors import InvalidValueError
 from thintact_sdk.imaging.t2s import SystemMatrices
 
 
@@ -104,3 +105,49 @@ def test_set_tau_equals_a_fresh_decoder() -> None:
     ni.set_tau(5.0)
     np.testing.assert_allclose(ni.decode(y2), NonIterativeDecoder(sm2, jf, 5.0, ArrayBackend(
         "numpy", "float64")).decode(y2), rtol=1e-6, atol=1e-9)
+
+
+def test_exact_in_any_gauge_of_the_same_operator() -> None:
+    """``[Po Pc]·A``, ``[Qo Qc]·A⁻ᵀ`` is the same device: the decoder must give the same
+    (exact) minimiser although Po, Qo then carry part of the coding term (full rank)."""
+    rng = np.random.default_rng(4)
+    r, s, n, m = 30, 34, 12, 14
+
+    def blur(rows: int, cols: int, width: float) -> np.ndarray:
+        u, v = np.linspace(0, 1, rows)[:, None], np.linspace(0, 1, cols)[None, :]
+        return np.exp(-((u - v) ** 2) / (2 * width**2))
+
+    po, qo = blur(r, n, 0.6)[None], blur(s, m, 0.5)[None]
+    pc, qc = rng.standard_normal((1, r, n)), rng.standard_normal((1, s, m))
+    a = np.array([[1.0, 0.4], [0.7, 1.0]])  # mixes the coding term into the open one
+    b = np.linalg.inv(a).T
+    mixed = SystemMatrices(po * a[0, 0] + pc * a[1, 0], qo * b[0, 0] + qc * b[1, 0],
+                           po * a[0, 1] + pc * a[1, 1], qo * b[0, 1] + qc * b[1, 1])
+    x = rng.random((n, m, 1))
+    y = mixed.forward(x) + rng.standard_normal((r, s, 1)) * 0.05
+    tau = 0.1
+    exact = _dense_solution(mixed, y, tau)
+    np.testing.assert_allclose(_dense_solution(SystemMatrices(po, qo, pc, qc), y, tau), exact, atol=1e-8)
+    dec = T2SClosedFormDecoder(mixed, tau, ArrayBackend("numpy", "float64"), max_open_rank=4)
+    assert max(dec.info["dropped_open_sv"][0]) < 1e-3
+    np.testing.assert_allclose(dec.decode(y), exact, atol=1e-4 * np.abs(exact).max())
+
+
+def test_a_tau_per_channel_decodes_each_channel_at_its_own_tau() -> None:
+    from thintact_decoders import NonIterativeDecoder
+
+    sm = _low_rank_open_matrices(5)
+    rng = np.random.default_rng(6)
+    y = sm.forward(rng.random((*sm.scene_shape, 2))) + rng.standard_normal((*sm.sensor_shape, 2)) * 0.5
+    be = ArrayBackend("numpy", "float64")
+    for make in (lambda t: T2SClosedFormDecoder(sm, t, be), lambda t: NonIterativeDecoder(sm, None, t, be)):
+        both = make([0.01, 30.0])
+        np.testing.assert_allclose(both.decode(y)[..., 0], make(0.01).decode(y)[..., 0], rtol=1e-6, atol=1e-9)
+        np.testing.assert_allclose(both.decode(y)[..., 1], make(30.0).decode(y)[..., 1], rtol=1e-6, atol=1e-9)
+        changed = make(1.0)
+        changed.set_tau([0.01, 30.0])
+        np.testing.assert_allclose(changed.decode(y), both.decode(y), rtol=1e-6, atol=1e-9)
+        with pytest.raises(InvalidValueError):
+            changed.set_tau([1.0, 2.0, 3.0])  # three values for two channels
+        with pytest.raises(InvalidValueError):
+            changed.set_tau([1.0, 0.0])

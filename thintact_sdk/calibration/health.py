@@ -13,7 +13,11 @@ After the solve every slit frame is read once more and compared with the calibra
   one-pixel-wide line a **column/row defect**;
 * **dim or bright columns and rows**: a gain on one sensor column is separable, so the solve
   absorbs it into ``Qo``/``Qc`` instead of leaving a residual; it is found as a dip or peak of
-  the open response ``Qo·1`` (``Po·1`` for rows) against its smooth neighbourhood.
+  the open response ``Qo·1`` (``Po·1`` for rows) against its smooth neighbourhood;
+* **ghost**: a faint displaced copy of the whole image (a reflection between mask and cover
+  glass), found from the slit frames' Gram matrices (not separable) or as an echo of the
+  design's coding pattern in the calibrated matrices (separable), see
+  :mod:`thintact_sdk.calibration.ghost`; located by its offset and strength.
 
 Every defect names its kind, where it is (sensor rows/columns) and how strong it is.
 """
@@ -28,6 +32,7 @@ from scipy import ndimage
 
 from thintact_sdk.calibration.classify import classify_scene, is_dark, is_slit
 from thintact_sdk.calibration.collect import SlitCollection, signal_of
+from thintact_sdk.calibration.ghost import GhostScan, SlitGrams, find_ghosts
 from thintact_sdk.imaging.filter_training import scene_for_channels
 from thintact_sdk.imaging.noise import QUANTISATION_VARIANCE_DN2
 from thintact_sdk.imaging.t2s import SystemMatrices
@@ -85,15 +90,20 @@ class Defect:
     ----------
     kind
         ``dust speck``, ``dim column``, ``bright column``, ``dim row``, ``bright row``,
-        ``column defect``, ``row defect``.
+        ``column defect``, ``row defect``, ``ghost``.
     row0, row1, col0, col1
         Sensor pixel bounds (inclusive-exclusive) of the affected area.
     centre
         ``(row, col)`` of its centre (sensor pixels).
     strength
-        χ² excess over the noise (hotspots) or relative gain change (lines, e.g. −0.15).
+        χ² excess over the noise (hotspots), relative gain change (lines, e.g. −0.15) or the
+        ghost's brightness relative to the image (e.g. 0.08).
     channels
         Channel names where it shows.
+    offset_px
+        A ghost's displacement ``(rows, cols)`` from the image, sensor pixels.
+    note
+        How it shows (ghosts: separable or not), with the offset in um.
     """
 
     kind: str
@@ -104,9 +114,15 @@ class Defect:
     centre: tuple[float, float]
     strength: float
     channels: list[str] = field(default_factory=list)
+    offset_px: tuple[int, int] | None = None
+    note: str = ""
 
     def describe(self) -> str:
         """One line a person can act on."""
+        if self.kind == "ghost" and self.offset_px is not None:
+            dy, dx = self.offset_px
+            return (f"ghost: a copy of the sensor image displaced by {dy:+d} rows, {dx:+d} columns "
+                    f"{self.note} at {100 * self.strength:.1f} % of its brightness")
         where = (f"sensor rows {self.row0}-{self.row1 - 1}, columns {self.col0}-{self.col1 - 1} "
                  f"(centre row {self.centre[0]:.0f}, column {self.centre[1]:.0f})")
         if self.kind.endswith(("column", "row")) and not self.kind.endswith("defect"):
@@ -119,6 +135,8 @@ class Defect:
         d = dict(self.__dict__)
         d["centre"] = [round(float(v), 1) for v in self.centre]
         d["strength"] = round(float(self.strength), 4)
+        if self.offset_px is not None:
+            d["offset_px"] = [int(v) for v in self.offset_px]
         d["description"] = self.describe()
         return d
 
@@ -133,6 +151,7 @@ class HealthReport:
     defects: list[Defect]
     column_deviation: np.ndarray
     row_deviation: np.ndarray
+    ghost_scans: list[GhostScan] = field(default_factory=list)
 
     @property
     def mean_chi2(self) -> float:
@@ -146,6 +165,8 @@ class HealthReport:
                                        key=lambda kv: -kv[1])[:5]),
             "noise": self.noise.to_json(),
             "defects": [d.to_json() for d in self.defects],
+            "ghost_scans": [{"scan": g.name, "lag_px": g.lag, "strength": round(g.value, 4),
+                             "significant": g.significant} for g in self.ghost_scans],
         }
 
 
@@ -232,6 +253,16 @@ def _lines(dev: np.ndarray, spread: np.ndarray, names: list[str], axis: str,
     return list(out.values())
 
 
+def _in_ghost_edge(d: Defect, dy: int, dx: int, shape: tuple[int, int]) -> bool:
+    """A residual hotspot inside the band along the sensor edge where a ghost displaced by
+    ``(dy, dx)`` has no copy (its source lies beyond the sensor): the ghost's, not a defect."""
+    if d.kind not in ("dust speck", "column defect", "row defect"):
+        return False
+    rows = (d.row1 <= dy) if dy > 0 else (d.row0 >= shape[0] + dy) if dy < 0 else False
+    cols = (d.col1 <= dx) if dx > 0 else (d.col0 >= shape[1] + dx) if dx < 0 else False
+    return bool(rows or cols)
+
+
 def assess(recording: Recording, collection: SlitCollection, sm: SystemMatrices,
            frames_averaged: int) -> HealthReport:
     """Residuals of every slit frame against the calibrated model; noise; defects.
@@ -252,6 +283,7 @@ def assess(recording: Recording, collection: SlitCollection, sm: SystemMatrices,
     shape = sm.sensor_shape
     saturation = nz.saturation_dn - 1.0
     residuals: list[tuple[str, np.ndarray, np.ndarray, np.ndarray]] = []
+    grams = SlitGrams.empty(shape)
     dark_frames = 0
     for i in range(len(recording)):
         scene = recording.scene(i)
@@ -266,6 +298,7 @@ def assess(recording: Recording, collection: SlitCollection, sm: SystemMatrices,
         raw = np.asarray(recording.measurement(i))
         ok = (raw.reshape(signal.shape) < saturation)
         label = recording.frames[i].label or str(i)
+        grams.add(signal[..., :c] / scale, horizontal=any(r.kind == "hslit" for r in roles))
         residuals.append((label, (signal[..., :c] - pred) / scale, pred / scale, ok[..., :c]))
     pred_all = np.concatenate([p[m] for _, _, p, m in residuals])
     r2_all = np.concatenate([r[m] ** 2 for _, r, _, m in residuals])
@@ -288,4 +321,21 @@ def assess(recording: Recording, collection: SlitCollection, sm: SystemMatrices,
         d.channels = names[:c]
     defects += _lines(col_dev, col_spread, names, "column", shape)
     defects += _lines(row_dev, row_spread, names, "row", shape)
-    return HealthReport(slit_chi2, chi2_map, noise, defects, col_dev, row_dev)
+    keep_rows, keep_cols = np.ones(shape[0], bool), np.ones(shape[1], bool)
+    for d in defects:  # widened by half their size: the half-maximum box is the core only
+        hr, hc = (d.row1 - d.row0) // 2 + 1, (d.col1 - d.col0) // 2 + 1
+        if d.kind.endswith("row") or d.kind == "dust speck" or d.kind == "row defect":
+            keep_rows[max(d.row0 - hr, 0) : d.row1 + hr] = False
+        if d.kind.endswith("column") or d.kind == "dust speck" or d.kind == "column defect":
+            keep_cols[max(d.col0 - hc, 0) : d.col1 + hc] = False
+    ghosts, scans = find_ghosts(grams, sm, profile, keep_rows, keep_cols)
+    pitch = profile.sensor.pixel_pitch_um
+    for g in ghosts:  # its edge: where the copy comes in from beyond the sensor, not dust
+        defects = [d for d in defects if not _in_ghost_edge(d, g.rows, g.cols, shape)]
+    for g in ghosts:
+        how = ("separable: the matrices absorbed it, every reconstruction carries it" if g.separable
+               else "not separable: it raises the slit residuals")
+        defects.append(Defect("ghost", 0, shape[0], 0, shape[1], (shape[0] / 2, shape[1] / 2), g.strength,
+                              names[:c], (g.rows, g.cols),
+                              f"({g.rows * pitch:+.0f}, {g.cols * pitch:+.0f} um; {how})"))
+    return HealthReport(slit_chi2, chi2_map, noise, defects, col_dev, row_dev, scans)

@@ -19,7 +19,7 @@ from thintact_sdk.calibration.lowrank import DEFAULT_RANK
 from thintact_sdk.calibration.outcome import CalibrationOutcome
 from thintact_sdk.calibration.prediction import predict_validation
 from thintact_sdk.calibration.registration import RegistrationResult
-from thintact_sdk.calibration.selection import TAU_KEYS, select, validation_frames
+from thintact_sdk.calibration.selection import select, validation_frames
 from thintact_sdk.calibration.solver import ChannelMatrices, Method, SolveReport, solve_channel
 from thintact_sdk.calibration.tau import TauCurve
 from thintact_sdk.calibration.validation import (
@@ -302,8 +302,7 @@ def calibrate_recording(
     frames = validation_frames(recording, collection, profile.noise.saturation_dn)
     selection = select(profile, bundle, frames, health.noise, decoder=opts.decoder, tau=opts.tau,
                        simulated=_simulated_curve(tau_table))
-    for name, tau in selection.decoder_taus.items():
-        bundle.meta[TAU_KEYS.get(name, "tau")] = float(tau)
+    selection.write_taus(bundle.meta)
     bundle.meta["decoder"] = selection.decoder
     val = selection.validation
     prediction = None
@@ -418,8 +417,7 @@ def bundle_from_matrices(
         noise = NoiseEstimate(nz.read_noise_dn, nz.electrons_per_dn, nz.read_noise_dn, nz.electrons_per_dn,
                               (nz.read_noise_dn**2 + QUANTISATION_VARIANCE_DN2) / k, 1.0 / (nz.electrons_per_dn * k))
         selection = select(profile, bundle, frames, noise, decoder=opts.decoder, tau=opts.tau, simulated=simulated)
-        for name, tau in selection.decoder_taus.items():
-            bundle.meta[TAU_KEYS.get(name, "tau")] = float(tau)
+        selection.write_taus(bundle.meta)
         bundle.meta["decoder"] = selection.decoder
         metrics = {"tau_selection": selection.to_json(),
                    "psnr_db": {v.label: v.psnr_db for v in selection.validation},

@@ -101,8 +101,8 @@ def _tau_figure(outcome: CalibrationOutcome) -> str | None:
     sel = outcome.selection
     if sel is None or not sel.curves:
         return None
-    psnr_curves = [c for c in sel.curves if c.unit == "mean PSNR dB"]
-    noise_curves = [c for c in sel.curves if c.unit != "mean PSNR dB"]
+    psnr_curves = [c for c in sel.curves if c.unit.startswith("mean PSNR dB")]
+    noise_curves = [c for c in sel.curves if not c.unit.startswith("mean PSNR dB")]
     fig, axes = plt.subplots(1, 2, figsize=(11, 3.4), layout="constrained")
     for c in psnr_curves:
         line = axes[0].semilogx(c.taus, c.values, ".-", label=c.criterion)[0]
@@ -134,7 +134,8 @@ def _health_figure(outcome: CalibrationOutcome, profile: Profile) -> str | None:
     h = outcome.health
     if h is None:
         return None
-    fig, axes = plt.subplots(1, 3, figsize=(15, 3.6), layout="constrained")
+    fig, axes = plt.subplots(1, 4 if h.ghost_scans else 3, figsize=(20 if h.ghost_scans else 15, 3.6),
+                             layout="constrained")
     vals = list(h.slit_chi2.values())
     axes[0].plot(range(len(vals)), vals, ".", ms=3)
     axes[0].axhline(1.0, color="gray", lw=0.8)
@@ -145,6 +146,8 @@ def _health_figure(outcome: CalibrationOutcome, profile: Profile) -> str | None:
     fig.colorbar(im, ax=axes[1], fraction=0.046)
     axes[1].set_title("Slit residual r²/σ² per sensor pixel (defects boxed)", fontsize=9)
     for d in h.defects:
+        if d.kind == "ghost":  # the whole image: its offset is in the ghost panel
+            continue
         axes[1].add_patch(Rectangle((d.col0 - 0.5, d.row0 - 0.5), d.col1 - d.col0, d.row1 - d.row0,
                                     fill=False, ec="cyan", lw=1.5))
         axes[1].annotate(d.kind, (d.col1, d.row0), color="cyan", fontsize=8)
@@ -157,6 +160,18 @@ def _health_figure(outcome: CalibrationOutcome, profile: Profile) -> str | None:
     axes[2].set_ylabel("open response vs neighbours (%)")
     axes[2].set_title("Dim or bright sensor lines", fontsize=9)
     axes[2].legend(fontsize=7)
+    if h.ghost_scans:
+        from thintact_sdk.calibration.ghost import MIN_STRENGTH
+
+        for g in h.ghost_scans:
+            line = axes[3].plot(g.lags, 100 * np.asarray(g.strength), ".-", ms=3, lw=0.8, label=g.name)[0]
+            if g.significant:
+                axes[3].plot([g.lag], [100 * g.value], "o", ms=9, mfc="none", color=line.get_color())
+        axes[3].axhline(100 * MIN_STRENGTH, color="gray", ls=":", lw=1, label="reported from")
+        axes[3].set_xlabel("offset (sensor pixels)")
+        axes[3].set_ylabel("ghost strength (% of the image)")
+        axes[3].set_title("Ghost search (a circle marks a ghost found)", fontsize=9)
+        axes[3].legend(fontsize=7)
     return _png(fig)
 
 
@@ -201,7 +216,34 @@ def _selection_text(outcome: CalibrationOutcome) -> str:
             f"<b>{html.escape(sel.criterion)}</b>. Cross-validation tunes τ on one fold of the validation "
             "scenes and scores the other fold with it, so no scene is scored with a τ tuned on it.</p>"
             + _table(rows, ["decoder", "τ (DN²)", "held-out mean PSNR (dB)"])
+            + _channel_tau_text(outcome)
             + "<p>τ each criterion would choose:</p>" + _table(crit, ["criterion", "τ (DN²)", "note"]))
+
+
+def _channel_tau_text(outcome: CalibrationOutcome) -> str:
+    """The per-channel τ check: each fold's τ per channel, the held-out means with one τ and
+    with a τ per channel, and what the bundle uses."""
+    sel = outcome.selection
+    if sel is None:
+        return ""
+    rows = []
+    for name, cv in sel.cross_validation.items():
+        if not cv.channel_fold_tau:
+            continue
+        used = ("per channel: " + ", ".join(f"{t:.4g}" for t in cv.channel_tau)) if cv.channel_tau else "one τ"
+        tuned = np.asarray(cv.channel_fold_tau)
+        ranges = ", ".join(f"{lo:.3g}–{hi:.3g}" for lo, hi in zip(tuned.min(axis=0), tuned.max(axis=0), strict=True))
+        gain = cv.held_out_channel_db - cv.held_out_shared_db
+        rows.append([name, ranges, f"{cv.held_out_shared_db:.2f}", f"{cv.held_out_channel_db:.2f}",
+                     f"{gain:+.2f} ± {cv.channel_gain_se_db:.2f}", used])
+    if not rows:
+        return ""
+    return ("<p>τ per channel: leaving out one distinct validation scene at a time, one τ and one τ per "
+            "channel are tuned on the others and the left-out scene is scored with both; the bundle "
+            "keeps a τ per channel only when the mean gain exceeds its standard error.</p>"
+            + _table(rows, ["decoder", "τ per channel tuned without each scene (DN², range)",
+                            "held out, one τ (dB)", "held out, τ per channel (dB)", "gain ± s.e. (dB)",
+                            "bundle uses"]))
 
 
 def _validation_table(outcome: CalibrationOutcome) -> str:
@@ -241,7 +283,14 @@ def _health_section(outcome: CalibrationOutcome, profile: Profile) -> list[str]:
             f"<li>{html.escape(d.describe())}</li>" for d in h.defects) + "</ul>")
     else:
         out.append("<p>No defect located: no structure beyond noise in the slit residuals, no dim or "
-                   "bright sensor line.</p>")
+                   "bright sensor line, no ghost.</p>")
+    if h.ghost_scans:
+        out.append("<p>Ghost search: a faint displaced copy of the image is looked for in the slit frames "
+                   "(not separable: the copy widens the slits' column/row space) and as an echo of the "
+                   "design's coding pattern in the calibrated matrices (separable: absorbed by them). "
+                   "Strongest candidate of each scan:</p>"
+                   + _table([[g.name, f"{g.lag:+d}", f"{100 * g.value:.2f} %", "yes" if g.significant else "no"]
+                             for g in h.ghost_scans], ["scan", "offset (px)", "strength", "ghost"]))
     fig = _health_figure(outcome, profile)
     if fig:
         out.append(f"<img src='{fig}'>")

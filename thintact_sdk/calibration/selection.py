@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -63,13 +64,34 @@ class TauSelection:
     cross_validation: dict[str, CrossValidation] = field(default_factory=dict)
     validation: list[ValidationResult] = field(default_factory=list)
 
+    @property
+    def channel_taus(self) -> dict[str, list[float]]:
+        """Per decoder, the τ per channel cross-validation chose (only where it scored better
+        held out than one τ; ``calibration.json`` → ``channel_tau``)."""
+        return {name: cv.channel_tau for name, cv in self.cross_validation.items() if cv.channel_tau is not None}
+
     def to_json(self) -> dict[str, object]:
         return {
             "decoder": self.decoder, "tau": float(f"{self.tau:.4g}"), "criterion": self.criterion,
             "decoder_taus": {k: float(f"{v:.4g}") for k, v in self.decoder_taus.items()},
             "held_out_mean_psnr_db": {k: round(v.held_out_mean_db, 3) for k, v in self.cross_validation.items()},
+            "channel_tau": {k: [float(f"{t:.4g}") for t in v] for k, v in self.channel_taus.items()},
+            "per_channel_check": {
+                k: {"leave_one_out_tau": [[float(f"{t:.4g}") for t in fold] for fold in v.channel_fold_tau],
+                    "held_out_one_tau_db": round(v.held_out_shared_db, 3),
+                    "held_out_tau_per_channel_db": round(v.held_out_channel_db, 3),
+                    "gain_standard_error_db": round(v.channel_gain_se_db, 3)}
+                for k, v in self.cross_validation.items() if v.channel_fold_tau},
             "curves": [c.to_json() for c in self.curves],
         }
+
+    def write_taus(self, meta: dict[str, Any]) -> None:
+        """Put each decoder's τ (and τ per channel where chosen) into ``calibration.json`` fields."""
+        for name, tau in self.decoder_taus.items():
+            meta[TAU_KEYS.get(name, "tau")] = float(tau)
+        meta.pop("channel_tau", None)
+        if self.channel_taus:
+            meta["channel_tau"] = {k: [float(t) for t in v] for k, v in self.channel_taus.items()}
 
 
 def validation_frames(recording: Recording, collection: SlitCollection, saturation_dn: float) -> ValidationFrames:

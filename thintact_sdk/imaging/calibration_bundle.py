@@ -5,7 +5,9 @@ A bundle directory holds
 ``calibration.json``
     ``{"format": "thintact-calibration/1", "profile", "profile_hash", "software_version",
     "created", "tau", "exposure_us", "metrics": {...}, "source": "wizard|recording|simulator|import"}``
-    (``import``: matrices calibrated elsewhere, :mod:`thintact_sdk.calibration.matrices_io`)
+    (``import``: matrices calibrated elsewhere, :mod:`thintact_sdk.calibration.matrices_io`);
+    optional ``tau_t2s_closed_form`` (that decoder's τ) and ``channel_tau``
+    (``{decoder name: [τ per channel]}``, DN², where the calibration found a τ per channel better)
 ``system_matrices.npz``
     :class:`~thintact_sdk.imaging.t2s.SystemMatrices` (DN above black per display unit).
 ``filter.npz``
@@ -193,6 +195,16 @@ def _check_meta(meta: dict[str, Any], meta_path: Path) -> None:
     for key in ("profile", "profile_hash"):
         if key in meta and not isinstance(meta[key], str):
             raise CalibrationError(f"{meta_path}: field {key!r} must be a string, got {meta[key]!r}")
+    channel_tau = meta.get("channel_tau")
+    if channel_tau is not None:
+        ok = isinstance(channel_tau, dict) and all(
+            isinstance(v, list) and v and all(
+                isinstance(t, int | float) and not isinstance(t, bool) and math.isfinite(t) and t > 0 for t in v)
+            for v in channel_tau.values())
+        if not ok:
+            raise CalibrationError(
+                f"{meta_path}: field 'channel_tau' is {channel_tau!r}, which is invalid: it must map "
+                "decoder names to lists of finite numbers > 0 (one per channel)")
     if "metrics" in meta and not isinstance(meta["metrics"], dict):
         raise CalibrationError(f"{meta_path}: field 'metrics' must be an object")
 

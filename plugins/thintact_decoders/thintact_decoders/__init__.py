@@ -15,6 +15,8 @@ are preferences honoured only where not more than 20 % slower than the best.
 ``t2s-iterative`` takes ``iterations`` (800). ``t2s-closed-form`` (this SDK's extension: the
 exact full-T2S Tikhonov minimiser without iterations, see :mod:`thintact_decoders.t2s_closed_form`)
 takes ``open_rtol`` and ``max_open_rank`` and uses the bundle's ``tau_t2s_closed_form`` if present.
+A bundle's per-channel τ (``channel_tau`` → decoder name → one τ per channel, chosen by the
+calibration where it helps) is used by that decoder unless ``tau`` is given in the settings.
 """
 
 from __future__ import annotations
@@ -36,11 +38,11 @@ from thintact_decoders.flatcam import FlatCamDecoder
 from thintact_decoders.identity import IdentityDecoder, make_identity
 from thintact_decoders.iterative import T2SIterativeDecoder
 from thintact_decoders.loading import resolve_bundle
-from thintact_decoders.modes import DEFAULT_MODE_RTOL
+from thintact_decoders.modes import DEFAULT_MODE_RTOL, TauSpec
 from thintact_decoders.noniterative import NonIterativeDecoder
 from thintact_decoders.selection import BackendPreferenceWarning, make_probes, select_backend
 from thintact_decoders.t2s_closed_form import T2SClosedFormDecoder
-from thintact_sdk.algorithms import SystemMatrices
+from thintact_sdk.algorithms import CalibrationBundle, SystemMatrices
 from thintact_sdk.errors import CalibrationError
 from thintact_sdk.interfaces import Decoder
 from thintact_sdk.machine import host_capabilities, host_fingerprint
@@ -116,12 +118,22 @@ def _tau(bundle_tau: float, settings: dict[str, Any], profile: Profile) -> float
     raise CalibrationError("no Tikhonov tau: the bundle has none; pass settings={'tau': ...}")
 
 
+def _decoder_tau(name: str, bundle_tau: float, bundle: CalibrationBundle, settings: dict[str, Any],
+                 profile: Profile) -> TauSpec:
+    """The settings' ``tau``, else the bundle's per-channel τ for decoder ``name``, else
+    :func:`_tau`."""
+    per_channel = (bundle.meta.get("channel_tau") or {}).get(name)
+    if "tau" not in settings and per_channel is not None:
+        return [float(t) for t in per_channel]
+    return _tau(bundle_tau, settings, profile)
+
+
 def make_noniterative(profile: Profile, settings: dict[str, Any]) -> NonIterativeDecoder:
     """Build the joint-filter decoder for ``profile``."""
     bundle = resolve_bundle(profile, settings)
     if bundle.filter is None:
         raise CalibrationError(f"calibration {bundle.path} has no filter.npz: the non-iterative decoder needs one")
-    tau, jf = _tau(bundle.tau, settings, profile), bundle.filter
+    tau, jf = _decoder_tau("thintact-noniterative", bundle.tau, bundle, settings, profile), bundle.filter
     return _selected("thintact-noniterative", profile, settings, bundle.system_matrices,
                      lambda xp: NonIterativeDecoder(
                          bundle.system_matrices, jf, tau, xp, fold=str(settings.get("fold", "auto")),
@@ -149,7 +161,8 @@ def make_flatcam(profile: Profile, settings: dict[str, Any]) -> FlatCamDecoder:
 def make_t2s_closed_form(profile: Profile, settings: dict[str, Any]) -> T2SClosedFormDecoder:
     """Build the exact non-iterative full-T2S decoder for ``profile``."""
     bundle = resolve_bundle(profile, settings)
-    tau = _tau(float(bundle.meta.get("tau_t2s_closed_form", bundle.tau)), settings, profile)
+    tau = _decoder_tau("t2s-closed-form", float(bundle.meta.get("tau_t2s_closed_form", bundle.tau)), bundle,
+                       settings, profile)
     return _selected("t2s-closed-form", profile, settings, bundle.system_matrices,
                      lambda xp: T2SClosedFormDecoder(
                          bundle.system_matrices, tau, xp, open_rtol=float(settings.get("open_rtol", 1e-6)),

@@ -23,7 +23,13 @@ import numpy as np
 
 from thintact_decoders.backend import ArrayBackend, synthesis_macs
 from thintact_decoders.closed_form_base import ClosedFormDecoder
-from thintact_decoders.modes import DEFAULT_MODE_RTOL, kept_mode_counts
+from thintact_decoders.modes import (
+    DEFAULT_MODE_RTOL,
+    TauSpec,
+    channel_taus,
+    kept_mode_counts,
+    representative_tau,
+)
 from thintact_sdk.algorithms import (
     JointFilter,
     SeparableDCT,
@@ -107,7 +113,7 @@ class NonIterativeDecoder(ClosedFormDecoder):
         self,
         system_matrices: SystemMatrices,
         joint_filter: JointFilter | None,
-        tau: float,
+        tau: TauSpec,
         backend: ArrayBackend | None = None,
         fold: str = "auto",
         max_rank: int = 8,
@@ -117,13 +123,15 @@ class NonIterativeDecoder(ClosedFormDecoder):
         if fold not in ("auto", "never", "approx"):
             raise InvalidValueError(f"fold must be 'auto', 'never' or 'approx', got {fold!r}")
         self.xp = backend or ArrayBackend("numpy")
-        self.tau = float(tau)
-        self.mode_rtol = float(mode_rtol)
         sm = system_matrices
+        self.channel_tau = channel_taus(tau, sm.channels)
+        self.tau = representative_tau(self.channel_tau)
+        self.mode_rtol = float(mode_rtol)
         self.channels = sm.channels
         self.sensor_shape = sm.sensor_shape
         self.scene_shape = sm.scene_shape
-        solvers = [TikhonovSolver(sm.Pc[c], sm.Qc[c], self.tau, np.float64) for c in range(sm.channels)]
+        solvers = [TikhonovSolver(sm.Pc[c], sm.Qc[c], float(self.channel_tau[c]), np.float64)
+                   for c in range(sm.channels)]
         left = np.stack([s.left for s in solvers])  # C × kP × R
         right = np.stack([s.right for s in solvers])  # C × S × kQ
         self._sp = np.stack([s.singular_values_p for s in solvers])  # C × kP
@@ -155,7 +163,7 @@ class NonIterativeDecoder(ClosedFormDecoder):
                 self._ps = self.xp.asarray(joint_filter.phi_s)
         self.filter_info["folded"] = self.folded
         self.kept_modes = (0, 0)
-        self._place(*kept_mode_counts(self._sp, self._sq, self.tau, self.mode_rtol))
+        self._place(*kept_mode_counts(self._sp, self._sq, self.channel_tau, self.mode_rtol))
 
     def _place(self, kp: int, kq: int) -> None:
         """Put the operators of the leading ``kp × kq`` modes on the backend (contiguous)."""
@@ -174,21 +182,21 @@ class NonIterativeDecoder(ClosedFormDecoder):
         self._big_left = xp.asarray(big_left, gemm=True)
         self._right = xp.asarray(full["right"][..., :kq], gemm=True)
         self._sig2 = np.einsum("ci,cj->cij", self._sp[:, :kp] ** 2, self._sq[:, :kq] ** 2)
-        self._inv_denom = xp.asarray(1.0 / (self._sig2 + self.tau))
+        self._inv_denom = xp.asarray(1.0 / (self._sig2 + self.channel_tau[:, None, None]))
         self._vp = xp.asarray(full["vp"][..., :kp], gemm=True)
         self._vqt = xp.asarray(full["vqt"][:, :kq], gemm=True)
         self._unit_core: Any = None
 
-    def set_tau(self, tau: float) -> None:
-        """Change τ without recomputing the SVDs (the modes kept follow the new τ)."""
-        if tau <= 0:
-            raise InvalidValueError("tau must be > 0")
-        self.tau = float(tau)
-        kept = kept_mode_counts(self._sp, self._sq, self.tau, self.mode_rtol)
+    def set_tau(self, tau: TauSpec) -> None:
+        """Change τ (one value, or one per channel) without recomputing the SVDs (the modes
+        kept follow the new τ)."""
+        self.channel_tau = channel_taus(tau, self.channels)
+        self.tau = representative_tau(self.channel_tau)
+        kept = kept_mode_counts(self._sp, self._sq, self.channel_tau, self.mode_rtol)
         if kept != self.kept_modes:
             self._place(*kept)
         else:
-            self._inv_denom = self.xp.asarray(1.0 / (self._sig2 + self.tau))
+            self._inv_denom = self.xp.asarray(1.0 / (self._sig2 + self.channel_tau[:, None, None]))
 
     def gemm_flops(self) -> int:
         """Floating-point operations of the matrix products of one frame, all channels."""

@@ -18,6 +18,14 @@ Pc, Qc, i.e. the coding-only closed form) plus a rank-2K correction::
 Per frame this is the coding-only closed form of the raw measurement (no joint filter), K
 projections ``Eᵀ Y`` (folded into the same big product) and three thin ``NM × 2K`` products.
 It is exact up to the truncation of Po, Qo (``open_rtol``), i.e. the limit iterative-800 tends to.
+
+The truncation is done in the gauge where it drops least: the matrices as given or the
+canonical gauge (``thintact_sdk.algorithms.canonical_gauge``: the same operator with the
+smoothest open term). ``[Po Pc]·A``, ``[Qo Qc]·A⁻ᵀ`` describe the same device for any
+invertible 2 × 2 ``A``; in the gauge the paper's Algorithms 1-3 land on,
+``Po`` carries part of the coding term, its singular values fall only to 4 % by the 8th and
+truncating there moved the PSNR by −0.02 … +0.17 dB on the calibration test recordings
+(docs/calibration.md) — the decoder was then not the exact T2S solve it claims to be.
 """
 
 from __future__ import annotations
@@ -28,9 +36,21 @@ import numpy as np
 
 from thintact_decoders.backend import ArrayBackend, synthesis_macs
 from thintact_decoders.closed_form_base import ClosedFormDecoder
-from thintact_decoders.modes import DEFAULT_MODE_RTOL, kept_mode_counts
-from thintact_sdk.algorithms import SystemMatrices, TikhonovSolver, largest_eigenvalue, nesterov
-from thintact_sdk.errors import InvalidShapeError, InvalidValueError
+from thintact_decoders.modes import (
+    DEFAULT_MODE_RTOL,
+    TauSpec,
+    channel_taus,
+    kept_mode_counts,
+    representative_tau,
+)
+from thintact_sdk.algorithms import (
+    SystemMatrices,
+    TikhonovSolver,
+    canonical_gauge,
+    largest_eigenvalue,
+    nesterov,
+)
+from thintact_sdk.errors import InvalidShapeError
 
 
 def _truncated_svd(a: np.ndarray, rtol: float, max_rank: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -53,7 +73,8 @@ class T2SClosedFormDecoder(ClosedFormDecoder):
         :class:`ArrayBackend` (default numpy float32).
     open_rtol, max_open_rank
         Singular values of Po, Qo kept: above ``open_rtol`` × the largest, at most
-        ``max_open_rank`` per axis. ``truncation`` in :attr:`info` reports what was dropped.
+        ``max_open_rank`` per axis, after the matrices were put in the canonical gauge
+        (the operator is unchanged). ``dropped_open_sv`` in :attr:`info` reports what was dropped.
     mode_rtol
         The coding term ``Σ_P U_Pᵀ Y U_Q Σ_Q`` (the two big products) is computed only for
         the Tikhonov modes whose filter factor reaches this
@@ -66,19 +87,20 @@ class T2SClosedFormDecoder(ClosedFormDecoder):
     def __init__(
         self,
         system_matrices: SystemMatrices,
-        tau: float,
+        tau: TauSpec,
         backend: ArrayBackend | None = None,
         open_rtol: float = 1e-6,
         max_open_rank: int = 8,
         mode_rtol: float = DEFAULT_MODE_RTOL,
     ) -> None:
         self.xp = backend or ArrayBackend("numpy")
-        sm = system_matrices
+        sm = _least_truncated(system_matrices, open_rtol, max_open_rank)
         (r, s), (n, m) = sm.sensor_shape, sm.scene_shape
         if r < n or s < m:
             raise InvalidShapeError("t2s-closed-form needs at least as many sensor rows/cols as scene rows/cols")
         self.channels, self.sensor_shape, self.scene_shape = sm.channels, (r, s), (n, m)
-        self.tau = float(tau)
+        self.channel_tau = channel_taus(tau, sm.channels)
+        self.tau = representative_tau(self.channel_tau)
         svds = []
         for c in range(sm.channels):
             up, sp, vpo = _truncated_svd(sm.Po[c].astype(np.float64), open_rtol, max_open_rank)
@@ -94,14 +116,14 @@ class T2SClosedFormDecoder(ClosedFormDecoder):
         for c in range(sm.channels):
             up, sp, vpo = _pad(*svds[c][:3], kp)
             uq, sq, vqo = _pad(*svds[c][3:], kq)
-            sol = TikhonovSolver(sm.Pc[c], sm.Qc[c], self.tau, np.float64)
+            sol = TikhonovSolver(sm.Pc[c], sm.Qc[c], float(self.channel_tau[c]), np.float64)
             # scene images of F and G expressed in the SVD bases of Pc, Qc (separable there)
             a, b = sol.vp.T @ vpo, sol.vqt @ vqo  # kP × kp, kQ × kq
             a2, b2 = (sol.left @ up) * sp, (sol.right.T @ uq) * sq  # Vpᵀ Pcᵀ u s, Vqᵀ Qcᵀ u s
             sig2 = np.outer(sol.singular_values_p**2, sol.singular_values_q**2)
             part = (np.concatenate([a, a2], 1), np.concatenate([b, b2], 1), np.outer(sp**2, sq**2), sig2)
             self._parts.append(part)
-            per["small"].append(_small_inverse(part, kp, kq, self.tau))
+            per["small"].append(_small_inverse(part, kp, kq, float(self.channel_tau[c])))
             per["left"].append(sol.left)  # kP × R
             per["up_t"].append(up.T)  # kp × R
             per["right"].append(sol.right)
@@ -127,7 +149,7 @@ class T2SClosedFormDecoder(ClosedFormDecoder):
         self._sp, self._sq = np.stack(per["sp"]), np.stack(per["sq"])  # C × kP, C × kQ
         self._full_modes = (self._coding_left.shape[1], self._coding_right.shape[2])
         self.kept_modes = (0, 0)
-        self._place(*kept_mode_counts(self._sp, self._sq, self.tau, self.mode_rtol))
+        self._place(*kept_mode_counts(self._sp, self._sq, self.channel_tau, self.mode_rtol))
         self._uq = xp.asarray(np.stack(per["uq"]), gemm=True)  # C × S × kq
         st = {key: xp.asarray(np.stack(per[key]), gemm=key in ("vp", "vqt"))
               for key in ("den", "vp", "vqt", "scale", "a", "b", "a2", "b2", "small", "sig2")}
@@ -156,19 +178,19 @@ class T2SClosedFormDecoder(ClosedFormDecoder):
         woodbury = 3 * (big_p * ko_p * ko_q + big_p * ko_q * big_q) + 2 * (ko_p * big_p * big_q + ko_p * big_q * ko_q)
         return 2 * self.channels * (big + woodbury + synthesis_macs(n, big_p, big_q, m))
 
-    def set_tau(self, tau: float) -> None:
-        """Change τ without recomputing any SVD (only the 2K × 2K system and ``1/(σ² + τ)``;
-        the coding modes kept follow the new τ)."""
-        if tau <= 0:
-            raise InvalidValueError("tau must be > 0")
-        self.tau = float(tau)
-        kept = kept_mode_counts(self._sp, self._sq, self.tau, self.mode_rtol)
+    def set_tau(self, tau: TauSpec) -> None:
+        """Change τ (one value, or one per channel) without recomputing any SVD (only the
+        2K × 2K system and ``1/(σ² + τ)``; the coding modes kept follow the new τ)."""
+        self.channel_tau = channel_taus(tau, self.channels)
+        self.tau = representative_tau(self.channel_tau)
+        kept = kept_mode_counts(self._sp, self._sq, self.channel_tau, self.mode_rtol)
         if kept != self.kept_modes:
             self._place(*kept)
         xp = self.xp
-        self._den = xp.asarray(np.stack([1.0 / (p[3] + self.tau) for p in self._parts]))
-        self._small = xp.asarray(np.stack([_small_inverse(p, self._kp, self._kq, self.tau)
-                                           for p in self._parts]))
+        taus = [float(t) for t in self.channel_tau]
+        self._den = xp.asarray(np.stack([1.0 / (p[3] + t) for p, t in zip(self._parts, taus, strict=True)]))
+        self._small = xp.asarray(np.stack([_small_inverse(p, self._kp, self._kq, t)
+                                           for p, t in zip(self._parts, taus, strict=True)]))
 
     def _linear(self, y: Any) -> tuple[Any, Any]:
         """``(Σ_P U_Pᵀ Y U_Q Σ_Q, Eᵀ Y)`` for channel-first ``y`` (GEMM precision)."""
@@ -226,13 +248,36 @@ class T2SClosedFormDecoder(ClosedFormDecoder):
         rhs = core + self._a @ e @ xp.swap(self._b)  # Aᵀ y in coefficients
         start = xp.asarray(np.random.default_rng(0).standard_normal(tuple(rhs.shape)))
         lam = largest_eigenvalue(self._normal_op, start, power_iterations, xp.sum_squares)
-        step = 1.0 / (2.0 * (lam * 1.02 + self.tau))
+        step = 1.0 / (2.0 * (lam * 1.02 + float(self.channel_tau.max())))
+        tau = xp.asarray(self.channel_tau[:, None, None])
 
         def gradient(z: Any) -> Any:
-            return 2.0 * (self._normal_op(z) - rhs) + (2.0 * self.tau) * z
+            return 2.0 * (self._normal_op(z) - rhs) + (2.0 * tau) * z
 
         x = nesterov(gradient, xp.zeros_like(rhs), step, iterations)
         return xp.synthesise(self._vp, x, self._vqt)
+
+
+def _truncation_loss(sm: SystemMatrices, rtol: float, max_rank: int) -> float:
+    """Largest share of squared singular values of Po or Qo (any channel) the truncation drops."""
+    worst = 0.0
+    for c in range(sm.channels):
+        for a in (sm.Po[c], sm.Qo[c]):
+            sv2 = np.linalg.svd(np.asarray(a, np.float64), compute_uv=False) ** 2
+            if sv2[0] <= 0:
+                continue
+            kept = max(1, min(int(np.sum(sv2 > rtol**2 * sv2[0])), max_rank))
+            worst = max(worst, float(sv2[kept:].sum() / sv2.sum()))
+    return worst
+
+
+def _least_truncated(sm: SystemMatrices, rtol: float, max_rank: int) -> SystemMatrices:
+    """``sm`` as given or in the canonical gauge, whichever loses less to the truncation of
+    its open term (the operator is the same)."""
+    canonical = canonical_gauge(sm)
+    if _truncation_loss(canonical, rtol, max_rank) < _truncation_loss(sm, rtol, max_rank):
+        return canonical
+    return sm
 
 
 def _dropped_fraction(sv: np.ndarray, kept: int) -> float:

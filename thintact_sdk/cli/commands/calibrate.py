@@ -98,6 +98,9 @@ def run(args: argparse.Namespace) -> int:
     sel = m.get("tau_selection", {})
     print(f"calibration bundle: {outcome.path}")
     print(f"decoder {sel.get('decoder')}, tau {sel.get('tau')} DN² ({sel.get('criterion')})")
+    per_channel = sel.get("channel_tau", {}).get(sel.get("decoder"))
+    if per_channel:
+        print(f"  tau per channel: {', '.join(f'{t:.4g}' for t in per_channel)} DN² (better held out than one tau)")
     print(f"validation (held out): mean PSNR {m['mean_psnr_db']:.2f} dB, mean SSIM {m['mean_ssim']:.3f} "
           f"-> {verdict}")
     for f in m.get("verdict", {}).get("failures", []):
