@@ -47,8 +47,10 @@ class KernelParams:
 
     @property
     def separable(self) -> bool:
-        """True unless the scene side refracts or the direct path is forced."""
-        return self.n_scene_side == 1.0 and not self.force_direct
+        """True unless the direct path is forced or a refracting scene gap meets a rotated
+        mask (the one combination still on the direct path)."""
+        refracted_rotation = self.n_scene_side != 1.0 and self.angle_deg != 0.0
+        return not (self.force_direct or refracted_rotation)
 
     def grid_x(self) -> AxisGrid:
         return AxisGrid(self.cols, self.pitch_um * 1e-3, self.scene_cols, self.scene_pitch_um * 1e-3)

@@ -36,7 +36,7 @@ from typing import Any, TypeAlias, TypeVar
 import numpy as np
 
 from thintact_sdk.errors import ThinTactError
-from thintact_sdk.imaging import sim_rotated
+from thintact_sdk.imaging import sim_refracted, sim_rotated
 from thintact_sdk.imaging.sim_axis import AxisGrid, mask_cell_edges_mm
 from thintact_sdk.imaging.sim_direct import DirectKernel, build_direct_kernel
 from thintact_sdk.imaging.sim_params import KernelParams, kernel_params
@@ -93,6 +93,8 @@ def build_separable_kernel(kp: KernelParams) -> SeparableKernel:
     """Build the ``P_k``, ``Q_k`` of every channel for separable physics."""
     if not kp.separable:
         raise ThinTactError("internal: separable kernel requested for non-separable physics")
+    if kp.n_scene_side != 1.0:
+        return sim_refracted.build_refracted_kernel(kp)
     h = kp.z_mm + kp.d_mm
     alpha, beta = kp.z_mm / h, kp.d_mm / h
     exp = _expansion(kp)
@@ -258,8 +260,9 @@ class Simulator(ImagingModel):
         self.kernel_params = kernel_params(profile, self.physics, n_sub, rank_tol, direct)
         if self.kernel_params.wavelengths_nm is not None and not self.kernel_params.separable:
             raise ThinTactError(
-                "physics: diffraction cannot be combined with refraction (the simulator's "
-                "diffraction model needs straight rays in air)"
+                "physics: diffraction cannot be combined with a rotated mask behind a "
+                "refracting scene gap, or with the forced direct path (the direct path has "
+                "no diffraction model)"
             )
         self._kernel: ImagingKernel | None = None
         self._ref_gain: float | None = None
