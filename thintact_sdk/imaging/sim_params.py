@@ -47,10 +47,8 @@ class KernelParams:
 
     @property
     def separable(self) -> bool:
-        """True unless the direct path is forced or a refracting scene gap meets a rotated
-        mask (the one combination still on the direct path)."""
-        refracted_rotation = self.n_scene_side != 1.0 and self.angle_deg != 0.0
-        return not (self.force_direct or refracted_rotation)
+        """True unless the direct path is forced (every effect has a separable kernel)."""
+        return not self.force_direct
 
     def grid_x(self) -> AxisGrid:
         return AxisGrid(self.cols, self.pitch_um * 1e-3, self.scene_cols, self.scene_pitch_um * 1e-3)

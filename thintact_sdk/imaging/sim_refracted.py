@@ -39,11 +39,17 @@ import numpy as np
 from thintact_sdk.imaging.sim_axis import AxisGrid, mask_cell_edges_mm, second_antiderivative
 from thintact_sdk.imaging.sim_params import KernelParams
 from thintact_sdk.imaging.sim_radiometry import SeparableExpansion, TabulatedRadial
-from thintact_sdk.imaging.sim_rotated import FactorDerivs, compress_family, interp_weights
+from thintact_sdk.imaging.sim_rotated import (
+    SHIFT_STEP_UM,
+    SHIFT_STEPS_PER_WIDTH,
+    FactorDerivs,
+    compress_family,
+    interp_weights,
+)
 from thintact_sdk.imaging.sim_separable import SeparableKernel, SeparableTerm, compress_terms
 from thintact_sdk.physics import diffraction, mask_leakage, refraction
 
-CROSSING_STEP_UM = 0.25
+CROSSING_STEP_UM = 0.5
 """Largest move of the crossing point between two tabulated ``D²`` nodes (µm); also kept
 under a tenth of the narrower trapezoid width."""
 
@@ -77,8 +83,8 @@ class RefractedTables:
 
 def refracted_axis_family(
     grid: AxisGrid, edges_mm: np.ndarray, values: np.ndarray, factor_derivs: FactorDerivs,
-    kappa: TabulatedRadial, other_r2_mm2: np.ndarray, n_sub: int, shift_mm: float = 0.0,
-    chunk_rows: int = 64,
+    kappa: TabulatedRadial, other_r2_mm2: np.ndarray, n_sub: int,
+    shifts_mm: np.ndarray | float = 0.0, chunk_rows: int = 64,
 ) -> np.ndarray:
     """One-axis matrices along the refracted map, for every frozen other-axis offset.
 
@@ -97,14 +103,19 @@ def refracted_axis_family(
         ``(T,)`` squared other-axis offsets ``D²`` (mm²).
     n_sub
         Sub-intervals per pixel (tangent maps and factor moments).
-    shift_mm
-        The profile is read at ``m - shift_mm`` (mask displacement along this axis).
+    shifts_mm
+        The profile is read at ``m - shift`` (mask displacement along this axis), for each
+        of these ``(H,)`` displacements (or one).
 
     Returns
     -------
     numpy.ndarray
-        ``(T, V, L, n_sensor, n_scene)``: ``(1/pitch)·∫∫ A(m(u, s))·f_l(s - u) du ds``.
+        ``(T, H, V, L, n_sensor, n_scene)``: ``(1/pitch)·∫∫ A(m(u, s) - shift)·f_l(s - u) du ds``
+        (``(T, V, L, ...)`` for a scalar ``shifts_mm``).
     """
+    scalar = np.ndim(shifts_mm) == 0
+    shifts = np.atleast_1d(np.asarray(shifts_mm, float))
+    n_h = shifts.size
     p, ps = grid.sensor_pitch_mm, grid.scene_pitch_mm
     ue = grid.sensor_edges_mm(n_sub)
     se = grid.scene_edges_mm(n_sub)
@@ -114,9 +125,9 @@ def refracted_axis_family(
     var_in = (p**2 + ps**2) / (12 * n_sub**2)
     n_t, n_v = other_r2_mm2.size, values.shape[0]
     r_all, n = grid.n_sensor, grid.n_scene
-    rows_per_chunk = max(1, min(r_all, chunk_rows * 16 // (n_v * n_sub**2)))
+    rows_per_chunk = max(1, min(r_all, chunk_rows * 16 // (n_v * n_h * n_sub**2)))
     out: np.ndarray | None = None
-    edges = np.asarray(edges_mm, float) + shift_mm
+    edges = np.asarray(edges_mm, float)
     for r0 in range(0, r_all, rows_per_chunk):
         r1 = min(r_all, r0 + rows_per_chunk)
         uc = uc_all[r0 * n_sub:r1 * n_sub]
@@ -132,18 +143,19 @@ def refracted_axis_family(
             m0 = uc[:, None] + dx * k
             a_u, b_s = (1 - gp) * hu, gp * hs
             corners = np.stack([m0 + a_u + b_s, m0 - a_u + b_s, m0 + a_u - b_s, m0 - a_u - b_s])
-            d = second_antiderivative(edges, values, corners)  # (V, 4, ...)
-            box = (d[:, 0] - d[:, 1] - d[:, 2] + d[:, 3]) / ((1 - gp) * gp)
-            box = box.reshape(n_v, r1 - r0, n_sub, n, n_sub).transpose(0, 1, 3, 2, 4)
-            b0 = box.sum(axis=(-2, -1))
+            d = second_antiderivative(edges, values, corners[None] - shifts[:, None, None, None])
+            # d: (V, H, 4, ...)
+            box = (d[:, :, 0] - d[:, :, 1] - d[:, :, 2] + d[:, :, 3]) / ((1 - gp) * gp)
+            box = box.reshape(n_v, n_h, r1 - r0, n_sub, n, n_sub).transpose(1, 0, 2, 4, 3, 5)
+            b0 = box.sum(axis=(-2, -1))  # (H, V, r, n)
             b1 = (box * rel).sum(axis=(-2, -1))
             b2 = (box * (rel**2 + var_in)).sum(axis=(-2, -1))
-            blk = (b0[:, None] * f + b1[:, None] * df + 0.5 * b2[:, None] * d2f) / p
+            blk = (b0[:, :, None] * f + b1[:, :, None] * df + 0.5 * b2[:, :, None] * d2f) / p
             if out is None:
-                out = np.empty((n_t, n_v, f.shape[0], r_all, n))
-            out[it, :, :, r0:r1] = blk
+                out = np.empty((n_t, n_h, n_v, f.shape[0], r_all, n))
+            out[it, :, :, :, r0:r1] = blk
     assert out is not None
-    return out
+    return out[:, 0] if scalar else out
 
 
 def pair_offsets_mm(grid: AxisGrid) -> np.ndarray:
@@ -215,6 +227,96 @@ def refracted_terms(
     return compress_terms(terms, kp.compress_tol)
 
 
+def _lagrange4(nodes: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, list[np.ndarray]]:
+    """First index and the four cubic Lagrange weights of uniform ``nodes`` at ``t``."""
+    n = nodes.size
+    pos = np.clip((t - nodes[0]) / (nodes[1] - nodes[0]), 0.0, n - 1.000001)
+    base = np.clip(np.floor(pos).astype(np.int64) - 1, 0, n - 4)
+    x = pos - base
+    ls = []
+    for k in range(4):
+        lk = np.ones_like(x)
+        for j in range(4):
+            if j != k:
+                lk = lk * (x - j) / (k - j)
+        ls.append(lk)
+    return base, ls
+
+
+def interp_weights_2d(nodes1: np.ndarray, nodes2: np.ndarray, weights: np.ndarray,
+                      t1: np.ndarray, t2: np.ndarray) -> np.ndarray:
+    """``(V, r) + t1.shape``: weights ``(V, T1·T2, r)`` tabulated on the product grid of two
+    uniform node sets (``T1``, ``T2`` ≥ 4), bicubically interpolated at ``(t1, t2)``."""
+    n_v, _, r = weights.shape
+    w = weights.reshape(n_v, nodes1.size, nodes2.size, r)
+    b1, l1 = _lagrange4(nodes1, t1)
+    b2, l2 = _lagrange4(nodes2, t2)
+    out = np.zeros((n_v,) + t1.shape + (r,))
+    for a in range(4):
+        for b in range(4):
+            out += w[:, b1 + a, b2 + b] * (l1[a] * l2[b])[None, ..., None]
+    return np.moveaxis(out, -1, 1)
+
+
+def _shift_nodes(t_lo: float, t_hi: float, width_mm: float) -> np.ndarray:
+    """Uniform displacement nodes (≥ 4) over ``[t_lo, t_hi]``, step ≤ ``SHIFT_STEP_UM`` and a
+    tenth of the narrower trapezoid width (as for the rotated mask)."""
+    step = min(SHIFT_STEP_UM * 1e-3, width_mm / SHIFT_STEPS_PER_WIDTH)
+    n_int = max(3, int(math.ceil((t_hi - t_lo) / step)))
+    if t_hi <= t_lo:
+        return t_lo + (np.arange(4) - 1.5) * step
+    return np.linspace(t_lo, t_hi, n_int + 1)
+
+
+def refracted_rotated_terms(
+    kp: KernelParams, exp: SeparableExpansion, tables: RefractedTables,
+    profiles_x: tuple[np.ndarray, np.ndarray], profiles_y: tuple[np.ndarray, np.ndarray],
+    pairs: list[tuple[str, int, float]],
+) -> list[SeparableTerm]:
+    """:func:`refracted_terms` for a rotated mask: the pattern-frame profiles are read at
+    ``p_x = c·(m_x - dx) + t_x``, ``p_y = c·(m_y - dy) - t_y`` with the coupling frozen at
+    the pair's centre crossing point (``t_x = s·(M_y - dy)``, ``t_y = s·(M_x - dx)``, as in
+    :mod:`~thintact_sdk.imaging.sim_rotated`; ``M`` taken with the other axis's offset set to
+    zero inside ``κ``, which moves it by ``s·D·Δκ``, well under 0.1 µm at the angles a
+    misalignment has). The x family then depends on the y pair through two numbers,
+    ``(D_y², t_x)``: it is tabulated on their product grid, compressed by one SVD and its
+    weights interpolated bicubically; likewise for y."""
+    a = math.radians(kp.angle_deg)
+    c, s = math.cos(a), math.sin(a)
+    sx_mm, sy_mm = kp.dx_um * 1e-3, kp.dy_um * 1e-3
+    gx, gy = kp.grid_x(), kp.grid_y()
+    ox, oy = pair_offsets_mm(gx), pair_offsets_mm(gy)
+    k0 = float(tables.kappa.value(np.array(0.0)))
+    cross_x = gx.sensor_centres_mm()[:, None] + ox * tables.kappa.value(ox**2)  # (S, M)
+    cross_y = gy.sensor_centres_mm()[:, None] + oy * tables.kappa.value(oy**2)  # (R, N)
+    # x profile read at m - (dx - t_x/c) after scaling its edges by 1/c; y at m - (dy + t_y/c)
+    disp_x = sx_mm - s * (cross_y - sy_mm) / c  # (R, N): a function of the y pair
+    disp_y = sy_mm + s * (cross_x - sx_mm) / c  # (S, M): a function of the x pair
+    families = []
+    for grid, prof, derivs, other, disp in ((gx, profiles_x, exp.fx_derivs, oy, disp_x),
+                                            (gy, profiles_y, exp.gy_derivs, ox, disp_y)):
+        o2 = other**2
+        width = min((1 - k0) * grid.sensor_pitch_mm, k0 * grid.scene_pitch_mm)
+        n_r2 = _r2_nodes(float(o2.min()), float(o2.max()), tables, grid.max_offset_mm(), width)
+        n_sh = _shift_nodes(float(disp.min()), float(disp.max()), width)
+        edges = prof[0] / c
+        fam = refracted_axis_family(grid, edges, prof[1], derivs, tables.kappa, n_r2, kp.n_sub,
+                                    n_sh)  # (T1, T2, V, L, r, n)
+        fam = fam.reshape((n_r2.size * n_sh.size,) + fam.shape[2:])
+        weights, basis, ranks = compress_family(fam, FAMILY_RANK_TOL)
+        del fam
+        families.append((interp_weights_2d(n_r2, n_sh, weights, o2, disp), basis, ranks))
+    (u_x, b_x, ranks_x), (u_y, b_y, ranks_y) = families
+    terms: list[SeparableTerm] = []
+    for part, v, coef in pairs:
+        if coef == 0:
+            continue
+        block = [SeparableTerm(coef * u_x[v, j] * b_y[v, i, ll], b_x[v, j, ll] * u_y[v, i], part)
+                 for ll in range(exp.rank) for j in range(ranks_x[v]) for i in range(ranks_y[v])]
+        terms += compress_terms(block, kp.compress_tol / 4)
+    return compress_terms(terms, kp.compress_tol)
+
+
 def _tables_and_expansion(kp: KernelParams) -> tuple[RefractedTables, SeparableExpansion]:
     gx, gy = kp.grid_x(), kp.grid_y()
     margin = 2 * max(kp.pitch_um, kp.scene_pitch_um) * 1e-3
@@ -226,9 +328,10 @@ def _tables_and_expansion(kp: KernelParams) -> tuple[RefractedTables, SeparableE
 
 
 def build_refracted_kernel(kp: KernelParams) -> SeparableKernel:
-    """The separable kernel of an unrotated mask behind a refracting scene gap, geometric or
-    with diffraction (one set of terms per distinct wavelength)."""
+    """The separable kernel of a (possibly rotated) mask behind a refracting scene gap,
+    geometric or with diffraction (one set of terms per distinct wavelength)."""
     tables, exp = _tables_and_expansion(kp)
+    make = refracted_rotated_terms if kp.angle_deg != 0.0 else refracted_terms
     info = {"rank": float(exp.rank), "radiometric_rel_error": exp.rel_error}
     k = len(kp.phi)
     edges = mask_cell_edges_mm(k, kp.feature_um * 1e-3)
@@ -236,7 +339,7 @@ def build_refracted_kernel(kp: KernelParams) -> SeparableKernel:
         c_o, c_c = mask_leakage.intensity_coefficients(kp.leakage)
         px = (edges, np.stack([np.ones(k), np.asarray(kp.phi, float)]))
         py = (edges, np.stack([np.ones(k), np.asarray(kp.phi_rows, float)]))
-        terms = refracted_terms(kp, exp, tables, px, py, [("open", 0, c_o), ("coding", 1, c_c)])
+        terms = make(kp, exp, tables, px, py, [("open", 0, c_o), ("coding", 1, c_c)])
         info["terms"] = float(len(terms))
         return SeparableKernel([terms] * kp.channels, info)
     a_o, a_c = mask_leakage.amplitude_coefficients(kp.leakage)
@@ -251,13 +354,16 @@ def build_refracted_kernel(kp: KernelParams) -> SeparableKernel:
         lam = kp.wavelengths_nm[min(ch, len(kp.wavelengths_nm) - 1)]
         if lam not in by_wavelength:
             profs = []
-            for grid, phi, shift in ((kp.grid_x(), kp.phi, kp.dx_um), (kp.grid_y(), kp.phi_rows,
-                                                                        kp.dy_um)):
-                reach = grid.n_sensor * grid.sensor_pitch_mm / 2 + k_max * grid.max_offset_mm() \
-                    + abs(shift) * 1e-3 + 4 * grid.sensor_pitch_mm + 4 * grid.scene_pitch_mm
+            # crossing points in the pattern frame: rotation mixes in the other axis's extent
+            sin_a = abs(math.sin(math.radians(kp.angle_deg)))
+            half = max(g.n_sensor * g.sensor_pitch_mm / 2 + k_max * g.max_offset_mm()
+                       for g in (kp.grid_x(), kp.grid_y()))
+            for grid, phi in ((kp.grid_x(), kp.phi), (kp.grid_y(), kp.phi_rows)):
+                reach = half * (1 + sin_a) + (abs(kp.dx_um) + abs(kp.dy_um)) * 1e-3 \
+                    + 4 * grid.sensor_pitch_mm + 4 * grid.scene_pitch_mm
                 profs.append(diffraction.axis_intensity_profiles(
                     edges, np.asarray(phi, float), -reach, reach, lam, z_eff, kp.d_mm))
-            by_wavelength[lam] = refracted_terms(kp, exp, tables, profs[0], profs[1], pairs)
+            by_wavelength[lam] = make(kp, exp, tables, profs[0], profs[1], pairs)
         per_channel.append(by_wavelength[lam])
     info["terms"] = float(max(len(t) for t in per_channel))
     return SeparableKernel(per_channel, info)

@@ -260,8 +260,7 @@ class Simulator(ImagingModel):
         self.kernel_params = kernel_params(profile, self.physics, n_sub, rank_tol, direct)
         if self.kernel_params.wavelengths_nm is not None and not self.kernel_params.separable:
             raise ThinTactError(
-                "physics: diffraction cannot be combined with a rotated mask behind a "
-                "refracting scene gap, or with the forced direct path (the direct path has "
+                "physics: diffraction cannot be simulated on the forced direct path (it has "
                 "no diffraction model)"
             )
         self._kernel: ImagingKernel | None = None
