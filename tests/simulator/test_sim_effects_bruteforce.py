@@ -26,8 +26,8 @@ RAY = dict(rows=4, cols=5, scene_rows=3, scene_cols=4, pitch_um=20.0, scene_pitc
 #: as RAY with 20 µm cells, for the rotated mask (test_sim_rotated's device)
 ROT = dict(rows=4, cols=5, pitch_um=20.0, scene_rows=3, scene_cols=4, scene_pitch_um=60.0,
            feature_um=20.0, k=40, z_mm=1.0, d_mm=0.3)
-#: a smaller window of RAY for the quick default cases
-QUICK = dict(RAY, rows=3, cols=3, scene_rows=2, scene_cols=3)
+#: 3×3 sensor pixels, 2×3 scene pixels: the window every brute-force test uses
+WINDOW = dict(rows=3, cols=3, scene_rows=2, scene_cols=3)
 
 REFR = {"refraction": {"n_scene_side": 1.4}}
 ROTATION = {"mask_misalignment": {"angle_deg": 2.0, "dx_um": -4.0, "dy_um": 2.0}}
@@ -64,21 +64,29 @@ def _errors(physics: dict, device: dict, n: int) -> tuple[float, float, bool]:
             rel_rms(y, reference_forward(prof, x, 2 * n, 2 * n)), sim.separable)
 
 
+#: the brute force converges slowly on this one (1.48e-3, 1.12e-3, 5.0e-4 at 12², 24², 36²;
+#: the simulator moves by < 3e-5 with 8 sub-intervals or a 10x finer family)
+SAMPLES = {"refraction+geometry": 18}
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("case", list(CASES))
 def test_effect_path_within_contract_of_converged_brute_force(case):
+    """On the 3×3-pixel window of the devices: every path within 1e-3 of the brute force at
+    2n samples, and at least twice as close as at n (the brute force is still converging
+    onto the simulator)."""
     physics, device = CASES[case]
-    e12, e24, separable = _errors(physics, device, 12)
+    n = SAMPLES.get(case, 12)
+    e_n, e_2n, separable = _errors(physics, dict(device, **WINDOW), n)
     assert separable
-    assert e24 < 1e-3
-    assert e24 < e12 / 2 or e24 < 2e-4  # converging towards the simulator
+    assert e_2n < 1e-3
+    assert e_2n < e_n / 2
 
 
 @pytest.mark.parametrize("case", ["refraction", "rotation+refraction"])
 def test_quick_refraction_paths_against_brute_force(case):
     physics, device = CASES[case]
-    e8, e16, separable = _errors(physics, dict(device, rows=3, cols=3, scene_rows=2,
-                                               scene_cols=3), 8)
+    e8, e16, separable = _errors(physics, dict(device, **WINDOW), 8)
     assert separable
     assert e16 < 1.5e-3
     assert e16 < e8 / 2

@@ -56,6 +56,9 @@ under a tenth of the narrower trapezoid width."""
 FAMILY_RANK_TOL = 1e-4
 """Relative Frobenius cut of the SVD over the ``D²`` nodes."""
 
+MERGE_TERMS = 300
+"""Terms accumulated before an intermediate compression (rotated + refracted kernel)."""
+
 TABLE_POINTS = 4001
 """Samples of the Snell solution (uniform in ρ²) behind the splines of κ and F."""
 
@@ -311,9 +314,17 @@ def refracted_rotated_terms(
     for part, v, coef in pairs:
         if coef == 0:
             continue
-        block = [SeparableTerm(coef * u_x[v, j] * b_y[v, i, ll], b_x[v, j, ll] * u_y[v, i], part)
-                 for ll in range(exp.rank) for j in range(ranks_x[v]) for i in range(ranks_y[v])]
-        terms += compress_terms(block, kp.compress_tol / 4)
+        # the two-parameter families have high ranks: the r_x·r_y·L products are compressed
+        # one x basis matrix at a time and merged, so that memory stays bounded
+        acc: list[SeparableTerm] = []
+        for j in range(ranks_x[v]):
+            block = [SeparableTerm(coef * u_x[v, j] * b_y[v, i, ll], b_x[v, j, ll] * u_y[v, i],
+                                   part)
+                     for ll in range(exp.rank) for i in range(ranks_y[v])]
+            acc += compress_terms(block, kp.compress_tol / 8)
+            if len(acc) > MERGE_TERMS:
+                acc = compress_terms(acc, kp.compress_tol / 8)
+        terms += compress_terms(acc, kp.compress_tol / 4)
     return compress_terms(terms, kp.compress_tol)
 
 

@@ -10,8 +10,9 @@ Stages, in order (CONTRACTS §4 baseline plus the effects of ``profile.physics``
    ``geometry``) set the kernel's parameters through their declaration's ``kernel``.
    Separable physics uses ``Y_c = Σ_k P_k X_c Q_kᵀ``
    (:mod:`~thintact_sdk.imaging.sim_separable`, rotated masks
-   :mod:`~thintact_sdk.imaging.sim_rotated`); refraction uses the direct path
-   (:mod:`~thintact_sdk.imaging.sim_direct`);
+   :mod:`~thintact_sdk.imaging.sim_rotated`, refraction, with or without rotation and
+   diffraction, :mod:`~thintact_sdk.imaging.sim_refracted`); ``direct=True`` forces the
+   dense direct path (:mod:`~thintact_sdk.imaging.sim_direct`);
 3. signal-stage effects, linear (e.g. ``sensor_blur``, ``color_crosstalk``, ``veiling_glare``);
 4. **the gain enters here**: ``L = gain_dn_per_unit[c] · signal`` (DN above black);
 5. DN-stage effects (e.g. ``stray_light``, ``sensor_gamma``, ``saturation``).
@@ -385,7 +386,7 @@ class Simulator(ImagingModel):
         Raises
         ------
         ThinTactError
-            When the physics is not separable per channel (refraction, colour
+            When the physics is not separable per channel (the forced direct path, colour
             crosstalk, display gamma, DN-defined effects).
         """
         o, c = self.open_coding_terms(channel)
@@ -402,7 +403,7 @@ class Simulator(ImagingModel):
         blockers = [e for e in ph if EFFECTS[e].stage != "kernel" and EFFECTS[e].separable_terms is None]
         kernel = self.kernel if self.separable else None
         if not isinstance(kernel, SeparableKernel) or blockers:
-            why = "refraction or the forced direct path" if not self.separable \
+            why = "the forced direct path" if not self.separable \
                 else ", ".join(blockers)
             raise ThinTactError(f"the physics of {self.profile.name!r} is not separable ({why})")
         if not 0 <= channel < self.n_channels:
