@@ -40,6 +40,7 @@ from thintact_sdk.imaging.sim_axis import AxisGrid, mask_cell_edges_mm, second_a
 from thintact_sdk.imaging.sim_params import KernelParams
 from thintact_sdk.imaging.sim_radiometry import SeparableExpansion, TabulatedRadial
 from thintact_sdk.imaging.sim_rotated import (
+    SHIFT_RANK_TOL,
     SHIFT_STEP_UM,
     SHIFT_STEPS_PER_WIDTH,
     FactorDerivs,
@@ -58,6 +59,10 @@ FAMILY_RANK_TOL = 1e-4
 
 MERGE_TERMS = 300
 """Terms accumulated before an intermediate compression (rotated + refracted kernel)."""
+
+ONE_SHOT_TERMS = 2500
+"""Up to this many products (rotated + refracted kernel) are compressed in one go (one Gram
+matrix each side, ~(R·N + S·M)·terms·8 bytes); beyond, block by block."""
 
 TABLE_POINTS = 4001
 """Samples of the Snell solution (uniform in ρ²) behind the splines of κ and F."""
@@ -306,7 +311,7 @@ def refracted_rotated_terms(
         fam = refracted_axis_family(grid, edges, prof[1], derivs, tables.kappa, n_r2, kp.n_sub,
                                     n_sh)  # (T1, T2, V, L, r, n)
         fam = fam.reshape((n_r2.size * n_sh.size,) + fam.shape[2:])
-        weights, basis, ranks = compress_family(fam, FAMILY_RANK_TOL)
+        weights, basis, ranks = compress_family(fam, SHIFT_RANK_TOL)
         del fam
         families.append((interp_weights_2d(n_r2, n_sh, weights, o2, disp), basis, ranks))
     (u_x, b_x, ranks_x), (u_y, b_y, ranks_y) = families
@@ -314,8 +319,16 @@ def refracted_rotated_terms(
     for part, v, coef in pairs:
         if coef == 0:
             continue
-        # the two-parameter families have high ranks: the r_x·r_y·L products are compressed
-        # one x basis matrix at a time and merged, so that memory stays bounded
+        n_products = exp.rank * ranks_x[v] * ranks_y[v]
+        if n_products <= ONE_SHOT_TERMS:
+            block = [SeparableTerm(coef * u_x[v, j] * b_y[v, i, ll], b_x[v, j, ll] * u_y[v, i],
+                                   part)
+                     for ll in range(exp.rank) for j in range(ranks_x[v])
+                     for i in range(ranks_y[v])]
+            terms += compress_terms(block, kp.compress_tol / 4)
+            continue
+        # large angles: the two-parameter families have high ranks, so the r_x·r_y·L products
+        # are compressed one x basis matrix at a time and merged (bounded memory, slower)
         acc: list[SeparableTerm] = []
         for j in range(ranks_x[v]):
             block = [SeparableTerm(coef * u_x[v, j] * b_y[v, i, ll], b_x[v, j, ll] * u_y[v, i],
