@@ -303,3 +303,13 @@ def test_diffraction_with_rotated_mask_against_2d_fresnel_quadrature():
         want = float(np.mean(rad * np.abs(field) ** 2)) * p_mm**2
         assert y[r, c] == pytest.approx(want, rel=2e-3)
     assert rel_rms(unrotated.forward(x)[..., 0], y) > 2e-2
+
+
+def test_refraction_on_a_paper_size_device_is_refused_with_a_message():
+    """At 1024×1280 the Snell family would need ~1.4 TiB: a ThinTactError, not a MemoryError."""
+    from thintact_sdk.errors import ThinTactError
+    from thintact_sdk.profile import load_profile
+
+    paper = load_profile("thintact-paper").with_physics({"refraction": {"n_scene_side": 1.41}})
+    with pytest.raises(ThinTactError, match="refraction on this device needs"):
+        Simulator(paper).kernel  # noqa: B018 - building the kernel is the test

@@ -36,6 +36,7 @@ import math
 
 import numpy as np
 
+from thintact_sdk.errors import ThinTactError
 from thintact_sdk.imaging.sim_axis import AxisGrid, mask_cell_edges_mm, second_antiderivative
 from thintact_sdk.imaging.sim_params import KernelParams
 from thintact_sdk.imaging.sim_radiometry import SeparableExpansion, TabulatedRadial
@@ -87,6 +88,22 @@ class RefractedTables:
         kappa, factor = refraction.crossing_fraction_and_factor(rho, z_mm, d_mm, n, exponent)
         self.kappa = TabulatedRadial.from_samples(rho, kappa)
         self.factor = TabulatedRadial.from_samples(rho, factor)
+
+
+FAMILY_MAX_BYTES = 2 * 1024**3
+"""Largest tabulated family (one axis) the refracted kernels build."""
+
+
+def _check_family_size(grid: AxisGrid, n_members: int, n_values: int, rank: int) -> None:
+    """Refuse (``ThinTactError``) a family that would not fit in :data:`FAMILY_MAX_BYTES`."""
+    size = 8.0 * n_members * n_values * rank * grid.n_sensor * grid.n_scene
+    if size > FAMILY_MAX_BYTES:
+        raise ThinTactError(
+            f"physics: refraction on this device needs {n_members} tabulated one-axis members "
+            f"of {grid.n_sensor}×{grid.n_scene} pixels ({size / 1024**3:.0f} GiB, limit "
+            f"{FAMILY_MAX_BYTES / 1024**3:.0f} GiB): the separable refraction kernel is made for "
+            "devices up to about 128×160 sensor pixels and a few degrees of view"
+        )
 
 
 def refracted_axis_family(
@@ -218,6 +235,7 @@ def refracted_terms(
         reach = grid.max_offset_mm()
         width = min((1 - k0) * grid.sensor_pitch_mm, k0 * grid.scene_pitch_mm)
         nodes = _r2_nodes(float(o2.min()), float(o2.max()), tables, reach, width)
+        _check_family_size(grid, nodes.size, prof[1].shape[0], exp.rank)
         fam = refracted_axis_family(grid, prof[0], prof[1], derivs, tables.kappa, nodes,
                                     kp.n_sub, shift)
         weights, basis, ranks = compress_family(fam, FAMILY_RANK_TOL)
@@ -307,6 +325,7 @@ def refracted_rotated_terms(
         width = min((1 - k0) * grid.sensor_pitch_mm, k0 * grid.scene_pitch_mm)
         n_r2 = _r2_nodes(float(o2.min()), float(o2.max()), tables, grid.max_offset_mm(), width)
         n_sh = _shift_nodes(float(disp.min()), float(disp.max()), width)
+        _check_family_size(grid, n_r2.size * n_sh.size, prof[1].shape[0], exp.rank)
         edges = prof[0] / c
         fam = refracted_axis_family(grid, edges, prof[1], derivs, tables.kappa, n_r2, kp.n_sub,
                                     n_sh)  # (T1, T2, V, L, r, n)
