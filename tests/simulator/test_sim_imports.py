@@ -12,8 +12,8 @@ import pytest
 
 import thintact_sdk.imaging as imaging
 
-KERNEL_MODULES = ("sim_params", "sim_direct", "sim_rotated", "sim_separable", "sim_axis",
-                  "sim_radiometry")
+KERNEL_MODULES = ("sim_params", "sim_direct", "sim_rotated", "sim_refracted", "sim_separable",
+                  "sim_axis", "sim_radiometry")
 
 
 def _imports(path: Path) -> set[str]:

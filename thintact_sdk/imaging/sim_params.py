@@ -47,8 +47,8 @@ class KernelParams:
 
     @property
     def separable(self) -> bool:
-        """True unless the scene side refracts or the direct path is forced."""
-        return self.n_scene_side == 1.0 and not self.force_direct
+        """True unless the direct path is forced (every effect has a separable kernel)."""
+        return not self.force_direct
 
     def grid_x(self) -> AxisGrid:
         return AxisGrid(self.cols, self.pitch_um * 1e-3, self.scene_cols, self.scene_pitch_um * 1e-3)

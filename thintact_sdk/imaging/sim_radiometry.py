@@ -6,7 +6,9 @@ across a gap ``H`` gives the irradiance factor ``cos^q(theta) / H²`` with
 pixel angular response ``cos^p``). It is radial, hence not separable, but smooth: on the
 rectangle of offsets a device can see it is approximated by a short sum
 ``Σ_l f_l(dx)·g_l(dy)`` (a skeleton / cross approximation on Chebyshev nodes, truncated
-where the singular values drop below ``rel_tol`` of the largest).
+where the singular values drop below ``rel_tol`` of the largest). With refraction the factor
+is still radial but has no closed form: :class:`TabulatedRadial` gives it (and its
+derivatives) from a spline in ``ρ²`` and the same expansion is built from it.
 """
 
 from __future__ import annotations
@@ -14,12 +16,41 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.interpolate import CubicSpline
 
 
 def radial_factor(dx_mm: np.ndarray, dy_mm: np.ndarray, h_mm: float, q: float) -> np.ndarray:
     """``cos^q(theta) / H²`` in 1/mm² for lateral offsets ``dx_mm``, ``dy_mm`` (broadcast)."""
     rho2 = np.asarray(dx_mm) ** 2 + np.asarray(dy_mm) ** 2
     return h_mm ** (q - 2) / (h_mm**2 + rho2) ** (q / 2)
+
+
+@dataclass(frozen=True)
+class TabulatedRadial:
+    """A radial function ``F(ρ²)`` given by a cubic spline in ``r2 = ρ²`` (mm²).
+
+    Build with :meth:`from_samples`; the spline's error is of order (step in ρ²)⁴ times the
+    fourth derivative (the functions tabulated here are analytic in ``ρ²``).
+    """
+
+    spline: CubicSpline
+
+    @classmethod
+    def from_samples(cls, rho_mm: np.ndarray, values: np.ndarray) -> TabulatedRadial:
+        """From values at ``rho_mm`` (increasing, starting at 0); tabulated in ``ρ²``."""
+        return cls(CubicSpline(np.asarray(rho_mm, float) ** 2, np.asarray(values, float)))
+
+    def value(self, r2: np.ndarray) -> np.ndarray:
+        """``F(r2)``."""
+        return np.asarray(self.spline(r2))
+
+    def d1(self, r2: np.ndarray) -> np.ndarray:
+        """``dF/d(ρ²)``."""
+        return np.asarray(self.spline(r2, 1))
+
+    def d2(self, r2: np.ndarray) -> np.ndarray:
+        """``d²F/d(ρ²)²``."""
+        return np.asarray(self.spline(r2, 2))
 
 
 def _chebyshev_nodes(half_mm: float, n: int) -> np.ndarray:
@@ -42,28 +73,36 @@ class SeparableExpansion:
     left: np.ndarray  # (n_y, L): multiplies radial_factor(dx, y_nodes)
     right: np.ndarray  # (n_x, L): multiplies radial_factor(x_nodes, dy)
     rel_error: float
+    radial: TabulatedRadial | None = None
 
     @classmethod
     def build(
         cls, h_mm: float, q: float, half_x_mm: float, half_y_mm: float,
-        rel_tol: float = 1e-7, n_nodes: int = 96,
+        rel_tol: float = 1e-7, n_nodes: int = 96, radial: TabulatedRadial | None = None,
     ) -> SeparableExpansion:
-        """Expansion of ``cos^q/H²`` over offsets up to ``half_x_mm``, ``half_y_mm`` (mm)."""
+        """Expansion of ``cos^q/H²`` (or of ``radial`` when given) over offsets up to
+        ``half_x_mm``, ``half_y_mm`` (mm)."""
         xn = _chebyshev_nodes(max(half_x_mm, 1e-6) * 1.02, n_nodes)
         yn = _chebyshev_nodes(max(half_y_mm, 1e-6) * 1.02, n_nodes)
-        kmat = radial_factor(xn[:, None], yn[None, :], h_mm, q)
+
+        def factor(dx: np.ndarray, dy: np.ndarray) -> np.ndarray:
+            if radial is None:
+                return radial_factor(dx, dy, h_mm, q)
+            return radial.value(dx**2 + dy**2)
+
+        kmat = factor(xn[:, None], yn[None, :])
         u, s, vt = np.linalg.svd(kmat)
         rank = int(np.sum(s > rel_tol * s[0]))
         rank = max(rank, 1)
         inv_sqrt = 1.0 / np.sqrt(s[:rank])
         left = vt[:rank].T * inv_sqrt  # (n_y, L)
         right = u[:, :rank] * inv_sqrt  # (n_x, L)
-        exp = cls(h_mm, q, xn, yn, left, right, 0.0)
+        exp = cls(h_mm, q, xn, yn, left, right, 0.0, radial)
         # measured error on an off-node test grid
         tx = np.linspace(-xn.max(), xn.max(), 61)
         ty = np.linspace(-yn.max(), yn.max(), 53)
         approx = exp.fx(tx) @ exp.gy(ty).T
-        exact = radial_factor(tx[:, None], ty[None, :], h_mm, q)
+        exact = factor(tx[:, None], ty[None, :])
         exp.rel_error = float(np.max(np.abs(approx - exact)) / np.max(exact))
         return exp
 
@@ -74,15 +113,11 @@ class SeparableExpansion:
 
     def fx(self, dx_mm: np.ndarray) -> np.ndarray:
         """``(..., L)`` x-factors at offsets ``dx_mm`` (any shape)."""
-        dx = np.asarray(dx_mm, dtype=float)
-        k = radial_factor(dx[..., None], self.y_nodes, self.h_mm, self.q)
-        return k @ self.left
+        return self._derivs(np.asarray(dx_mm, float), self.y_nodes, self.left)[0]
 
     def gy(self, dy_mm: np.ndarray) -> np.ndarray:
         """``(..., L)`` y-factors at offsets ``dy_mm`` (any shape)."""
-        dy = np.asarray(dy_mm, dtype=float)
-        k = radial_factor(self.x_nodes, dy[..., None], self.h_mm, self.q)
-        return k @ self.right
+        return self._derivs(np.asarray(dy_mm, float), self.x_nodes, self.right)[0]
 
     def fx_derivs(self, dx_mm: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(f, f', f'')`` of the x-factors at ``dx_mm``, each ``(..., L)`` (analytic)."""
@@ -110,6 +145,13 @@ class SeparableExpansion:
                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         q, h = self.q, self.h_mm
         tt = t[:, None]
+        if self.radial is not None:
+            r2 = tt**2 + nodes**2
+            f1 = self.radial.d1(r2)
+            k = self.radial.value(r2)
+            dk = 2 * tt * f1
+            d2k = 2 * f1 + 4 * tt**2 * self.radial.d2(r2)
+            return k @ weights, dk @ weights, d2k @ weights
         inv = 1.0 / (h**2 + tt**2 + nodes**2)
         half_q = q / 2
         k = inv * inv if half_q == 2.0 else inv**half_q

@@ -4,7 +4,10 @@ Direct 4-D midpoint quadrature: ``n_sensor²`` points in every sensor pixel time
 points in every scene pixel, each ray evaluated with the full non-separable physics (sharp
 mask, rotated/shifted pattern, leakage, ``cos^(4+p)`` radiometry, Snell refraction). Its
 own error falls as the sample counts grow; it shares no code with the fast paths except
-the small physics formulas of :mod:`thintact_sdk.physics`.
+the small physics formulas of :mod:`thintact_sdk.physics`. With refraction, Snell's law is
+solved once on a table of :data:`SNELL_TABLE_POINTS` lateral offsets (uniform in ρ up to the
+largest the device has) and read by linear interpolation: the table's error, ``κ''·Δρ²/8``,
+is below 1e-9 relative for any device this renderer can afford.
 """
 
 from __future__ import annotations
@@ -13,6 +16,9 @@ import numpy as np
 
 from thintact_sdk.physics import mask_misalignment, refraction, resolve_physics
 from thintact_sdk.profile import Profile
+
+SNELL_TABLE_POINTS = 200_001
+"""Lateral offsets at which the brute force solves Snell's law (uniform in ρ)."""
 
 
 def _mask_value(mx: np.ndarray, my: np.ndarray, profile: Profile, physics: dict) -> np.ndarray:
@@ -78,6 +84,11 @@ def reference_kernel(profile: Profile, n_sensor: int = 8, n_scene: int = 8,
         u_y, u_x = u_y[sensor_pixels], u_x[sensor_pixels]
     scene_idx = np.arange(nr * nc) if scene_pixels is None else np.asarray(scene_pixels)
     out = np.empty((u_y.shape[0], scene_idx.size))
+    if n_idx != 1.0:
+        rho_max = float(np.hypot(np.ptp(np.r_[u_x.ravel(), s_x.ravel()]),
+                                 np.ptp(np.r_[u_y.ravel(), s_y.ravel()])))
+        rho_t = np.linspace(0.0, rho_max * 1.001 + 1e-9, SNELL_TABLE_POINTS)
+        kappa_t, factor_t = refraction.crossing_fraction_and_factor(rho_t, z, d, n_idx, p_exp)
     for col, j in enumerate(scene_idx):
         dx = s_x[j][None, None, :] - u_x[:, :, None]
         dy = s_y[j][None, None, :] - u_y[:, :, None]
@@ -87,7 +98,8 @@ def reference_kernel(profile: Profile, n_sensor: int = 8, n_scene: int = 8,
             kappa = np.full_like(rho, d / h)
             factor = h ** (2 + p_exp) / (h**2 + rho**2) ** ((4 + p_exp) / 2)
         else:
-            kappa, factor = refraction.crossing_fraction_and_factor(rho, z, d, n_idx, p_exp)
+            kappa = np.interp(rho, rho_t, kappa_t)
+            factor = np.interp(rho, rho_t, factor_t)
         mx = u_x[:, :, None] + dx * kappa
         my = u_y[:, :, None] + dy * kappa
         t = _mask_value(mx, my, profile, ph)

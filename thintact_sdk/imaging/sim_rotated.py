@@ -86,7 +86,17 @@ def _shift_family(
     nodes = (t_lo + t_hi) / 2 + (np.arange(n) - (n - 1) / 2) * step
     fam = axis_term_matrices(grid, alpha, beta, edges_mm, values, factor_derivs, n_sub,
                              shifts_mm=nodes)  # (T, V, L, r, n)
-    n_v = values.shape[0]
+    weights, basis, ranks = compress_family(fam)
+    return nodes, weights, basis, ranks
+
+
+def compress_family(fam: np.ndarray, rel_tol: float = SHIFT_RANK_TOL
+                    ) -> tuple[np.ndarray, np.ndarray, list[int]]:
+    """Factor a tabulated family ``(T, V, ...)`` per profile ``v`` as
+    ``A(t) ≈ Σ_j u_j(t)·B_j`` (SVD over the node index ``t``, relative Frobenius cut
+    ``rel_tol``): weights ``(V, T, r)``, basis ``(V, r, ...)`` and the rank of each profile
+    (unused columns of lower-rank profiles are zero)."""
+    n, n_v = fam.shape[:2]
     per_v = []
     for v in range(n_v):
         mat = fam[:, v].reshape(n, -1)
@@ -94,7 +104,7 @@ def _shift_family(
         ev, u = np.linalg.eigh(mat @ mat.T)
         ev, u = np.clip(ev[::-1], 0.0, None), u[:, ::-1]
         tail = np.sqrt(np.cumsum(ev[::-1])[::-1])  # tail[i]: Frobenius norm beyond rank i
-        rank = max(1, int(np.sum(tail > SHIFT_RANK_TOL * tail[0]))) if ev[0] > 0 else 1
+        rank = max(1, int(np.sum(tail > rel_tol * tail[0]))) if ev[0] > 0 else 1
         per_v.append((u[:, :rank], u[:, :rank].T @ mat))
     r_max = max(b.shape[0] for _, b in per_v)
     weights = np.zeros((n_v, n, r_max))
@@ -102,10 +112,10 @@ def _shift_family(
     for v, (u, b) in enumerate(per_v):
         weights[v, :, : u.shape[1]] = u
         basis[v, : b.shape[0]] = b.reshape((b.shape[0],) + fam.shape[2:])
-    return nodes, weights, basis, [b.shape[0] for _, b in per_v]
+    return weights, basis, [b.shape[0] for _, b in per_v]
 
 
-def _interp_weights(nodes: np.ndarray, weights: np.ndarray, t: np.ndarray) -> np.ndarray:
+def interp_weights(nodes: np.ndarray, weights: np.ndarray, t: np.ndarray) -> np.ndarray:
     """``(V, r) + t.shape``: the weights ``u_j`` at displacements ``t`` by local cubic
     (4-point Lagrange) interpolation on the nodes nearest to each ``t`` (linear with fewer
     than four nodes)."""
@@ -173,8 +183,8 @@ def rotated_terms(
     nodes_y, w_y, b_y, ranks_y = _shift_family(gy, alpha, beta, ey / c, vy, exp.gy_derivs, kp.n_sub,
                                       dy + t_y.min() / c, dy + t_y.max() / c)
     # weights of the x family at each y pair, of the y family at each x pair
-    u_x = _interp_weights(nodes_x, w_x, dx - t_x / c)  # (V, r_x, R, N)
-    u_y = _interp_weights(nodes_y, w_y, dy + t_y / c)  # (V, r_y, S, M)
+    u_x = interp_weights(nodes_x, w_x, dx - t_x / c)  # (V, r_x, R, N)
+    u_y = interp_weights(nodes_y, w_y, dy + t_y / c)  # (V, r_y, S, M)
     terms: list[SeparableTerm] = []
     for part, v, coef in pairs:
         if coef == 0:

@@ -10,8 +10,9 @@ Stages, in order (CONTRACTS §4 baseline plus the effects of ``profile.physics``
    ``geometry``) set the kernel's parameters through their declaration's ``kernel``.
    Separable physics uses ``Y_c = Σ_k P_k X_c Q_kᵀ``
    (:mod:`~thintact_sdk.imaging.sim_separable`, rotated masks
-   :mod:`~thintact_sdk.imaging.sim_rotated`); refraction uses the direct path
-   (:mod:`~thintact_sdk.imaging.sim_direct`);
+   :mod:`~thintact_sdk.imaging.sim_rotated`, refraction, with or without rotation and
+   diffraction, :mod:`~thintact_sdk.imaging.sim_refracted`); ``direct=True`` forces the
+   dense direct path (:mod:`~thintact_sdk.imaging.sim_direct`);
 3. signal-stage effects, linear (e.g. ``sensor_blur``, ``color_crosstalk``, ``veiling_glare``);
 4. **the gain enters here**: ``L = gain_dn_per_unit[c] · signal`` (DN above black);
 5. DN-stage effects (e.g. ``stray_light``, ``sensor_gamma``, ``saturation``).
@@ -36,7 +37,7 @@ from typing import Any, TypeAlias, TypeVar
 import numpy as np
 
 from thintact_sdk.errors import ThinTactError
-from thintact_sdk.imaging import sim_rotated
+from thintact_sdk.imaging import sim_refracted, sim_rotated
 from thintact_sdk.imaging.sim_axis import AxisGrid, mask_cell_edges_mm
 from thintact_sdk.imaging.sim_direct import DirectKernel, build_direct_kernel
 from thintact_sdk.imaging.sim_params import KernelParams, kernel_params
@@ -93,6 +94,8 @@ def build_separable_kernel(kp: KernelParams) -> SeparableKernel:
     """Build the ``P_k``, ``Q_k`` of every channel for separable physics."""
     if not kp.separable:
         raise ThinTactError("internal: separable kernel requested for non-separable physics")
+    if kp.n_scene_side != 1.0:
+        return sim_refracted.build_refracted_kernel(kp)
     h = kp.z_mm + kp.d_mm
     alpha, beta = kp.z_mm / h, kp.d_mm / h
     exp = _expansion(kp)
@@ -258,8 +261,8 @@ class Simulator(ImagingModel):
         self.kernel_params = kernel_params(profile, self.physics, n_sub, rank_tol, direct)
         if self.kernel_params.wavelengths_nm is not None and not self.kernel_params.separable:
             raise ThinTactError(
-                "physics: diffraction cannot be combined with refraction (the simulator's "
-                "diffraction model needs straight rays in air)"
+                "physics: diffraction cannot be simulated on the forced direct path (it has "
+                "no diffraction model)"
             )
         self._kernel: ImagingKernel | None = None
         self._ref_gain: float | None = None
@@ -383,7 +386,7 @@ class Simulator(ImagingModel):
         Raises
         ------
         ThinTactError
-            When the physics is not separable per channel (refraction, colour
+            When the physics is not separable per channel (the forced direct path, colour
             crosstalk, display gamma, DN-defined effects).
         """
         o, c = self.open_coding_terms(channel)
@@ -400,7 +403,7 @@ class Simulator(ImagingModel):
         blockers = [e for e in ph if EFFECTS[e].stage != "kernel" and EFFECTS[e].separable_terms is None]
         kernel = self.kernel if self.separable else None
         if not isinstance(kernel, SeparableKernel) or blockers:
-            why = "refraction or the forced direct path" if not self.separable \
+            why = "the forced direct path" if not self.separable \
                 else ", ".join(blockers)
             raise ThinTactError(f"the physics of {self.profile.name!r} is not separable ({why})")
         if not 0 <= channel < self.n_channels:

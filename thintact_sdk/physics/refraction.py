@@ -6,8 +6,9 @@ the mask at ``m = u + (s - u)·d·tan θ / ρ``.
 Irradiance (radiance conserved as ``L/n²`` across the interface, Fresnel losses ignored):
 ``dE = (L/n²)·cos θ·dΩ``, ``dΩ/dA_s = sin θ / (ρ·dρ/dθ)``, so the factor is
 ``cos^(1+p) θ · sin θ / (n²·ρ·dρ/dθ)`` (``p`` the pixel angular exponent); for ``n = 1`` it is
-``cos^(4+p) θ / H²``. The mapping ``m(u, s)`` is not linear, so the kernel is not separable
-(the simulator then uses its direct path).
+``cos^(4+p) θ / H²``. The mapping ``m(u, s)`` is not linear; the simulator integrates the
+mask along it per axis with the other axis's offset frozen per pixel pair
+(:mod:`thintact_sdk.imaging.sim_refracted`), which keeps the kernel separable.
 """
 
 from __future__ import annotations
@@ -113,7 +114,7 @@ SPEC = EffectSpec(
         "a measured gap (or a second recording with the scene at another distance), or scenes with "
         "bright content far off-axis, where Snell's law departs from a changed straight-ray distance"
     )},
-    # every simulation takes the simulator's slow direct path: scored through the geometry fit
+    # started from the geometry fit (near the axis refraction acts like a shorter scene gap)
     fit=scalar_fit("n_scene_side", 1.0, 0.4, signed=False,
                    proxy=Proxy("geometry", from_geometry_fit)),
 )

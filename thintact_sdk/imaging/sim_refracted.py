@@ -1,0 +1,412 @@
+"""Separable kernel with refraction (CONTRACTS §5 ``refraction``): ``Y_c = Σ_k P_k X_c Q_kᵀ``.
+
+With a scene-side medium of index ``n`` a ray from scene point ``s`` to sensor point ``u``
+crosses the mask at ``m = u + (s - u)·κ(ρ²)``, ``ρ = |s - u|`` (Snell's law,
+:func:`thintact_sdk.physics.refraction.crossing_fraction_and_factor`), and carries the radial
+irradiance factor ``F(ρ²)``. Per axis, ``m_x = u_x + dx·κ(dx² + dy²)``: the x crossing depends
+on the y offset only through ``κ``. For one (sensor pixel, scene pixel) pair the y offset
+``dy`` is frozen at the y pair's centre offset ``D_y`` inside ``κ`` (the same freezing as the
+rotated mask's coupling term; its first-order error vanishes for a single edge, because the
+y footprint is symmetric about ``D_y``), so the x-factor is a one-axis box integral of the
+mask profile along the *curved* map ``m_x(u_x, s_x; D_y²)``:
+
+- the pixel pair is split into ``n_sub × n_sub`` sub-rectangles; on each, the map is replaced
+  by its tangent at the sub-rectangle's centre, ``m ≈ M + (1 - g')(u - u_c) + g'(s - s_c)``
+  with ``g(dx) = dx·κ(dx² + D_y²)`` and ``g' = κ + 2dx²κ'`` the *local* widths (not the
+  paraxial ``κ0``), and integrated exactly with the profile's second antiderivative
+  (:func:`~thintact_sdk.imaging.sim_axis.second_antiderivative`);
+- the radial factor ``F`` is expanded as ``Σ_l f_l(dx)·g_l(dy)``
+  (:class:`~thintact_sdk.imaging.sim_radiometry.SeparableExpansion` built on the tabulated
+  ``F``) and enters through its value and derivatives at the pair's centre offset with the
+  sub-rectangles' moments, as in the straight-ray kernel.
+
+The x-matrices depend on the y pair only through ``D_y²``; they are tabulated on a uniform
+grid of ``D_y²`` (the crossing moves by at most :data:`CROSSING_STEP_UM` between nodes),
+compressed by an SVD over the node index and their weights interpolated by local cubics at
+every y pair's ``D_y²`` (:mod:`~thintact_sdk.imaging.sim_rotated`'s machinery); likewise for y.
+Each (x basis × interpolated y weights) ⊗ (y basis × interpolated x weights) product is one
+separable term. Diffraction composes: its intensity profiles (functions of the crossing
+point) are integrated along the same map, with the paraxial Fresnel width of a scene gap
+``z/n`` (the wave's phase curvature in the medium).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from thintact_sdk.errors import ThinTactError
+from thintact_sdk.imaging.sim_axis import AxisGrid, mask_cell_edges_mm, second_antiderivative
+from thintact_sdk.imaging.sim_params import KernelParams
+from thintact_sdk.imaging.sim_radiometry import SeparableExpansion, TabulatedRadial
+from thintact_sdk.imaging.sim_rotated import (
+    SHIFT_RANK_TOL,
+    SHIFT_STEP_UM,
+    SHIFT_STEPS_PER_WIDTH,
+    FactorDerivs,
+    compress_family,
+    interp_weights,
+)
+from thintact_sdk.imaging.sim_separable import SeparableKernel, SeparableTerm, compress_terms
+from thintact_sdk.physics import diffraction, mask_leakage, refraction
+
+CROSSING_STEP_UM = 0.5
+"""Largest move of the crossing point between two tabulated ``D²`` nodes (µm); also kept
+under a tenth of the narrower trapezoid width."""
+
+FAMILY_RANK_TOL = 1e-4
+"""Relative Frobenius cut of the SVD over the ``D²`` nodes."""
+
+MERGE_TERMS = 300
+"""Terms accumulated before an intermediate compression (rotated + refracted kernel)."""
+
+ONE_SHOT_TERMS = 2500
+"""Up to this many products (rotated + refracted kernel) are compressed in one go (one Gram
+matrix each side, ~(R·N + S·M)·terms·8 bytes); beyond, block by block."""
+
+TABLE_POINTS = 4001
+"""Samples of the Snell solution (uniform in ρ²) behind the splines of κ and F."""
+
+
+class RefractedTables:
+    """``κ(ρ²)`` and ``F(ρ²)`` of a refracting scene gap as splines in ``ρ²``.
+
+    Parameters
+    ----------
+    z_mm, d_mm, n, exponent
+        Scene-to-mask gap (medium of index ``n``), mask-to-sensor gap (air) and the pixel
+        angular exponent ``p``.
+    rho_max_mm
+        Largest lateral offset the device uses.
+    """
+
+    def __init__(self, z_mm: float, d_mm: float, n: float, exponent: float,
+                 rho_max_mm: float) -> None:
+        # uniform in ρ² (the splines' variable)
+        rho = np.sqrt(np.linspace(0.0, (rho_max_mm * 1.05 + 1e-3) ** 2, TABLE_POINTS))
+        kappa, factor = refraction.crossing_fraction_and_factor(rho, z_mm, d_mm, n, exponent)
+        self.kappa = TabulatedRadial.from_samples(rho, kappa)
+        self.factor = TabulatedRadial.from_samples(rho, factor)
+
+
+FAMILY_MAX_BYTES = 2 * 1024**3
+"""Largest tabulated family (one axis) the refracted kernels build."""
+
+
+def _check_family_size(grid: AxisGrid, n_members: int, n_values: int, rank: int) -> None:
+    """Refuse (``ThinTactError``) a family that would not fit in :data:`FAMILY_MAX_BYTES`."""
+    size = 8.0 * n_members * n_values * rank * grid.n_sensor * grid.n_scene
+    if size > FAMILY_MAX_BYTES:
+        raise ThinTactError(
+            f"physics: refraction on this device needs {n_members} tabulated one-axis members "
+            f"of {grid.n_sensor}×{grid.n_scene} pixels ({size / 1024**3:.0f} GiB, limit "
+            f"{FAMILY_MAX_BYTES / 1024**3:.0f} GiB): the separable refraction kernel is made for "
+            "devices up to about 128×160 sensor pixels and a few degrees of view"
+        )
+
+
+def refracted_axis_family(
+    grid: AxisGrid, edges_mm: np.ndarray, values: np.ndarray, factor_derivs: FactorDerivs,
+    kappa: TabulatedRadial, other_r2_mm2: np.ndarray, n_sub: int,
+    shifts_mm: np.ndarray | float = 0.0, chunk_rows: int = 64,
+) -> np.ndarray:
+    """One-axis matrices along the refracted map, for every frozen other-axis offset.
+
+    Parameters
+    ----------
+    grid
+        This axis's sensor and scene pixel grids.
+    edges_mm, values
+        ``(J+1,)`` edges and ``(V, J)`` values of piecewise-constant mask profiles (zero
+        outside), in this axis's mask coordinate.
+    factor_derivs
+        This axis's radial-factor terms with derivatives (``(..., L)`` each).
+    kappa
+        ``κ(ρ²)``.
+    other_r2_mm2
+        ``(T,)`` squared other-axis offsets ``D²`` (mm²).
+    n_sub
+        Sub-intervals per pixel (tangent maps and factor moments).
+    shifts_mm
+        The profile is read at ``m - shift`` (mask displacement along this axis), for each
+        of these ``(H,)`` displacements (or one).
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(T, H, V, L, n_sensor, n_scene)``: ``(1/pitch)·∫∫ A(m(u, s) - shift)·f_l(s - u) du ds``
+        (``(T, V, L, ...)`` for a scalar ``shifts_mm``).
+    """
+    scalar = np.ndim(shifts_mm) == 0
+    shifts = np.atleast_1d(np.asarray(shifts_mm, float))
+    n_h = shifts.size
+    p, ps = grid.sensor_pitch_mm, grid.scene_pitch_mm
+    ue = grid.sensor_edges_mm(n_sub)
+    se = grid.scene_edges_mm(n_sub)
+    uc_all = (ue[1:] + ue[:-1]) / 2
+    sc = (se[1:] + se[:-1]) / 2
+    hu, hs = p / (2 * n_sub), ps / (2 * n_sub)
+    var_in = (p**2 + ps**2) / (12 * n_sub**2)
+    n_t, n_v = other_r2_mm2.size, values.shape[0]
+    r_all, n = grid.n_sensor, grid.n_scene
+    rows_per_chunk = max(1, min(r_all, chunk_rows * 16 // (n_v * n_h * n_sub**2)))
+    out: np.ndarray | None = None
+    edges = np.asarray(edges_mm, float)
+    for r0 in range(0, r_all, rows_per_chunk):
+        r1 = min(r_all, r0 + rows_per_chunk)
+        uc = uc_all[r0 * n_sub:r1 * n_sub]
+        dx = sc[None, :] - uc[:, None]  # (r·n_sub, n·n_sub)
+        off = dx.reshape(r1 - r0, n_sub, n, n_sub).transpose(0, 2, 1, 3)
+        centre = off.mean(axis=(2, 3))  # (r, n)
+        rel = off - centre[..., None, None]
+        f, df, d2f = (np.moveaxis(a, -1, 0) for a in factor_derivs(centre))  # (L, r, n)
+        for it, t in enumerate(other_r2_mm2):
+            r2 = dx**2 + t
+            k = kappa.value(r2)
+            gp = k + 2 * dx**2 * kappa.d1(r2)  # g'(dx) = ∂m/∂s; 1 - g' = ∂m/∂u
+            m0 = uc[:, None] + dx * k
+            a_u, b_s = (1 - gp) * hu, gp * hs
+            corners = np.stack([m0 + a_u + b_s, m0 - a_u + b_s, m0 + a_u - b_s, m0 - a_u - b_s])
+            d = second_antiderivative(edges, values, corners[None] - shifts[:, None, None, None])
+            # d: (V, H, 4, ...)
+            box = (d[:, :, 0] - d[:, :, 1] - d[:, :, 2] + d[:, :, 3]) / ((1 - gp) * gp)
+            box = box.reshape(n_v, n_h, r1 - r0, n_sub, n, n_sub).transpose(1, 0, 2, 4, 3, 5)
+            b0 = box.sum(axis=(-2, -1))  # (H, V, r, n)
+            b1 = (box * rel).sum(axis=(-2, -1))
+            b2 = (box * (rel**2 + var_in)).sum(axis=(-2, -1))
+            blk = (b0[:, :, None] * f + b1[:, :, None] * df + 0.5 * b2[:, :, None] * d2f) / p
+            if out is None:
+                out = np.empty((n_t, n_h, n_v, f.shape[0], r_all, n))
+            out[it, :, :, :, r0:r1] = blk
+    assert out is not None
+    return out[:, 0] if scalar else out
+
+
+def pair_offsets_mm(grid: AxisGrid) -> np.ndarray:
+    """``(n_sensor, n_scene)`` centre offsets ``s - u`` of every pixel pair (mm)."""
+    return grid.scene_centres_mm()[None, :] - grid.sensor_centres_mm()[:, None]
+
+
+def _r2_nodes(d2_lo: float, d2_hi: float, tables: RefractedTables, reach_mm: float,
+              width_mm: float) -> np.ndarray:
+    """Uniform ``D²`` nodes over ``[d2_lo, d2_hi]``: the crossing ``dx·κ`` moves by at most
+    ``min(CROSSING_STEP_UM, width/10)`` per step for offsets up to ``reach_mm``."""
+    probe = np.linspace(0.0, reach_mm**2 + d2_hi, 512)
+    slope = float(np.max(np.abs(tables.kappa.d1(probe)))) * reach_mm  # |d(dx·κ)/dD²|
+    step_move = min(CROSSING_STEP_UM * 1e-3, width_mm / 10)
+    span = d2_hi - d2_lo
+    n_int = max(3, int(math.ceil(span * max(slope, 1e-12) / step_move)))
+    if span <= 0:
+        return d2_lo + np.arange(4) * 1e-6
+    # the cubic interpolation takes one-sided stencils at the ends (no node below D² = 0,
+    # where κ(ρ²) is not defined)
+    return np.linspace(d2_lo, d2_hi, n_int + 1)
+
+
+def refracted_terms(
+    kp: KernelParams, exp: SeparableExpansion, tables: RefractedTables,
+    profiles_x: tuple[np.ndarray, np.ndarray], profiles_y: tuple[np.ndarray, np.ndarray],
+    pairs: list[tuple[str, int, float]],
+) -> list[SeparableTerm]:
+    """Separable terms ``Σ coef·A_v(m_x)·B_v(m_y)`` along the refracted crossing map.
+
+    Parameters
+    ----------
+    kp
+        Kernel parameters (grids, shift ``dx_um``/``dy_um``, ``n_sub``).
+    exp
+        The separable expansion of the refracted radial factor.
+    tables
+        ``κ`` and ``F`` splines.
+    profiles_x, profiles_y
+        ``(edges (J+1,), values (V, J))`` of the one-axis profiles (mm).
+    pairs
+        ``(part, v, coef)`` as in :func:`thintact_sdk.imaging.sim_rotated.rotated_terms`.
+    """
+    gx, gy = kp.grid_x(), kp.grid_y()
+    ox, oy = pair_offsets_mm(gx), pair_offsets_mm(gy)  # (S, M), (R, N)
+    k0 = float(tables.kappa.value(np.array(0.0)))
+    families = []
+    for grid, prof, derivs, other, shift in (
+            (gx, profiles_x, exp.fx_derivs, oy, kp.dx_um * 1e-3),
+            (gy, profiles_y, exp.gy_derivs, ox, kp.dy_um * 1e-3)):
+        o2 = other**2
+        reach = grid.max_offset_mm()
+        width = min((1 - k0) * grid.sensor_pitch_mm, k0 * grid.scene_pitch_mm)
+        nodes = _r2_nodes(float(o2.min()), float(o2.max()), tables, reach, width)
+        _check_family_size(grid, nodes.size, prof[1].shape[0], exp.rank)
+        fam = refracted_axis_family(grid, prof[0], prof[1], derivs, tables.kappa, nodes,
+                                    kp.n_sub, shift)
+        weights, basis, ranks = compress_family(fam, FAMILY_RANK_TOL)
+        families.append((nodes, weights, basis, ranks))
+    (nx_, w_x, b_x, ranks_x), (ny_, w_y, b_y, ranks_y) = families
+    u_x = interp_weights(nx_, w_x, oy**2)  # (V, r_x, R, N): x-family weights at each y pair
+    u_y = interp_weights(ny_, w_y, ox**2)  # (V, r_y, S, M)
+    terms: list[SeparableTerm] = []
+    for part, v, coef in pairs:
+        if coef == 0:
+            continue
+        block = [SeparableTerm(coef * u_x[v, j] * b_y[v, i, ll], b_x[v, j, ll] * u_y[v, i], part)
+                 for ll in range(exp.rank) for j in range(ranks_x[v]) for i in range(ranks_y[v])]
+        terms += compress_terms(block, kp.compress_tol / 4)
+    return compress_terms(terms, kp.compress_tol)
+
+
+def _lagrange4(nodes: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, list[np.ndarray]]:
+    """First index and the four cubic Lagrange weights of uniform ``nodes`` at ``t``."""
+    n = nodes.size
+    pos = np.clip((t - nodes[0]) / (nodes[1] - nodes[0]), 0.0, n - 1.000001)
+    base = np.clip(np.floor(pos).astype(np.int64) - 1, 0, n - 4)
+    x = pos - base
+    ls = []
+    for k in range(4):
+        lk = np.ones_like(x)
+        for j in range(4):
+            if j != k:
+                lk = lk * (x - j) / (k - j)
+        ls.append(lk)
+    return base, ls
+
+
+def interp_weights_2d(nodes1: np.ndarray, nodes2: np.ndarray, weights: np.ndarray,
+                      t1: np.ndarray, t2: np.ndarray) -> np.ndarray:
+    """``(V, r) + t1.shape``: weights ``(V, T1·T2, r)`` tabulated on the product grid of two
+    uniform node sets (``T1``, ``T2`` ≥ 4), bicubically interpolated at ``(t1, t2)``."""
+    n_v, _, r = weights.shape
+    w = weights.reshape(n_v, nodes1.size, nodes2.size, r)
+    b1, l1 = _lagrange4(nodes1, t1)
+    b2, l2 = _lagrange4(nodes2, t2)
+    out = np.zeros((n_v,) + t1.shape + (r,))
+    for a in range(4):
+        for b in range(4):
+            out += w[:, b1 + a, b2 + b] * (l1[a] * l2[b])[None, ..., None]
+    return np.moveaxis(out, -1, 1)
+
+
+def _shift_nodes(t_lo: float, t_hi: float, width_mm: float) -> np.ndarray:
+    """Uniform displacement nodes (≥ 4) over ``[t_lo, t_hi]``, step ≤ ``SHIFT_STEP_UM`` and a
+    tenth of the narrower trapezoid width (as for the rotated mask)."""
+    step = min(SHIFT_STEP_UM * 1e-3, width_mm / SHIFT_STEPS_PER_WIDTH)
+    n_int = max(3, int(math.ceil((t_hi - t_lo) / step)))
+    if t_hi <= t_lo:
+        return t_lo + (np.arange(4) - 1.5) * step
+    return np.linspace(t_lo, t_hi, n_int + 1)
+
+
+def refracted_rotated_terms(
+    kp: KernelParams, exp: SeparableExpansion, tables: RefractedTables,
+    profiles_x: tuple[np.ndarray, np.ndarray], profiles_y: tuple[np.ndarray, np.ndarray],
+    pairs: list[tuple[str, int, float]],
+) -> list[SeparableTerm]:
+    """:func:`refracted_terms` for a rotated mask: the pattern-frame profiles are read at
+    ``p_x = c·(m_x - dx) + t_x``, ``p_y = c·(m_y - dy) - t_y`` with the coupling frozen at
+    the pair's centre crossing point (``t_x = s·(M_y - dy)``, ``t_y = s·(M_x - dx)``, as in
+    :mod:`~thintact_sdk.imaging.sim_rotated`; ``M`` taken with the other axis's offset set to
+    zero inside ``κ``, which moves it by ``s·D·Δκ``, well under 0.1 µm at the angles a
+    misalignment has). The x family then depends on the y pair through two numbers,
+    ``(D_y², t_x)``: it is tabulated on their product grid, compressed by one SVD and its
+    weights interpolated bicubically; likewise for y."""
+    a = math.radians(kp.angle_deg)
+    c, s = math.cos(a), math.sin(a)
+    sx_mm, sy_mm = kp.dx_um * 1e-3, kp.dy_um * 1e-3
+    gx, gy = kp.grid_x(), kp.grid_y()
+    ox, oy = pair_offsets_mm(gx), pair_offsets_mm(gy)
+    k0 = float(tables.kappa.value(np.array(0.0)))
+    cross_x = gx.sensor_centres_mm()[:, None] + ox * tables.kappa.value(ox**2)  # (S, M)
+    cross_y = gy.sensor_centres_mm()[:, None] + oy * tables.kappa.value(oy**2)  # (R, N)
+    # x profile read at m - (dx - t_x/c) after scaling its edges by 1/c; y at m - (dy + t_y/c)
+    disp_x = sx_mm - s * (cross_y - sy_mm) / c  # (R, N): a function of the y pair
+    disp_y = sy_mm + s * (cross_x - sx_mm) / c  # (S, M): a function of the x pair
+    families = []
+    for grid, prof, derivs, other, disp in ((gx, profiles_x, exp.fx_derivs, oy, disp_x),
+                                            (gy, profiles_y, exp.gy_derivs, ox, disp_y)):
+        o2 = other**2
+        width = min((1 - k0) * grid.sensor_pitch_mm, k0 * grid.scene_pitch_mm)
+        n_r2 = _r2_nodes(float(o2.min()), float(o2.max()), tables, grid.max_offset_mm(), width)
+        n_sh = _shift_nodes(float(disp.min()), float(disp.max()), width)
+        _check_family_size(grid, n_r2.size * n_sh.size, prof[1].shape[0], exp.rank)
+        edges = prof[0] / c
+        fam = refracted_axis_family(grid, edges, prof[1], derivs, tables.kappa, n_r2, kp.n_sub,
+                                    n_sh)  # (T1, T2, V, L, r, n)
+        fam = fam.reshape((n_r2.size * n_sh.size,) + fam.shape[2:])
+        weights, basis, ranks = compress_family(fam, SHIFT_RANK_TOL)
+        del fam
+        families.append((interp_weights_2d(n_r2, n_sh, weights, o2, disp), basis, ranks))
+    (u_x, b_x, ranks_x), (u_y, b_y, ranks_y) = families
+    terms: list[SeparableTerm] = []
+    for part, v, coef in pairs:
+        if coef == 0:
+            continue
+        n_products = exp.rank * ranks_x[v] * ranks_y[v]
+        if n_products <= ONE_SHOT_TERMS:
+            block = [SeparableTerm(coef * u_x[v, j] * b_y[v, i, ll], b_x[v, j, ll] * u_y[v, i],
+                                   part)
+                     for ll in range(exp.rank) for j in range(ranks_x[v])
+                     for i in range(ranks_y[v])]
+            terms += compress_terms(block, kp.compress_tol / 4)
+            continue
+        # large angles: the two-parameter families have high ranks, so the r_x·r_y·L products
+        # are compressed one x basis matrix at a time and merged (bounded memory, slower)
+        acc: list[SeparableTerm] = []
+        for j in range(ranks_x[v]):
+            block = [SeparableTerm(coef * u_x[v, j] * b_y[v, i, ll], b_x[v, j, ll] * u_y[v, i],
+                                   part)
+                     for ll in range(exp.rank) for i in range(ranks_y[v])]
+            acc += compress_terms(block, kp.compress_tol / 8)
+            if len(acc) > MERGE_TERMS:
+                acc = compress_terms(acc, kp.compress_tol / 8)
+        terms += compress_terms(acc, kp.compress_tol / 4)
+    return compress_terms(terms, kp.compress_tol)
+
+
+def _tables_and_expansion(kp: KernelParams) -> tuple[RefractedTables, SeparableExpansion]:
+    gx, gy = kp.grid_x(), kp.grid_y()
+    margin = 2 * max(kp.pitch_um, kp.scene_pitch_um) * 1e-3
+    hx, hy = gx.max_offset_mm() + margin, gy.max_offset_mm() + margin
+    tables = RefractedTables(kp.z_mm, kp.d_mm, kp.n_scene_side, kp.q - 4.0, math.hypot(hx, hy))
+    exp = SeparableExpansion.build(kp.z_mm + kp.d_mm, kp.q, hx, hy, rel_tol=kp.rank_tol,
+                                   radial=tables.factor)
+    return tables, exp
+
+
+def build_refracted_kernel(kp: KernelParams) -> SeparableKernel:
+    """The separable kernel of a (possibly rotated) mask behind a refracting scene gap,
+    geometric or with diffraction (one set of terms per distinct wavelength)."""
+    tables, exp = _tables_and_expansion(kp)
+    make = refracted_rotated_terms if kp.angle_deg != 0.0 else refracted_terms
+    info = {"rank": float(exp.rank), "radiometric_rel_error": exp.rel_error}
+    k = len(kp.phi)
+    edges = mask_cell_edges_mm(k, kp.feature_um * 1e-3)
+    if kp.wavelengths_nm is None:
+        c_o, c_c = mask_leakage.intensity_coefficients(kp.leakage)
+        px = (edges, np.stack([np.ones(k), np.asarray(kp.phi, float)]))
+        py = (edges, np.stack([np.ones(k), np.asarray(kp.phi_rows, float)]))
+        terms = make(kp, exp, tables, px, py, [("open", 0, c_o), ("coding", 1, c_c)])
+        info["terms"] = float(len(terms))
+        return SeparableKernel([terms] * kp.channels, info)
+    a_o, a_c = mask_leakage.amplitude_coefficients(kp.leakage)
+    pairs = [("open", 0, a_o**2), ("open", 1, a_c**2), ("coding", 2, 2 * a_o * a_c),
+             ("coding", 3, -2 * a_o * a_c)]
+    z_eff = kp.z_mm / kp.n_scene_side  # the spherical wave's curvature in the medium
+    k_max = float(np.max(tables.kappa.value(np.linspace(0, exp.x_nodes.max()**2
+                                                        + exp.y_nodes.max()**2, 64))))
+    by_wavelength: dict[float, list[SeparableTerm]] = {}
+    per_channel = []
+    for ch in range(kp.channels):
+        lam = kp.wavelengths_nm[min(ch, len(kp.wavelengths_nm) - 1)]
+        if lam not in by_wavelength:
+            profs = []
+            # crossing points in the pattern frame: rotation mixes in the other axis's extent
+            sin_a = abs(math.sin(math.radians(kp.angle_deg)))
+            half = max(g.n_sensor * g.sensor_pitch_mm / 2 + k_max * g.max_offset_mm()
+                       for g in (kp.grid_x(), kp.grid_y()))
+            for grid, phi in ((kp.grid_x(), kp.phi), (kp.grid_y(), kp.phi_rows)):
+                reach = half * (1 + sin_a) + (abs(kp.dx_um) + abs(kp.dy_um)) * 1e-3 \
+                    + 4 * grid.sensor_pitch_mm + 4 * grid.scene_pitch_mm
+                profs.append(diffraction.axis_intensity_profiles(
+                    edges, np.asarray(phi, float), -reach, reach, lam, z_eff, kp.d_mm))
+            by_wavelength[lam] = make(kp, exp, tables, profs[0], profs[1], pairs)
+        per_channel.append(by_wavelength[lam])
+    info["terms"] = float(max(len(t) for t in per_channel))
+    return SeparableKernel(per_channel, info)
