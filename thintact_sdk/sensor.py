@@ -21,6 +21,7 @@ import threading
 import time
 from collections import deque
 from collections.abc import Iterator
+from contextlib import ExitStack
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -28,6 +29,11 @@ import numpy as np
 
 from thintact_sdk.bayer import planes_to_rgb
 from thintact_sdk.capture import FrameGapCounter, camera_is_simulated, create_camera, to_measurement
+from thintact_sdk.compute_threads import (
+    decode_workers,
+    prepare_worker_thread,
+    single_threaded_kernels,
+)
 from thintact_sdk.errors import DeviceError, ProfileError
 from thintact_sdk.frames import Measurement, RawFrame, TactileFrame
 from thintact_sdk.interfaces import Camera, Decoder, LightController, RawDecoder
@@ -68,6 +74,9 @@ class StreamStats:
     warm_up_s
         Seconds spent building and warming up the decoder before the first read (not
         counted against the read timeout).
+    decode_workers
+        Decode workers of the pipeline (:func:`thintact_sdk.compute_threads.decode_workers`);
+        with more than one, each decodes whole frames on one kernel thread.
     """
 
     captured: int = 0
@@ -79,6 +88,7 @@ class StreamStats:
     age_ms: deque[float] = field(default_factory=lambda: deque(maxlen=AGE_HISTORY))
     waited_ms_max: float = 0.0
     warm_up_s: float = 0.0
+    decode_workers: int = 1
 
     def age_percentile_ms(self, q: float) -> float:
         """The ``q``-th percentile (0-100) of :attr:`age_ms`; NaN before any delivery."""
@@ -106,10 +116,18 @@ class _Latest:
         self._item: Any = None
         self._seq = 0
         self._taken = 0
+        self._newest_ns = -1
 
     def put(self, item: Any) -> bool:
-        """Store ``item``; True when it replaced one nobody took."""
+        """Store ``item``; True when a frame was skipped: it replaced one nobody took, or it is
+        itself older than the newest already put (several decode workers finish out of order,
+        and an older frame never overtakes a newer one)."""
         with self._cond:
+            arrived = getattr(item, "arrived_ns", None)
+            if arrived is not None and arrived < self._newest_ns:
+                return True
+            if arrived is not None:
+                self._newest_ns = arrived
             replaced = self._seq > self._taken
             self._item = item
             self._seq += 1
@@ -182,6 +200,7 @@ class Sensor:
         self._io_lock = threading.Lock()
         self._stop = threading.Event()
         self._threads: list[threading.Thread] = []
+        self._kernel_hold: ExitStack | None = None
         self._stream_error: BaseException | None = None
         self.stats = StreamStats()
         self.gaps = FrameGapCounter()
@@ -384,6 +403,14 @@ class Sensor:
         yet returned. Skipped frames are counted in :attr:`stats`; ``frame.meta["age_ms"]``
         is the time from the frame's arrival from the camera to its delivery.
 
+        The decode stage has one worker per usable core (at most 4; ``THINTACT_DECODE_WORKERS``
+        overrides), each decoding whole frames on one kernel thread, and OpenBLAS and torch
+        are held at one thread while it streams (restored after): a product split over
+        cores waits on its slowest core, so it slows several-fold whenever anything else runs
+        on one of them, while frame-parallel workers never wait on each other
+        (:mod:`thintact_sdk.compute_threads`). A frame finished after a newer one is skipped,
+        never delivered out of order.
+
         The decoder is built and warmed up (:meth:`warm_up`) before the first read, so its
         one-off cost (e.g. measuring the backends on a new host) never counts against
         ``timeout_s``.
@@ -437,14 +464,21 @@ class Sensor:
         self._frames = _Latest()
         self.stats = StreamStats()
         name = self.profile.name
+        workers = decode_workers()
+        self.stats.decode_workers = workers
+        if workers > 1:  # frame-parallel decode: one kernel thread per worker, no waits
+            self._kernel_hold = ExitStack()
+            self._kernel_hold.enter_context(single_threaded_kernels())
         stages = [
             ("bin", self._raws, self._measurements, self._bin_stage),
-            ("decode", self._measurements, self._images, self._decode_stage),
+            *((f"decode{i}" if workers > 1 else "decode", self._measurements, self._images,
+               self._decode_stage) for i in range(workers)),
             ("interpret", self._images, self._frames, self._interpret_stage),
         ]
         self._threads = [threading.Thread(target=self._capture_loop, name=f"{name}-capture", daemon=True)]
         self._threads += [
-            threading.Thread(target=self._stage_loop, args=(inbox, outbox, work, label == "interpret"),
+            threading.Thread(target=self._stage_loop,
+                             args=(inbox, outbox, work, label == "interpret", label.startswith("decode")),
                              name=f"{name}-{label}", daemon=True)
             for label, inbox, outbox, work in stages
         ]
@@ -460,6 +494,9 @@ class Sensor:
         for t in self._threads:
             t.join(timeout=5.0)
         self._threads = []
+        if self._kernel_hold is not None:
+            self._kernel_hold.close()
+            self._kernel_hold = None
 
     def _capture_loop(self) -> None:
         cam = self._camera()
@@ -475,9 +512,12 @@ class Sensor:
             self._stream_error = err
             self._stop.set()
 
-    def _stage_loop(self, inbox: _Latest, outbox: _Latest, work: Any, last: bool) -> None:
+    def _stage_loop(self, inbox: _Latest, outbox: _Latest, work: Any, last: bool,
+                    decode: bool = False) -> None:
         """One pipeline stage: take the newest item of ``inbox``, ``work(item)``, pass it on."""
         try:
+            if decode:
+                prepare_worker_thread()
             while not self._stop.is_set():
                 item = inbox.get(0.1, self._stop)
                 if item is None:

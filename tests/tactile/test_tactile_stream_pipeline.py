@@ -128,3 +128,70 @@ def test_bench_tactile_reports_streamed_fps_and_latency_percentiles(profile, lut
     assert stream["fps"] > 0 and stream["processed"] >= 2
     assert 0 < stream["latency_p50_ms"] <= stream["latency_p99_ms"]
     assert stream["waited_ms_max"] >= 0 and stream["warm_up_s"] >= 0
+
+
+class _AlternatingDecoder(BlockDecoder):
+    """Every other decode is slow (150 ms against 10 ms): with two workers, frames finish out
+    of order."""
+
+    def __init__(self) -> None:
+        self.calls = 0
+
+    def decode(self, signal: np.ndarray) -> np.ndarray:
+        self.calls += 1
+        time.sleep(0.15 if self.calls % 2 else 0.01)
+        return super().decode(signal)
+
+
+def _fps(profile, lut, decoder, monkeypatch, workers: int, frames: int = 12) -> tuple[float, Sensor]:
+    monkeypatch.setenv("THINTACT_DECODE_WORKERS", str(workers))
+    with Sensor(profile, registry=make_registry(), lut=lut, decoder=decoder,
+                camera_settings={"fps": 200.0}) as s:
+        got = []
+        t0 = 0.0
+        for frame in s.stream(max_frames=frames, timeout_s=5.0):
+            if not got:
+                t0 = time.perf_counter()
+            got.append(frame.frame_id)
+        fps = (len(got) - 1) / (time.perf_counter() - t0)
+    assert got == sorted(got) and len(set(got)) == len(got), got
+    return fps, s
+
+
+def test_two_decode_workers_double_the_rate_of_a_decode_bound_stream(profile, lut, monkeypatch) -> None:
+    """Decode is the slow stage (60 ms, no CPU): two workers decode consecutive frames at once,
+    so the stream runs at about twice the one-worker rate (compared in the same run)."""
+    one, s1 = _fps(profile, lut, SlowDecoder(), monkeypatch, 1)
+    two, s2 = _fps(profile, lut, SlowDecoder(), monkeypatch, 2)
+    assert s1.stats.decode_workers == 1 and s2.stats.decode_workers == 2
+    assert two > 1.5 * one, f"one worker {one:.1f} fps, two {two:.1f} fps"
+
+
+def test_a_frame_finished_after_a_newer_one_is_skipped_not_delivered_late(profile, lut, monkeypatch) -> None:
+    fps, s = _fps(profile, lut, _AlternatingDecoder(), monkeypatch, 2, frames=10)
+    assert fps > 0 and s.stats.skipped > 0  # the slow ones were overtaken and dropped
+
+
+def test_streaming_holds_kernel_threads_at_one_and_restores_them(profile, lut, monkeypatch) -> None:
+    import torch
+
+    from thintact_sdk.blas import openblas_threads
+    from thintact_sdk.compute_threads import kernel_threads_held
+
+    monkeypatch.setenv("THINTACT_DECODE_WORKERS", "2")
+    torch_before, blas_before = torch.get_num_threads(), openblas_threads()
+    seen: list[tuple[int, int | None, int]] = []
+
+    class Probe(BlockDecoder):
+        def decode(self, signal: np.ndarray) -> np.ndarray:
+            seen.append((torch.get_num_threads(), openblas_threads(), kernel_threads_held()))
+            return super().decode(signal)
+
+    with Sensor(profile, registry=make_registry(), lut=lut, decoder=Probe()) as s:
+        for _ in s.stream(max_frames=3, timeout_s=5.0):
+            pass
+    during = seen[1:]  # the first decode is the warm-up, before the workers start
+    assert during and all(t == 1 and held == 1 for t, _, held in during)
+    if blas_before is not None:
+        assert all(b == 1 for _, b, _ in during)
+    assert (torch.get_num_threads(), openblas_threads(), kernel_threads_held()) == (torch_before, blas_before, 0)

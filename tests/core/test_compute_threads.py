@@ -1,0 +1,69 @@
+"""compute_threads: how many decode workers a stream uses, and the counted one-thread hold."""
+
+from __future__ import annotations
+
+import threading
+
+import pytest
+
+from thintact_sdk.blas import openblas_threads
+from thintact_sdk.compute_threads import (
+    MAX_DECODE_WORKERS,
+    decode_workers,
+    kernel_threads_held,
+    single_threaded_kernels,
+    usable_cores,
+)
+from thintact_sdk.errors import InvalidValueError, ThinTactError
+
+
+def test_decode_workers_follow_the_usable_cores_capped() -> None:
+    assert decode_workers({}) == max(1, min(usable_cores(), MAX_DECODE_WORKERS))
+    assert decode_workers({"THINTACT_DECODE_WORKERS": "3"}) == 3
+    assert decode_workers({"THINTACT_DECODE_WORKERS": " 1 "}) == 1
+
+
+@pytest.mark.parametrize("bad", ["0", "-1", "two", "1.5", "17"])
+def test_a_bad_worker_count_is_a_clear_error(bad: str) -> None:
+    with pytest.raises(InvalidValueError, match="THINTACT_DECODE_WORKERS") as err:
+        decode_workers({"THINTACT_DECODE_WORKERS": bad})
+    assert isinstance(err.value, ThinTactError)
+
+
+def test_nested_holds_from_two_threads_restore_the_first_settings() -> None:
+    import torch
+
+    from thintact_sdk.compute_threads import prepare_worker_thread
+
+    torch_before, blas_before = torch.get_num_threads(), openblas_threads()
+    inner_started, release = threading.Event(), threading.Event()
+    worker_saw: list[int] = []
+
+    def other_sensor() -> None:
+        with single_threaded_kernels():
+            prepare_worker_thread()
+            worker_saw.append(torch.get_num_threads())
+            inner_started.set()
+            release.wait(5.0)
+
+    with single_threaded_kernels():
+        t = threading.Thread(target=other_sensor)
+        t.start()
+        assert inner_started.wait(5.0)
+        assert kernel_threads_held() == 2
+        assert blas_before is None or openblas_threads() == 1
+        assert torch.get_num_threads() == torch_before  # the caller's own threads are untouched
+    # the first holder left while the second still holds: nothing restored yet
+    assert kernel_threads_held() == 1 and (blas_before is None or openblas_threads() == 1)
+    release.set()
+    t.join(5.0)
+    assert worker_saw == [1] and kernel_threads_held() == 0
+    assert (torch.get_num_threads(), openblas_threads()) == (torch_before, blas_before)
+
+    def fresh() -> None:
+        worker_saw.append(torch.get_num_threads())
+
+    t = threading.Thread(target=fresh)
+    t.start()
+    t.join(5.0)
+    assert worker_saw[-1] == torch_before  # new threads start from the restored value

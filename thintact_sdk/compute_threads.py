@@ -1,0 +1,114 @@
+"""How the stream pipeline spends the host's cores: several decode workers, one kernel thread each.
+
+A decode split over two cores inside one product (OpenBLAS or torch intra-op threads) waits
+on its slowest thread at every product: when anything else runs on the second core (the
+pipeline's own binning and tactile stages, or another program) the whole decode waits, and
+it slows by 2-6× (measured on a 2-core Intel Xeon with AMX, paper-size ``t2s-closed-form``:
+torch float32 31.6 → 175.8 ms per frame with one core busy, 1 thread: 42.1 ms either way).
+Decoding consecutive frames on separate workers, one kernel thread each, has no such waits:
+on that host it streams 48.7 instead of 33.1 frames/s quiet (torch float32; bfloat16 133.9
+instead of 82.9) and 31.0 instead of 24.3 with one core busy.
+
+:func:`decode_workers` says how many workers a stream uses (the usable cores, at most
+:data:`MAX_DECODE_WORKERS`; ``THINTACT_DECODE_WORKERS`` overrides), and
+:func:`single_threaded_kernels` holds OpenBLAS and torch at one thread while any stream with
+several workers runs (process-wide, counted, the previous settings restored by the last).
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import threading
+from collections.abc import Iterator
+from contextlib import ExitStack, contextmanager
+
+from thintact_sdk.blas import blas_threads
+from thintact_sdk.errors import InvalidValueError
+
+MAX_DECODE_WORKERS = 4
+ENV_DECODE_WORKERS = "THINTACT_DECODE_WORKERS"
+
+_lock = threading.Lock()
+_holders = 0
+_restore: ExitStack | None = None
+_torch_threads_before: int | None = None
+
+
+def usable_cores() -> int:
+    """CPU cores this process may run on (its affinity mask where the OS has one)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
+
+
+def decode_workers(environ: dict[str, str] | None = None) -> int:
+    """Decode workers for a stream: ``THINTACT_DECODE_WORKERS`` if set (1-16), else the usable
+    cores capped at :data:`MAX_DECODE_WORKERS`.
+
+    Raises
+    ------
+    InvalidValueError
+        When the environment variable is not a whole number from 1 to 16.
+    """
+    env = os.environ if environ is None else environ
+    text = env.get(ENV_DECODE_WORKERS, "").strip()
+    if text:
+        if not text.isdigit() or not 1 <= int(text) <= 16:
+            raise InvalidValueError(f"{ENV_DECODE_WORKERS}={text!r}: expected a whole number from 1 to 16")
+        return int(text)
+    return max(1, min(usable_cores(), MAX_DECODE_WORKERS))
+
+
+def prepare_worker_thread() -> None:
+    """Call first in a decode worker thread while :func:`single_threaded_kernels` is held.
+
+    torch's CPU thread count is per calling thread (OpenMP) once a thread has set it, and
+    the value new threads start from: each worker sets its own to one, the caller's threads
+    keep theirs, and the last hold to end puts back the value new threads start from. Does
+    nothing where torch was not loaded when the hold began (torch is never imported here).
+    """
+    with _lock:
+        held_with_torch = _holders > 0 and _torch_threads_before is not None
+    torch = sys.modules.get("torch")
+    if held_with_torch and torch is not None:
+        torch.set_num_threads(1)
+
+
+@contextmanager
+def single_threaded_kernels() -> Iterator[None]:
+    """Hold OpenBLAS (process-wide) at one thread while the block runs, and let decode workers
+    (:func:`prepare_worker_thread`) set torch to one thread in their own threads.
+
+    Re-entrant across threads and sensors: the first holder saves the settings and the last
+    one out restores them, so two sensors streaming at once never undo each other.
+    """
+    global _holders, _restore, _torch_threads_before
+    with _lock:
+        if _holders == 0:
+            stack = ExitStack()
+            stack.enter_context(blas_threads(1))
+            torch = sys.modules.get("torch")
+            _torch_threads_before = int(torch.get_num_threads()) if torch is not None else None
+            _restore = stack
+        _holders += 1
+    try:
+        yield
+    finally:
+        with _lock:
+            _holders -= 1
+            if _holders == 0:
+                if _restore is not None:
+                    _restore.close()
+                torch = sys.modules.get("torch")
+                if torch is not None and _torch_threads_before is not None:
+                    torch.set_num_threads(_torch_threads_before)
+                _restore = None
+                _torch_threads_before = None
+
+
+def kernel_threads_held() -> int:
+    """How many streams hold :func:`single_threaded_kernels` now (for tests and ``doctor``)."""
+    with _lock:
+        return _holders
