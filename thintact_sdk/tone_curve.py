@@ -26,15 +26,31 @@ from __future__ import annotations
 
 from functools import lru_cache
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, Literal
+from typing import Annotated, Any, Literal, Protocol, TypeVar
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from thintact_sdk.errors import InvalidValueError, ProfileError
 
-if TYPE_CHECKING:
-    from thintact_sdk.profile import Profile
+
+class _ProfileLike(Protocol):
+    """What this module reads of a device profile (:class:`thintact_sdk.profile.Profile` is
+    one). A structural type, so that ``tone_curve`` does not import ``profile`` (which
+    validates its ``sensor.tone_curve`` with :class:`ToneCurveSpec`): no import cycle."""
+
+    name: str
+    _source: Path | None
+
+    @property
+    def sensor(self) -> Any: ...
+    @property
+    def noise(self) -> Any: ...
+    def resolve_path(self, path: str | Path) -> Path: ...
+    def model_copy(self, *, update: dict[str, Any] | None = None, deep: bool = False) -> Any: ...
+
+
+ProfileT = TypeVar("ProfileT", bound=_ProfileLike)
 
 __all__ = ["ToneCurveSpec", "check_table_file", "encode", "has_tone_curve", "inline_table", "linear_table", "linearize"]
 
@@ -105,12 +121,12 @@ def check_table(table: np.ndarray, bits: int, where: str) -> None:
         raise ValueError(f"{where}: constant table (every code maps to {table[0]:g} DN)")
 
 
-def _spec(profile: Profile) -> ToneCurveSpec | None:
+def _spec(profile: ProfileT) -> ToneCurveSpec | None:
     spec = getattr(profile.sensor, "tone_curve", None)
     return spec if isinstance(spec, ToneCurveSpec) else None
 
 
-def has_tone_curve(profile: Profile) -> bool:
+def has_tone_curve(profile: ProfileT) -> bool:
     """Whether the profile declares ``sensor.tone_curve``."""
     return _spec(profile) is not None
 
@@ -135,7 +151,7 @@ def _read_table_file(path: Path, bits: int) -> np.ndarray:
     return np.asarray(table, np.float64)
 
 
-def check_table_file(profile: Profile) -> None:
+def check_table_file(profile: ProfileT) -> None:
     """Read and check a ``kind: table`` curve's ``file`` (at profile load, so that a bad file is
     refused before any frame). No-op for other curves.
 
@@ -150,7 +166,7 @@ def check_table_file(profile: Profile) -> None:
         _table(profile)
 
 
-def inline_table(profile: Profile) -> Profile:
+def inline_table(profile: ProfileT) -> ProfileT:
     """``profile`` with a table curve's ``file`` replaced by its ``values`` (for a recording's
     self-contained ``profile.json``); the profile itself when there is nothing to inline."""
     spec = _spec(profile)
@@ -172,7 +188,7 @@ def _inverse_curve(spec: ToneCurveSpec, v: np.ndarray) -> np.ndarray:
     return s * np.where(a <= 0.04045, a / 12.92, ((a + 0.055) / 1.055) ** 2.4)
 
 
-def _table(profile: Profile) -> np.ndarray:
+def _table(profile: ProfileT) -> np.ndarray:
     spec = _spec(profile)
     assert spec is not None and spec.kind == "table" and spec.bits is not None
     if spec.values is not None:
@@ -188,7 +204,7 @@ def _code_table(kind: str, gamma: float | None, black: float, full: float, n: in
     return (black + full * _inverse_curve(spec, (codes - black) / full)).astype(np.float32)
 
 
-def linear_table(profile: Profile, codes: int) -> np.ndarray:
+def linear_table(profile: ProfileT, codes: int) -> np.ndarray:
     """Linear DN (float32) of every delivered integer code ``0 … codes − 1``.
 
     Raises
@@ -208,7 +224,7 @@ def linear_table(profile: Profile, codes: int) -> np.ndarray:
                        float(nz.saturation_dn - nz.black_level_dn), codes)
 
 
-def linearize(data: np.ndarray, profile: Profile, what: str = "frame") -> np.ndarray:
+def linearize(data: np.ndarray, profile: ProfileT, what: str = "frame") -> np.ndarray:
     """Undo the profile's ``sensor.tone_curve`` on delivered DN.
 
     Parameters
@@ -258,7 +274,7 @@ def linearize(data: np.ndarray, profile: Profile, what: str = "frame") -> np.nda
     return (nz.black_level_dn + full * _inverse_curve(spec, norm)).astype(np.float32)
 
 
-def encode(linear: np.ndarray, profile: Profile) -> np.ndarray:
+def encode(linear: np.ndarray, profile: ProfileT) -> np.ndarray:
     """The declared curve applied to linear DN (float64 delivered DN; for simulation and tests).
 
     ``linearize(encode(x)) ≈ x``; a table is inverted by interpolation.
