@@ -1,18 +1,25 @@
-"""How the stream pipeline spends the host's cores: several decode workers, one kernel thread each.
+"""How the stream pipeline spends the host's cores: optionally several decode workers, one
+kernel thread each.
 
 A decode split over two cores inside one product (OpenBLAS or torch intra-op threads) waits
-on its slowest thread at every product: when anything else runs on the second core (the
-pipeline's own binning and tactile stages, or another program) the whole decode waits, and
-it slows by 2-6× (measured on a 2-core Intel Xeon with AMX, paper-size ``t2s-closed-form``:
-torch float32 31.6 → 175.8 ms per frame with one core busy, 1 thread: 42.1 ms either way).
-Decoding consecutive frames on separate workers, one kernel thread each, has no such waits:
-on that host it streams 48.7 instead of 33.1 frames/s quiet (torch float32; bfloat16 133.9
-instead of 82.9) and 31.0 instead of 24.3 with one core busy.
+on its slowest thread at every product: when anything else runs on the second core it slows
+by 2-6× (measured on a 2-core Intel Xeon with AMX, paper-size ``t2s-closed-form`` alone:
+torch float32 31.6 → 175.8 ms per frame with one core busy; with 1 thread 42.1 ms either
+way). Decoding consecutive frames on separate workers, one kernel thread each, avoids those
+waits: decode alone streamed 48.7 instead of 33.1 frames/s quiet (torch float32; bfloat16
+133.9 instead of 82.9) and 31.0 instead of 24.3 with one core busy.
 
-:func:`decode_workers` says how many workers a stream uses (the usable cores, at most
-:data:`MAX_DECODE_WORKERS`; ``THINTACT_DECODE_WORKERS`` overrides), and
-:func:`single_threaded_kernels` holds OpenBLAS and torch at one thread while any stream with
-several workers runs (process-wide, counted, the previous settings restored by the last).
+In the whole pipeline (binning and the tactile stage sharing the cores and the GIL), two
+workers did *not* pay on that host with one core taken by another program: 12.2 against
+13.2 tactile frames/s in float32 and 18.9 against 29.4 with bfloat16 products (2026-11-24).
+So the default stays one worker (intra-op threads as the libraries set them) and
+``THINTACT_DECODE_WORKERS=N`` turns frame-parallel decoding on, for a host where measuring
+shows it pays (``tools/bench_stream_workers.py``).
+
+:func:`decode_workers` says how many workers a stream uses, and
+:func:`single_threaded_kernels` holds OpenBLAS at one thread while any stream with several
+workers runs (process-wide, counted, the previous setting restored by the last), each worker
+setting torch to one thread in its own thread (:func:`prepare_worker_thread`).
 """
 
 from __future__ import annotations
@@ -44,8 +51,7 @@ def usable_cores() -> int:
 
 
 def decode_workers(environ: dict[str, str] | None = None) -> int:
-    """Decode workers for a stream: ``THINTACT_DECODE_WORKERS`` if set (1-16), else the usable
-    cores capped at :data:`MAX_DECODE_WORKERS`.
+    """Decode workers for a stream: ``THINTACT_DECODE_WORKERS`` if set (1-16), else 1.
 
     Raises
     ------
@@ -58,6 +64,12 @@ def decode_workers(environ: dict[str, str] | None = None) -> int:
         if not text.isdigit() or not 1 <= int(text) <= 16:
             raise InvalidValueError(f"{ENV_DECODE_WORKERS}={text!r}: expected a whole number from 1 to 16")
         return int(text)
+    return 1
+
+
+def suggested_decode_workers() -> int:
+    """The usable cores, at most :data:`MAX_DECODE_WORKERS`: what to try with
+    ``THINTACT_DECODE_WORKERS`` (and measure) on a many-core host."""
     return max(1, min(usable_cores(), MAX_DECODE_WORKERS))
 
 

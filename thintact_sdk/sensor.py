@@ -403,13 +403,11 @@ class Sensor:
         yet returned. Skipped frames are counted in :attr:`stats`; ``frame.meta["age_ms"]``
         is the time from the frame's arrival from the camera to its delivery.
 
-        The decode stage has one worker per usable core (at most 4; ``THINTACT_DECODE_WORKERS``
-        overrides), each decoding whole frames on one kernel thread, and OpenBLAS and torch
-        are held at one thread while it streams (restored after): a product split over
-        cores waits on its slowest core, so it slows several-fold whenever anything else runs
-        on one of them, while frame-parallel workers never wait on each other
-        (:mod:`thintact_sdk.compute_threads`). A frame finished after a newer one is skipped,
-        never delivered out of order.
+        With ``THINTACT_DECODE_WORKERS=N`` (N > 1) the decode stage has N workers, each
+        decoding whole frames on one kernel thread, with OpenBLAS and torch held at one
+        thread while it streams (restored after); see :mod:`thintact_sdk.compute_threads`
+        for when that pays. A frame finished after a newer one is skipped, never delivered
+        out of order.
 
         The decoder is built and warmed up (:meth:`warm_up`) before the first read, so its
         one-off cost (e.g. measuring the backends on a new host) never counts against

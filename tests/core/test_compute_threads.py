@@ -12,13 +12,15 @@ from thintact_sdk.compute_threads import (
     decode_workers,
     kernel_threads_held,
     single_threaded_kernels,
+    suggested_decode_workers,
     usable_cores,
 )
 from thintact_sdk.errors import InvalidValueError, ThinTactError
 
 
-def test_decode_workers_follow_the_usable_cores_capped() -> None:
-    assert decode_workers({}) == max(1, min(usable_cores(), MAX_DECODE_WORKERS))
+def test_decode_workers_default_to_one_and_follow_the_environment() -> None:
+    assert decode_workers({}) == 1
+    assert suggested_decode_workers() == max(1, min(usable_cores(), MAX_DECODE_WORKERS))
     assert decode_workers({"THINTACT_DECODE_WORKERS": "3"}) == 3
     assert decode_workers({"THINTACT_DECODE_WORKERS": " 1 "}) == 1
 
