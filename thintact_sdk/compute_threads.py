@@ -9,12 +9,14 @@ way). Decoding consecutive frames on separate workers, one kernel thread each, a
 waits: decode alone streamed 48.7 instead of 33.1 frames/s quiet (torch float32; bfloat16
 133.9 instead of 82.9) and 31.0 instead of 24.3 with one core busy.
 
-In the whole pipeline (binning and the tactile stage sharing the cores and the GIL), two
-workers did *not* pay on that host with one core taken by another program: 12.2 against
-13.2 tactile frames/s in float32 and 18.9 against 29.4 with bfloat16 products (2026-11-24).
-So the default stays one worker (intra-op threads as the libraries set them) and
-``THINTACT_DECODE_WORKERS=N`` turns frame-parallel decoding on, for a host where measuring
-shows it pays (``tools/bench_stream_workers.py``).
+In the whole stream pipeline (paper device, camera at 30 fps, ``tools/bench_stream_workers.py``,
+same host, 2026-11-24) two workers pay where the decode is the bottleneck: float32 20.0-20.9
+→ 27.1-28.0 tactile frames/s quiet and 9.9 → 16.5 with one core busy; where one decode fits
+in a camera period (bfloat16 products, 10-11 ms) both keep up with the camera (30.5 / 30.6
+fps) and one worker has the lower latency (p50 52 against 77 ms with a core busy). So the
+choice is measured: :func:`decode_workers` takes one worker when a decode (timed at warm-up)
+fits in the camera's frame period, else one per usable core; ``THINTACT_DECODE_WORKERS``
+overrides.
 
 :func:`decode_workers` says how many workers a stream uses, and
 :func:`single_threaded_kernels` holds OpenBLAS at one thread while any stream with several
@@ -50,8 +52,15 @@ def usable_cores() -> int:
         return os.cpu_count() or 1
 
 
-def decode_workers(environ: dict[str, str] | None = None) -> int:
-    """Decode workers for a stream: ``THINTACT_DECODE_WORKERS`` if set (1-16), else 1.
+def decode_workers(decode_ms: float | None = None, camera_fps: float | None = None,
+                   environ: dict[str, str] | None = None) -> int:
+    """Decode workers for a stream.
+
+    ``THINTACT_DECODE_WORKERS`` if set (1-16). Otherwise measured: one worker (the lowest
+    latency) when one decode, measured on this host (``decode_ms``), fits in the camera's
+    frame period; :func:`suggested_decode_workers` when it does not, or when the camera gives
+    no frame rate, so the stream keeps up with the camera instead of dropping frames. One
+    when nothing was measured.
 
     Raises
     ------
@@ -64,7 +73,11 @@ def decode_workers(environ: dict[str, str] | None = None) -> int:
         if not text.isdigit() or not 1 <= int(text) <= 16:
             raise InvalidValueError(f"{ENV_DECODE_WORKERS}={text!r}: expected a whole number from 1 to 16")
         return int(text)
-    return 1
+    if decode_ms is None:
+        return 1
+    if camera_fps and camera_fps > 0 and decode_ms <= 1e3 / camera_fps:
+        return 1
+    return suggested_decode_workers()
 
 
 def suggested_decode_workers() -> int:

@@ -201,6 +201,8 @@ class Sensor:
         self._stop = threading.Event()
         self._threads: list[threading.Thread] = []
         self._kernel_hold: ExitStack | None = None
+        self.decode_ms: float | None = None
+        """ms one decode took at :meth:`warm_up` on this host (None before)."""
         self._stream_error: BaseException | None = None
         self.stats = StreamStats()
         self.gaps = FrameGapCounter()
@@ -356,8 +358,12 @@ class Sensor:
         """
         t0 = time.perf_counter()
         s = self.profile.sensor
-        black = np.full((s.rows, s.cols, len(s.channels)), self.profile.noise.black_level_dn, np.float32)
-        self.reconstruct(Measurement(black, self.profile.noise.black_level_dn))
+        black = Measurement(np.full((s.rows, s.cols, len(s.channels)), self.profile.noise.black_level_dn,
+                                    np.float32), self.profile.noise.black_level_dn)
+        self.reconstruct(black)
+        t1 = time.perf_counter()
+        self.reconstruct(black)  # warm: what a frame costs on this host (chooses decode workers)
+        self.decode_ms = (time.perf_counter() - t1) * 1e3
         _ = self.lut
         return time.perf_counter() - t0
 
@@ -403,11 +409,11 @@ class Sensor:
         yet returned. Skipped frames are counted in :attr:`stats`; ``frame.meta["age_ms"]``
         is the time from the frame's arrival from the camera to its delivery.
 
-        With ``THINTACT_DECODE_WORKERS=N`` (N > 1) the decode stage has N workers, each
-        decoding whole frames on one kernel thread, with OpenBLAS and torch held at one
-        thread while it streams (restored after); see :mod:`thintact_sdk.compute_threads`
-        for when that pays. A frame finished after a newer one is skipped, never delivered
-        out of order.
+        When one decode (timed at warm-up) does not fit in the camera's frame period, the
+        decode stage gets one worker per usable core (``THINTACT_DECODE_WORKERS`` overrides),
+        each decoding whole frames on one kernel thread, with OpenBLAS and torch held at one
+        thread while it streams (restored after); see :mod:`thintact_sdk.compute_threads`.
+        A frame finished after a newer one is skipped, never delivered out of order.
 
         The decoder is built and warmed up (:meth:`warm_up`) before the first read, so its
         one-off cost (e.g. measuring the backends on a new host) never counts against
@@ -462,7 +468,11 @@ class Sensor:
         self._frames = _Latest()
         self.stats = StreamStats()
         name = self.profile.name
-        workers = decode_workers()
+        try:
+            camera_fps = self._camera().capabilities().fps
+        except Exception:  # noqa: BLE001 - a camera that cannot say its rate: treat as unknown
+            camera_fps = None
+        workers = decode_workers(self.decode_ms, camera_fps)
         self.stats.decode_workers = workers
         if workers > 1:  # frame-parallel decode: one kernel thread per worker, no waits
             self._kernel_hold = ExitStack()

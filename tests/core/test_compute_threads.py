@@ -18,17 +18,21 @@ from thintact_sdk.compute_threads import (
 from thintact_sdk.errors import InvalidValueError, ThinTactError
 
 
-def test_decode_workers_default_to_one_and_follow_the_environment() -> None:
-    assert decode_workers({}) == 1
-    assert suggested_decode_workers() == max(1, min(usable_cores(), MAX_DECODE_WORKERS))
-    assert decode_workers({"THINTACT_DECODE_WORKERS": "3"}) == 3
-    assert decode_workers({"THINTACT_DECODE_WORKERS": " 1 "}) == 1
+def test_decode_workers_are_chosen_from_the_measured_decode_and_the_camera_rate() -> None:
+    many = suggested_decode_workers()
+    assert many == max(1, min(usable_cores(), MAX_DECODE_WORKERS))
+    assert decode_workers(None, 30.0, environ={}) == 1  # nothing measured
+    assert decode_workers(10.0, 30.0, environ={}) == 1  # fits in 33 ms: lowest latency
+    assert decode_workers(45.0, 30.0, environ={}) == many  # does not: keep up with the camera
+    assert decode_workers(10.0, None, environ={}) == many  # free-running camera
+    assert decode_workers(45.0, 30.0, environ={"THINTACT_DECODE_WORKERS": "1"}) == 1
+    assert decode_workers(1.0, 30.0, environ={"THINTACT_DECODE_WORKERS": " 3 "}) == 3
 
 
 @pytest.mark.parametrize("bad", ["0", "-1", "two", "1.5", "17"])
 def test_a_bad_worker_count_is_a_clear_error(bad: str) -> None:
     with pytest.raises(InvalidValueError, match="THINTACT_DECODE_WORKERS") as err:
-        decode_workers({"THINTACT_DECODE_WORKERS": bad})
+        decode_workers(50.0, 30.0, environ={"THINTACT_DECODE_WORKERS": bad})
     assert isinstance(err.value, ThinTactError)
 
 

@@ -190,8 +190,23 @@ def test_streaming_holds_kernel_threads_at_one_and_restores_them(profile, lut, m
     with Sensor(profile, registry=make_registry(), lut=lut, decoder=Probe()) as s:
         for _ in s.stream(max_frames=3, timeout_s=5.0):
             pass
-    during = seen[1:]  # the first decode is the warm-up, before the workers start
+    during = seen[2:]  # the first two decodes are the warm-up, before the workers start
+    assert [held for _, _, held in seen[:2]] == [0, 0]
     assert during and all(t == 1 and held == 1 for t, _, held in during)
     if blas_before is not None:
         assert all(b == 1 for _, b, _ in during)
     assert (torch.get_num_threads(), openblas_threads(), kernel_threads_held()) == (torch_before, blas_before, 0)
+
+
+def test_workers_are_chosen_from_the_decode_timed_at_warm_up(profile, lut, monkeypatch) -> None:
+    """A 60 ms decode does not fit in a 100 fps camera's period: one worker per usable core.
+    A fast decode at 10 fps does: one worker (the lowest latency)."""
+    from thintact_sdk.compute_threads import suggested_decode_workers
+
+    monkeypatch.delenv("THINTACT_DECODE_WORKERS", raising=False)
+    for decoder, fps, want in ((SlowDecoder(), 100.0, suggested_decode_workers()), (BlockDecoder(), 10.0, 1)):
+        with Sensor(profile, registry=make_registry(), lut=lut, decoder=decoder,
+                    camera_settings={"fps": fps}) as s:
+            next(s.stream(max_frames=1, timeout_s=5.0))
+            assert s.decode_ms is not None
+            assert s.stats.decode_workers == want, (fps, s.decode_ms)
