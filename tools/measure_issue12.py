@@ -14,11 +14,12 @@ on the test scenes, the same decoder with the best τ in hindsight, and the pape
 unit with a dust speck, with a dim column and with a ghost, each calibrated on its own: the
 exit status and the defects named.
 
-Usage (about 15-30 min on a loaded 2-core host)::
+Usage (about 5 min on an idle 2-core host, 15 under load)::
 
-    python tools/measure_issue12.py --out /tmp/issue12 [--cases healthy,dust,dim,ghost]
+    python tools/measure_issue12.py --out /tmp/issue12 --filter-steps 10 --all-decoders \\
+        [--cases healthy,dust,dim,ghost,ghost8,ghost_separable]
 
-Writes ``DIR/summary.json`` and prints a Markdown table.
+Writes ``DIR/summary.json`` and prints each case's figures (JSON) as it finishes.
 """
 
 from __future__ import annotations
@@ -201,7 +202,7 @@ def measure_defect(root: Path, name: str) -> dict[str, Any]:
 def main_cli(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", type=Path, required=True)
-    ap.add_argument("--cases", default="healthy,dust,dim,ghost")
+    ap.add_argument("--cases", default=",".join(["healthy", *DEFECTS]))
     ap.add_argument("--filter-steps", type=int, default=None,
                     help="healthy unit's filter training steps (default: calibrate's default)")
     ap.add_argument("--reuse", action="store_true", help="reuse the healthy calibration and test recording in --out")
