@@ -68,11 +68,10 @@ class Ghost:
 
 
 def small_profile(channels: tuple[str, ...] = ("R", "G", "B"), seed: int = 11,
-                  rows: int = 64, cols: int = 80, scene: tuple[int, int] = (24, 32)) -> Profile:
-    """virtual-mini's optics on a small sensor with a random φ (and a different φ_rows)."""
+                  rows: int = 64, cols: int = 80, scene: tuple[int, int] = (24, 32), k: int = 96) -> Profile:
+    """virtual-mini's optics on a small sensor with a random φ of ``k`` cells (and a different φ_rows)."""
     d = load_profile("virtual-mini").contract_dict()
     rng = np.random.default_rng(seed)
-    k = 96
     d["name"] = "independent-" + "".join(c.lower() for c in channels)
     d["sensor"] = {"rows": rows, "cols": cols, "pixel_pitch_um": 10.0, "channels": list(channels)}
     d["scene"] = {"rows": scene[0], "cols": scene[1], "pixel_pitch_um": 31.5}

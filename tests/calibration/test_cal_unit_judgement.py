@@ -257,3 +257,34 @@ def test_a_ghost_fails_the_unit_with_its_offset_and_strength(ghosted: tuple[Ghos
     assert "ghost" in [f["what"] for f in m["verdict"]["failures"]]
     report = (cal / "report.html").read_text()
     assert f"displaced by {ghost.rows:+d} rows, {ghost.cols:+d} columns" in report and "Ghost search" in report
+
+
+def test_reconstruct_uses_the_bundles_tau_per_channel_unless_tau_is_given(tmp_path: Path) -> None:
+    from thintact_sdk.imaging.t2s import SystemMatrices
+
+    profile = small_profile(("R", "G", "B"))
+    rng = np.random.default_rng(5)
+    (r, s), (n, m) = (profile.sensor.rows, profile.sensor.cols), (profile.scene.rows, profile.scene.cols)
+    sm = SystemMatrices(np.abs(rng.random((3, r, n))), np.abs(rng.random((3, s, m))),
+                        rng.standard_normal((3, r, n)), rng.standard_normal((3, s, m)))
+    CalibrationBundle.create(profile, sm, None, tau=7.0, source="recording", decoder="t2s-closed-form",
+                             tau_t2s_closed_form=80.0,
+                             channel_tau={"t2s-closed-form": [10.0, 2000.0, 50.0]}).save(tmp_path / "cal")
+    bundle = CalibrationBundle.load(tmp_path / "cal")
+    black = 100.0
+    scene = gelsight(n, m, 0)
+    y = np.rint(sm.forward(scene) + black).astype(np.uint16)
+    w = RecordingWriter(tmp_path / "rec", profile)
+    w.add(np.full((r, s, 3), black, np.uint16), np.zeros((n, m, 3), np.float32), label="dark")
+    w.add(y, scene.astype(np.float32), label="press")
+    signal = y.astype(np.float32) - black
+    for extra, settings in (([], {}), (["--tau", "5"], {"tau": 5.0})):
+        out = tmp_path / f"out{len(extra)}"
+        assert main(["reconstruct", str(tmp_path / "rec"), "--calibration", str(tmp_path / "cal"),
+                     "--out", str(out), "--no-progress", *extra]) == 0
+        got = np.load(out / "001_press.npy")
+        expected = make_decoder(profile, bundle, "t2s-closed-form", **settings).decode(signal)
+        np.testing.assert_allclose(got, expected, rtol=1e-4, atol=1e-4)
+    # the bundle's τ per channel and --tau give different reconstructions
+    assert not np.allclose(np.load(tmp_path / "out0" / "001_press.npy"),
+                           np.load(tmp_path / "out2" / "001_press.npy"), atol=1e-3)
