@@ -67,21 +67,29 @@ def _linear_effect(name: str) -> Callable[..., TactileModel | None]:
     return propose
 
 
-def _specular(model: TactileModel, data: PressData, presses: list[Press],
-              normals: list[Normals]) -> TactileModel | None:
-    if model.light is None:
-        return None
-    fits: dict[float, TactileModel] = {}
+def _scanned_effect(name: str, attr: str, grid: list[float], needs_light: bool = False,
+                    reshades: bool = False) -> Callable[..., TactileModel | None]:
+    """A proposer for an effect with one nonlinear scalar (``attr``): each grid value is set,
+    the linear terms refitted, and the value with the lowest BIC kept (refined by
+    :func:`scan_scalar`). ``needs_light``: only once a light is fitted; ``reshades``: the
+    scalar changes the press normals (a blur width), which are recomputed per value."""
+    def propose(model: TactileModel, data: PressData, presses: list[Press],
+                normals: list[Normals]) -> TactileModel | None:
+        if needs_light and model.light is None:
+            return None
+        fits: dict[float, TactileModel] = {}
 
-    def cost(alpha: float) -> float:
-        m = _with(model, "specular_lobe")
-        m.shininess = float(alpha)
-        m = fit_linear(m, data, normals, iterations=3)
-        fits[float(alpha)] = m
-        return score(m, data, normals)[0].bic
+        def cost(value: float) -> float:
+            m = _with(model, name)
+            setattr(m, attr, float(value))
+            nrm = all_normals(data, presses, m.sigma_mm) if reshades else normals
+            m = fit_linear(m, data, nrm, iterations=3)
+            fits[float(value)] = m
+            return score(m, data, nrm)[0].bic
 
-    best, _ = scan_scalar(cost, [2.0, 5.0, 12.0, 30.0])
-    return fits[best]
+        best, _ = scan_scalar(cost, grid)
+        return fits[best]
+    return propose
 
 
 def _crosstalk(model: TactileModel, data: PressData, presses: list[Press],
@@ -91,46 +99,15 @@ def _crosstalk(model: TactileModel, data: PressData, presses: list[Press],
     return _linear_effect("colour_crosstalk")(model, data, presses, normals)
 
 
-def _blur(model: TactileModel, data: PressData, presses: list[Press],
-          normals: list[Normals]) -> TactileModel | None:
-    fits: dict[float, TactileModel] = {}
-
-    def cost(sigma: float) -> float:
-        m = _with(model, "elastomer_blur")
-        m.sigma_mm = float(sigma)
-        nrm = all_normals(data, presses, m.sigma_mm)
-        m = fit_linear(m, data, nrm, iterations=3)
-        fits[float(sigma)] = m
-        return score(m, data, nrm)[0].bic
-
-    best, _ = scan_scalar(cost, [0.1, 0.3, 0.6, 1.0, 1.5])
-    return fits[best]
-
-
-def _gamma(model: TactileModel, data: PressData, presses: list[Press],
-           normals: list[Normals]) -> TactileModel | None:
-    fits: dict[float, TactileModel] = {}
-
-    def cost(g: float) -> float:
-        m = _with(model, "camera_gamma")
-        m.gamma = float(g)
-        m = fit_linear(m, data, normals, iterations=3)
-        fits[float(g)] = m
-        return score(m, data, normals)[0].bic
-
-    best, _ = scan_scalar(cost, [0.3, 0.45, 0.7, 1.0, 1.5])
-    return fits[best]
-
-
 PROPOSERS: dict[str, Callable[..., TactileModel | None]] = {
     "illumination_field": _field,
     "background_texture": _linear_effect("background_texture"),
     "exposure_drift": _linear_effect("exposure_drift"),
     "led_directions": _linear_effect("led_directions"),
-    "specular_lobe": _specular,
+    "specular_lobe": _scanned_effect("specular_lobe", "shininess", [2.0, 5.0, 12.0, 30.0], needs_light=True),
     "colour_crosstalk": _crosstalk,
-    "elastomer_blur": _blur,
-    "camera_gamma": _gamma,
+    "elastomer_blur": _scanned_effect("elastomer_blur", "sigma_mm", [0.1, 0.3, 0.6, 1.0, 1.5], reshades=True),
+    "camera_gamma": _scanned_effect("camera_gamma", "gamma", [0.3, 0.45, 0.7, 1.0, 1.5]),
 }
 
 
