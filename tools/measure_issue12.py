@@ -41,6 +41,8 @@ from independent_device import (  # noqa: E402
     DimColumn,
     Dust,
     Ghost,
+    best_in_hindsight,
+    mean_psnr,
     small_profile,
     write_recording,
 )
@@ -50,7 +52,6 @@ from thintact_sdk.calibration.pipeline import CalibrationOptions, solve_matrices
 from thintact_sdk.calibration.validation import make_decoder  # noqa: E402
 from thintact_sdk.cli.main import main  # noqa: E402
 from thintact_sdk.imaging.calibration_bundle import CalibrationBundle  # noqa: E402
-from thintact_sdk.imaging.metrics import psnr  # noqa: E402
 from thintact_sdk.imaging.noise import signal_to_dn  # noqa: E402
 from thintact_sdk.imaging.scenes import checker, gelsight, random_pixels, usaf, white  # noqa: E402
 from thintact_sdk.imaging.simulator import Simulator  # noqa: E402
@@ -103,29 +104,6 @@ def write_test_recording(root: Path, profile: Profile, seed: int = 99) -> Record
     for label, x in test_scenes(n, m):
         w.add(signal_to_dn(sim.predict_signal_dn(x, gain), nz, rng).astype(np.uint16), x, label=label)
     return Recording(root)
-
-
-def mean_psnr(out_dir: Path, rec: Recording) -> float:
-    """Mean PSNR of ``thintact reconstruct``'s outputs against the recording's scenes."""
-    values = []
-    for i, fr in enumerate(rec.frames):
-        truth = rec.scene(i)
-        if truth is None or not truth.any():
-            continue
-        est = np.load(out_dir / f"{Path(fr.measurement).stem}.npy")
-        values.append(psnr(np.clip(est, 0, 1), truth))
-    return float(np.mean(values))
-
-
-def best_in_hindsight(decoder: Any, frames: list[tuple[np.ndarray, np.ndarray]]) -> tuple[float, float]:
-    """Best mean PSNR over a τ grid (8 per decade, 1e2 … 1e7 DN²) and its τ."""
-    best, best_tau = -np.inf, float("nan")
-    for tau in np.geomspace(1e2, 1e7, 41):
-        decoder.set_tau(float(tau))
-        v = float(np.mean([psnr(np.clip(decoder.decode(y), 0, 1), x) for y, x in frames]))
-        if v > best:
-            best, best_tau = v, float(tau)
-    return best, best_tau
 
 
 def calibrate(rec: Path, cal: Path, filter_steps: int | None) -> tuple[int, float, dict[str, Any]]:

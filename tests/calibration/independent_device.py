@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from thintact_sdk.imaging.filter_training import scene_for_channels
+from thintact_sdk.imaging.metrics import psnr
 from thintact_sdk.imaging.noise import signal_to_dn
 from thintact_sdk.imaging.scenes import gelsight, make_scene
 from thintact_sdk.imaging.simulator import Simulator
@@ -145,3 +146,32 @@ def write_recording(root: Path, profile: Profile, *, seed: int = 0, white_fracti
     for label, x in validation_scenes(n, m):
         add(x, label)
     return Recording(root)
+
+
+HINDSIGHT_TAUS = np.geomspace(1e2, 1e7, 41)
+"""τ grid (DN², 8 per decade) of the best-in-hindsight comparisons."""
+
+
+def mean_psnr(out_dir: Path, rec: Recording) -> float:
+    """Mean PSNR (dB) of ``thintact reconstruct``'s outputs in ``out_dir`` against the
+    recording's non-black scenes."""
+    values = []
+    for i, fr in enumerate(rec.frames):
+        truth = rec.scene(i)
+        if truth is None or not truth.any():
+            continue
+        est = np.load(out_dir / f"{Path(fr.measurement).stem}.npy")
+        values.append(psnr(np.clip(est, 0, 1), truth))
+    return float(np.mean(values))
+
+
+def best_in_hindsight(decoder: Any, frames: list[tuple[np.ndarray, np.ndarray]]) -> tuple[float, float]:
+    """Best mean PSNR (dB) of a tunable decoder over :data:`HINDSIGHT_TAUS` on ``(signal,
+    scene)`` frames, and its τ (DN²)."""
+    best, best_tau = -np.inf, float("nan")
+    for tau in HINDSIGHT_TAUS:
+        decoder.set_tau(float(tau))
+        v = float(np.mean([psnr(np.clip(decoder.decode(y), 0, 1), x) for y, x in frames]))
+        if v > best:
+            best, best_tau = v, float(tau)
+    return best, best_tau

@@ -9,7 +9,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from independent_device import DimColumn, Dust, Ghost, small_profile, write_recording
+from independent_device import (
+    DimColumn,
+    Dust,
+    Ghost,
+    best_in_hindsight,
+    mean_psnr,
+    small_profile,
+    write_recording,
+)
 
 from thintact_sdk.calibration.collect import collect_slits, signal_of
 from thintact_sdk.calibration.pipeline import CalibrationOptions, solve_matrices
@@ -19,6 +27,8 @@ from thintact_sdk.cli.main import main
 from thintact_sdk.imaging.calibration_bundle import CalibrationBundle
 from thintact_sdk.imaging.metrics import psnr
 from thintact_sdk.imaging.scenes import gelsight
+from thintact_sdk.imaging.t2s import SystemMatrices
+from thintact_sdk.profile import Profile
 from thintact_sdk.recording import Recording, RecordingWriter
 
 
@@ -109,44 +119,23 @@ def test_healthy_unit_passes_against_its_own_prediction(healthy: tuple[Path, Pat
     assert not re.search(r"\d\.\d{9,}", report.split("<img")[0])  # no raw 15-digit floats
 
 
-def _mean_psnr(out_dir: Path, rec: Recording) -> float:
-    values = []
-    for i, fr in enumerate(rec.frames):
-        truth = rec.scene(i)
-        if truth is None or not truth.any():
-            continue
-        est = np.load(out_dir / f"{Path(fr.measurement).stem}.npy")
-        values.append(psnr(np.clip(est, 0, 1), truth))
-    return float(np.mean(values))
-
-
 def test_default_reconstruct_is_near_the_best_tau_and_beats_the_paper_pipeline(
         healthy: tuple[Path, Path, Path], tmp_path: Path) -> None:
     rec_dir, cal, test_dir = healthy
     test = Recording(test_dir)
     assert main(["reconstruct", str(test_dir), "--calibration", str(cal), "--out", str(tmp_path / "d"),
                  "--no-progress"]) == 0
-    default = _mean_psnr(tmp_path / "d", test)
+    default = mean_psnr(tmp_path / "d", test)
     bundle = CalibrationBundle.load(cal)
     profile = test.profile
     dark = np.asarray(test.measurement(0), np.float64)
     frames = [(signal_of(test, i, dark, None)[0].astype(np.float32), np.asarray(test.scene(i)))
               for i in range(1, len(test))]
-    taus = np.geomspace(1e2, 1e7, 41)
-
-    def best(decoder: object) -> float:
-        out = -np.inf
-        for tau in taus:
-            decoder.set_tau(float(tau))  # type: ignore[attr-defined]
-            out = max(out, float(np.mean([psnr(np.clip(decoder.decode(y), 0, 1), x)  # type: ignore[attr-defined]
-                                          for y, x in frames])))
-        return out
-
-    hindsight = best(make_decoder(profile, bundle, bundle.meta["decoder"]))
+    hindsight, _ = best_in_hindsight(make_decoder(profile, bundle, bundle.meta["decoder"]), frames)
     rec = Recording(rec_dir)
     paper_sm, _ = solve_matrices(collect_slits(rec), CalibrationOptions(method="paper"), profile)
     paper = CalibrationBundle.create(profile, paper_sm, None, tau=1.0, source="recording")
-    reference = best(make_decoder(profile, paper, "t2s-closed-form"))
+    reference, _ = best_in_hindsight(make_decoder(profile, paper, "t2s-closed-form"), frames)
     print(f"default {default:.2f} dB, hindsight {hindsight:.2f} dB, Alg. 1-3 + exact T2S {reference:.2f} dB")
     assert default >= hindsight - 0.3
     assert default >= reference - 0.05
@@ -207,14 +196,17 @@ def test_tau_per_channel_only_where_it_scores_better_held_out(wanted: tuple[floa
         assert cv.channel_tau is None
 
 
-def test_bundle_tau_per_channel_is_used_unless_tau_is_given(tmp_path: Path) -> None:
-    from thintact_sdk.imaging.t2s import SystemMatrices
-
-    profile = small_profile(("R", "G", "B"))
-    rng = np.random.default_rng(3)
+def _random_matrices(profile: Profile, seed: int) -> SystemMatrices:
+    """Random three-channel T2S matrices of ``profile``'s shapes (positive coding terms)."""
+    rng = np.random.default_rng(seed)
     (r, s), (n, m) = (profile.sensor.rows, profile.sensor.cols), (profile.scene.rows, profile.scene.cols)
-    sm = SystemMatrices(np.abs(rng.random((3, r, n))), np.abs(rng.random((3, s, m))),
-                        rng.standard_normal((3, r, n)), rng.standard_normal((3, s, m)))
+    return SystemMatrices(np.abs(rng.random((3, r, n))), np.abs(rng.random((3, s, m))),
+                          rng.standard_normal((3, r, n)), rng.standard_normal((3, s, m)))
+
+
+def test_bundle_tau_per_channel_is_used_unless_tau_is_given(tmp_path: Path) -> None:
+    profile = small_profile(("R", "G", "B"))
+    sm = _random_matrices(profile, seed=3)
     per_channel = [10.0, 200.0, 50.0]
     CalibrationBundle.create(profile, sm, None, tau=7.0, source="recording", decoder="t2s-closed-form",
                              tau_t2s_closed_form=80.0,
@@ -260,13 +252,9 @@ def test_a_ghost_fails_the_unit_with_its_offset_and_strength(ghosted: tuple[Ghos
 
 
 def test_reconstruct_uses_the_bundles_tau_per_channel_unless_tau_is_given(tmp_path: Path) -> None:
-    from thintact_sdk.imaging.t2s import SystemMatrices
-
     profile = small_profile(("R", "G", "B"))
-    rng = np.random.default_rng(5)
+    sm = _random_matrices(profile, seed=5)
     (r, s), (n, m) = (profile.sensor.rows, profile.sensor.cols), (profile.scene.rows, profile.scene.cols)
-    sm = SystemMatrices(np.abs(rng.random((3, r, n))), np.abs(rng.random((3, s, m))),
-                        rng.standard_normal((3, r, n)), rng.standard_normal((3, s, m)))
     CalibrationBundle.create(profile, sm, None, tau=7.0, source="recording", decoder="t2s-closed-form",
                              tau_t2s_closed_form=80.0,
                              channel_tau={"t2s-closed-form": [10.0, 2000.0, 50.0]}).save(tmp_path / "cal")
