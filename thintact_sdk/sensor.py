@@ -468,11 +468,7 @@ class Sensor:
         self._frames = _Latest()
         self.stats = StreamStats()
         name = self.profile.name
-        try:
-            camera_fps = self._camera().capabilities().fps
-        except Exception:  # noqa: BLE001 - a camera that cannot say its rate: treat as unknown
-            camera_fps = None
-        workers = decode_workers(self.decode_ms, camera_fps)
+        workers = decode_workers(self.decode_ms, self._camera().capabilities().fps)
         self.stats.decode_workers = workers
         if workers > 1:  # frame-parallel decode: one kernel thread per worker, no waits
             self._kernel_hold = ExitStack()

@@ -188,8 +188,7 @@ def test_streaming_holds_kernel_threads_at_one_and_restores_them(profile, lut, m
             return super().decode(signal)
 
     with Sensor(profile, registry=make_registry(), lut=lut, decoder=Probe()) as s:
-        for _ in s.stream(max_frames=3, timeout_s=5.0):
-            pass
+        list(s.stream(max_frames=3, timeout_s=5.0))
     during = seen[2:]  # the first two decodes are the warm-up, before the workers start
     assert [held for _, _, held in seen[:2]] == [0, 0]
     assert during and all(t == 1 and held == 1 for t, _, held in during)
