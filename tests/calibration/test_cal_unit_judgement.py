@@ -21,7 +21,7 @@ from independent_device import (
 
 from thintact_sdk.calibration.collect import collect_slits, signal_of
 from thintact_sdk.calibration.pipeline import CalibrationOptions, solve_matrices
-from thintact_sdk.calibration.tau import assign_folds, cross_validate
+from thintact_sdk.calibration.tau import assign_folds, bootstrap_spread, cross_validate
 from thintact_sdk.calibration.validation import make_decoder
 from thintact_sdk.cli.main import main
 from thintact_sdk.imaging.calibration_bundle import CalibrationBundle
@@ -61,6 +61,25 @@ def test_cross_validation_never_scores_a_scene_with_a_tau_tuned_on_it() -> None:
     assert cv.held_out_psnr["b"] == pytest.approx(psnr(np.full((1, 1, 1), 0.5), truths[1]))
     # one distinct scene per fold is too few to tune on
     assert cross_validate(_ScaledDecoder(), "stub", signals[:2], truths[:2], labels[:2], np.array([1.0])) is None
+
+
+def test_bootstrap_spread_says_how_well_the_scenes_determine_tau() -> None:
+    taus = np.geomspace(1.0, 1e4, 41)
+    lt = np.log10(taus)
+
+    def curve(best: float) -> np.ndarray:  # a scene whose PSNR peaks at τ = 10**best
+        return 30.0 - (lt - best) ** 2
+
+    agree = np.stack([curve(2.0) for _ in range(5)])
+    keys = [f"s{i}" for i in range(5)]
+    lo, hi = bootstrap_spread(taus, agree, keys, np.ones(5))
+    assert lo == pytest.approx(100.0) and hi == pytest.approx(100.0)
+    # scenes wanting 10 and 1000: the resamples' choices spread between them
+    split = np.stack([curve(1.0), curve(3.0), curve(1.0), curve(3.0), curve(2.0), curve(2.0)])
+    keys = ["a", "b", "c", "d", "e", "e"]  # the last two rows are one scene, counted once
+    lo, hi = bootstrap_spread(taus, split, keys, np.array([1, 1, 1, 1, 0.5, 0.5]))
+    assert 10.0 < lo < 100.0 < hi < 1000.0
+    assert np.isnan(bootstrap_spread(taus, split[:2], ["a", "b"], np.ones(2))[0])  # too few scenes
 
 
 def _test_scenes(n: int, m: int) -> list[tuple[str, np.ndarray]]:

@@ -75,6 +75,8 @@ class TauSelection:
             "decoder": self.decoder, "tau": float(f"{self.tau:.4g}"), "criterion": self.criterion,
             "decoder_taus": {k: float(f"{v:.4g}") for k, v in self.decoder_taus.items()},
             "held_out_mean_psnr_db": {k: round(v.held_out_mean_db, 3) for k, v in self.cross_validation.items()},
+            "tau_bootstrap_68": {k: [float(f"{t:.4g}") for t in v.tau_spread]
+                                 for k, v in self.cross_validation.items() if np.isfinite(v.tau_spread[0])},
             "channel_tau": {k: [float(f"{t:.4g}") for t in v] for k, v in self.channel_taus.items()},
             "per_channel_check": {
                 k: {"leave_one_out_tau": [[float(f"{t:.4g}") for t in fold] for fold in v.channel_fold_tau],
