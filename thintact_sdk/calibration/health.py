@@ -15,9 +15,9 @@ After the solve every slit frame is read once more and compared with the calibra
   absorbs it into ``Qo``/``Qc`` instead of leaving a residual; it is found as a dip or peak of
   the open response ``Qo·1`` (``Po·1`` for rows) against its smooth neighbourhood;
 * **ghost**: a faint displaced copy of the whole image (a reflection between mask and cover
-  glass), found from the slit frames' Gram matrices (not separable) or as an echo of the
-  design's coding pattern in the calibrated matrices (separable), see
-  :mod:`thintact_sdk.calibration.ghost`; located by its offset and strength.
+  glass), found by a least-squares fit to the slit frames at every 2-D offset (not
+  separable) or as an echo of the design's coding pattern in the calibrated matrices
+  (separable), see :mod:`thintact_sdk.calibration.ghost`; located by its offset and strength.
 
 Every defect names its kind, where it is (sensor rows/columns) and how strong it is.
 """
@@ -335,8 +335,8 @@ def assess(recording: Recording, collection: SlitCollection, sm: SystemMatrices,
     defects += _lines(col_dev, col_spread, names, "column", shape)
     defects += _lines(row_dev, row_spread, names, "row", shape)
     ghosts, scans = find_ghosts(collection.channels, sm, profile, *_kept_lines(defects, shape), slit_frames)
-    for g in ghosts:  # its edge: where the copy comes in from beyond the sensor, not dust
-        inside = [d for d in defects if not _in_ghost_edge(d, g.rows, g.cols, shape)]
+    if ghosts:  # (at most one) its edge: where the copy comes in from beyond the sensor, not dust
+        inside = [d for d in defects if not _in_ghost_edge(d, ghosts[0].rows, ghosts[0].cols, shape)]
         if len(inside) < len(defects):
             # searched again with those lines in: left out, they cut the copy's source lines
             # off the fit (a 10 % ghost at (6, -9) read 7.6 % with them out, 10.2 % in)
@@ -344,6 +344,7 @@ def assess(recording: Recording, collection: SlitCollection, sm: SystemMatrices,
                                              slit_frames)
             if again:
                 ghosts, scans = again, scans_again
+                inside = [d for d in defects if not _in_ghost_edge(d, again[0].rows, again[0].cols, shape)]
         defects = inside
     pitch = profile.sensor.pixel_pitch_um
     for g in ghosts:
