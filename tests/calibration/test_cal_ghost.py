@@ -6,11 +6,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 from independent_device import Ghost, small_profile, write_recording
 
 from thintact_sdk.calibration.collect import collect_slits
-from thintact_sdk.calibration.ghost import MIN_STRENGTH
+from thintact_sdk.calibration.ghost import MIN_STRENGTH, _out_factors, _signature
 from thintact_sdk.calibration.health import HealthReport, assess
 from thintact_sdk.calibration.pipeline import CalibrationOptions, solve_matrices
 
@@ -49,3 +50,18 @@ def test_healthy_unit_ghost_scans_stay_below_the_threshold(tmp_path: Path) -> No
     assert not [d for d in health.defects if d.kind == "ghost"]
     strongest = max(s.estimate if s.estimate == s.estimate else s.value for s in health.ghost_scans)
     assert strongest < 0.8 * MIN_STRENGTH
+
+
+def test_all_lags_at_once_match_one_shift_per_lag() -> None:
+    # the slit map's out-lag factors by cross-correlation against shifting once per lag
+    rng = np.random.default_rng(1)
+    left = rng.standard_normal((7, 40, 5))
+    lead = rng.standard_normal((7, 40, 2)) + np.linspace(0.0, 3.0, 40)[None, :, None]  # an open-like trend
+    keep = np.ones(40)
+    keep[[3, 17, 18]] = 0.0  # lines of located defects
+    lags = [-13, -5, -2, 2, 6, 13]
+    x, gram = _out_factors(left, lead, lags, keep)
+    for j, lag in enumerate(lags):
+        sig = _signature(lead, lag, keep)
+        np.testing.assert_allclose(x[j], left.transpose(0, 2, 1) @ sig, rtol=1e-9, atol=1e-9)
+        np.testing.assert_allclose(gram[j], np.einsum("naq,nar->qr", sig, sig), rtol=1e-9, atol=1e-9)
