@@ -26,6 +26,8 @@ def test_bench_reconstruct_runs_on_virtual_mini(capsys, monkeypatch) -> None:
     for key in ("thintact-noniterative [numpy-float32]", "t2s-closed-form [numpy-float32]"):
         roof = out["roofline"][key]
         assert roof["gemm_gflop"] > 0 and roof["sgemm_gflops"] > 0 and roof["ratio"] > 0
+        assert roof["one_thread"]["ratio"] > 0 and roof["ratio_from_uint16"] > 0
+        assert out["latency_ms_from_uint16"][key] > 0
     assert set(out["backend_choice"]) == {"thintact-noniterative", "t2s-closed-form"}
     assert all("numpy-float32" in v for v in out["backend_choice"].values())
     assert any("AVX" in line or "SIMD" in line for line in out["host"])
@@ -49,3 +51,31 @@ def test_bench_reconstruct_runs_on_virtual_mini(capsys, monkeypatch) -> None:
     table = capsys.readouterr().out
     assert "thintact-noniterative [torch-float32]" in table and "decoder [backend]" in table
     assert "roofline" in table and "backend chosen for t2s-closed-form" in table
+    assert "1 thread" in table and "from uint16" in table
+
+
+def test_decoders_take_the_binned_planes_without_a_copy_and_decode_them_alike() -> None:
+    """The Bayer binning hands the decoder channel-planar float32 storage; the channel-first
+    operand is that storage itself (no per-frame conversion pass), and the result equals
+    the one from an interleaved copy of the same frame."""
+    import numpy as np
+    from thintact_decoders import ArrayBackend, T2SClosedFormDecoder
+
+    from thintact_sdk.algorithms import SystemMatrices
+    from thintact_sdk.bayer import bin_bayer
+
+    rng = np.random.default_rng(3)
+    mosaic = rng.integers(60, 4000, size=(32, 40)).astype(np.uint16)
+    frame = bin_bayer(mosaic)
+    assert np.moveaxis(frame, -1, 0).flags.c_contiguous
+    for name in ("numpy", "torch"):
+        xp = ArrayBackend(name, "float32")
+        planes = xp.channels_first(frame, gemm=True)
+        shared = np.shares_memory(planes, frame) if name == "numpy" else planes.data_ptr() == frame.ctypes.data
+        assert shared
+    sm = SystemMatrices(0.1 * rng.standard_normal((3, 16, 12)), 0.1 * rng.standard_normal((3, 20, 14)),
+                        rng.standard_normal((3, 16, 12)), rng.standard_normal((3, 20, 14)))
+    dec = T2SClosedFormDecoder(sm, 2.0)
+    interleaved = np.ascontiguousarray(frame)
+    np.testing.assert_allclose(dec.decode_raw(frame, 64.0), dec.decode_raw(interleaved, 64.0), rtol=1e-5, atol=1e-6)
+    assert frame.base is not None and np.array_equal(frame, interleaved)  # the input was not written to

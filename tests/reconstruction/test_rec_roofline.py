@@ -82,3 +82,23 @@ def test_synthesis_order_is_the_cheaper_and_exact() -> None:
 def test_roofline_ratio() -> None:
     assert roofline_ratio(20.0, 2e9, 100.0) == pytest.approx(1.0)
     assert measure_sgemm_gflops(1, 64, 64, 64, repeats=2) > 0
+
+
+@pytest.mark.parametrize("rtol", [0.0, 1e-2])
+def test_black_level_folds_in_exactly_with_modes_dropped_and_after_a_new_tau(rtol) -> None:
+    """The T2S closed form carries the pedestal as a rank-one term (no unit frame decoded):
+    ``decode_raw(y + b, b) == decode(y)`` whatever modes are kept, also after ``set_tau``.
+    Positive coding matrices (a binary mask's), so the coding term sees the pedestal."""
+    rng = np.random.default_rng(5)
+    sm = SystemMatrices(0.2 * rng.random((3, 64, 20)), 0.2 * rng.random((3, 72, 24)),
+                        np.stack([_decaying(p) for p in rng.random((3, 64, 20))]),
+                        np.stack([_decaying(q) for q in rng.random((3, 72, 24))]))
+    y = sm.forward(rng.random((20, 24, 3)))
+    for tau in (100.0, 3.0):
+        dec = T2SClosedFormDecoder(sm, 1e3, ArrayBackend("numpy", "float64"), mode_rtol=rtol)
+        dec.set_tau(tau)
+        fresh = T2SClosedFormDecoder(sm, tau, ArrayBackend("numpy", "float64"), mode_rtol=rtol)
+        assert dec.kept_modes == fresh.kept_modes
+        want = fresh.decode(y)
+        # float64 solve, float32 result: equal to the result's rounding
+        np.testing.assert_allclose(dec.decode_raw(y + 64.0, 64.0), want, rtol=1e-5, atol=1e-6 * np.abs(want).max())

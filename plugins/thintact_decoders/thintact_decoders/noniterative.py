@@ -186,6 +186,7 @@ class NonIterativeDecoder(ClosedFormDecoder):
         self._vp = xp.asarray(full["vp"][..., :kp], gemm=True)
         self._vqt = xp.asarray(full["vqt"][:, :kq], gemm=True)
         self._unit_core: Any = None
+        self._black_term: tuple[float, Any] | None = None  # (black level, black · unit core)
 
     def set_tau(self, tau: TauSpec) -> None:
         """Change τ (one value, or one per channel) without recomputing the SVDs (the modes
@@ -262,7 +263,10 @@ class NonIterativeDecoder(ClosedFormDecoder):
                 y_cf = xp.cast(y32 - f, gemm=True)
         core = self._core(y_cf)  # this frame's own array: updated in place
         if black_dn:
-            core -= black_dn * self._black_core()
+            cached = self._black_term
+            if cached is None or cached[0] != black_dn:  # one full-size pass per frame, not two
+                cached = self._black_term = (black_dn, black_dn * self._black_core())
+            core -= cached[1]
         core *= self._inv_denom
         return xp.synthesise(self._vp, core, self._vqt)
 

@@ -156,7 +156,13 @@ class T2SClosedFormDecoder(ClosedFormDecoder):
         self._den, self._vp, self._vqt, self._scale = st["den"], st["vp"], st["vqt"], st["scale"]
         self._a, self._b, self._a2, self._b2, self._small = st["a"], st["b"], st["a2"], st["b2"], st["small"]
         self._sig2 = st["sig2"]  # σ_P,i² σ_Q,j² of Pc, Qc
-        self._unit: Any = None
+        # float64 copies for the per-τ constants of the frame solve (C × kP × 2kp, C × kQ × 2kq)
+        self._a_all64 = np.concatenate([np.stack(per["a"]), np.stack(per["a2"])], axis=2)
+        self._b_all64 = np.concatenate([np.stack(per["b"]), np.stack(per["b2"])], axis=2)
+        self._scale64 = np.stack(per["scale"])
+        self._a_all = xp.asarray(self._a_all64)
+        self._b_all = xp.asarray(self._b_all64)
+        self._refresh_frame_constants()
 
     def _place(self, kp: int, kq: int) -> None:
         """Put the big products' operators for the leading ``kp × kq`` coding modes (and the
@@ -166,7 +172,6 @@ class T2SClosedFormDecoder(ClosedFormDecoder):
         self.k_p = kp
         self._left = xp.asarray(np.concatenate([self._coding_left[:, :kp], self._up_t], axis=1), gemm=True)
         self._right = xp.asarray(self._coding_right[..., :kq], gemm=True)
-        self._unit = None
 
     def gemm_flops(self) -> int:
         """Floating-point operations of the matrix products of one frame, all channels."""
@@ -191,6 +196,53 @@ class T2SClosedFormDecoder(ClosedFormDecoder):
         self._den = xp.asarray(np.stack([1.0 / (p[3] + t) for p, t in zip(self._parts, taus, strict=True)]))
         self._small = xp.asarray(np.stack([_small_inverse(p, self._kp, self._kq, t)
                                            for p, t in zip(self._parts, taus, strict=True)]))
+        self._refresh_frame_constants()
+
+    def _refresh_frame_constants(self) -> None:
+        """Precompute what the frame solve needs for the current τ and kept modes.
+
+        * ``_coef_e`` (``C × 2K × K``): the small system's answer to the open term's own share
+          ``Hc⁻¹ (a E bᵀ)`` as a linear map of ``vec(E)``, so that share is never formed at
+          full size.
+        * The black level: a uniform frame is rank one through the big products
+          (``core = p qᵀ``, ``E = E₁``), so a pedestal ``b`` is ``b·E₁`` off ``E``, one more
+          rank-one term of the correction (``_lr_left``/``_lr_right_t`` end in ``p``/``q``) and a
+          constant vector ``_black_coef`` of the small system: no unit image is decoded and no full-size pass
+          is spent on it. ``p``, ``q``, ``E₁`` come from the operators in GEMM precision, so
+          the pedestal cancels through the products' own rounding.
+        """
+        xp = self.xp
+        kp, kq = self._kp, self._kq
+        k = kp * kq
+        left = np.asarray(xp.to_numpy(self._left), np.float64)  # C × (kept + kp) × R
+        right = np.asarray(xp.to_numpy(self._right), np.float64)  # C × S × kept
+        uq = np.asarray(xp.to_numpy(self._uq), np.float64)  # C × S × kq
+        den = np.asarray(xp.to_numpy(self._den), np.float64)
+        small = np.asarray(xp.to_numpy(self._small), np.float64)
+        (full_p, full_q), kept = self._full_modes, self.k_p
+        p = np.zeros((self.channels, full_p))
+        p[:, :kept] = left[:, :kept].sum(axis=2)
+        q = np.zeros((self.channels, full_q))
+        q[:, : right.shape[2]] = right.sum(axis=1)
+        e1 = np.einsum("ci,cj->cij", left[:, kept:].sum(axis=2), uq.sum(axis=1)) * self._scale64
+        coef_e, black_coef = [], []
+        for c in range(self.channels):
+            a_all, b_all = self._a_all64[c], self._b_all64[c]
+            # [aᵀ Z b; a2ᵀ Z b2] for Z = Hc⁻¹ (a_i b_jᵀ): the (i, j) column of the map
+            t = np.einsum("ab,ai,ak,bj,bl->ijkl", den[c], a_all, a_all[:, :kp], b_all, b_all[:, :kq],
+                          optimize=True)
+            cols = np.concatenate([t[:kp, :kq].reshape(k, k), t[kp:, kq:].reshape(k, k)])
+            zb = den[c] * np.outer(p[c], q[c])
+            proj_b = np.concatenate([(a_all[:, :kp].T @ zb @ b_all[:, :kq]).ravel(),
+                                     (a_all[:, kp:].T @ zb @ b_all[:, kq:]).ravel()])
+            coef_e.append(small[c] @ cols)
+            black_coef.append(small[c] @ proj_b)
+        self._coef_e = xp.asarray(np.stack(coef_e))
+        self._black_coef = xp.asarray(np.stack(black_coef)[..., None])  # C × 2K × 1
+        self._e_unit = xp.asarray(e1)
+        self._mid_zeros = xp.asarray(np.zeros((self.channels, 2 * kp + 1, 2 * kq + 1)))
+        self._lr_left = xp.asarray(np.concatenate([self._a_all64, p[..., None]], axis=2))  # C × kP × (2kp+1)
+        self._lr_right_t = xp.asarray(np.swapaxes(np.concatenate([self._b_all64, q[..., None]], axis=2), 1, 2))
 
     def _linear(self, y: Any) -> tuple[Any, Any]:
         """``(Σ_P U_Pᵀ Y U_Q Σ_Q, Eᵀ Y)`` for channel-first ``y`` (GEMM precision)."""
@@ -201,30 +253,30 @@ class T2SClosedFormDecoder(ClosedFormDecoder):
         return core, e
 
     def _solve(self, y: Any, black_dn: float = 0.0) -> np.ndarray:
+        """One frame: ``ξ = Hc⁻¹ (core + a E bᵀ) − Hc⁻¹ W (…)⁻¹ Wᵀ(…)`` written as
+        ``Hc⁻¹ ⊙ core + Hc⁻¹ ⊙ (A M Bᵀ)`` with one rank-(2kp+1) product ``A M Bᵀ``: four
+        full-size passes between the big products (scale, project, add, scale) instead of
+        a dozen."""
         xp = self.xp
         core, e = self._linear(y)
         if black_dn:
-            if self._unit is None:
-                ones = np.ones((self.channels, *self.sensor_shape), np.float32)
-                self._unit = self._linear(xp.asarray(ones, gemm=True))
-            core -= black_dn * self._unit[0]  # core and e are this frame's own arrays:
-            e = e - black_dn * self._unit[1]  # updated in place, no per-frame temporaries
-        a, b, a2, b2 = self._a, self._b, self._a2, self._b2
-        xi0 = core
-        xi0 += a @ e @ xp.swap(b)
-        xi0 *= self._den  # Hc⁻¹ b in SVD coefficients
-        c = core.shape[0]
-        k = self._kp * self._kq
-        w = xp.contiguous(xp.swap(a) @ xi0 @ b).reshape(c, k, 1)
-        w2 = xp.contiguous(xp.swap(a2) @ xi0 @ b2).reshape(c, k, 1)
-        coef = self._small @ xp.cat([w, w2], axis=1)
-        cf = xp.contiguous(coef[:, :k]).reshape(c, self._kp, self._kq)
-        cg = xp.contiguous(coef[:, k:]).reshape(c, self._kp, self._kq)
-        correction = a @ cf @ xp.swap(b)
-        correction += a2 @ cg @ xp.swap(b2)
-        correction *= self._den
-        xi0 -= correction
-        return xp.synthesise(self._vp, xi0, self._vqt)
+            e = e - black_dn * self._e_unit
+        c, k, kp, kq = core.shape[0], self._kp * self._kq, self._kp, self._kq
+        core *= self._den  # Hc⁻¹ ⊙ core (core is this frame's own array)
+        proj = xp.swap(self._a_all) @ core  # C × 2kp × kQ: reads the full array once
+        w = xp.contiguous(proj[:, :kp] @ self._b).reshape(c, k, 1)
+        w2 = xp.contiguous(proj[:, kp:] @ self._b2).reshape(c, k, 1)
+        coef = self._small @ xp.cat([w, w2], axis=1) + self._coef_e @ xp.contiguous(e).reshape(c, k, 1)
+        if black_dn:
+            coef = coef - black_dn * self._black_coef
+        mid = xp.zeros_like(self._mid_zeros)
+        mid[:, :kp, :kq] = e - xp.contiguous(coef[:, :k]).reshape(c, kp, kq)
+        mid[:, kp : 2 * kp, kq : 2 * kq] = -xp.contiguous(coef[:, k:]).reshape(c, kp, kq)
+        mid[:, 2 * kp, 2 * kq] = -black_dn
+        low = self._lr_left @ mid @ self._lr_right_t  # C × kP × kQ
+        low *= self._den
+        core += low
+        return xp.synthesise(self._vp, core, self._vqt)
 
     def _normal_op(self, xi: Any) -> Any:
         """``AᵀA`` in SVD coefficients: ``(σ_P² σ_Qᵀ²) ⊙ ξ + W Mmid Wᵀ ξ`` (τ excluded)."""
