@@ -132,3 +132,23 @@ def test_a_turn_far_from_every_mounting_is_refused(nominal: Profile) -> None:
     turned = ndimage.rotate(flat, -30.0, reshape=False, order=1, mode="nearest")  # +30° in CONTRACTS terms
     with pytest.raises(CalibrationError, match=r"turned by \+(29\.\d|30\.\d)°.*separable"):
         estimate_pose(turned, nominal)
+
+
+def test_calibrate_pose_cli_turned_by_90_and_refusal(nominal: Profile, tmp_path, capsys) -> None:  # type: ignore[no-untyped-def]
+    from thintact_sdk.cli.main import main
+    from thintact_sdk.profile import load_profile, write_profile
+
+    write_profile(nominal, tmp_path / "nominal.json")
+    truth = _mounted(nominal, Orientation.turned(1), 0.0)
+    np.save(tmp_path / "flat.npy", _flat(truth) + nominal.noise.black_level_dn)
+    args = ["calibrate-pose", str(tmp_path / "flat.npy"), "--profile", str(tmp_path / "nominal.json"),
+            "--out", str(tmp_path / "posed.json")]
+    assert main(args) == 0
+    assert "turned by 90°" in capsys.readouterr().out
+    posed = load_profile(tmp_path / "posed.json")
+    assert posed.mask.phi == truth.mask.phi and posed.mask.phi_rows == truth.mask.phi_rows
+    assert abs(posed.physics["mask_misalignment"]["dx_um"] - DX) < 0.2
+    turned = ndimage.rotate(_flat(truth), 20.0, reshape=False, order=1, mode="nearest")
+    np.save(tmp_path / "flat.npy", turned + nominal.noise.black_level_dn)
+    assert main(args) == 2
+    assert "-20." in capsys.readouterr().err
