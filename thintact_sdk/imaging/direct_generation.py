@@ -116,7 +116,8 @@ class AxisGeometry:
 
         The profile's ``physics`` is honoured: ``geometry`` replaces z and d, and
         ``mask_misalignment.dy_um`` shifts the pattern (its ``angle_deg`` cannot be
-        represented by a separable model, see :func:`unmodelled_angle_deg`).
+        represented by a separable model, see ``SystemMatrices.direct``'s
+        ``meta["unmodelled_angle_deg"]``).
         """
         pose = MaskPose.of(profile)
         return cls(profile.sensor.rows, profile.sensor.pixel_pitch_um, profile.scene.rows,
@@ -165,9 +166,10 @@ class MaskPose:
     dx_um, dy_um
         Shift of the pattern along x (columns) and y (rows), um (``mask_misalignment``).
     angle_deg
-        Rotation of the pattern, degrees (``mask_misalignment``). A 180° flip is written into
-        the profile as reversed ``phi`` and ``phi_rows`` instead (see
-        :mod:`thintact_sdk.calibration.pose`), so only small angles appear here.
+        Rotation of the pattern, degrees (``mask_misalignment``). Quarter turns and mirror
+        images are written into the profile as rewritten ``phi`` and ``phi_rows`` instead
+        (:mod:`thintact_sdk.imaging.mask_orientation`, :mod:`thintact_sdk.calibration.pose`),
+        so only the small residual turn appears here.
     """
 
     z_mm: float
