@@ -45,6 +45,13 @@ generation leaves the turn out; beyond this the pose would be wrong, so it is re
 TURN_STEP_DEG = 1.0
 """Step of the separability scan over the turn (refined by a parabola)."""
 
+SEARCH_CHUNK_ELEMENTS = 4_000_000
+"""Shifts × sensor pixels × scene pixels evaluated at once by the 1-D shift search."""
+
+SCAN_MAX_SIDE = 192
+"""The separability scan bins the image (a separable operation) to at most this many pixels
+along its shorter side."""
+
 ENVELOPE_DEGREE = 2
 """Degree of the 2-D polynomial gain of each half (open, coding) of the flat-field model."""
 
@@ -118,9 +125,15 @@ def _search(gen: DirectGenerator, phi: np.ndarray, target: np.ndarray, max_shift
             step_um: float) -> tuple[float, float]:
     """Best shift (um) and its score; coarse grid then three 4× finer grids and a parabola."""
 
+    axis = gen.axis
+    chunk = max(1, SEARCH_CHUNK_ELEMENTS // (axis.n_sensor * axis.n_scene))
+
     def scores(shifts: np.ndarray) -> np.ndarray:
-        prof = gen.uniform_scene_profiles(phi, shifts)  # (2, T, n)
-        return _score(np.transpose(prof, (1, 2, 0)), target)
+        out = []
+        for i in range(0, shifts.size, chunk):  # bounded memory on large sensors
+            prof = gen.uniform_scene_profiles(phi, shifts[i:i + chunk])  # (2, T, n)
+            out.append(_score(np.transpose(prof, (1, 2, 0)), target))
+        return np.concatenate(out)
 
     shifts = np.arange(-max_shift_um, max_shift_um + step_um / 2, step_um)
     vals = scores(shifts)
@@ -153,10 +166,14 @@ def separability_turn(y: np.ndarray, step_deg: float = TURN_STEP_DEG) -> tuple[f
     """The turn (degrees, in [−45°, 45°)) at which the image is most separable, and the share
     of its two leading singular values there.
 
-    The image, less its mean, is turned back by each trial angle; a central square that stays
-    inside the sensor at every angle is scored by ``(σ1² + σ2²) / Σσ²``.
+    The image, binned (:data:`SCAN_MAX_SIDE`) and less its mean, is turned back by each trial
+    angle; a central square that stays inside the sensor at every angle is scored by
+    ``(σ1² + σ2²) / Σσ²``.
     """
-    img = y - float(np.mean(y))
+    b = max(1, min(y.shape) // SCAN_MAX_SIDE)
+    binned = y[: y.shape[0] // b * b, : y.shape[1] // b * b]
+    binned = binned.reshape(y.shape[0] // b, b, y.shape[1] // b, b).mean(axis=(1, 3))
+    img = binned - float(np.mean(binned))
     side = int(min(img.shape) / math.sqrt(2.0)) - 2
     r0, c0 = (img.shape[0] - side) // 2, (img.shape[1] - side) // 2
 
