@@ -45,8 +45,9 @@ generation leaves the turn out; beyond this the pose would be wrong, so it is re
 TURN_STEP_DEG = 1.0
 """Step of the separability scan over the turn (refined by a parabola)."""
 
-SEARCH_CHUNK_ELEMENTS = 4_000_000
-"""Shifts × sensor pixels × scene pixels evaluated at once by the 1-D shift search."""
+COARSE_SENSOR_PIXELS = 256
+"""The coarse shift grid is scored on every k-th sensor pixel, at most about this many (all of
+them on small sensors); the finer grids use every pixel."""
 
 SCAN_MAX_SIDE = 192
 """The separability scan bins the image (a separable operation) to at most this many pixels
@@ -115,7 +116,7 @@ class PoseEstimate:
 
 
 def _score(profiles: np.ndarray, target: np.ndarray) -> np.ndarray:
-    """``(T,)``: fraction of ``target``'s columns (orthonormal, ``n × 2``) inside the span of
+    """``(T,)``: fraction of the energy of ``target``'s columns (``n × 2``) inside the span of
     each ``n × 2`` basis ``profiles[t]`` (``(T, n, 2)``)."""
     q, _ = np.linalg.qr(profiles)
     return np.sum(np.einsum("tnk,nj->tkj", q, target) ** 2, axis=(1, 2)) / float(np.sum(target**2))
@@ -126,17 +127,14 @@ def _search(gen: DirectGenerator, phi: np.ndarray, target: np.ndarray, max_shift
     """Best shift (um) and its score; coarse grid then three 4× finer grids and a parabola."""
 
     axis = gen.axis
-    chunk = max(1, SEARCH_CHUNK_ELEMENTS // (axis.n_sensor * axis.n_scene))
 
-    def scores(shifts: np.ndarray) -> np.ndarray:
-        out = []
-        for i in range(0, shifts.size, chunk):  # bounded memory on large sensors
-            prof = gen.uniform_scene_profiles(phi, shifts[i:i + chunk])  # (2, T, n)
-            out.append(_score(np.transpose(prof, (1, 2, 0)), target))
-        return np.concatenate(out)
+    def scores(shifts: np.ndarray, stride: int = 1) -> np.ndarray:
+        index = np.arange(0, axis.n_sensor, stride)
+        prof = gen.uniform_scene_profiles(phi, shifts, sensor_index=index)  # (2, T, n)
+        return _score(np.transpose(prof, (1, 2, 0)), target[index])
 
     shifts = np.arange(-max_shift_um, max_shift_um + step_um / 2, step_um)
-    vals = scores(shifts)
+    vals = scores(shifts, max(1, axis.n_sensor // COARSE_SENSOR_PIXELS))
     k = int(np.argmax(vals))
     best, value = float(shifts[k]), float(vals[k])
     for _ in range(3):

@@ -50,6 +50,9 @@ SIGMOID_SOFTNESS = 0.28
 #: :meth:`DirectGenerator.uniform_scene_profiles`.
 PROFILE_TABLE_STEP_UM = 0.05
 
+#: Shifts × sensor pixels × scene pixels gathered at once by ``uniform_scene_profiles``.
+_PROFILE_CHUNK_ELEMENTS = 4_000_000
+
 
 @dataclass(frozen=True)
 class StripeParameters:
@@ -297,10 +300,12 @@ class DirectGenerator:
         return self.coding(np.ones(self.axis.K))
 
     def uniform_scene_profiles(self, phi: np.ndarray, shifts_um: np.ndarray,
-                               feature_um: float | None = None) -> np.ndarray:
+                               feature_um: float | None = None,
+                               sensor_index: np.ndarray | None = None) -> np.ndarray:
         """``(2, T, n_sensor)``: open and coding profiles of a uniform scene (``P·1``), the
         pattern shifted by each of ``shifts_um`` (``(T,)``, um, instead of the axis' own
-        shift) and with cells of ``feature_um`` (default the axis' own).
+        shift) and with cells of ``feature_um`` (default the axis' own); only the sensor
+        pixels ``sensor_index`` (then ``(2, T, len(sensor_index))``) when given.
 
         One row of the flat field of a slightly turned mask (:mod:`thintact_sdk.calibration.pose`)
         is the product of such profiles at shifts that vary along the other axis. The
@@ -313,22 +318,30 @@ class DirectGenerator:
             raise InvalidShapeError(f"phi has shape {phi.shape}, the mask has K={axis.K}")
         shifts = np.asarray(shifts_um, np.float64)
         m0 = crossing_points_um(axis)
+        fade = self._scaled_fade
+        if sensor_index is not None:
+            m0, fade = m0[sensor_index], fade[sensor_index]
         lo = float(m0.min() - shifts.max()) - 2 * PROFILE_TABLE_STEP_UM
         hi = float(m0.max() - shifts.min()) + 2 * PROFILE_TABLE_STEP_UM
         grid = np.arange(lo, hi + PROFILE_TABLE_STEP_UM, PROFILE_TABLE_STEP_UM)
         lo_cell, weights = _footprint_weights(axis, grid)
         pad = int(max(0, -lo_cell.min(), lo_cell.max() + weights.shape[0] - axis.K)) + 1
-        pos = (m0[None] - shifts[:, None, None] - lo) / PROFILE_TABLE_STEP_UM
-        i0 = np.floor(pos).astype(np.int64)
-        frac = pos - i0
-        out = np.empty((2, shifts.size, axis.n_sensor))
-        for k, vec in enumerate((np.ones(axis.K), phi)):
+        tables = []
+        for vec in (np.ones(axis.K), phi):
             padded = np.pad(vec, pad)
             table = np.zeros(grid.size)
             for ell in range(weights.shape[0]):
                 table += weights[ell] * padded[lo_cell + ell + pad]
-            values = table[i0] + frac * (table[i0 + 1] - table[i0])
-            out[k] = np.einsum("tsn,sn->ts", values, self._scaled_fade)
+            tables.append(table)
+        out = np.empty((2, shifts.size, m0.shape[0]))
+        chunk = max(1, _PROFILE_CHUNK_ELEMENTS // m0.size)  # bounded memory on large sensors
+        for i in range(0, shifts.size, chunk):
+            pos = (m0[None] - shifts[i:i + chunk, None, None] - lo) / PROFILE_TABLE_STEP_UM
+            i0 = np.floor(pos).astype(np.int64)
+            frac = pos - i0
+            for k, table in enumerate(tables):
+                values = table[i0] + frac * (table[i0 + 1] - table[i0])
+                out[k, i:i + chunk] = np.einsum("tsn,sn->ts", values, fade)
         return out
 
 
