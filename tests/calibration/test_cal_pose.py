@@ -78,6 +78,26 @@ def test_orientations_rewrite_the_mask_exactly() -> None:
     assert split_angle(-179.9)[0] == Orientation.turned(2) and abs(split_angle(-179.9)[1] - 0.1) < 1e-9
 
 
+def test_uniform_scene_profiles_match_the_direct_matrices(nominal: Profile) -> None:
+    """The flat-field model's profiles are direct generation's ``P·1`` at each shift."""
+    from dataclasses import replace
+
+    from thintact_sdk.imaging.direct_generation import AxisGeometry, DirectGenerator
+
+    axis = AxisGeometry.cols_of(nominal)
+    phi = np.asarray(nominal.mask.phi, float)
+    shifts = np.array([-7.5, 0.0, 3.2])
+    index = np.arange(0, axis.n_sensor, 3)
+    prof = DirectGenerator(axis).uniform_scene_profiles(phi, shifts, feature_um=20.5)
+    sub = DirectGenerator(axis).uniform_scene_profiles(phi, shifts, feature_um=20.5, sensor_index=index)
+    for t, shift in enumerate(shifts):
+        gen = DirectGenerator(replace(axis, mask_shift_um=float(shift), feature_um=20.5))
+        peak = float(gen.open().sum(axis=1).max())
+        np.testing.assert_allclose(prof[0, t], gen.open().sum(axis=1), atol=1e-5 * peak)
+        np.testing.assert_allclose(prof[1, t], gen.coding(phi).sum(axis=1), atol=1e-5 * peak)
+    np.testing.assert_array_equal(sub, prof[:, :, index])
+
+
 @pytest.mark.parametrize(("mounting", "angle_deg"), [
     ("as designed", 0.02), ("as designed", 0.05), ("as designed", 0.3),
     ("turned by 180°", 0.0), ("turned by 90°", 0.0), ("mirrored left-right", 0.0),
