@@ -53,7 +53,7 @@ SCAN_MAX_SIDE = 192
 """The separability scan bins the image (a separable operation) to at most this many pixels
 along its shorter side."""
 
-ENVELOPE_DEGREE = 2
+ENVELOPE_DEGREE = 4
 """Degree of the 2-D polynomial gain of each half (open, coding) of the flat-field model."""
 
 
