@@ -26,7 +26,7 @@ the mask ``M = (1·1ᵀ + φ_rows φᵀ)/2``.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -45,6 +45,13 @@ _HALF_MAX_OVER_H = math.sqrt(2.0 ** (2.0 / 3.0) - 1.0)
 #: 0.47 % (wide) relative RMS after one gain per channel; see docs/masks.md.
 DEFAULT_D_STRIPE_SCALE = 0.78
 SIGMOID_SOFTNESS = 0.28
+
+#: Step (um) of the table of the footprint-averaged pattern behind
+#: :meth:`DirectGenerator.uniform_scene_profiles`.
+PROFILE_TABLE_STEP_UM = 0.05
+
+#: Shifts × sensor pixels × scene pixels gathered at once by ``uniform_scene_profiles``.
+_PROFILE_CHUNK_ELEMENTS = 4_000_000
 
 
 @dataclass(frozen=True)
@@ -112,7 +119,8 @@ class AxisGeometry:
 
         The profile's ``physics`` is honoured: ``geometry`` replaces z and d, and
         ``mask_misalignment.dy_um`` shifts the pattern (its ``angle_deg`` cannot be
-        represented by a separable model, see :func:`unmodelled_angle_deg`).
+        represented by a separable model, see ``SystemMatrices.direct``'s
+        ``meta["unmodelled_angle_deg"]``).
         """
         pose = MaskPose.of(profile)
         return cls(profile.sensor.rows, profile.sensor.pixel_pitch_um, profile.scene.rows,
@@ -161,9 +169,10 @@ class MaskPose:
     dx_um, dy_um
         Shift of the pattern along x (columns) and y (rows), um (``mask_misalignment``).
     angle_deg
-        Rotation of the pattern, degrees (``mask_misalignment``). A 180° flip is written into
-        the profile as reversed ``phi`` and ``phi_rows`` instead (see
-        :mod:`thintact_sdk.calibration.pose`), so only small angles appear here.
+        Rotation of the pattern, degrees (``mask_misalignment``). Quarter turns and mirror
+        images are written into the profile as rewritten ``phi`` and ``phi_rows`` instead
+        (:mod:`thintact_sdk.imaging.mask_orientation`, :mod:`thintact_sdk.calibration.pose`),
+        so only the small residual turn appears here.
     """
 
     z_mm: float
@@ -202,6 +211,34 @@ def _trapezoid_cdf(x: np.ndarray, a: float, b: float) -> np.ndarray:
     return (_ramp2(x + s) - _ramp2(x + t) - _ramp2(x - t) + _ramp2(x - s)) / (a * b)
 
 
+def crossing_points_um(axis: AxisGeometry) -> np.ndarray:
+    """``n_sensor × n_scene``: where the ray from each scene pixel centre to each sensor pixel
+    centre crosses the mask, ``(z·y_r + d·y_n) / H`` (um, unshifted)."""
+    z_um, d_um = axis.z_mm * 1e3, axis.d_mm * 1e3
+    y_sensor = _centred(axis.n_sensor, axis.sensor_pitch_um)[:, None]
+    y_scene = _centred(axis.n_scene, axis.scene_pitch_um)[None, :]
+    return (z_um * y_sensor + d_um * y_scene) / (z_um + d_um)
+
+
+def _footprint_weights(axis: AxisGeometry, m_um: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Exact share of each mask cell in the trapezoid footprint centred at ``m_um`` (any shape,
+    pattern frame, um): the first cell index (``m_um.shape``, int) and the weights
+    ``(n_cells,) + m_um.shape`` of it and the next ``n_cells − 1`` cells."""
+    h_um = axis.h_mm * 1e3
+    a_um = axis.z_mm * 1e3 * axis.sensor_pitch_um / h_um  # footprint of the sensor pixel on the mask
+    b_um = axis.d_mm * 1e3 * axis.scene_pitch_um / h_um  # footprint of the scene pixel on the mask
+    half_um = (a_um + b_um) / 2.0
+    delta = axis.feature_um
+    lo_cell = np.floor((m_um - half_um) / delta + axis.K / 2.0).astype(np.int64)
+    n_cells = int(math.ceil(2.0 * half_um / delta)) + 1
+    weights = np.empty((n_cells,) + m_um.shape)
+    for ell in range(n_cells):
+        left_um = (lo_cell + ell - axis.K / 2.0) * delta - m_um
+        weights[ell] = (_trapezoid_cdf(left_um + delta, a_um, b_um)
+                        - _trapezoid_cdf(left_um, a_um, b_um))
+    return lo_cell, weights
+
+
 class DirectGenerator:
     """Precomputed affine map φ → system matrix for one axis.
 
@@ -222,23 +259,12 @@ class DirectGenerator:
         self.stripe = axis.stripe_parameters(d_stripe_px)
         if not self.stripe.d_stripe_px > 0:
             raise InvalidValueError(f"d_stripe_px must be > 0, got {self.stripe.d_stripe_px}")
-        z_um, d_um = axis.z_mm * 1e3, axis.d_mm * 1e3
-        h_um = z_um + d_um
         y_sensor = _centred(axis.n_sensor, axis.sensor_pitch_um)[:, None]
         y_scene = _centred(axis.n_scene, axis.scene_pitch_um)[None, :]
         # where the ray crosses the mask, in the (shifted) pattern's frame
-        m_um = (z_um * y_sensor + d_um * y_scene) / h_um - axis.mask_shift_um
-        a_um = z_um * axis.sensor_pitch_um / h_um  # footprint of the sensor pixel on the mask
-        b_um = d_um * axis.scene_pitch_um / h_um  # footprint of the scene pixel on the mask
-        half_um = (a_um + b_um) / 2.0
-        delta = axis.feature_um
-        lo_cell = np.floor((m_um - half_um) / delta + axis.K / 2.0).astype(np.int64)
-        n_cells = int(math.ceil(2.0 * half_um / delta)) + 1
-        weights = np.empty((n_cells, axis.n_sensor, axis.n_scene))
-        for ell in range(n_cells):
-            left_um = (lo_cell + ell - axis.K / 2.0) * delta - m_um
-            weights[ell] = (_trapezoid_cdf(left_um + delta, a_um, b_um)
-                            - _trapezoid_cdf(left_um, a_um, b_um))
+        m_um = crossing_points_um(axis) - axis.mask_shift_um
+        lo_cell, weights = _footprint_weights(axis, m_um)
+        n_cells = weights.shape[0]
         # φ is padded with closed cells so that every index lands inside the padded vector
         self._pad = int(max(0, -lo_cell.min(), lo_cell.max() + n_cells - axis.K)) + 1
         self._index = (lo_cell[None] + np.arange(n_cells)[:, None, None] + self._pad)
@@ -272,6 +298,51 @@ class DirectGenerator:
     def open(self) -> np.ndarray:
         """Open matrix (``Po`` or ``Qo``), ``n_sensor × n_scene``: φ ≡ 1 on the K cells."""
         return self.coding(np.ones(self.axis.K))
+
+    def uniform_scene_profiles(self, phi: np.ndarray, shifts_um: np.ndarray,
+                               feature_um: float | None = None,
+                               sensor_index: np.ndarray | None = None) -> np.ndarray:
+        """``(2, T, n_sensor)``: open and coding profiles of a uniform scene (``P·1``), the
+        pattern shifted by each of ``shifts_um`` (``(T,)``, um, instead of the axis' own
+        shift) and with cells of ``feature_um`` (default the axis' own); only the sensor
+        pixels ``sensor_index`` (then ``(2, T, len(sensor_index))``) when given.
+
+        One row of the flat field of a slightly turned mask (:mod:`thintact_sdk.calibration.pose`)
+        is the product of such profiles at shifts that vary along the other axis. The
+        footprint-averaged pattern is tabulated every :data:`PROFILE_TABLE_STEP_UM` and read
+        by linear interpolation (relative error under 1e-4 of a cell's contrast).
+        """
+        axis = self.axis if feature_um is None else replace(self.axis, feature_um=float(feature_um))
+        phi = np.asarray(phi, np.float64)
+        if phi.shape != (axis.K,):
+            raise InvalidShapeError(f"phi has shape {phi.shape}, the mask has K={axis.K}")
+        shifts = np.asarray(shifts_um, np.float64)
+        m0 = crossing_points_um(axis)
+        fade = self._scaled_fade
+        if sensor_index is not None:
+            m0, fade = m0[sensor_index], fade[sensor_index]
+        lo = float(m0.min() - shifts.max()) - 2 * PROFILE_TABLE_STEP_UM
+        hi = float(m0.max() - shifts.min()) + 2 * PROFILE_TABLE_STEP_UM
+        grid = np.arange(lo, hi + PROFILE_TABLE_STEP_UM, PROFILE_TABLE_STEP_UM)
+        lo_cell, weights = _footprint_weights(axis, grid)
+        pad = int(max(0, -lo_cell.min(), lo_cell.max() + weights.shape[0] - axis.K)) + 1
+        tables = []
+        for vec in (np.ones(axis.K), phi):
+            padded = np.pad(vec, pad)
+            table = np.zeros(grid.size)
+            for ell in range(weights.shape[0]):
+                table += weights[ell] * padded[lo_cell + ell + pad]
+            tables.append(table)
+        out = np.empty((2, shifts.size, m0.shape[0]))
+        chunk = max(1, _PROFILE_CHUNK_ELEMENTS // m0.size)  # bounded memory on large sensors
+        for i in range(0, shifts.size, chunk):
+            pos = (m0[None] - shifts[i:i + chunk, None, None] - lo) / PROFILE_TABLE_STEP_UM
+            i0 = np.floor(pos).astype(np.int64)
+            frac = pos - i0
+            for k, table in enumerate(tables):
+                values = table[i0] + frac * (table[i0 + 1] - table[i0])
+                out[k, i:i + chunk] = np.einsum("tsn,sn->ts", values, fade)
+        return out
 
 
 def direct_system_matrices(

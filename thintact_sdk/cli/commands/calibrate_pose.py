@@ -9,10 +9,14 @@ from pathlib import Path
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "calibrate-pose",
-        help="estimate the mask's offset, rotation (incl. 180° flips) and magnification from a flat field",
+        help="estimate the mask's orientation (quarter turns, mirror images), residual rotation, "
+        "offset and magnification from a flat field",
         description="Fits the known mask pattern to one uniformly lit capture and writes a profile "
-        "whose physics (mask_misalignment, geometry) and mask vectors (reversed for a 180° flip) "
-        "describe where the mask really is; direct generation and the simulator honour them.",
+        "whose mask vectors (phi, phi_rows rewritten for a quarter turn or a mirror image: exact, "
+        "and the mask stays separable) and physics (mask_misalignment: the residual turn and the "
+        "offset; geometry: z) describe where the mask really is; direct generation and the "
+        "simulator honour them. A mask turned more than a few degrees away from every quarter turn "
+        "is refused: no separable model holds there.",
     )
     p.add_argument("flat", type=Path, metavar="FLAT",
                    help="a recording (its all-white frame is used, minus its dark frames) or an "
@@ -54,9 +58,12 @@ def run(args: argparse.Namespace) -> int:
     est = estimate_pose(signal, profile)  # type: ignore[arg-type]
     write_profile(est.apply(profile), args.out)
     print(f"flat field: {source}")
-    print(f"mask shift dx {est.dx_um:+.2f} um, dy {est.dy_um:+.2f} um; rotation {est.angle_deg:+.3f}°"
-          f"{'; turned by 180° (phi and phi_rows reversed)' if est.flipped else ''}; "
+    o = est.orientation
+    rewritten = "" if o == type(o)() else " (phi and phi_rows rewritten as mounted)"
+    print(f"mask {o.name}{rewritten}; residual rotation {est.angle_deg:+.4f}°; "
+          f"shift dx {est.dx_um:+.2f} um, dy {est.dy_um:+.2f} um; "
           f"scene-to-mask {est.scene_to_mask_mm:.3f} mm (profile {profile.geometry.scene_to_mask_mm:g})")
-    print(f"fit: rows {est.fit['rows']:.6f}, columns {est.fit['cols']:.6f} (1 = exact)")
+    print(f"fit: rows {est.fit['rows']:.6f}, columns {est.fit['cols']:.6f} (1 = exact); "
+          f"2-D relative RMS residual {est.fit['rel_rms']:.4f}")
     print(f"profile written: {args.out}")
     return 0
