@@ -455,7 +455,11 @@ def _round_candidates(
     Returns the fitted candidates and the score ranking."""
     model, vals, ev = state.model, state.values, state.ev
     scores = []
-    for name in list(state.remaining):
+    # candidates that need no new simulation first: when the budget runs out while the
+    # optical ones are re-simulated (seconds each with a refracted or rotated kernel), the
+    # cheap ones have still been scored
+    order = sorted(state.remaining, key=lambda n: CANDIDATES[n].domain == "optical")
+    for name in order:
         if CANDIDATES[name].proxy is not None:
             continue
         if deadline.expired():
