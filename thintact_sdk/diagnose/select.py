@@ -409,6 +409,8 @@ class _SelectionState:
         self.rejected: list[CandidateResult] = []
         self.log: list[str] = []
         self.accepted: tuple[str, ...] = ()
+        #: each candidate's score Δχ² in the latest round that scored it
+        self.last_score: dict[str, float] = {}
         model.set_reference(None)
         ev = model.evaluate(values)
         model.set_reference(ev.pred_dn)
@@ -457,8 +459,10 @@ def _round_candidates(
     scores = []
     # candidates that need no new simulation first: when the budget runs out while the
     # optical ones are re-simulated (seconds each with a refracted or rotated kernel), the
-    # cheap ones have still been scored
-    order = sorted(state.remaining, key=lambda n: CANDIDATES[n].domain == "optical")
+    # cheap ones have still been scored; within each group the strongest evidence of the
+    # previous round first (registration order in the first round)
+    order = sorted(state.remaining, key=lambda n: (CANDIDATES[n].domain == "optical",
+                                                   -state.last_score.get(n, 0.0)))
     for name in order:
         if CANDIDATES[name].proxy is not None:
             continue
@@ -470,6 +474,7 @@ def _round_candidates(
             state.drop(name, f"the simulator cannot model it here ({err})")
             continue
         scores.append(res)
+        state.last_score[name] = res.score_dchi2
         say(f"score {name}: Δχ² ≈ {res.score_dchi2:.1f}")
     scores.sort(key=lambda r: -(r.score_dchi2 - r.k * ln_n))
     fitted: list[CandidateResult] = []
