@@ -122,16 +122,7 @@ def test_dust_speck_flagged_where_it_is(concealed: Any) -> None:
         "subnoise_glare", "pair_gamma_stray", "pair_angular_leakage", "pair_diffraction_shift",
         "dim_column", "mask_rotation_035", "pair_rotation_refraction",
         "pair_rotation_diffraction", "triple_rotation_diffraction_stray",
-        pytest.param(
-            "triple_rotation_refraction_gamma",
-            marks=pytest.mark.xfail(
-                reason="refraction is accepted first (via the geometry proxy, ~50 s under load); "
-                "every rotated + refracted kernel near the hidden 0.3 deg then costs ~25 s CPU "
-                "on virtual-mini (two-parameter families of rank 37/53), so the rotation's "
-                "line search and fit do not fit in the default 75 s budget (2026-11-24)",
-                strict=False,
-            ),
-        ),
+        "triple_rotation_refraction_gamma",
     ],
 )
 def test_concealed_matrix(concealed: Any, case: str) -> None:
