@@ -119,29 +119,10 @@ def test_dust_speck_flagged_where_it_is(concealed: Any) -> None:
         "mask_misalignment", "mask_shift",
         "geometry", "sensor_gamma", "saturation", "sensor_blur", "scene_blur", "display_gamma",
         "color_crosstalk", "veiling_glare", "stray_light", "subnoise_leakage", "subnoise_sensor_blur",
-        "subnoise_glare", "pair_gamma_stray", "pair_angular_leakage",
-        pytest.param(
-            "pair_diffraction_shift",
-            marks=pytest.mark.xfail(
-                reason="two slow-to-simulate effects: within the default 75 s budget the joint "
-                "refit of the wavelengths with the mask shift does not converge (with 240 s: "
-                "shift within 0.1 um, blue wavelength exact, red/green 10 %/3 % low)",
-                strict=False,
-            ),
-        ),
+        "subnoise_glare", "pair_gamma_stray", "pair_angular_leakage", "pair_diffraction_shift",
         "dim_column", "mask_rotation_035", "pair_rotation_refraction",
-        *(
-            pytest.param(case, marks=pytest.mark.xfail(reason=why, strict=False))
-            for case, why in (
-                ("triple_rotation_refraction_gamma", "with the separable rotated + refracted "
-                 "kernel the pair passes (137 s, load 1-2, 2026-11-24), but the triple fails its "
-                 "checks within the default budget (134 s, same run; not analysed)"),
-                ("pair_rotation_diffraction", "diffraction is named (598/507/444 nm) but the "
-                 "rotation is not: a diffraction + rotation kernel takes 45 s to build under load"),
-                ("triple_rotation_diffraction_stray", "stray light is found, then the budget is "
-                 "spent before diffraction + rotation"),
-            )
-        ),
+        "pair_rotation_diffraction", "triple_rotation_diffraction_stray",
+        "triple_rotation_refraction_gamma",
     ],
 )
 def test_concealed_matrix(concealed: Any, case: str) -> None:

@@ -111,3 +111,19 @@ def test_diagnosis_modules_name_no_effect() -> None:
         src = inspect.getsource(module)
         named = [n for n in CANDIDATES if f'"{n}"' in src or f"'{n}'" in src]
         assert named == [], f"{module.__name__} special-cases {named}"
+
+
+def test_optical_candidate_out_of_reach_is_not_line_searched():
+    """An optical candidate is line-searched only while LINE_SEARCH_REACH times its score can
+    reach the n_fit-th best line-search Δχ² of the round; cheap domains always are."""
+    def res(name: str, score: float, dchi2: float | None = None) -> select.CandidateResult:
+        return select.CandidateResult(name, CANDIDATES[name].k, score, np.zeros(CANDIDATES[name].k),
+                                      dchi2=dchi2)
+
+    fitted = [res("geometry", 9e5, 1e6), res("sensor_blur", 4e5, 5e5)]
+    reach = select.LINE_SEARCH_REACH
+    assert select._out_of_reach(res("mask_misalignment", 0.9 * 5e5 / reach), fitted, 2)
+    assert not select._out_of_reach(res("mask_misalignment", 1.1 * 5e5 / reach), fitted, 2)
+    assert not select._out_of_reach(res("mask_misalignment", 1.0), fitted[:1], 2)  # a slot is free
+    assert CANDIDATES["stray_light"].domain != "optical"
+    assert not select._out_of_reach(res("stray_light", 1.0), fitted, 2)

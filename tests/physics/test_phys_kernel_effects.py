@@ -259,6 +259,29 @@ def test_windowed_fields_match_box_averaged_exact_fields():
         assert rel_rms(avg(got), avg(want)) < 2e-3
 
 
+def test_lattice_fields_equal_the_windowed_fields():
+    """Equal cells: the FFT correlation on the fine lattice gives the windowed fields and the
+    dropped fringes' power of :func:`axis_fields_local` at the same points (a shifted mask,
+    points beyond both ends included), and ``axis_intensity_profiles`` aligns its fine cells
+    with the mask edges."""
+    k, feature, shift = 64, 0.02, 0.0037
+    phi = np.random.default_rng(7).choice([-1.0, 1.0], k)
+    prof = np.stack([np.ones(k), phi])
+    w = diffraction.fresnel_width_mm(530.0, 4.8, 1.0)
+    e0, sub, k_lo, k_hi = -k / 2 * feature + shift, 50, -900, k * 50 + 700
+    got, got_tail = diffraction.lattice_fields(e0, feature, prof, sub, k_lo, k_hi, w, reach_w=16.0)
+    centres = e0 + (np.arange(k_lo, k_hi) + 0.5) * feature / sub
+    edges = (np.arange(k + 1) - k / 2) * feature + shift
+    want, want_tail = diffraction.axis_fields_local(edges, prof, centres, w, reach_w=16.0)
+    assert np.max(np.abs(got - want)) < 1e-9
+    assert np.max(np.abs(got_tail - want_tail)) < 1e-9
+    fine, _ = diffraction.axis_intensity_profiles(edges, phi, -0.5, 0.5, 530.0, 4.8, 1.0)
+    h = float(np.diff(fine).mean())
+    assert fine[0] <= -0.5 and fine[-1] >= 0.5 and np.allclose(np.diff(fine), h)
+    assert feature / h == pytest.approx(round(feature / h), abs=1e-9)  # whole cells
+    assert ((fine[0] - edges[0]) / h) == pytest.approx(round((fine[0] - edges[0]) / h), abs=1e-6)
+
+
 def test_diffraction_with_rotated_mask_against_2d_fresnel_quadrature():
     """Diffraction composes with a rotated, shifted mask: a tiny device against direct
     numerical quadrature of the 2-D Fresnel integral. Fresnel propagation is rotation-invariant,

@@ -82,3 +82,22 @@ def test_rotation_composes_with_kernel_effects(physics, n_samples):
     x = np.random.default_rng(21).random((3, 4, 3))
     y = Simulator(prof).forward(x)
     assert rel_rms(y, reference_forward(prof, x, n_samples, n_samples)) < 1e-3
+
+
+def test_radiometric_factors_are_memoised_read_only():
+    """Kernels of one geometry share one expansion; its factor values at repeated offsets
+    are computed once, returned read-only, and equal a fresh evaluation."""
+    from thintact_sdk.imaging import simulator as sim_mod
+    from thintact_sdk.imaging.sim_radiometry import SeparableExpansion
+
+    exp = sim_mod._cached_expansion(5.8, 4.0, 1.5, 1.2, 1e-7)
+    assert sim_mod._cached_expansion(5.8, 4.0, 1.5, 1.2, 1e-7) is exp
+    t = np.linspace(-1.0, 1.0, 301).reshape(7, 43)
+    first = exp.fx_derivs(t)
+    again = exp.fx_derivs(t.copy())
+    assert all(a is b for a, b in zip(first, again, strict=True))
+    assert not first[0].flags.writeable
+    fresh = SeparableExpansion.build(5.8, 4.0, 1.5, 1.2, rel_tol=1e-7).fx_derivs(t)
+    for a, b in zip(first, fresh, strict=True):
+        np.testing.assert_array_equal(a, b)
+    assert exp.gy_derivs(t)[0] is not first[0]  # the other axis is its own entry

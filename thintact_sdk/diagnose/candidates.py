@@ -89,6 +89,11 @@ class Candidate:
         """``(k,)`` typical amplitude of the first-order signature."""
         return np.asarray(self.fit.step(p), np.float64)
 
+    def score_step(self, p: Profile) -> np.ndarray:
+        """``(k,)`` finite-difference steps of the score test (default: :meth:`step`)."""
+        make = self.fit.score_step or self.fit.step
+        return np.asarray(make(p), np.float64)
+
     def lower(self, p: Profile) -> np.ndarray:
         """``(k,)`` lower physical bounds."""
         return self.spec.fit_bounds(p)[0]

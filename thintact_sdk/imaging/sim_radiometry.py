@@ -13,7 +13,7 @@ derivatives) from a spline in ``ρ²`` and the same expansion is built from it.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.interpolate import CubicSpline
@@ -58,6 +58,10 @@ def _chebyshev_nodes(half_mm: float, n: int) -> np.ndarray:
     return half_mm * np.cos(np.pi * (k + 0.5) / n)
 
 
+MEMO_BYTES = 64 * 1024**2
+"""Largest total size of the factor values one expansion keeps for reuse."""
+
+
 @dataclass
 class SeparableExpansion:
     """``radial_factor(dx, dy) ≈ Σ_l fx(dx)[l] · gy(dy)[l]`` on ``|dx| ≤ half_x``, ``|dy| ≤ half_y``.
@@ -74,6 +78,10 @@ class SeparableExpansion:
     right: np.ndarray  # (n_x, L): multiplies radial_factor(x_nodes, dy)
     rel_error: float
     radial: TabulatedRadial | None = None
+    #: ``_derivs`` results by (axis, offsets): kernels of one device evaluate the factors at
+    #: the same pixel-pair offsets again and again (every trial of a diagnosis)
+    _memo: dict[tuple[bool, tuple[int, ...], bytes], tuple[np.ndarray, np.ndarray, np.ndarray]] \
+        = field(default_factory=dict, repr=False, compare=False)
 
     @classmethod
     def build(
@@ -129,6 +137,25 @@ class SeparableExpansion:
 
     def _derivs(self, t: np.ndarray, nodes: np.ndarray, weights: np.ndarray
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Memoised :meth:`_evaluate` (read-only results, at most :data:`MEMO_BYTES`)."""
+        key = (weights is self.left, t.shape, np.ascontiguousarray(t).tobytes())
+        hit = self._memo.get(key)
+        if hit is not None:
+            return hit
+        out = self._evaluate(t, nodes, weights)
+        for a in out:
+            a.setflags(write=False)
+        size = sum(a.nbytes for a in out)
+        if size <= MEMO_BYTES:
+            held = sum(a.nbytes for v in self._memo.values() for a in v)
+            while self._memo and held + size > MEMO_BYTES:
+                old = self._memo.pop(next(iter(self._memo)))
+                held -= sum(a.nbytes for a in old)
+            self._memo[key] = out
+        return out
+
+    def _evaluate(self, t: np.ndarray, nodes: np.ndarray, weights: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         flat = t.ravel()
         # pixel-pair offsets repeat a lot on regular grids: evaluate each value once
         uniq, inverse = np.unique(np.round(flat, 12), return_inverse=True)

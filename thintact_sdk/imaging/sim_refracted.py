@@ -348,14 +348,18 @@ def refracted_rotated_terms(
             continue
         # large angles: the two-parameter families have high ranks, so the r_x·r_y·L products
         # are compressed one x basis matrix at a time and merged (bounded memory, slower)
+        # merged once the list has doubled since the last merge: with ~270 terms kept per
+        # merge, merging at a fixed 300 recompressed ~320 terms after every block
         acc: list[SeparableTerm] = []
+        merge_at = MERGE_TERMS
         for j in range(ranks_x[v]):
             block = [SeparableTerm(coef * u_x[v, j] * b_y[v, i, ll], b_x[v, j, ll] * u_y[v, i],
                                    part)
                      for ll in range(exp.rank) for i in range(ranks_y[v])]
             acc += compress_terms(block, kp.compress_tol / 8)
-            if len(acc) > MERGE_TERMS:
+            if len(acc) > merge_at:
                 acc = compress_terms(acc, kp.compress_tol / 8)
+                merge_at = max(MERGE_TERMS, 2 * len(acc))
         terms += compress_terms(acc, kp.compress_tol / 4)
     return compress_terms(terms, kp.compress_tol)
 

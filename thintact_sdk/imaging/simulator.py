@@ -30,6 +30,7 @@ effects (if any) applied at :meth:`Simulator.reference_gain` and divided back ou
 
 from __future__ import annotations
 
+import functools
 from collections import OrderedDict
 from dataclasses import replace
 from typing import Any, TypeAlias, TypeVar
@@ -72,17 +73,24 @@ _CACHE_SIZE = 4
 
 
 def clear_kernel_cache() -> None:
-    """Forget every cached kernel (frees memory)."""
+    """Forget every cached kernel and radiometric expansion (frees memory)."""
     _KERNEL_CACHE.clear()
+    _cached_expansion.cache_clear()
 
 
 def _expansion(kp: KernelParams) -> SeparableExpansion:
     h = kp.z_mm + kp.d_mm
     margin = 2 * max(kp.pitch_um, kp.scene_pitch_um) * 1e-3
-    return SeparableExpansion.build(
-        h, kp.q, kp.grid_x().max_offset_mm() + margin, kp.grid_y().max_offset_mm() + margin,
-        rel_tol=kp.rank_tol,
-    )
+    return _cached_expansion(h, kp.q, kp.grid_x().max_offset_mm() + margin,
+                             kp.grid_y().max_offset_mm() + margin, kp.rank_tol)
+
+
+@functools.lru_cache(maxsize=4)
+def _cached_expansion(h_mm: float, q: float, half_x_mm: float, half_y_mm: float,
+                      rel_tol: float) -> SeparableExpansion:
+    """One expansion per geometry, shared by every kernel built for it (with the factor
+    values it memoises: the diagnosis rebuilds kernels of one device hundreds of times)."""
+    return SeparableExpansion.build(h_mm, q, half_x_mm, half_y_mm, rel_tol=rel_tol)
 
 
 def _crossing_range_mm(grid: AxisGrid, alpha: float, beta: float) -> tuple[float, float]:

@@ -168,6 +168,11 @@ class FitSpec:
         Parameter i acts only on channel i: one simulation gives every Jacobian column.
     signed
         Per parameter: may the change from the null have either sign (else one-sided).
+    score_step
+        ``profile -> (k,)`` finite-difference steps of the score's first-order signature
+        where a step of ``step`` would be needlessly expensive to simulate (a kernel whose
+        cost grows with the parameter, e.g. the rotated mask's rank with the angle);
+        default ``step``.
     slow_params
         Parameters that switch the simulator to a slow path: left at null in the score,
         refined last by parabolas when time allows.
@@ -196,6 +201,7 @@ class FitSpec:
     bounds: Callable[[DeviceProfile], tuple[np.ndarray, np.ndarray]] | None = None
     channelwise: bool = False
     signed: tuple[bool, ...] = ()
+    score_step: ProfileVector | None = None
     slow_params: tuple[int, ...] = ()
     costly: bool = False
     joint_refit: bool = True

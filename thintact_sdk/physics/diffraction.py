@@ -120,6 +120,82 @@ def axis_fields_local(
     return out, tail
 
 
+def lattice_fields(
+    first_edge_mm: float, pitch_mm: float, profiles: np.ndarray, sub: int, k_lo: int, k_hi: int,
+    w_mm: float, reach_w: float = 48.0,
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`axis_fields_local` for cells of equal width, at points on a finer lattice.
+
+    The mask edges are ``e_j = first_edge_mm + j·pitch_mm`` and the points are the centres
+    ``first_edge_mm + (k + 1/2)·h`` of the fine cells ``k_lo ≤ k < k_hi``, ``h = pitch_mm/sub``.
+    Every edge-to-point distance is then ``(j·sub - k - 1/2)·h``: the windowed Fresnel
+    function (exact within ``reach_w·w``, its geometric limit ``±(1+i)/2`` beyond) and the
+    dropped fringes' mean power are tabulated once on that lattice, and the sums over edges
+    become correlations of the (upsampled) edge jumps with the tables, done by FFT: about
+    ``2·reach_w·w/h`` Fresnel integrals instead of one per (point, near edge).
+
+    Parameters
+    ----------
+    first_edge_mm, pitch_mm
+        First mask edge and the cell width (mm).
+    profiles
+        ``(V, K)`` cell values (zero outside the mask).
+    sub
+        Fine cells per mask cell.
+    k_lo, k_hi
+        Fine cell indices (relative to the first edge; may be negative or beyond ``K·sub``).
+    w_mm, reach_w
+        Fresnel width and the reach of the exact part (see :func:`axis_fields_local`).
+
+    Returns
+    -------
+    fields
+        ``(V, k_hi - k_lo)`` complex fields without the far fringes.
+    tail_power
+        ``(V, V, k_hi - k_lo)`` mean power of the dropped fringes per pair of profiles.
+    """
+    from scipy.signal import fftconvolve
+
+    n_v, k = profiles.shape
+    ext = np.zeros((n_v, k + 2))
+    ext[:, 1:-1] = profiles
+    jumps = ext[:, :-1] - ext[:, 1:]  # (V, K+1): A_{j-1} - A_j at edge j
+    h = pitch_mm / sub
+    # distances (n - k - 1/2)·h for n = j·sub: n - k runs over lag = n_min .. n_max
+    lag_lo, lag_hi = -(k_hi - 1), k * sub - k_lo
+    x = (np.arange(lag_lo, lag_hi + 1) - 0.5) * h
+    reach = reach_w * w_mm
+    near = np.abs(x) < reach
+    g = np.where(x > 0, 0.5 + 0.5j, -0.5 - 0.5j).astype(complex)
+    s_, c_ = fresnel(math.sqrt(2) * x[near] / w_mm)
+    g[near] = c_ + 1j * s_
+    far_power = np.where(near, 0.0, w_mm**2 / (4 * math.pi**2) / np.where(near, 1.0, x) ** 2)
+    up = np.zeros((n_v, k * sub + 1))
+    up[:, ::sub] = jumps  # jumps at n = j·sub
+    # c[k] = Σ_n up[n]·g[n - k - lag_lo]: a correlation, i.e. a convolution with the
+    # flipped table (:func:`_correlation_window`)
+    n_out = k_hi - k_lo
+    pref = np.exp(-1j * math.pi / 4) / math.sqrt(2)
+    fields = np.empty((n_v, n_out), complex)
+    for v in range(n_v):
+        full = fftconvolve(up[v], g[::-1])
+        fields[v] = pref * _correlation_window(full, g.size, lag_lo, k_lo, n_out)
+    tail = np.empty((n_v, n_v, n_out))
+    for a in range(n_v):
+        for b in range(a, n_v):
+            full = fftconvolve(up[a] * up[b], far_power[::-1])
+            tail[a, b] = tail[b, a] = _correlation_window(full, far_power.size, lag_lo, k_lo, n_out)
+    return fields, tail
+
+
+def _correlation_window(full: np.ndarray, n_table: int, lag_lo: int, k_lo: int,
+                        n_out: int) -> np.ndarray:
+    """Pick ``c[k] = Σ_n up[n]·table[n - k - lag_lo]`` for ``k = k_lo .. k_lo + n_out - 1``
+    out of ``full = up * table[::-1]`` (full convolution): ``c[k] = full[n_table - 1 + lag_lo + k]``."""
+    start = n_table - 1 + lag_lo + k_lo
+    return full[start:start + n_out]
+
+
 def axis_intensity_profiles(
     cell_edges_mm: np.ndarray, phi: np.ndarray, m_lo_mm: float, m_hi_mm: float,
     wavelength_nm: float, z_mm: float, d_mm: float, reach_w: float = 48.0,
@@ -144,19 +220,31 @@ def axis_intensity_profiles(
     -------
     edges
         ``(J+1,)`` fine cell edges (mm), step ≤ w/(4·reach_w) (the finest kept fringe
-        sampled four times per period) and ≤ δ/8.
+        sampled four times per period) and ≤ δ/8. With cells of equal width the fine cells
+        subdivide them (an integer number per cell, aligned with the mask edges) and the
+        fields come from :func:`lattice_fields`; otherwise from :func:`axis_fields_local`.
     values
-        ``(4, J)`` profile values at the fine cell centres (fields from
-        :func:`axis_fields_local`, so fringes finer than the step are not aliased).
+        ``(4, J)`` profile values at the fine cell centres (fields without the fringes
+        finer than the step, which would alias, plus their mean power).
     """
     w = fresnel_width_mm(wavelength_nm, z_mm, d_mm)
-    feature = float(np.min(np.diff(cell_edges_mm)))
+    widths = np.diff(cell_edges_mm)
+    feature = float(np.min(widths))
     step = min(w / (4 * reach_w), feature / 8)
-    n = int(math.ceil((m_hi_mm - m_lo_mm) / step)) + 2
-    edges = m_lo_mm - step + np.arange(n + 1) * step
-    centres = (edges[1:] + edges[:-1]) / 2
     profiles = np.stack([np.ones_like(phi, dtype=float), np.asarray(phi, float)])
-    (va, vp), tail = axis_fields_local(cell_edges_mm, profiles, centres, w, reach_w)
+    if np.allclose(widths, widths[0], rtol=1e-9, atol=0.0):
+        sub = int(math.ceil(feature / step))
+        h = feature / sub
+        e0 = float(cell_edges_mm[0])
+        k_lo = int(math.floor((m_lo_mm - e0) / h)) - 1
+        k_hi = int(math.ceil((m_hi_mm - e0) / h)) + 1
+        edges = e0 + np.arange(k_lo, k_hi + 1) * h
+        (va, vp), tail = lattice_fields(e0, feature, profiles, sub, k_lo, k_hi, w, reach_w)
+    else:
+        n = int(math.ceil((m_hi_mm - m_lo_mm) / step)) + 2
+        edges = m_lo_mm - step + np.arange(n + 1) * step
+        centres = (edges[1:] + edges[:-1]) / 2
+        (va, vp), tail = axis_fields_local(cell_edges_mm, profiles, centres, w, reach_w)
     cross = va * np.conj(vp)
     values = np.stack([np.abs(va) ** 2 + tail[0, 0], np.abs(vp) ** 2 + tail[1, 1],
                        cross.real + tail[0, 1], cross.imag])
