@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -119,3 +121,34 @@ def test_rotated_kernel_refuses_a_family_over_the_limit() -> None:
         sim_rotated.check_rotated_size(kp, 7)
     small = _device(128, 160, {"mask_misalignment": {"angle_deg": 0.3, "dx_um": 0.0, "dy_um": 0.0}})
     sim_rotated.check_rotated_size(kernel_params(small, resolve_physics(small.physics)), 7)
+
+
+def test_cli_bins_and_checks_the_fit_unbinned(tmp_path: Path) -> None:
+    """``thintact diagnose --bin 2`` on a small device with a hidden angular response:
+    the effect is found on the binned data, the report says how it was binned, the hotspots
+    are in sensor pixels and the fit, evaluated unbinned, reaches the noise."""
+    from thintact_sdk.cli.main import main
+    from thintact_sdk.imaging.noise import signal_to_dn
+    from thintact_sdk.recording import RecordingWriter
+
+    prof = _device(32, 48)
+    rng = np.random.default_rng(5)
+    scenes = np.concatenate([np.ones((1, 12, 16, 3)), rng.random((3, 12, 16, 3))]).astype(np.float32)
+    white = Simulator(prof).linear_batch(scenes[:1])[0]
+    gains = [0.6 * 4031 / float(white[..., c].max()) for c in range(3)]
+    hidden = Simulator(prof.with_physics({"pixel_angular_response": {"exponent": 4.0}}))
+    signal = hidden.predict_signal_dn(scenes, gains)
+    w = RecordingWriter(tmp_path / "rec", prof)
+    for i, sc in enumerate(scenes):
+        w.add(np.round(signal_to_dn(signal[i], prof.noise, rng)).astype(np.uint16), scene=sc)
+    rc = main(["diagnose", str(tmp_path / "rec"), "--out", str(tmp_path / "o"), "--quiet",
+               "--bin", "2", "--max-effects", "1"])
+    assert rc == 0
+    rep = json.loads((tmp_path / "o" / "report.json").read_text())
+    assert rep["binned"]["factor"] == 2 and rep["binned"]["rows"] == 16
+    assert [f["effect"] for f in rep["findings"]][:1] == ["pixel_angular_response"]
+    assert abs(rep["findings"][0]["params"]["exponent"] - 4.0) < 0.5
+    assert rep["full_size"]["baseline"]["chi2_per_dof"] > 2.0
+    assert rep["full_size"]["final"]["chi2_per_dof"] < 1.2
+    fitted = json.loads((tmp_path / "o" / "fitted_profile.json").read_text())
+    assert fitted["sensor"]["rows"] == 32  # the device itself, not the binned one

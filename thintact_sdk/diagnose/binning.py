@@ -150,3 +150,28 @@ def oversized_candidates(profile: Profile, limit_bytes: float = DIAGNOSIS_FAMILY
                          f"{profile.scene.rows}×{profile.scene.cols} device (limit "
                          f"{limit_bytes / 1024**2:.0f} MiB)")
     return out
+
+
+def full_size_check(data: DiagnosisData, base_values: dict[str, np.ndarray],
+                    final_values: dict[str, np.ndarray], sys_frac: float = 1e-3
+                    ) -> dict[str, dict[str, float]]:
+    """The baseline and the fitted model evaluated on the unbinned recording.
+
+    The effects are named and fitted on binned data; this evaluates the outcome at full
+    resolution (gains and closed-form terms refitted there, the effects' parameters as
+    fitted): ``{"baseline": {"rms_dn", "chi2_per_dof"}, "final": {...}}`` (CONTRACTS §6
+    χ² over every unbinned, unsaturated pixel). A missed sub-block structure shows up here
+    as a final χ²/dof above the binned one.
+    """
+    from thintact_sdk.diagnose.model import DiagnosisModel, default_simulate
+    from thintact_sdk.diagnose.run import _evaluate_full, _view
+
+    model = DiagnosisModel(data, default_simulate, default_variance_fn(), sys_frac=sys_frac,
+                           cache_size=1)
+    out: dict[str, dict[str, float]] = {}
+    for name, values in (("baseline", base_values), ("final", final_values)):
+        ev = _evaluate_full(model, values)
+        st = _view(model, data, ev.pred_dn, values).stats
+        out[name] = {"rms_dn": round(st.rms_dn, 4), "chi2_per_dof": round(st.chi2_per_dof, 4)}
+        model.cache.clear()
+    return out

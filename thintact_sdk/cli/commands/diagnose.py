@@ -57,6 +57,7 @@ def run(args: argparse.Namespace) -> int:
         auto_bin_factor,
         bin_data,
         binned_variance_fn,
+        full_size_check,
         oversized_candidates,
         unbin_hotspots,
     )
@@ -71,7 +72,7 @@ def run(args: argparse.Namespace) -> int:
         f"{data.n_frames} frames with scenes ({data.skipped} without), "
         f"{data.profile.sensor.rows}×{data.profile.sensor.cols} sensor"
     )
-    full_profile = data.profile
+    full_data, full_profile = data, data.profile
     b = args.bin or auto_bin_factor(full_profile.sensor.rows, full_profile.sensor.cols)
     if b > 1:
         data = bin_data(data, b)
@@ -93,6 +94,10 @@ def run(args: argparse.Namespace) -> int:
         rep["binned"] = {"factor": b, "rows": data.profile.sensor.rows, "cols": data.profile.sensor.cols,
                          "not_screened": skipped}
         d.fitted_profile = full_profile.with_physics(dict(d.fitted_profile.physics))
+        accepted = {r.name for r in d.selection.rounds}
+        base_values = {k: v for k, v in d.selection.values.items() if k not in accepted}
+        con.print("evaluating the fit on the unbinned recording")
+        rep["full_size"] = full_size_check(full_data, base_values, d.selection.values, args.sys_frac)
     _check_finite(rep)
     paths = write_outputs(d, out, png=args.png)
     print(f"baseline: rms {rep['baseline']['rms_dn']:.2f} DN, chi2/dof {rep['baseline']['chi2_per_dof']:.3f} "
@@ -101,6 +106,10 @@ def run(args: argparse.Namespace) -> int:
         alt = f" (or: {', '.join(f['alternatives'])})" if f["alternatives"] else ""
         print(f"  + {f['effect']}{alt}: {f['params']} -> chi2/dof {f['chi2_per_dof_after']:.3f}")
     print(f"final: rms {rep['final']['rms_dn']:.2f} DN, chi2/dof {rep['final']['chi2_per_dof']:.3f}")
+    if "full_size" in rep:
+        fb, ff = rep["full_size"]["baseline"], rep["full_size"]["final"]
+        print(f"unbinned: baseline chi2/dof {fb['chi2_per_dof']:.3f}, final rms {ff['rms_dn']:.2f} DN, "
+              f"chi2/dof {ff['chi2_per_dof']:.3f}")
     if rep["unexplained"]["significant"]:
         print(f"unexplained: {rep['unexplained']['summary']}")
     print(f"wrote {paths['report']}, {paths['fitted_profile']}, {paths['html']} "
