@@ -5,7 +5,8 @@ For every single-effect case of ``tools/make_concealed_dataset.py`` (the CONTRAC
 vocabulary at the concealed data set's amplitudes) a child process builds the simulator of
 the shipped ``thintact-paper`` device (1024×1280 sensor, 400×512 scene) with that effect and
 simulates 12 random frames; it reports the kernel build time, the 12-frame simulation time
-and its own peak resident memory (``getrusage(RUSAGE_SELF).ru_maxrss``), or the
+(OpenBLAS on one thread, as
+the diagnosis runs it) and its own peak resident memory (``getrusage(RUSAGE_SELF).ru_maxrss``), or the
 ``ThinTactError`` with which the simulator refuses a kernel that does not fit.
 
 Usage::
@@ -17,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -72,7 +74,8 @@ def main(argv: list[str] | None = None) -> int:
     for name in names:
         try:
             proc = subprocess.run([sys.executable, "-c", CHILD, json.dumps(cases[name]), str(args.frames)],
-                                  capture_output=True, text=True, timeout=args.timeout, check=False)
+                                  capture_output=True, text=True, timeout=args.timeout, check=False,
+                                  env=os.environ | {"OPENBLAS_NUM_THREADS": "1"})
             row = json.loads(proc.stdout.strip().splitlines()[-1]) if proc.returncode == 0 else \
                 {"failed": f"exit {proc.returncode}: {proc.stderr.strip().splitlines()[-1:]}"}
         except subprocess.TimeoutExpired:
