@@ -21,6 +21,7 @@ def _tool(repo_root: Path, name: str) -> Any:
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(1800)  # render (~2.5-3 min) + the diagnosis's own 10-minute bound
 def test_paper_size_concealed_case_is_diagnosed_within_limits(repo_root: Path, tmp_path: Path) -> None:
     tool = _tool(repo_root, "diagnose_paper_size")
     rc = tool.main(["--out", str(tmp_path), "--case", "pixel_angular_response"])
@@ -32,6 +33,7 @@ def test_paper_size_concealed_case_is_diagnosed_within_limits(repo_root: Path, t
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(3600)  # 17 effects, up to ~3 min each under load
 def test_every_effect_simulates_at_paper_size_or_refuses_cleanly(repo_root: Path, tmp_path: Path) -> None:
     """Each single effect simulates 12 paper-size frames within 8 GiB, except the rotated
     mask and refraction, whose tabulated families do not fit: those refuse with a
