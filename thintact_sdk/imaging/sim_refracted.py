@@ -106,6 +106,20 @@ def _check_family_size(grid: AxisGrid, n_members: int, n_values: int, rank: int)
         )
 
 
+def refracted_family_bytes(kp: KernelParams, n_values: int = 2) -> float:
+    """Bytes of the larger one-axis ``D²`` family an unrotated refracted kernel would
+    tabulate (checked by :func:`_check_family_size` before it is built)."""
+    tables, exp = _tables_and_expansion(kp)
+    k0 = float(tables.kappa.value(np.array(0.0)))
+    out = 0.0
+    for grid, other in ((kp.grid_x(), kp.grid_y()), (kp.grid_y(), kp.grid_x())):
+        o2 = pair_offsets_mm(other) ** 2
+        width = min((1 - k0) * grid.sensor_pitch_mm, k0 * grid.scene_pitch_mm)
+        nodes = _r2_nodes(float(o2.min()), float(o2.max()), tables, grid.max_offset_mm(), width)
+        out = max(out, 8.0 * nodes.size * n_values * exp.rank * grid.n_sensor * grid.n_scene)
+    return out
+
+
 def refracted_axis_family(
     grid: AxisGrid, edges_mm: np.ndarray, values: np.ndarray, factor_derivs: FactorDerivs,
     kappa: TabulatedRadial, other_r2_mm2: np.ndarray, n_sub: int,

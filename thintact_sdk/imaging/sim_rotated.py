@@ -32,6 +32,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from thintact_sdk.errors import ThinTactError
 from thintact_sdk.imaging.sim_axis import AxisGrid, mask_cell_edges_mm
 from thintact_sdk.imaging.sim_params import KernelParams
 from thintact_sdk.imaging.sim_radiometry import SeparableExpansion
@@ -51,6 +52,53 @@ SHIFT_STEPS_PER_WIDTH = 10.0
 
 SHIFT_RANK_TOL = 3e-4
 """Relative Frobenius error allowed when truncating the displacement family of one profile."""
+
+
+FAMILY_MAX_BYTES = 2 * 1024**3
+"""Largest tabulated displacement family (one axis) the rotated kernels build; the paper's
+1024×1280 → 400×512 device at 0.3° would need about 10 GiB per axis (and, measured, ran out
+of this host's 24 GiB after 12 minutes)."""
+
+
+def family_bytes(grid: AxisGrid, alpha: float, beta: float, t_lo: float, t_hi: float,
+                 n_values: int, rank: int) -> float:
+    """Bytes of the displacement family :func:`_shift_family` would tabulate for one axis."""
+    width = min(alpha * grid.sensor_pitch_mm, beta * grid.scene_pitch_mm)
+    step = min(SHIFT_STEP_UM * 1e-3, width / SHIFT_STEPS_PER_WIDTH)
+    n = max(2, int(math.ceil((t_hi - t_lo) / step)) + 3)
+    return 8.0 * n * n_values * rank * grid.n_sensor * grid.n_scene
+
+
+def rotated_family_bytes(kp: KernelParams, rank: int, n_values: int = 2) -> float:
+    """Bytes of the larger of the two displacement families of a rotated kernel (``rank``
+    the radiometric expansion's, ``n_values`` the profiles per axis: 2 geometric, 4 with
+    diffraction)."""
+    h = kp.z_mm + kp.d_mm
+    alpha, beta = kp.z_mm / h, kp.d_mm / h
+    s = abs(math.sin(math.radians(kp.angle_deg)))
+    c = math.cos(math.radians(kp.angle_deg))
+    gx, gy = kp.grid_x(), kp.grid_y()
+    out = 0.0
+    for grid, other in ((gx, gy), (gy, gx)):
+        cen = pair_centres_mm(other, alpha, beta)
+        span = s * float(cen.max() - cen.min()) / c
+        out = max(out, family_bytes(grid, alpha, beta, 0.0, span, n_values, rank))
+    return out
+
+
+def check_rotated_size(kp: KernelParams, rank: int, n_values: int = 2,
+                       limit_bytes: float = FAMILY_MAX_BYTES) -> None:
+    """Refuse (``ThinTactError``) a rotated kernel whose displacement family would exceed
+    ``limit_bytes``, before any of it is allocated."""
+    size = rotated_family_bytes(kp, rank, n_values)
+    if size > limit_bytes:
+        raise ThinTactError(
+            f"physics: a mask rotated by {kp.angle_deg:g}° on this device "
+            f"({kp.rows}×{kp.cols} sensor, {kp.scene_rows}×{kp.scene_cols} scene) needs a "
+            f"displacement family of {size / 1024**3:.1f} GiB per axis (limit "
+            f"{limit_bytes / 1024**3:.1f} GiB): the rotated kernel is made for devices up to "
+            "about 128×160 sensor pixels and 50×64 scene pixels"
+        )
 
 
 def pair_centres_mm(grid: AxisGrid, alpha: float, beta: float) -> np.ndarray:
@@ -178,6 +226,7 @@ def rotated_terms(
     t_y = s * (cx - dx)  # (S, M)
     ex, vx = profiles_x
     ey, vy = profiles_y
+    check_rotated_size(kp, exp.rank, max(vx.shape[0], vy.shape[0]))
     nodes_x, w_x, b_x, ranks_x = _shift_family(gx, alpha, beta, ex / c, vx, exp.fx_derivs, kp.n_sub,
                                       dx - t_x.max() / c, dx - t_x.min() / c)
     nodes_y, w_y, b_y, ranks_y = _shift_family(gy, alpha, beta, ey / c, vy, exp.gy_derivs, kp.n_sub,

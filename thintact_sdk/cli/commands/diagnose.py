@@ -26,6 +26,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="systematic-error allowance, relative (default 0.001)")
     p.add_argument("--max-effects", type=non_negative_int, default=4, metavar="K",
                    help="accept at most K effects (default 4)")
+    p.add_argument("--bin", type=non_negative_int, default=0, metavar="B",
+                   help="diagnose the sensor binned B×B (exact for the imaging model; 0: automatic, "
+                        "binning sensors above 128×160 pixels, 1: never)")
+    p.add_argument("--no-unbinned-check", dest="unbinned_check", action="store_false",
+                   help="after a binned diagnosis, skip evaluating the fit on the unbinned recording")
     p.add_argument("--png", action="store_true", help="also write the figures as DIR/figures/*.png")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     add_force_argument(p, "into an existing non-empty --out")
@@ -50,7 +55,16 @@ def run(args: argparse.Namespace) -> int:
     from rich.console import Console
 
     from thintact_sdk.diagnose import DiagnoseOptions, diagnose, load_diagnosis_data
+    from thintact_sdk.diagnose.binning import (
+        auto_bin_factor,
+        bin_data,
+        binned_variance_fn,
+        full_size_check,
+        oversized_candidates,
+        unbin_hotspots,
+    )
     from thintact_sdk.diagnose.outputs import write_outputs
+    from thintact_sdk.diagnose.run import known_candidates
 
     out = claim_output(args.out, "directory", force=args.force)
     con = Console(stderr=True, quiet=args.quiet)
@@ -60,10 +74,31 @@ def run(args: argparse.Namespace) -> int:
         f"{data.n_frames} frames with scenes ({data.skipped} without), "
         f"{data.profile.sensor.rows}×{data.profile.sensor.cols} sensor"
     )
+    full_data, full_profile = data, data.profile
+    b = args.bin or auto_bin_factor(full_profile.sensor.rows, full_profile.sensor.cols)
+    if b > 1:
+        data = bin_data(data, b)
+        con.print(f"diagnosing the sensor binned {b}×{b}: {data.profile.sensor.rows}×"
+                  f"{data.profile.sensor.cols} pixels of {data.profile.sensor.pixel_pitch_um:g} um")
     opts = DiagnoseOptions(sys_frac=args.sys_frac, time_budget_s=args.time_budget, max_effects=args.max_effects)
+    skipped: dict[str, str] = {}
+    if b > 1:
+        skipped = oversized_candidates(data.profile)
+        opts.candidates = [c for c in known_candidates(data.profile) if c not in skipped]
+        for name, why in skipped.items():
+            con.print(f"not screened: {name} ({why})")
     with con.status("diagnosing...") as status:
-        d = diagnose(data, options=opts, progress=lambda m: status.update(m))
+        d = diagnose(data, variance_fn=binned_variance_fn(b) if b > 1 else None, options=opts,
+                     progress=lambda m: status.update(m))
     rep = d.report
+    if b > 1:
+        unbin_hotspots(rep, b)
+        rep["binned"] = {"factor": b, "rows": data.profile.sensor.rows, "cols": data.profile.sensor.cols,
+                         "not_screened": skipped}
+        d.fitted_profile = full_profile.with_physics(dict(d.fitted_profile.physics))
+        if args.unbinned_check:
+            con.print("evaluating the fit on the unbinned recording")
+            rep["full_size"] = {"final": full_size_check(full_data, d.selection.values, args.sys_frac)}
     _check_finite(rep)
     paths = write_outputs(d, out, png=args.png)
     print(f"baseline: rms {rep['baseline']['rms_dn']:.2f} DN, chi2/dof {rep['baseline']['chi2_per_dof']:.3f} "
@@ -72,6 +107,9 @@ def run(args: argparse.Namespace) -> int:
         alt = f" (or: {', '.join(f['alternatives'])})" if f["alternatives"] else ""
         print(f"  + {f['effect']}{alt}: {f['params']} -> chi2/dof {f['chi2_per_dof_after']:.3f}")
     print(f"final: rms {rep['final']['rms_dn']:.2f} DN, chi2/dof {rep['final']['chi2_per_dof']:.3f}")
+    if "full_size" in rep:
+        ff = rep["full_size"]["final"]
+        print(f"unbinned: final rms {ff['rms_dn']:.2f} DN, chi2/dof {ff['chi2_per_dof']:.3f}")
     if rep["unexplained"]["significant"]:
         print(f"unexplained: {rep['unexplained']['summary']}")
     print(f"wrote {paths['report']}, {paths['fitted_profile']}, {paths['html']} "

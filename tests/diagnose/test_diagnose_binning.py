@@ -1,0 +1,154 @@
+"""Sensor-binned diagnosis of large devices (issue 17, "Full-size recordings")."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from thintact_sdk.diagnose.binning import (
+    auto_bin_factor,
+    bin_frames,
+    binned_profile,
+    binned_variance_fn,
+    oversized_candidates,
+    unbin_hotspots,
+)
+from thintact_sdk.errors import ThinTactError
+from thintact_sdk.imaging import sim_rotated
+from thintact_sdk.imaging.noise import noise_variance_dn
+from thintact_sdk.imaging.sim_params import kernel_params
+from thintact_sdk.imaging.simulator import Simulator
+from thintact_sdk.physics import resolve_physics
+from thintact_sdk.profile import Profile, load_profile, profile_from_dict
+
+
+def _device(rows: int = 24, cols: int = 32, physics: dict | None = None) -> Profile:
+    rng = np.random.default_rng(3)
+    return profile_from_dict({
+        "format": "thintact-profile/1", "name": "bin-test",
+        "sensor": {"rows": rows, "cols": cols, "pixel_pitch_um": 10.0},
+        "scene": {"rows": 12, "cols": 16, "pixel_pitch_um": 31.5},
+        "mask": {"feature_um": 20.0, "phi": [int(v) for v in rng.choice([-1, 1], 31)]},
+        "geometry": {"scene_to_mask_mm": 1.2, "mask_to_sensor_mm": 0.3},
+        "noise": {"black_level_dn": 64, "read_noise_dn": 2, "electrons_per_dn": 4,
+                  "saturation_dn": 4095},
+        "physics": physics or {},
+    })
+
+
+def _block_mean(y: np.ndarray, b: int) -> np.ndarray:
+    f, r, s, c = y.shape
+    return y.reshape(f, r // b, b, s // b, b, c).mean(axis=(2, 4))
+
+
+@pytest.mark.parametrize("physics", [
+    {},
+    {"pixel_angular_response": {"exponent": 3.0}},
+    {"mask_misalignment": {"angle_deg": 0.0, "dx_um": 6.0, "dy_um": -4.0}},
+    {"mask_leakage": {"transmittance": 0.03}},
+], ids=["baseline", "angular", "shift", "leakage"])
+def test_binned_device_is_the_block_mean(physics: dict) -> None:
+    """A b×b block mean of the fine device's signal is the binned device's signal: the
+    kernel integrates over pixel squares, so binning is exact (up to the radiometric
+    expansion's own error)."""
+    prof = _device(physics=physics)
+    x = np.random.default_rng(0).random((2, 12, 16, 3))
+    fine = Simulator(prof).forward_batch(x)
+    for b in (2, 4):
+        coarse = Simulator(binned_profile(prof, b)).forward_batch(x)
+        want = _block_mean(fine, b)
+        rel = np.sqrt(np.mean((coarse - want) ** 2) / np.mean(want**2))
+        assert rel < 1e-4, (b, rel)
+
+
+def test_binned_profile_refuses_a_factor_that_does_not_divide() -> None:
+    with pytest.raises(ThinTactError, match="divide"):
+        binned_profile(_device(24, 32), 5)
+
+
+def test_auto_bin_factor() -> None:
+    assert auto_bin_factor(128, 160) == 1
+    assert auto_bin_factor(1024, 1280) == 8
+    assert auto_bin_factor(256, 320) == 2
+    with pytest.raises(ThinTactError, match="bin"):
+        auto_bin_factor(1021, 1279)  # coprime: no common factor
+
+
+def test_bin_frames_means_and_marks_saturated_blocks() -> None:
+    m = np.arange(2 * 4 * 6 * 1, dtype=float).reshape(2, 4, 6, 1) + 100
+    m[1, 0, 0, 0] = 4095.0
+    out = bin_frames(m, 2, 4095.0)
+    assert out.shape == (2, 2, 3, 1)
+    assert out[0, 0, 0, 0] == pytest.approx(np.mean(m[0, :2, :2, 0]))
+    assert out[1, 0, 0, 0] == 4095.0  # one saturated pixel: the whole block is out of χ²
+    assert out[1, 0, 1, 0] == pytest.approx(np.mean(m[1, :2, 2:4, 0]))
+
+
+def test_binned_variance_is_the_pixel_variance_over_b2() -> None:
+    nz = _device().noise
+    pred = np.linspace(64, 3000, 7)
+    assert np.allclose(binned_variance_fn(4)(pred, nz), noise_variance_dn(pred, nz) / 16)
+
+
+def test_unbin_hotspots_scales_rectangles() -> None:
+    rep: dict[str, Any] = {"located": {"hotspots": [{"row0": 1, "row1": 3, "col0": 2, "col1": 5, "share": 0.5}]},
+           "unexplained": {"hotspots": []}}
+    unbin_hotspots(rep, 8)
+    assert rep["located"]["hotspots"][0] == {"row0": 8, "row1": 24, "col0": 16, "col1": 40,
+                                             "share": 0.5}
+
+
+def test_family_candidates_oversized_at_paper_size_only() -> None:
+    paper = binned_profile(load_profile("thintact-paper"), 8)
+    big = oversized_candidates(paper)
+    assert set(big) == {"mask_misalignment", "refraction"}
+    assert "MiB" in big["refraction"]
+    assert oversized_candidates(_device(128, 160)) == {}
+
+
+def test_rotated_kernel_refuses_a_family_over_the_limit() -> None:
+    """At the paper's size a 0.3° kernel's displacement family is ~8 GiB per axis (it used
+    to run out of memory after minutes): refused before anything is allocated."""
+    prof = load_profile("thintact-paper").with_physics(
+        {"mask_misalignment": {"angle_deg": 0.3, "dx_um": 0.0, "dy_um": 0.0}})
+    kp = kernel_params(prof, resolve_physics(prof.physics))
+    assert sim_rotated.rotated_family_bytes(kp, 7) > sim_rotated.FAMILY_MAX_BYTES
+    with pytest.raises(ThinTactError, match="rotated by 0.3"):
+        sim_rotated.check_rotated_size(kp, 7)
+    small = _device(128, 160, {"mask_misalignment": {"angle_deg": 0.3, "dx_um": 0.0, "dy_um": 0.0}})
+    sim_rotated.check_rotated_size(kernel_params(small, resolve_physics(small.physics)), 7)
+
+
+def test_cli_bins_and_checks_the_fit_unbinned(tmp_path: Path) -> None:
+    """``thintact diagnose --bin 2`` on a small device with a hidden angular response:
+    the effect is found on the binned data, the report says how it was binned, the hotspots
+    are in sensor pixels and the fit, evaluated unbinned, reaches the noise."""
+    from thintact_sdk.cli.main import main
+    from thintact_sdk.imaging.noise import signal_to_dn
+    from thintact_sdk.recording import RecordingWriter
+
+    prof = _device(32, 48)
+    rng = np.random.default_rng(5)
+    scenes = np.concatenate([np.ones((1, 12, 16, 3)), rng.random((3, 12, 16, 3))]).astype(np.float32)
+    white = Simulator(prof).linear_batch(scenes[:1])[0]
+    gains = [0.6 * 4031 / float(white[..., c].max()) for c in range(3)]
+    hidden = Simulator(prof.with_physics({"pixel_angular_response": {"exponent": 4.0}}))
+    signal = hidden.predict_signal_dn(scenes, gains)
+    w = RecordingWriter(tmp_path / "rec", prof)
+    for i, sc in enumerate(scenes):
+        w.add(np.round(signal_to_dn(signal[i], prof.noise, rng)).astype(np.uint16), scene=sc)
+    rc = main(["diagnose", str(tmp_path / "rec"), "--out", str(tmp_path / "o"), "--quiet",
+               "--bin", "2", "--max-effects", "1"])
+    assert rc == 0
+    rep = json.loads((tmp_path / "o" / "report.json").read_text())
+    assert rep["binned"]["factor"] == 2 and rep["binned"]["rows"] == 16
+    assert [f["effect"] for f in rep["findings"]][:1] == ["pixel_angular_response"]
+    assert abs(rep["findings"][0]["params"]["exponent"] - 4.0) < 0.5
+    assert rep["baseline"]["chi2_per_dof"] > 2.0
+    assert rep["full_size"]["final"]["chi2_per_dof"] < 1.2
+    fitted = json.loads((tmp_path / "o" / "fitted_profile.json").read_text())
+    assert fitted["sensor"]["rows"] == 32  # the device itself, not the binned one

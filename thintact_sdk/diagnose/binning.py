@@ -1,0 +1,181 @@
+"""Diagnosing a large recording on sensor-binned data (the paper's 1024×1280 device).
+
+Binning the sensor ``b × b`` is exact for the imaging model: a sensor pixel integrates the
+irradiance over its square (CONTRACTS §4), so the mean of a ``b × b`` block of pixels is the
+pixel of a device whose sensor has ``b``-times the pitch and ``1/b`` the rows and columns,
+with the same scene, mask and geometry. Every kernel-stage effect (mask shift, leakage,
+angular response, geometry, diffraction, ...) and every linear signal- or DN-stage effect
+(colour crosstalk, veiling glare, stray light, gain) commutes with it. A nonlinear DN effect
+(sensor gamma, a clip level) and a sensor blur narrower than a block are binned after they
+act, so on binned data they are fitted as the nearest binned model (their fit is an
+approximation of order the signal's variation inside a block).
+
+The noise of the mean of ``b²`` independent pixels is the single pixel's variance over
+``b²``; :func:`binned_variance_fn` gives the diagnosis that variance, so χ² keeps its
+meaning (CONTRACTS §6) on the binned data. A block with a saturated pixel is marked saturated
+(its mean is not the model's mean of unclipped values).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from thintact_sdk.diagnose.data import DiagnosisData
+from thintact_sdk.diagnose.stats import VarianceFn, default_variance_fn
+from thintact_sdk.errors import ThinTactError
+from thintact_sdk.profile import NoiseSpec, Profile, profile_from_dict
+
+MAX_DIAGNOSIS_PIXELS = 160 * 128
+"""Sensor pixels (per frame and channel) above which ``thintact diagnose`` bins the sensor:
+the size its effect screening and fits are measured at (``docs/diagnosis.md``)."""
+
+
+def auto_bin_factor(rows: int, cols: int, max_pixels: int = MAX_DIAGNOSIS_PIXELS) -> int:
+    """The smallest factor ``b`` dividing both ``rows`` and ``cols`` with
+    ``(rows/b)·(cols/b) ≤ max_pixels`` (1 when the sensor is small enough already).
+
+    Raises
+    ------
+    ThinTactError
+        When no common divisor brings the sensor under ``max_pixels``.
+    """
+    if rows * cols <= max_pixels:
+        return 1
+    g = math.gcd(rows, cols)
+    for b in range(2, g + 1):
+        if g % b == 0 and (rows // b) * (cols // b) <= max_pixels:
+            return b
+    raise ThinTactError(
+        f"sensor {rows}×{cols}: no common bin factor of rows and cols brings it under "
+        f"{max_pixels} pixels for the diagnosis; pass --bin explicitly"
+    )
+
+
+def binned_profile(profile: Profile, b: int) -> Profile:
+    """The device whose sensor pixels are ``b × b`` blocks of ``profile``'s (pitch × b)."""
+    if b < 1 or profile.sensor.rows % b or profile.sensor.cols % b:
+        raise ThinTactError(
+            f"bin factor {b} must divide the sensor's rows ({profile.sensor.rows}) and "
+            f"cols ({profile.sensor.cols})"
+        )
+    d = profile.contract_dict()
+    d["name"] = f"{profile.name}-bin{b}"
+    d["sensor"]["rows"] = profile.sensor.rows // b
+    d["sensor"]["cols"] = profile.sensor.cols // b
+    d["sensor"]["pixel_pitch_um"] = profile.sensor.pixel_pitch_um * b
+    return profile_from_dict(d)
+
+
+def bin_frames(measured_dn: np.ndarray, b: int, saturation_dn: float) -> np.ndarray:
+    """``F × R × S × C`` DN → ``F × R/b × S/b × C`` block means; a block holding a pixel at
+    or above ``saturation_dn - 0.5`` reads ``saturation_dn`` (so it is left out of χ²)."""
+    f, r, s, c = measured_dn.shape
+    blocks = measured_dn.reshape(f, r // b, b, s // b, b, c)
+    out = blocks.mean(axis=(2, 4))
+    sat = (blocks >= saturation_dn - 0.5).any(axis=(2, 4))
+    out[sat] = saturation_dn
+    return out
+
+
+def bin_data(data: DiagnosisData, b: int) -> DiagnosisData:
+    """The recording's frames with the sensor binned ``b × b`` (scenes unchanged)."""
+    if b == 1:
+        return data
+    prof = binned_profile(data.profile, b)
+    meas = bin_frames(data.measured_dn, b, float(data.profile.noise.saturation_dn))
+    return DiagnosisData(prof, list(data.labels), data.scenes, meas, data.skipped)
+
+
+def binned_variance_fn(b: int, base: VarianceFn | None = None) -> VarianceFn:
+    """The noise variance of a ``b × b`` block mean: the pixel's variance over ``b²``."""
+    inner = base or default_variance_fn()
+    scale = 1.0 / float(b * b)
+
+    def variance(pred_dn: np.ndarray, noise: NoiseSpec) -> np.ndarray:
+        return inner(pred_dn, noise) * scale
+
+    return variance
+
+
+def unbin_hotspots(report: dict[str, Any], b: int) -> None:
+    """Scale the hotspot rectangles of a CONTRACTS §6 report from binned to sensor pixels
+    (in place)."""
+    if b == 1:
+        return
+    for part in ("located", "unexplained"):
+        for h in report.get(part, {}).get("hotspots", []):
+            for k in ("row0", "row1", "col0", "col1"):
+                h[k] = int(h[k]) * b
+
+
+DIAGNOSIS_FAMILY_BYTES = 256 * 1024**2
+"""Largest one-axis kernel family a candidate may need for the diagnosis to screen it: the
+fit builds tens of kernels, each family costing seconds per 100 MiB on this project's 2-core
+reference host."""
+
+PROBES: dict[str, dict[str, dict[str, float]]] = {
+    "mask_misalignment": {"mask_misalignment": {"angle_deg": 0.3, "dx_um": 0.0, "dy_um": 0.0}},
+    "refraction": {"refraction": {"n_scene_side": 1.41}},
+}
+"""The physics at which a family-building candidate's kernel size is estimated (the first
+step of its fit is of this order)."""
+
+
+def oversized_candidates(profile: Profile, limit_bytes: float = DIAGNOSIS_FAMILY_BYTES
+                         ) -> dict[str, str]:
+    """Candidates whose kernels need tabulated families above ``limit_bytes`` on this
+    device (``{name: reason}``): the rotated mask's displacement family and refraction's
+    ``D²`` family grow with the sensor's and the scene's extent, not with binning alone."""
+    from thintact_sdk.imaging import sim_refracted, sim_rotated
+    from thintact_sdk.imaging.sim_params import kernel_params
+    from thintact_sdk.imaging.simulator import _expansion
+    from thintact_sdk.physics import resolve_physics
+
+    out: dict[str, str] = {}
+    for name, probe in PROBES.items():
+        if name in profile.physics:
+            continue
+        phys = resolve_physics({**dict(profile.physics), **probe})
+        kp = kernel_params(profile, phys)
+        if name == "mask_misalignment":
+            size = sim_rotated.rotated_family_bytes(kp, _expansion(kp).rank)
+        else:
+            size = sim_refracted.refracted_family_bytes(kp)
+        if size > limit_bytes:
+            out[name] = (f"its kernel family at {probe[name]} would be {size / 1024**2:.0f} MiB "
+                         f"on the {profile.sensor.rows}×{profile.sensor.cols} → "
+                         f"{profile.scene.rows}×{profile.scene.cols} device (limit "
+                         f"{limit_bytes / 1024**2:.0f} MiB)")
+    return out
+
+
+def _simulate_float32(profile: Profile, scenes: np.ndarray) -> np.ndarray:
+    """The project simulator in float32 products (relative error ~1e-7, about twice as fast
+    at full size), float64 out."""
+    from thintact_sdk.imaging.simulator import Simulator
+
+    return np.asarray(Simulator(profile, precision="float32").forward_batch(scenes), np.float64)
+
+
+def full_size_check(data: DiagnosisData, final_values: dict[str, np.ndarray],
+                    sys_frac: float = 1e-3) -> dict[str, float]:
+    """The fitted model evaluated on the unbinned recording.
+
+    The effects are named and fitted on binned data; this evaluates the outcome at full
+    resolution once (gains and closed-form terms refitted there, the effects' parameters as
+    fitted): ``{"rms_dn", "chi2_per_dof"}``, CONTRACTS §6 χ² over every unbinned,
+    unsaturated pixel. Structure finer than a block that the binned fit missed shows up
+    here as χ²/dof above 1. (One evaluation: at the paper's size two evaluations, baseline
+    and final, took 500 s of a 647 s run at load 8 and peaked at 5.7 GiB.)
+    """
+    from thintact_sdk.diagnose.model import DiagnosisModel
+    from thintact_sdk.diagnose.run import _evaluate_full, _view
+
+    model = DiagnosisModel(data, _simulate_float32, default_variance_fn(), sys_frac=sys_frac,
+                           cache_size=1)
+    ev = _evaluate_full(model, final_values)
+    st = _view(model, data, ev.pred_dn, final_values).stats
+    return {"rms_dn": round(st.rms_dn, 4), "chi2_per_dof": round(st.chi2_per_dof, 4)}

@@ -1,0 +1,177 @@
+#!/usr/bin/env python
+"""A concealed case at the paper's device size, diagnosed by ``thintact diagnose``.
+
+Renders a recording of the shipped ``thintact-paper`` device (1024×1280 sensor, 400×512
+scene, 12 frames) with a hidden effect (the simulator with the effect, then the sensor noise
+model; ``profile.json`` has empty physics, as in ``tools/make_concealed_dataset.py``), runs
+``thintact diagnose`` on it in a child process, and reports the child's wall time and peak
+resident memory (``getrusage(RUSAGE_CHILDREN).ru_maxrss``) and whether the finding is right:
+the hidden effect must be the first finding, its parameters within the tolerance, and no
+other effect named.
+
+Usage::
+
+    python tools/diagnose_paper_size.py --out /tmp/paper17                  # default case
+    python tools/diagnose_paper_size.py --out /tmp/p --case mask_leakage
+    python tools/diagnose_paper_size.py --list
+
+Exit status 0 when the finding is right and the run kept within ``--max-s`` and
+``--max-gib``, 1 otherwise.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import resource
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+N_FRAMES = 12
+WHITE_FRACTION = 0.6
+CHANNEL_GAIN = (1.0, 0.93, 0.82)
+
+CASES: dict[str, dict[str, Any]] = {
+    "pixel_angular_response": {
+        "physics": {"pixel_angular_response": {"exponent": 3.0}},
+        "check": {"exponent": (3.0, 0.3)},
+    },
+    "mask_leakage": {
+        "physics": {"mask_leakage": {"transmittance": 0.03}},
+        "check": {"transmittance": (0.03, 0.005)},
+    },
+    "geometry": {
+        "physics": {"geometry": {"scene_to_mask_mm": 4.95, "mask_to_sensor_mm": 1.04}},
+        "check": {"scene_to_mask_mm": (4.95, 0.1), "mask_to_sensor_mm": (1.04, 0.03)},
+    },
+}
+"""Hidden effects, and ``{param: (truth, tolerance)}`` for the check."""
+
+
+def frame_scenes(n: int, m: int) -> tuple[list[str], np.ndarray]:
+    """The 12 frames: ``(labels, F × N × M × 3 float32 display values)``."""
+    from thintact_sdk.imaging import scenes as lib
+
+    frames: list[tuple[str, np.ndarray]] = [
+        ("white", lib.white(n, m)),
+        ("grey_25", np.full((n, m, 3), 0.25, np.float32)),
+        ("grey_50", np.full((n, m, 3), 0.5, np.float32)),
+        ("checker_8", lib.checker(n, m, 8)),
+        ("checker_32", lib.checker(n, m, 32)),
+        ("random_0", lib.random_pixels(n, m, 0)),
+        ("random_1", lib.random_pixels(n, m, 1)),
+        ("smooth_color", lib.smooth_color(n, m)),
+        ("usaf", lib.usaf(n, m)),
+        ("gelsight_ref", lib.gelsight(n, m, -1)),
+        ("gelsight_3", lib.gelsight(n, m, 3)),
+        ("red", np.dstack([np.ones((n, m)), np.zeros((n, m)), np.zeros((n, m))])),
+    ]
+    return [f[0] for f in frames], np.stack([f[1].astype(np.float32) for f in frames])
+
+
+def make_recording(case: str, out: Path, seed: int = 0) -> tuple[Path, dict[str, Any], float]:
+    """Render ``case`` into ``out/recording``; returns (recording, truth, seconds)."""
+    from thintact_sdk.imaging.noise import signal_to_dn
+    from thintact_sdk.imaging.simulator import Simulator, clear_kernel_cache
+    from thintact_sdk.profile import load_profile
+    from thintact_sdk.recording import RecordingWriter
+
+    t0 = time.perf_counter()
+    prof = load_profile("thintact-paper").with_physics({})
+    labels, scenes = frame_scenes(prof.scene.rows, prof.scene.cols)
+    fs = prof.noise.saturation_dn - prof.noise.black_level_dn
+    white = Simulator(prof).linear_batch(scenes[:1])[0]
+    gains = [WHITE_FRACTION * fs * g / float(white[..., c].max()) for c, g in enumerate(CHANNEL_GAIN)]
+    clear_kernel_cache()
+    signal = Simulator(prof.with_physics(CASES[case]["physics"])).predict_signal_dn(scenes, gains)
+    clear_kernel_cache()
+    rng = np.random.default_rng(seed + sum(map(ord, case)))
+    rec = out / "recording"
+    if rec.exists():
+        shutil.rmtree(rec)
+    writer = RecordingWriter(rec, prof)
+    for i, (lab, sc) in enumerate(zip(labels, scenes, strict=True)):
+        dn = signal_to_dn(signal[i], prof.noise, rng)
+        writer.add(np.round(dn).astype(np.uint16), scene=sc, label=lab)
+    truth = {"case": case, "physics": CASES[case]["physics"], "gains_dn_per_unit": gains}
+    (out / "truth.json").write_text(json.dumps(truth, indent=1) + "\n")
+    return rec, truth, time.perf_counter() - t0
+
+
+def run_diagnose(rec: Path, out: Path, time_budget_s: float) -> tuple[int, float, float, str]:
+    """``thintact diagnose`` in a child process: (exit status, wall s, peak RSS GiB, stdout)."""
+    diag = out / "diagnosis"
+    cmd = [sys.executable, "-m", "thintact_sdk.cli.main", "diagnose", str(rec), "--out", str(diag),
+           "--force", "--quiet", "--time-budget", str(time_budget_s)]
+    t0 = time.perf_counter()
+    proc = subprocess.run(cmd, capture_output=True, text=True, check=False)
+    wall = time.perf_counter() - t0
+    rss_gib = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 2**20  # kB on Linux
+    return proc.returncode, wall, rss_gib, proc.stdout + proc.stderr
+
+
+def check_finding(report: dict[str, Any], case: str) -> list[str]:
+    """Problems with the report's findings for ``case`` (empty: right)."""
+    name = next(iter(CASES[case]["physics"]))
+    found = [f["effect"] for f in report.get("findings", [])]
+    if not found or found[0] != name:
+        return [f"expected {name} first, found {found}"]
+    bad = [f"also named {x}" for x in found[1:]]
+    params = report["findings"][0]["params"]
+    for k, (truth, tol) in CASES[case]["check"].items():
+        got = float(params[k])
+        if abs(got - truth) > tol:
+            bad.append(f"{k} = {got:g}, truth {truth:g} ± {tol:g}")
+    return bad
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--out", type=Path, help="work directory (recording, diagnosis, result.json)")
+    ap.add_argument("--case", default="pixel_angular_response", choices=sorted(CASES))
+    ap.add_argument("--time-budget", type=float, default=300.0, help="diagnose --time-budget (s)")
+    ap.add_argument("--max-s", type=float, default=600.0, help="allowed diagnosis wall time (s)")
+    ap.add_argument("--max-gib", type=float, default=8.0, help="allowed peak RSS (GiB)")
+    ap.add_argument("--reuse", action="store_true", help="diagnose an existing OUT/recording")
+    ap.add_argument("--list", action="store_true")
+    args = ap.parse_args(argv)
+    if args.list:
+        for k, v in CASES.items():
+            print(f"{k:24s} {json.dumps(v['physics'])}")
+        return 0
+    if args.out is None:
+        ap.error("--out is required")
+    args.out.mkdir(parents=True, exist_ok=True)
+    if args.reuse and (args.out / "recording").is_dir():
+        rec, t_make = args.out / "recording", 0.0
+    else:
+        rec, _, t_make = make_recording(args.case, args.out)
+        print(f"rendered {rec} in {t_make:.1f} s")
+    rc, wall, rss, log = run_diagnose(rec, args.out, args.time_budget)
+    print(log.rstrip())
+    problems = [f"thintact diagnose exited {rc}"] if rc != 0 else []
+    report: dict[str, Any] = {}
+    if rc == 0:
+        report = json.loads((args.out / "diagnosis" / "report.json").read_text())
+        problems += check_finding(report, args.case)
+    if wall > args.max_s:
+        problems.append(f"took {wall:.0f} s > {args.max_s:g} s")
+    if rss > args.max_gib:
+        problems.append(f"peak RSS {rss:.2f} GiB > {args.max_gib:g} GiB")
+    result = {"case": args.case, "render_s": round(t_make, 1), "diagnose_s": round(wall, 1),
+              "peak_rss_gib": round(rss, 2), "findings": report.get("findings", []),
+              "binned": report.get("binned"), "problems": problems}
+    (args.out / "result.json").write_text(json.dumps(result, indent=1) + "\n")
+    print(f"diagnose: {wall:.1f} s, peak RSS {rss:.2f} GiB; "
+          + ("finding right" if not problems else "; ".join(problems)))
+    return 0 if not problems else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
