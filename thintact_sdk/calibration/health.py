@@ -359,17 +359,19 @@ def _noise_samples(recording: Recording, indices: list[int], collection: SlitCol
     total = len(indices) * r * s * sm.channels
     per_frame = None if total <= NOISE_FIT_CAP else -(-NOISE_FIT_CAP // max(len(indices), 1))
     rng = np.random.default_rng(NOISE_FIT_SEED)
-    preds: list[np.ndarray] = []
-    r2s: list[np.ndarray] = []
+    size = total if per_frame is None else per_frame * len(indices)
+    preds, r2s = np.empty(size), np.empty(size)  # filled in place: no second copy to concatenate
+    n = 0
     for i in indices:
         _, res, pred, ok = _residual(recording, i, collection, sm, saturation)
         p, e = pred[ok], res[ok]
         if per_frame is not None and p.size > per_frame:
             pick = rng.choice(p.size, per_frame, replace=False)
             p, e = p[pick], e[pick]
-        preds.append(p)
-        r2s.append(e**2)
-    return np.concatenate(preds), np.concatenate(r2s)
+        preds[n : n + p.size] = p
+        r2s[n : n + p.size] = e**2
+        n += p.size
+    return preds[:n], r2s[:n]
 
 
 def assess(recording: Recording, collection: SlitCollection, sm: SystemMatrices,
