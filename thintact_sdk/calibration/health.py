@@ -189,7 +189,9 @@ def _fit_noise(pred: np.ndarray, r2: np.ndarray, noise: NoiseSpec, frames: int,
     in every residual too, and is taken out of the per-frame read noise reported.
     """
     edges = np.unique(np.quantile(pred, np.linspace(0.0, 1.0, 25)))
-    idx = np.clip(np.searchsorted(edges, pred, side="right") - 1, 0, max(len(edges) - 2, 0))
+    idx = np.searchsorted(edges, pred, side="right")  # in place below: one index array, not three
+    idx -= 1
+    np.clip(idx, 0, max(len(edges) - 2, 0), out=idx)
     xs, ys = [], []
     for bin_index in range(len(edges) - 1):
         sel = idx == bin_index
