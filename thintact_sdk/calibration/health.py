@@ -24,15 +24,18 @@ Every defect names its kind, where it is (sensor rows/columns) and how strong it
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 from scipy import ndimage
 
+from thintact_sdk.blas import blas_threads
 from thintact_sdk.calibration.classify import classify_scene, is_dark, is_slit
 from thintact_sdk.calibration.collect import SlitCollection, signal_of
 from thintact_sdk.calibration.ghost import GhostScan, find_ghosts
+from thintact_sdk.errors import CalibrationError
 from thintact_sdk.imaging.filter_training import scene_for_channels
 from thintact_sdk.imaging.noise import QUANTISATION_VARIANCE_DN2
 from thintact_sdk.imaging.t2s import SystemMatrices
@@ -41,6 +44,13 @@ from thintact_sdk.recording import Recording
 
 _MEDIAN_CHI2_1 = 0.45494
 """Median of a χ² variable with one degree of freedom (r²/σ² of Gaussian noise)."""
+NOISE_FIT_CAP = 20_000_000
+"""Slit-frame entries (pixels × channels) up to which the noise fit uses every one; above it, a
+random subsample of about this many (spread evenly over the slit frames): the bin quantiles and
+medians of millions of entries are those of all of them within their own sampling error, and
+memory stays bounded (a paper-size unit has 912 × 1024 × 1280 × 3 = 3.6e9)."""
+NOISE_FIT_SEED = 0
+"""Seed of that subsample: the same recording always gives the same noise fit."""
 HOTSPOT_SIGMA_PX = 1.5
 """Smoothing of the χ² map before hotspots are looked for (sensor pixels)."""
 HOTSPOT_ROBUST_SIGMAS = 10.0
@@ -179,7 +189,9 @@ def _fit_noise(pred: np.ndarray, r2: np.ndarray, noise: NoiseSpec, frames: int,
     in every residual too, and is taken out of the per-frame read noise reported.
     """
     edges = np.unique(np.quantile(pred, np.linspace(0.0, 1.0, 25)))
-    idx = np.clip(np.searchsorted(edges, pred, side="right") - 1, 0, max(len(edges) - 2, 0))
+    idx = np.searchsorted(edges, pred, side="right")  # in place below: one index array, not three
+    idx -= 1
+    np.clip(idx, 0, max(len(edges) - 2, 0), out=idx)
     xs, ys = [], []
     for bin_index in range(len(edges) - 1):
         sel = idx == bin_index
@@ -276,9 +288,103 @@ def _kept_lines(defects: list[Defect], shape: tuple[int, int]) -> tuple[np.ndarr
     return keep_rows, keep_cols
 
 
+class SlitFrames:
+    """The recording's slit frames, read again from the recording on every iteration.
+
+    Iterating yields ``(signal, horizontal)`` per slit frame: its ``R × S × C`` signal (DN above
+    dark at the reference exposure, float64) and whether it is a horizontal slit. Only one
+    frame is held at a time, so the ghost search's :func:`~thintact_sdk.calibration.ghost.exact_strength`
+    runs in one frame's memory however many slits the recording has.
+    """
+
+    def __init__(self, recording: Recording, indices: list[int], horizontal: list[bool],
+                 dark_dn: np.ndarray, exposure_us: float | None, channels: int) -> None:
+        self.recording = recording
+        self.indices = list(indices)
+        self.horizontal = list(horizontal)
+        self.dark_dn = dark_dn
+        self.exposure_us = exposure_us
+        self.channels = channels
+
+    def __len__(self) -> int:
+        return len(self.indices)
+
+    def __iter__(self) -> Iterator[tuple[np.ndarray, bool]]:
+        for i, horizontal in zip(self.indices, self.horizontal, strict=True):
+            signal, _ = signal_of(self.recording, i, self.dark_dn, self.exposure_us)
+            yield signal[..., : self.channels], horizontal
+
+
+def _slit_indices(recording: Recording) -> tuple[list[int], list[bool], int]:
+    """Slit frames (indices, horizontal?) and the number of dark frames, from the scenes alone."""
+    indices: list[int] = []
+    horizontal: list[bool] = []
+    dark_frames = 0
+    for i in range(len(recording)):
+        scene = recording.scene(i)
+        if scene is None:
+            continue
+        roles = classify_scene(scene)
+        dark_frames += int(is_dark(roles))
+        if is_slit(roles):
+            indices.append(i)
+            horizontal.append(any(r.kind == "hslit" for r in roles))
+    return indices, horizontal, dark_frames
+
+
+def _residual(recording: Recording, i: int, collection: SlitCollection, sm: SystemMatrices,
+              saturation: float) -> tuple[str, np.ndarray, np.ndarray, np.ndarray]:
+    """Slit frame ``i``: its label, residual and prediction (``R × S × C`` DN, float64, the
+    exposure scaling undone) and the unsaturated pixels (boolean, same shape)."""
+    c = sm.channels
+    scene = recording.scene(i)
+    if scene is None:  # the recording changed under us: slit frames are classified by their scene
+        raise CalibrationError(f"{recording.root}: frame {i} has no scene any more")
+    signal, scale = signal_of(recording, i, collection.dark_dn, collection.exposure_us)
+    pred = sm.forward(scene_for_channels(scene, c).astype(np.float64))
+    raw = np.asarray(recording.measurement(i))
+    ok = (raw.reshape(signal.shape) < saturation)
+    label = recording.frames[i].label or str(i)
+    return label, (signal[..., :c] - pred) / scale, pred / scale, ok[..., :c]
+
+
+def _noise_samples(recording: Recording, indices: list[int], collection: SlitCollection,
+                   sm: SystemMatrices, saturation: float) -> tuple[np.ndarray, np.ndarray]:
+    """Pass 1: the prediction and ``r²`` of the unsaturated slit-frame pixels the noise fit uses.
+
+    All of them while the slit frames hold at most ``NOISE_FIT_CAP`` entries (pixels ×
+    channels); above it ``⌈NOISE_FIT_CAP / slits⌉`` drawn at random from each frame's
+    unsaturated entries (without replacement, seed ``NOISE_FIT_SEED``), so memory stays
+    bounded by the cap whatever the number of slits.
+    """
+    r, s = sm.sensor_shape
+    total = len(indices) * r * s * sm.channels
+    per_frame = None if total <= NOISE_FIT_CAP else -(-NOISE_FIT_CAP // max(len(indices), 1))
+    rng = np.random.default_rng(NOISE_FIT_SEED)
+    size = total if per_frame is None else per_frame * len(indices)
+    preds, r2s = np.empty(size), np.empty(size)  # filled in place: no second copy to concatenate
+    n = 0
+    for i in indices:
+        _, res, pred, ok = _residual(recording, i, collection, sm, saturation)
+        p, e = pred[ok], res[ok]
+        if per_frame is not None and p.size > per_frame:
+            pick = rng.choice(p.size, per_frame, replace=False)
+            p, e = p[pick], e[pick]
+        preds[n : n + p.size] = p
+        r2s[n : n + p.size] = e**2
+        n += p.size
+    return preds[:n], r2s[:n]
+
+
 def assess(recording: Recording, collection: SlitCollection, sm: SystemMatrices,
            frames_averaged: int) -> HealthReport:
     """Residuals of every slit frame against the calibrated model; noise; defects.
+
+    The slit frames are streamed from the recording, never held together: pass 1 gathers what
+    the noise fit needs (:func:`_noise_samples`, bounded by ``NOISE_FIT_CAP``), pass 2 reads each
+    frame again, recomputes its prediction and adds it to the χ² map, and the ghost search
+    reads them a third time (:class:`SlitFrames`). Memory: a few frames plus the noise-fit
+    entries, independent of the number of slits.
 
     Parameters
     ----------
@@ -288,44 +394,41 @@ def assess(recording: Recording, collection: SlitCollection, sm: SystemMatrices,
         The calibrated matrices (DN above dark per display unit at the reference exposure).
     frames_averaged
         Frames averaged per pattern (the noise of the measurements is divided by it).
+
+    OpenBLAS is held at one thread throughout: the products are small (one frame's
+    prediction is ``R × N`` by ``N × M`` by ``M × S``) and on a busy two-core host two
+    threads made a 256 × 320 × 3 prediction 3-30× slower (0.05-0.14 s against 4-14 ms).
     """
+    with blas_threads(1):
+        return _assess(recording, collection, sm, frames_averaged)
+
+
+def _assess(recording: Recording, collection: SlitCollection, sm: SystemMatrices,
+            frames_averaged: int) -> HealthReport:
     profile = recording.profile
     nz = profile.noise
     k = max(1, int(frames_averaged))
     c = sm.channels
     shape = sm.sensor_shape
     saturation = nz.saturation_dn - 1.0
-    residuals: list[tuple[str, np.ndarray, np.ndarray, np.ndarray]] = []
-    slit_frames: list[tuple[np.ndarray, bool]] = []
-    dark_frames = 0
-    for i in range(len(recording)):
-        scene = recording.scene(i)
-        if scene is None:
-            continue
-        roles = classify_scene(scene)
-        dark_frames += int(is_dark(roles))
-        if not is_slit(roles):
-            continue
-        signal, scale = signal_of(recording, i, collection.dark_dn, collection.exposure_us)
-        pred = sm.forward(scene_for_channels(scene, c).astype(np.float64))
-        raw = np.asarray(recording.measurement(i))
-        ok = (raw.reshape(signal.shape) < saturation)
-        label = recording.frames[i].label or str(i)
-        residuals.append((label, (signal[..., :c] - pred) / scale, pred / scale, ok[..., :c]))
-        slit_frames.append((signal[..., :c], any(r.kind == "hslit" for r in roles)))
-    pred_all = np.concatenate([p[m] for _, _, p, m in residuals])
-    r2_all = np.concatenate([r[m] ** 2 for _, r, _, m in residuals])
+    indices, horizontal, dark_frames = _slit_indices(recording)
+    if not indices:
+        raise CalibrationError(f"{recording.root}: no slit frame to judge the unit's health by")
+    pred_all, r2_all = _noise_samples(recording, indices, collection, sm, saturation)
     from_frames = "dark frame" in collection.dark_source
     noise = _fit_noise(pred_all, r2_all, nz, k, dark_frames if from_frames else 0)
+    del pred_all, r2_all
     chi2_sum = np.zeros(shape)
     count = np.zeros(shape)
     slit_chi2: dict[str, float] = {}
-    for label, r, p, m in residuals:
+    for i in indices:  # pass 2: the χ² map with the measured noise
+        label, r, p, m = _residual(recording, i, collection, sm, saturation)
         z = np.where(m, r**2 / noise.variance(p), 0.0)
         chi2_sum += z.sum(axis=2)
         count += m.sum(axis=2)
         slit_chi2[label] = float(z.sum() / max(int(m.sum()), 1))
     chi2_map = chi2_sum / np.maximum(count, 1)
+    slit_frames = SlitFrames(recording, indices, horizontal, collection.dark_dn, collection.exposure_us, c)
     names = list(profile.sensor.channels)
     col_dev, col_spread = _line_deviation(sm.Qo)
     row_dev, row_spread = _line_deviation(sm.Po)

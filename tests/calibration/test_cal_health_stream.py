@@ -1,0 +1,128 @@
+"""The health step streams the slit frames (issue 12: holding them took 86 GB at the paper's
+size): same report as holding every frame on a small unit, peak memory that does not grow with
+the number of slits, and a subsampled noise fit above ``NOISE_FIT_CAP`` that agrees with the
+exact one."""
+
+from __future__ import annotations
+
+import tracemalloc
+from pathlib import Path
+
+import numpy as np
+import pytest
+from independent_device import Ghost, small_profile, write_recording
+
+from thintact_sdk.calibration import health
+from thintact_sdk.calibration.classify import classify_scene, is_dark, is_slit
+from thintact_sdk.calibration.collect import SlitCollection, collect_slits, signal_of
+from thintact_sdk.calibration.health import assess
+from thintact_sdk.calibration.pipeline import CalibrationOptions, solve_matrices
+from thintact_sdk.imaging.filter_training import scene_for_channels
+from thintact_sdk.imaging.t2s import SystemMatrices
+from thintact_sdk.recording import Recording, RecordingWriter
+
+
+def _unit(root: Path, channels: tuple[str, ...], ghost: Ghost | None, seed: int
+          ) -> tuple[Recording, SlitCollection, SystemMatrices]:
+    profile = small_profile(channels)
+    rec = write_recording(root / "rec", profile, seed=seed, defects=[ghost] if ghost else [])
+    collection = collect_slits(rec)
+    sm, _ = solve_matrices(collection, CalibrationOptions(), profile)
+    return rec, collection, sm
+
+
+def _held(rec: Recording, collection: SlitCollection, sm: SystemMatrices
+          ) -> tuple[dict[str, float], np.ndarray, health.NoiseEstimate]:
+    """The former ``assess`` (before streaming): every slit frame's residual held, then the
+    noise fit on all of them and the χ² map (reference for the streamed one)."""
+    nz, c = rec.profile.noise, sm.channels
+    residuals, dark_frames = [], 0
+    for i in range(len(rec)):
+        scene = rec.scene(i)
+        if scene is None:
+            continue
+        roles = classify_scene(scene)
+        dark_frames += int(is_dark(roles))
+        if not is_slit(roles):
+            continue
+        signal, scale = signal_of(rec, i, collection.dark_dn, collection.exposure_us)
+        pred = sm.forward(scene_for_channels(scene, c).astype(np.float64))
+        ok = np.asarray(rec.measurement(i)).reshape(signal.shape) < nz.saturation_dn - 1.0
+        residuals.append((rec.frames[i].label or str(i), (signal[..., :c] - pred) / scale, pred / scale, ok[..., :c]))
+    pred_all = np.concatenate([p[m] for _, _, p, m in residuals])
+    r2_all = np.concatenate([r[m] ** 2 for _, r, _, m in residuals])
+    noise = health._fit_noise(pred_all, r2_all, nz, 1, dark_frames if "dark frame" in collection.dark_source else 0)
+    chi2_sum, count, slit_chi2 = np.zeros(sm.sensor_shape), np.zeros(sm.sensor_shape), {}
+    for label, r, p, m in residuals:
+        z = np.where(m, r**2 / noise.variance(p), 0.0)
+        chi2_sum += z.sum(axis=2)
+        count += m.sum(axis=2)
+        slit_chi2[label] = float(z.sum() / max(int(m.sum()), 1))
+    return slit_chi2, chi2_sum / np.maximum(count, 1), noise
+
+
+def test_streamed_assess_equals_holding_every_frame(tmp_path: Path) -> None:
+    rec, collection, sm = _unit(tmp_path, ("R", "G", "B"), Ghost(6, -9, 0.05), seed=1)
+    report = assess(rec, collection, sm, 1)
+    slit_chi2, chi2_map, noise = _held(rec, collection, sm)
+    assert report.slit_chi2 == slit_chi2  # bit for bit: below the cap nothing is subsampled
+    np.testing.assert_array_equal(report.chi2_map, chi2_map)
+    assert report.noise == noise
+    # recorded from the code before streaming (commit 2d817fa) on this unit
+    assert report.noise.to_json()["variance_offset_dn2"] == 8.2061
+    assert report.noise.to_json()["variance_slope"] == 0.2629
+    assert round(report.mean_chi2, 4) == 1.0024
+    ghosts = [d for d in report.defects if d.kind == "ghost"]
+    assert [(g.offset_px, round(g.strength, 4)) for g in ghosts] == [((6, -9), 0.0508)]
+
+
+def _with_slits_twice(rec: Recording, root: Path) -> Recording:
+    """The same recording with every slit frame recorded twice (twice the slits, same unit)."""
+    w = RecordingWriter(root, rec.profile)
+    for i in range(len(rec)):
+        label = rec.frames[i].label or str(i)
+        scene = rec.scene(i)
+        copies = 2 if scene is not None and is_slit(classify_scene(scene)) else 1
+        for k in range(copies):
+            w.add(np.asarray(rec.measurement(i)), scene, label=label + ("_again" if k else ""))
+    return Recording(root)
+
+
+def _peak_bytes(rec: Recording, collection: SlitCollection, sm: SystemMatrices) -> int:
+    tracemalloc.start()
+    try:
+        assess(rec, collection, sm, 1)
+        return tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+
+
+def test_peak_memory_does_not_grow_with_the_number_of_slits(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    # a ghost unit: the ghost's exact strength re-reads the full slit frames too
+    rec, collection, sm = _unit(tmp_path, ("R", "G", "B"), Ghost(-7, 12, 0.10), seed=5)
+    twice = _with_slits_twice(rec, tmp_path / "twice")
+    r, s = sm.sensor_shape
+    monkeypatch.setattr(health, "NOISE_FIT_CAP", 20 * r * s * sm.channels)  # both above the cap
+    peak1, peak2 = _peak_bytes(rec, collection, sm), _peak_bytes(twice, collection, sm)
+    frame_bytes = r * s * sm.channels * 8
+    slits = len(assess(rec, collection, sm, 1).slit_chi2)
+    # holding the frames took 4 frame-size arrays per slit: 2x the slits would add that again
+    # (before streaming: 50.2 MB and 100.1 MB traced; streamed: 10.25 and 10.26 MB)
+    assert peak2 - peak1 < 0.1 * 4 * slits * frame_bytes, (peak1, peak2)
+    assert peak2 < 1.25 * peak1, (peak1, peak2)
+
+
+def test_subsampled_noise_fit_agrees_with_the_exact_one(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    rec, collection, sm = _unit(tmp_path, ("mono",), None, seed=3)
+    exact = assess(rec, collection, sm, 1)
+    r, s = sm.sensor_shape
+    entries = len(exact.slit_chi2) * r * s * sm.channels
+    monkeypatch.setattr(health, "NOISE_FIT_CAP", entries // 3)  # a third of the entries
+    sampled = assess(rec, collection, sm, 1)
+    assert sampled.noise != exact.noise  # the subsample was taken
+    assert sampled.noise.read_noise_dn == pytest.approx(exact.noise.read_noise_dn, rel=0.02)
+    assert sampled.noise.electrons_per_dn == pytest.approx(exact.noise.electrons_per_dn, rel=0.05)
+    assert sampled.mean_chi2 == pytest.approx(exact.mean_chi2, rel=0.02)
+    assert [d.kind for d in sampled.defects] == [d.kind for d in exact.defects]
+    again = assess(rec, collection, sm, 1)
+    assert again.noise == sampled.noise  # fixed seed: the same recording, the same fit
