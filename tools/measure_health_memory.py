@@ -30,6 +30,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "calibrat
 
 def _make(out: Path, rows: int, cols: int, n: int, m: int, random: bool) -> None:
     from independent_device import small_profile, write_recording
+    from sim_cli_device import calibration_scenes
 
     from thintact_sdk.blas import blas_threads
     from thintact_sdk.calibration.collect import collect_slits
@@ -57,16 +58,7 @@ def _make(out: Path, rows: int, cols: int, n: int, m: int, random: bool) -> None
         g = np.sqrt(0.7 * (nz.saturation_dn - nz.black_level_dn) / float(sm.forward(np.ones((n, m, 3))).max()))
         sm = SystemMatrices(sm.Po * g, sm.Qo * g, sm.Pc * g, sm.Qc * g)
         w = RecordingWriter(out / "rec", profile)
-        zero = np.zeros((n, m, 3), np.float32)
-        scenes = [("dark", zero), ("white", np.ones_like(zero))]
-        for i in range(n):
-            x = zero.copy()
-            x[i] = 1.0
-            scenes.append((f"hslit_{i:04d}", x))
-        for j in range(m):
-            x = zero.copy()
-            x[:, j] = 1.0
-            scenes.append((f"vslit_{j:04d}", x))
+        scenes = calibration_scenes(n, m)[: 2 + n + m]  # dark, white and every slit
         with blas_threads(1):
             for label, x in scenes:
                 s = sm.forward(x.astype(np.float64))

@@ -21,7 +21,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "calibration"))
 
-from independent_device import small_profile  # noqa: E402
+from independent_device import mounted_profile, small_profile  # noqa: E402
 
 from thintact_sdk.calibration.pose import estimate_pose  # noqa: E402
 from thintact_sdk.imaging.mask_orientation import ORIENTATIONS, Orientation  # noqa: E402
@@ -33,12 +33,7 @@ WHITE_DN = 2000.0
 
 
 def mounted(nominal: Profile, orientation: Orientation, angle_deg: float) -> Profile:
-    d = nominal.contract_dict()
-    px, py = orientation.apply(np.asarray(nominal.mask.phi), np.asarray(nominal.mask.rows_vector))
-    d["mask"]["phi"], d["mask"]["phi_rows"] = px.tolist(), py.tolist()
-    return Profile.model_validate(d).with_physics(
-        {"mask_misalignment": {"dx_um": DX, "dy_um": DY, "angle_deg": angle_deg},
-         "geometry": {"scene_to_mask_mm": Z}})
+    return mounted_profile(nominal, orientation, angle_deg, DX, DY, Z)
 
 
 def noisy(flat: np.ndarray, profile: Profile, rng: np.random.Generator) -> np.ndarray:

@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from thintact_sdk.imaging.filter_training import scene_for_channels
+from thintact_sdk.imaging.mask_orientation import Orientation
 from thintact_sdk.imaging.metrics import psnr
 from thintact_sdk.imaging.noise import signal_to_dn
 from thintact_sdk.imaging.scenes import gelsight, make_scene
@@ -175,3 +176,16 @@ def best_in_hindsight(decoder: Any, frames: list[tuple[np.ndarray, np.ndarray]])
         if v > best:
             best, best_tau = v, float(tau)
     return best, best_tau
+
+
+def mounted_profile(nominal: Profile, orientation: Orientation, angle_deg: float, dx_um: float,
+                    dy_um: float, z_mm: float) -> Profile:
+    """``nominal`` with its mask mounted in ``orientation`` (φ, φ_rows rewritten), turned by a
+    further ``angle_deg``, shifted by ``(dx_um, dy_um)`` and at scene-to-mask distance ``z_mm``:
+    the truth of a flat-field pose test."""
+    d = nominal.contract_dict()
+    px, py = orientation.apply(np.asarray(nominal.mask.phi), np.asarray(nominal.mask.rows_vector))
+    d["mask"]["phi"], d["mask"]["phi_rows"] = px.tolist(), py.tolist()
+    return Profile.model_validate(d).with_physics(
+        {"mask_misalignment": {"dx_um": dx_um, "dy_um": dy_um, "angle_deg": angle_deg},
+         "geometry": {"scene_to_mask_mm": z_mm}})

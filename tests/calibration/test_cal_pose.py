@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 import pytest
-from independent_device import small_profile
+from independent_device import mounted_profile, small_profile
 from scipy import ndimage
 
 from thintact_sdk.calibration.pose import PoseEstimate, estimate_pose
@@ -28,12 +28,7 @@ def nominal() -> Profile:
 
 
 def _mounted(nominal: Profile, orientation: Orientation, angle_deg: float) -> Profile:
-    d = nominal.contract_dict()
-    px, py = orientation.apply(np.asarray(nominal.mask.phi), np.asarray(nominal.mask.rows_vector))
-    d["mask"]["phi"], d["mask"]["phi_rows"] = px.tolist(), py.tolist()
-    return Profile.model_validate(d).with_physics(
-        {"mask_misalignment": {"dx_um": DX, "dy_um": DY, "angle_deg": angle_deg},
-         "geometry": {"scene_to_mask_mm": Z}})
+    return mounted_profile(nominal, orientation, angle_deg, DX, DY, Z)
 
 
 def _flat(profile: Profile) -> np.ndarray:
