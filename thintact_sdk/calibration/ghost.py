@@ -21,9 +21,9 @@ below one frame's noise, so the best offset's strength is measured again on the 
 exactly a two-term model: the solve absorbs it into ``Q`` (or ``P``), no residual is left and
 validation scenes barely suffer at the design's own scale, but every reconstruction then
 carries it. It shows as an echo in the calibrated coding matrix against the design's (direct
-generation of the profile's φ): ``Qc ≈ a X + b S_l X`` plus nuisance directions for what the
-pose and scale of the design may be off by (``X'``, ``u X'`` with ``u`` the sensor
-coordinate, the open matrix and ``u`` times it); ``g = b / a`` at the best lag.
+generation of the profile's φ): ``Qc ≈ a X + b S_l X`` plus the design's pose terms (the
+second-order expansion of an affine misregistration of the shadow, :func:`_pose_terms`);
+``g = b / a`` at the best lag.
 
 On both, an offset counts only beyond :data:`MIN_LAG_CELLS` mask-shadow cells along each of
 its non-zero axes (closer copies are blur, and there the design's pose error lives) and a
@@ -51,7 +51,7 @@ MAX_LAG_FRACTION = 0.25
 MIN_STRENGTH = 0.025
 """A ghost fainter than 2.5 % of the image is not reported: a 3 % ghost read 20 % low still is
 (on the healthy and dust/dim-column test units the echo scans' strongest candidates stayed
-at 0.6-1.7 %, the slit map's at 0.1-0.2 %)."""
+at 1.0-1.7 %, 0.9 % on a healthy 256 × 320 unit, the slit map's at 0.1-0.2 %)."""
 ROBUST_SIGMAS = 3.5
 """…and a slit-map candidate must stand this many robust standard deviations above the map's
 median (the echo scans have too few lags on a small sensor for a robust spread: there a 5 %
@@ -356,7 +356,7 @@ def _pose_terms(design: np.ndarray, design_open: np.ndarray) -> list[np.ndarray]
     ``δ X' + ½ δ² X''``, i.e. by ``X'``, ``uX'``, ``vX'`` and ``X''`` times ``1, u, v, u²,
     uv, v²``; the open matrix by its level and ``u`` times it. The first-order terms alone
     fail with size: ``δ`` grows with the sensor, the left-over ``½ δ² X''`` with its square,
-    and on a healthy 256 × 320 unit (distances 1 % and 1 % off the profile's) its
+    and on a healthy 256 × 320 unit (distances 1.25 % and 1 % off the profile's) its
     correlation with the design shifted by 56 columns read as a 3.2 % ghost.
     """
     d1 = np.gradient(design, axis=0)
