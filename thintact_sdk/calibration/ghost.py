@@ -34,7 +34,7 @@ ghost is reported from :data:`MIN_STRENGTH` (a slit-map candidate must also stan
 from __future__ import annotations
 
 from collections.abc import Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -368,22 +368,67 @@ def _pose_terms(design: np.ndarray, design_open: np.ndarray) -> list[np.ndarray]
             design_open, u * design_open]
 
 
+def fit_pose(coding: np.ndarray, axis: AxisGeometry, vec: np.ndarray, keep: np.ndarray | None = None,
+             iterations: int = 4) -> AxisGeometry:
+    """The axis geometry whose direct generation fits the calibrated coding matrices best.
+
+    ``coding`` (``C × lines × scene``) ≈ ``a X(θ) + c O(θ)`` (design and open matrix of the
+    direct generator) is fitted by Gauss-Newton over θ = (mask-to-sensor distance, mask
+    shift); the scene-to-mask distance stays (the shadow depends on the two distances
+    through their ratio only). Steps are held to ±20 % of the distance and ±2 cells of
+    shift: a unit further off is not this design. Matrices the profile's own design does not
+    explain (:data:`MIN_DESIGN_SHARE`) keep the profile's geometry. Sensor lines where
+    ``keep`` is False are left out.
+    """
+    w = np.ones((coding.shape[1], 1)) if keep is None else np.asarray(keep, np.float64).reshape(-1, 1)
+    ys = np.stack([(np.asarray(c, np.float64) * w).ravel() for c in coding], axis=1)
+
+    def residual(theta: np.ndarray) -> tuple[np.ndarray, float]:
+        gen = DirectGenerator(replace(axis, d_mm=float(theta[0]), mask_shift_um=float(theta[1])))
+        base = np.stack([(gen.coding(vec) * w).ravel(), (gen.open() * w).ravel()], axis=1)
+        r = ys - base @ np.linalg.lstsq(base, ys, rcond=None)[0]
+        return r.ravel(), 1.0 - float(np.sum(r * r)) / max(float(np.sum(ys * ys)), 1e-300)
+
+    theta = np.array([axis.d_mm, axis.mask_shift_um])
+    r0, share = residual(theta)
+    if share < MIN_DESIGN_SHARE:
+        return axis
+    h = np.array([1e-3 * axis.d_mm, 0.05 * axis.sensor_pitch_um])
+    lo = theta - np.array([0.2 * axis.d_mm, 2 * axis.feature_um])
+    hi = theta + np.array([0.2 * axis.d_mm, 2 * axis.feature_um])
+    for _ in range(iterations):
+        jac = np.stack([(residual(theta + step_h * e)[0] - r0) / step_h for e, step_h in zip(np.eye(2), h, strict=True)],
+                       axis=1)
+        step = np.linalg.lstsq(jac, -r0, rcond=None)[0]
+        trial = np.clip(theta + step, lo, hi)
+        r1, share1 = residual(trial)
+        if share1 <= share:  # no better: keep the last pose
+            break
+        theta, r0, share = trial, r1, share1
+        if np.all(np.abs(step) < h):  # below the difference step: converged
+            break
+    return replace(axis, d_mm=float(theta[0]), mask_shift_um=float(theta[1]))
+
+
 def echo_scan(coding: np.ndarray, design: np.ndarray, design_open: np.ndarray, lags: list[int],
-              name: str) -> GhostScan:
+              name: str, keep: np.ndarray | None = None) -> GhostScan:
     """Strength of a separable ghost at each lag: the calibrated coding matrices
     (``C × lines × scene``) against the design's, ``coding ≈ a X + b S_l X`` + the pose
     terms of :func:`_pose_terms`; ``g = b / a`` in the design's own units.
 
     A channel whose matrix the design does not explain (:data:`MIN_DESIGN_SHARE`) is not
-    scanned; when none is, the scan has no lags and its name says why.
+    scanned; when none is, the scan has no lags and its name says why. Sensor lines where
+    ``keep`` is False (located defects: a dim column or a dust shadow is in the matrix, not in
+    the design) are left out of the fit.
     """
-    base = np.stack([m.ravel() for m in _pose_terms(design, design_open)], axis=1)
+    w = np.ones((design.shape[0], 1)) if keep is None else np.asarray(keep, np.float64).reshape(-1, 1)
+    base = np.stack([(m * w).ravel() for m in _pose_terms(design, design_open)], axis=1)
     base /= np.maximum(np.linalg.norm(base, axis=0), 1e-300)  # columns of one size: normal equations
     gram_b = base.T @ base
     scale_a = float(np.linalg.norm(design))
     ys, bys, shares = [], [], []
     for c in range(coding.shape[0]):
-        y = np.asarray(coding[c], np.float64).ravel()
+        y = (np.asarray(coding[c], np.float64) * w).ravel()
         by = base.T @ y
         coef = np.linalg.lstsq(gram_b, by, rcond=None)[0]
         share = float(coef @ by) / max(float(y @ y), 1e-300)  # explained energy, 0-1
@@ -396,7 +441,7 @@ def echo_scan(coding: np.ndarray, design: np.ndarray, design_open: np.ndarray, l
                          f"(it explains {100 * max(shares, default=0.0):.0f} % of it)", [], []).decide()
     values = np.zeros(len(lags))
     for k, lag in enumerate(lags):  # one shifted design at a time (memory: one S × M array)
-        sh = _shift(design, lag).ravel()
+        sh = (_shift(design, lag) * w).ravel()
         norm = max(float(np.linalg.norm(sh)), 1e-300)
         col = sh / norm
         bs = base.T @ col
@@ -460,11 +505,14 @@ def find_ghosts(slits: list[ChannelSlits], sm: SystemMatrices, profile: Profile,
         scans += lines
         if ok:
             ghosts.append(Ghost(dy, dx, g, separable=False))
-    rows_gen, cols_gen = DirectGenerator(AxisGeometry.rows_of(profile)), DirectGenerator(AxisGeometry.cols_of(profile))
-    er = echo_scan(sm.Pc, rows_gen.coding(np.asarray(profile.mask.rows_vector, float)), rows_gen.open(),
-                   row_lags, "rows (Pc echo)")
-    ec = echo_scan(sm.Qc, cols_gen.coding(np.asarray(profile.mask.phi, float)), cols_gen.open(),
-                   col_lags, "columns (Qc echo)")
+    rows_vec, cols_vec = np.asarray(profile.mask.rows_vector, float), np.asarray(profile.mask.phi, float)
+    # the echo fits leave located defects' lines out while at least half the lines stay (a
+    # large dust speck's widened box can cover a small sensor's rows)
+    kr, kc = (k if k is not None and float(np.mean(k)) >= 0.5 else None for k in (keep_rows, keep_cols))
+    rows_gen = DirectGenerator(fit_pose(sm.Pc, AxisGeometry.rows_of(profile), rows_vec, kr))
+    cols_gen = DirectGenerator(fit_pose(sm.Qc, AxisGeometry.cols_of(profile), cols_vec, kc))
+    er = echo_scan(sm.Pc, rows_gen.coding(rows_vec), rows_gen.open(), row_lags, "rows (Pc echo)", kr)
+    ec = echo_scan(sm.Qc, cols_gen.coding(cols_vec), cols_gen.open(), col_lags, "columns (Qc echo)", kc)
     scans += [er, ec]
     if not ghosts:
         best = max((sc for sc in (er, ec) if sc.significant), key=lambda sc: sc.value, default=None)
