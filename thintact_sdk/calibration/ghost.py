@@ -21,9 +21,9 @@ below one frame's noise, so the best offset's strength is measured again on the 
 exactly a two-term model: the solve absorbs it into ``Q`` (or ``P``), no residual is left and
 validation scenes barely suffer at the design's own scale, but every reconstruction then
 carries it. It shows as an echo in the calibrated coding matrix against the design's (direct
-generation of the profile's φ): ``Qc ≈ a X + b S_l X`` plus the design's pose terms (the
-second-order expansion of an affine misregistration of the shadow, :func:`_pose_terms`);
-``g = b / a`` at the best lag.
+generation of the profile's φ at the unit's fitted pose, :func:`fit_pose`):
+``Qc ≈ a X + b S_l X`` plus what is left of the pose error (the second-order expansion of an
+affine misregistration of the shadow, :func:`_pose_terms`); ``g = b / a`` at the best lag.
 
 On both, an offset counts only beyond :data:`MIN_LAG_CELLS` mask-shadow cells along each of
 its non-zero axes (closer copies are blur, and there the design's pose error lives) and a
@@ -51,7 +51,8 @@ MAX_LAG_FRACTION = 0.25
 MIN_STRENGTH = 0.025
 """A ghost fainter than 2.5 % of the image is not reported: a 3 % ghost read 20 % low still is
 (on the healthy and dust/dim-column test units the echo scans' strongest candidates stayed
-at 1.0-1.7 %, 0.9 % on a healthy 256 × 320 unit, the slit map's at 0.1-0.2 %)."""
+at 0.1-0.3 % against the design at the fitted pose (1.0-1.7 % at the profile's pose, 3.2 % on a
+healthy 256 × 320 unit: issue 12), the slit map's at 0.1-0.2 %)."""
 ROBUST_SIGMAS = 3.5
 """…and a slit-map candidate must stand this many robust standard deviations above the map's
 median (the echo scans have too few lags on a small sensor for a robust spread: there a 5 %
@@ -357,7 +358,9 @@ def _pose_terms(design: np.ndarray, design_open: np.ndarray) -> list[np.ndarray]
     uv, v²``; the open matrix by its level and ``u`` times it. The first-order terms alone
     fail with size: ``δ`` grows with the sensor, the left-over ``½ δ² X''`` with its square,
     and on a healthy 256 × 320 unit (distances 1.25 % and 1 % off the profile's) its
-    correlation with the design shifted by 56 columns read as a 3.2 % ghost.
+    correlation with the design shifted by 56 columns read as a 3.2 % ghost. The design is
+    therefore generated at the fitted pose first (:func:`fit_pose`); these terms take what
+    that leaves (the rotation, which a separable model cannot hold).
     """
     d1 = np.gradient(design, axis=0)
     d2 = np.gradient(d1, axis=0)
