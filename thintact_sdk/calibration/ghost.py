@@ -21,9 +21,9 @@ below one frame's noise, so the best offset's strength is measured again on the 
 exactly a two-term model: the solve absorbs it into ``Q`` (or ``P``), no residual is left and
 validation scenes barely suffer at the design's own scale, but every reconstruction then
 carries it. It shows as an echo in the calibrated coding matrix against the design's (direct
-generation of the profile's φ): ``Qc ≈ a X + b S_l X`` plus nuisance directions for what the
-pose and scale of the design may be off by (``X'``, ``u X'`` with ``u`` the sensor
-coordinate, the open matrix and ``u`` times it); ``g = b / a`` at the best lag.
+generation of the profile's φ at the unit's fitted pose, :func:`fit_pose`):
+``Qc ≈ a X + b S_l X`` plus what is left of the pose error (the second-order expansion of an
+affine misregistration of the shadow, :func:`_pose_terms`); ``g = b / a`` at the best lag.
 
 On both, an offset counts only beyond :data:`MIN_LAG_CELLS` mask-shadow cells along each of
 its non-zero axes (closer copies are blur, and there the design's pose error lives) and a
@@ -34,7 +34,7 @@ ghost is reported from :data:`MIN_STRENGTH` (a slit-map candidate must also stan
 from __future__ import annotations
 
 from collections.abc import Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -51,7 +51,8 @@ MAX_LAG_FRACTION = 0.25
 MIN_STRENGTH = 0.025
 """A ghost fainter than 2.5 % of the image is not reported: a 3 % ghost read 20 % low still is
 (on the healthy and dust/dim-column test units the echo scans' strongest candidates stayed
-at 0.6-1.7 %, the slit map's at 0.1-0.2 %)."""
+at 0.1-0.3 % against the design at the fitted pose (1.0-1.7 % at the profile's pose, 3.2 % on a
+healthy 256 × 320 unit: issue 12), the slit map's at 0.1-0.2 %)."""
 ROBUST_SIGMAS = 3.5
 """…and a slit-map candidate must stand this many robust standard deviations above the map's
 median (the echo scans have too few lags on a small sensor for a robust spread: there a 5 %
@@ -339,30 +340,121 @@ def exact_strength(gmap: GhostMap, frames: Iterable[tuple[np.ndarray, bool]], dy
     return num / den if den > 0 else 0.0
 
 
-def echo_scan(coding: np.ndarray, design: np.ndarray, design_open: np.ndarray, lags: list[int],
-              name: str) -> GhostScan:
-    """Strength of a separable ghost at each lag: the calibrated coding matrices
-    (``C × lines × scene``) against the design's, ``coding ≈ a X + b S_l X`` + nuisance."""
-    d = np.gradient(design, axis=0)
+MIN_DESIGN_SHARE = 0.5
+"""The echo scans compare a calibrated coding matrix with the design's; they run only when the
+design and its pose terms explain at least this share of the matrix's energy (healthy units:
+0.9 and more; random matrices that are not the profile's design: far less, where ``b / a``
+divided by a coefficient ``a`` near zero read ghosts of 497 814 %)."""
+
+
+def _pose_terms(design: np.ndarray, design_open: np.ndarray) -> list[np.ndarray]:
+    """The design and what its pose error adds, as the columns of the echo fit.
+
+    The unit's mask shadow sits at ``u + δ(u, v)`` instead of ``u`` (sensor line ``u``, scene
+    line ``v``, both centred), with ``δ = α + βu + γv`` affine: a shift, a scale error of the
+    shadow (mask-to-sensor over scene-to-mask distance) and of the parallax (mask-to-sensor
+    over scene-to-mask times the scene pitch). To second order the coding matrix changes by
+    ``δ X' + ½ δ² X''``, i.e. by ``X'``, ``uX'``, ``vX'`` and ``X''`` times ``1, u, v, u²,
+    uv, v²``; the open matrix by its level and ``u`` times it. The first-order terms alone
+    fail with size: ``δ`` grows with the sensor, the left-over ``½ δ² X''`` with its square,
+    and on a healthy 256 × 320 unit (distances 1.25 % and 1 % off the profile's) its
+    correlation with the design shifted by 56 columns read as a 3.2 % ghost. The design is
+    therefore generated at the fitted pose first (:func:`fit_pose`); these terms take what
+    that leaves (the rotation, which a separable model cannot hold).
+    """
+    d1 = np.gradient(design, axis=0)
+    d2 = np.gradient(d1, axis=0)
     u = (np.arange(design.shape[0]) - design.shape[0] / 2.0)[:, None]
-    base = np.stack([m.ravel() for m in (design, d, u * d, design_open, u * design_open)], axis=1)
+    v = (np.arange(design.shape[1]) - design.shape[1] / 2.0)[None, :]
+    u, v = u / max(1.0, float(np.abs(u).max())), v / max(1.0, float(np.abs(v).max()))
+    return [design, d1, u * d1, v * d1, d2, u * d2, v * d2, u * u * d2, u * v * d2, v * v * d2,
+            design_open, u * design_open]
+
+
+def fit_pose(coding: np.ndarray, axis: AxisGeometry, vec: np.ndarray, keep: np.ndarray | None = None,
+             iterations: int = 4) -> AxisGeometry:
+    """The axis geometry whose direct generation fits the calibrated coding matrices best.
+
+    ``coding`` (``C × lines × scene``) ≈ ``a X(θ) + c O(θ)`` (design and open matrix of the
+    direct generator) is fitted by Gauss-Newton over θ = (mask-to-sensor distance, mask
+    shift); the scene-to-mask distance stays (the shadow depends on the two distances
+    through their ratio only). Steps are held to ±20 % of the distance and ±2 cells of
+    shift: a unit further off is not this design. Matrices the profile's own design does not
+    explain (:data:`MIN_DESIGN_SHARE`) keep the profile's geometry. Sensor lines where
+    ``keep`` is False are left out.
+    """
+    w = np.ones((coding.shape[1], 1)) if keep is None else np.asarray(keep, np.float64).reshape(-1, 1)
+    ys = np.stack([(np.asarray(c, np.float64) * w).ravel() for c in coding], axis=1)
+
+    def residual(theta: np.ndarray) -> tuple[np.ndarray, float]:
+        gen = DirectGenerator(replace(axis, d_mm=float(theta[0]), mask_shift_um=float(theta[1])))
+        base = np.stack([(gen.coding(vec) * w).ravel(), (gen.open() * w).ravel()], axis=1)
+        r = ys - base @ np.linalg.lstsq(base, ys, rcond=None)[0]
+        return r.ravel(), 1.0 - float(np.sum(r * r)) / max(float(np.sum(ys * ys)), 1e-300)
+
+    theta = np.array([axis.d_mm, axis.mask_shift_um])
+    r0, share = residual(theta)
+    if share < MIN_DESIGN_SHARE:
+        return axis
+    h = np.array([1e-3 * axis.d_mm, 0.05 * axis.sensor_pitch_um])
+    lo = theta - np.array([0.2 * axis.d_mm, 2 * axis.feature_um])
+    hi = theta + np.array([0.2 * axis.d_mm, 2 * axis.feature_um])
+    for _ in range(iterations):
+        jac = np.stack([(residual(theta + step_h * e)[0] - r0) / step_h for e, step_h in zip(np.eye(2), h, strict=True)],
+                       axis=1)
+        step = np.linalg.lstsq(jac, -r0, rcond=None)[0]
+        trial = np.clip(theta + step, lo, hi)
+        r1, share1 = residual(trial)
+        if share1 <= share:  # no better: keep the last pose
+            break
+        theta, r0, share = trial, r1, share1
+        if np.all(np.abs(step) < h):  # below the difference step: converged
+            break
+    return replace(axis, d_mm=float(theta[0]), mask_shift_um=float(theta[1]))
+
+
+def echo_scan(coding: np.ndarray, design: np.ndarray, design_open: np.ndarray, lags: list[int],
+              name: str, keep: np.ndarray | None = None) -> GhostScan:
+    """Strength of a separable ghost at each lag: the calibrated coding matrices
+    (``C × lines × scene``) against the design's, ``coding ≈ a X + b S_l X`` + the pose
+    terms of :func:`_pose_terms`; ``g = b / a`` in the design's own units.
+
+    A channel whose matrix the design does not explain (:data:`MIN_DESIGN_SHARE`) is not
+    scanned; when none is, the scan has no lags and its name says why. Sensor lines where
+    ``keep`` is False (located defects: a dim column or a dust shadow is in the matrix, not in
+    the design) are left out of the fit.
+    """
+    w = np.ones((design.shape[0], 1)) if keep is None else np.asarray(keep, np.float64).reshape(-1, 1)
+    base = np.stack([(m * w).ravel() for m in _pose_terms(design, design_open)], axis=1)
     base /= np.maximum(np.linalg.norm(base, axis=0), 1e-300)  # columns of one size: normal equations
     gram_b = base.T @ base
     scale_a = float(np.linalg.norm(design))
-    ys = [np.asarray(coding[c], np.float64).ravel() for c in range(coding.shape[0])]
-    bys = [base.T @ y for y in ys]
+    ys, bys, shares = [], [], []
+    for c in range(coding.shape[0]):
+        y = (np.asarray(coding[c], np.float64) * w).ravel()
+        by = base.T @ y
+        coef = np.linalg.lstsq(gram_b, by, rcond=None)[0]
+        share = float(coef @ by) / max(float(y @ y), 1e-300)  # explained energy, 0-1
+        shares.append(share)
+        if share >= MIN_DESIGN_SHARE and coef[0] != 0:  # a < 0: P and Q both flipped, allowed
+            ys.append(y)
+            bys.append(by)
+    if not ys:
+        return GhostScan(f"{name}: not scanned, the calibrated matrix does not follow the design "
+                         f"(it explains {100 * max(shares, default=0.0):.0f} % of it)", [], []).decide()
     values = np.zeros(len(lags))
     for k, lag in enumerate(lags):  # one shifted design at a time (memory: one S × M array)
-        sh = _shift(design, lag).ravel()
+        sh = (_shift(design, lag) * w).ravel()
         norm = max(float(np.linalg.norm(sh)), 1e-300)
         col = sh / norm
         bs = base.T @ col
         a = np.block([[gram_b, bs[:, None]], [bs[None, :], np.array([[col @ col]])]])
         for y, by in zip(ys, bys, strict=True):
             coef = np.linalg.lstsq(a, np.append(by, col @ y), rcond=None)[0]
-            # b/a in the design's own units: undo the two columns' normalisations
+            # b/a in the design's own units: undo the two columns' normalisations (a is far
+            # from 0: the design explains the matrix, checked above)
             values[k] += (coef[-1] / norm) / (coef[0] / scale_a) if coef[0] != 0 else 0.0
-    return GhostScan(name, lags, [float(v) for v in values / coding.shape[0]]).decide(robust=False)
+    return GhostScan(name, lags, [float(v) for v in values / len(ys)]).decide(robust=False)
 
 
 @dataclass
@@ -416,11 +508,14 @@ def find_ghosts(slits: list[ChannelSlits], sm: SystemMatrices, profile: Profile,
         scans += lines
         if ok:
             ghosts.append(Ghost(dy, dx, g, separable=False))
-    rows_gen, cols_gen = DirectGenerator(AxisGeometry.rows_of(profile)), DirectGenerator(AxisGeometry.cols_of(profile))
-    er = echo_scan(sm.Pc, rows_gen.coding(np.asarray(profile.mask.rows_vector, float)), rows_gen.open(),
-                   row_lags, "rows (Pc echo)")
-    ec = echo_scan(sm.Qc, cols_gen.coding(np.asarray(profile.mask.phi, float)), cols_gen.open(),
-                   col_lags, "columns (Qc echo)")
+    rows_vec, cols_vec = np.asarray(profile.mask.rows_vector, float), np.asarray(profile.mask.phi, float)
+    # the echo fits leave located defects' lines out while at least half the lines stay (a
+    # large dust speck's widened box can cover a small sensor's rows)
+    kr, kc = (k if k is not None and float(np.mean(k)) >= 0.5 else None for k in (keep_rows, keep_cols))
+    rows_gen = DirectGenerator(fit_pose(sm.Pc, AxisGeometry.rows_of(profile), rows_vec, kr))
+    cols_gen = DirectGenerator(fit_pose(sm.Qc, AxisGeometry.cols_of(profile), cols_vec, kc))
+    er = echo_scan(sm.Pc, rows_gen.coding(rows_vec), rows_gen.open(), row_lags, "rows (Pc echo)", kr)
+    ec = echo_scan(sm.Qc, cols_gen.coding(cols_vec), cols_gen.open(), col_lags, "columns (Qc echo)", kc)
     scans += [er, ec]
     if not ghosts:
         best = max((sc for sc in (er, ec) if sc.significant), key=lambda sc: sc.value, default=None)

@@ -289,7 +289,9 @@ def _health_section(outcome: CalibrationOutcome, profile: Profile) -> list[str]:
                    "(not separable: the copy widens the slits' column/row space) and as an echo of the "
                    "design's coding pattern in the calibrated matrices (separable: absorbed by them). "
                    "Strongest candidate of each scan:</p>"
-                   + _table([[g.name, f"{g.lag:+d}", f"{100 * (g.estimate if np.isfinite(g.estimate) else g.value):.2f} %", "yes" if g.significant else "no"]
+                   + _table([[g.name, f"{g.lag:+d}" if g.lags else "-",
+                               f"{100 * (g.estimate if np.isfinite(g.estimate) else g.value):.2f} %" if g.lags else "-",
+                               "yes" if g.significant else "no"]
                              for g in h.ghost_scans], ["scan", "offset (px)", "strength", "ghost"]))
     fig = _health_figure(outcome, profile)
     if fig:
