@@ -70,3 +70,21 @@ def test_profile_show(capsys: pytest.CaptureFixture[str]) -> None:
     out = capsys.readouterr().out
     data = json.loads(out[: out.rindex("}") + 1])
     assert data["name"] == "thintact-paper" and data["scene"]["pixel_pitch_um"] == 31.5
+
+
+def test_two_word_commands_name_the_hyphenated_ones() -> None:
+    from thintact_sdk.cli.main import join_two_word_command
+
+    names = ["calibrate", "calibrate-pose", "calibrate-import", "diagnose"]
+    assert join_two_word_command(["calibrate", "pose", "flat.npy"], names) == ["calibrate-pose", "flat.npy"]
+    assert join_two_word_command(["calibrate", "import", "-h"], names) == ["calibrate-import", "-h"]
+    assert join_two_word_command(["calibrate", "--profile", "p.json"], names) == ["calibrate", "--profile", "p.json"]
+    assert join_two_word_command(["calibrate", "wizard"], names) == ["calibrate", "wizard"]
+    assert join_two_word_command(["diagnose", "rec"], names) == ["diagnose", "rec"]
+
+
+def test_calibrate_import_spelt_as_two_words_reaches_its_command(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as done:
+        main(["calibrate", "import", "--help"])
+    assert done.value.code == 0
+    assert "calibrate-import" in capsys.readouterr().out

@@ -55,9 +55,41 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def join_two_word_command(argv: Sequence[str], commands: Sequence[str]) -> list[str]:
+    """``calibrate pose ...`` → ``calibrate-pose ...`` where ``calibrate-pose`` is a command.
+
+    The hyphenated names are the commands; the two-word spelling (as the docs and the issue
+    tracker write them) is the same command, so neither spelling is an error.
+
+    Parameters
+    ----------
+    argv
+        The arguments after the program name.
+    commands
+        Every registered subcommand name.
+
+    Returns
+    -------
+    list of str
+        ``argv`` with its first two words joined where that names a command, else unchanged.
+    """
+    args = list(argv)
+    if len(args) >= 2 and not args[1].startswith("-") and f"{args[0]}-{args[1]}" in commands:
+        return [f"{args[0]}-{args[1]}", *args[2:]]
+    return args
+
+
+def _command_names(parser: argparse.ArgumentParser) -> list[str]:
+    for action in parser._actions:  # argparse keeps the subcommand table on its action
+        if isinstance(action, argparse._SubParsersAction):
+            return list(action.choices)
+    return []
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the CLI; returns the exit status (0 ok, 2 bad input or device fault)."""
     parser = build_parser()
+    argv = join_two_word_command(sys.argv[1:] if argv is None else argv, _command_names(parser))
     try:
         args = parser.parse_args(argv)
     except SystemExit as done:  # --help and --version exit 0 as argparse does
