@@ -10,6 +10,8 @@ of the closed-form decoders is chosen by measurement on this host
 (:mod:`thintact_decoders.selection`); ``backend`` (``"numpy"``/``"torch"``), ``device`` and
 ``gemm_dtype`` in the settings, or ``THINTACT_BACKEND=torch-float32`` etc. in the environment,
 are preferences honoured only where not more than 20 % slower than the best.
+``t2s-closed-form`` may solve on the sensor binned 2 × 2 where that is measured faster and as
+accurate (:mod:`thintact_decoders.sensor_binning`; setting ``sensor_bin``: ``"auto"``, 1 never, 2).
 ``mode_rtol`` (closed-form decoders) drops Tikhonov modes whose filter factor is below it
 (default :data:`~thintact_decoders.modes.DEFAULT_MODE_RTOL`). ``thintact-noniterative`` also takes ``fold`` and ``max_rank``;
 ``t2s-iterative`` takes ``iterations`` (800). ``t2s-closed-form`` (this SDK's extension: the
@@ -38,9 +40,14 @@ from thintact_decoders.flatcam import FlatCamDecoder
 from thintact_decoders.identity import IdentityDecoder, make_identity
 from thintact_decoders.iterative import T2SIterativeDecoder
 from thintact_decoders.loading import resolve_bundle
-from thintact_decoders.modes import DEFAULT_MODE_RTOL, TauSpec
+from thintact_decoders.modes import DEFAULT_MODE_RTOL, TauSpec, channel_taus
 from thintact_decoders.noniterative import NonIterativeDecoder
 from thintact_decoders.selection import BackendPreferenceWarning, make_probes, select_backend
+from thintact_decoders.sensor_binning import (
+    SensorBinnedDecoder,
+    bin_system_matrices,
+    binning_offered,
+)
 from thintact_decoders.t2s_closed_form import T2SClosedFormDecoder
 from thintact_sdk.algorithms import CalibrationBundle, SystemMatrices
 from thintact_sdk.errors import CalibrationError
@@ -81,8 +88,10 @@ def _backend(settings: dict[str, Any]) -> ArrayBackend:
 
 
 def _selected(name: str, profile: Profile, settings: dict[str, Any], sm: SystemMatrices,
-              build: Callable[[ArrayBackend], Decoder]) -> Decoder:
-    """``build`` on the backend measured fastest (and accurate) for this host and operator."""
+              build: Callable[..., Decoder], binnable: bool = False) -> Decoder:
+    """``build`` on the backend measured fastest (and accurate) for this host and operator
+    (``binnable``: ``build(backend, b)`` also solves on the sensor binned b × b, which is
+    then a candidate where the sensor oversamples the scene)."""
     dtype = str(settings.get("dtype", "float32"))
     caps = host_capabilities()
     env = os.environ.get("THINTACT_BACKEND", "").strip()
@@ -98,8 +107,13 @@ def _selected(name: str, profile: Profile, settings: dict[str, Any], sm: SystemM
     not_candidates = {} if caps.native_bf16 else {"torch-bfloat16": EMULATED_BF16}
     (r, s), (n, m) = sm.sensor_shape, sm.scene_shape
     key = f"{host_fingerprint(caps)}|{name}|{sm.channels}x{r}x{s}->{n}x{m}|{dtype}"
+    try:
+        offered = binning_offered((r, s), (n, m), sm.channels, settings.get("sensor_bin", "auto"))
+        sensor_bin = offered if binnable else 1
+    except ValueError as err:
+        raise CalibrationError(str(err)) from None
     decoder, _ = select_backend(
-        build, lambda: make_probes(sm, profile.noise), candidate_specs(caps, dtype),
+        build, lambda: make_probes(sm, profile.noise), candidate_specs(caps, dtype, sensor_bin=sensor_bin),
         key, preferred, source, not_candidates, remeasure=os.environ.get(REMEASURE_ENV, "") not in ("", "0"))
     return decoder
 
@@ -158,16 +172,34 @@ def make_flatcam(profile: Profile, settings: dict[str, Any]) -> FlatCamDecoder:
                      lambda xp: FlatCamDecoder(bundle.system_matrices, tau, xp, _mode_rtol(settings)))  # type: ignore[return-value]
 
 
+def _binnable(sm: SystemMatrices, tau: TauSpec,
+              make: Callable[[SystemMatrices, TauSpec, ArrayBackend], Decoder]) -> Callable[..., Decoder]:
+    """``build(backend, b=1)``: ``make`` on ``sm``, or on ``sm`` binned ``b × b`` (τ / b², the
+    same objective) wrapped to bin each frame (:mod:`thintact_decoders.sensor_binning`)."""
+    binned: dict[int, SystemMatrices] = {}
+
+    def build(xp: ArrayBackend, b: int = 1) -> Decoder:
+        if b == 1:
+            return make(sm, tau, xp)
+        if b not in binned:
+            binned[b] = bin_system_matrices(sm, b)
+        inner = make(binned[b], channel_taus(tau, sm.channels) / b**2, xp)
+        return SensorBinnedDecoder(inner, sm.sensor_shape, sm.channels, b)
+
+    return build
+
+
 def make_t2s_closed_form(profile: Profile, settings: dict[str, Any]) -> T2SClosedFormDecoder:
-    """Build the exact non-iterative full-T2S decoder for ``profile``."""
+    """Build the exact non-iterative full-T2S decoder for ``profile`` (on the sensor binned
+    2 × 2 where the selection finds that faster and as accurate)."""
     bundle = resolve_bundle(profile, settings)
     tau = _decoder_tau("t2s-closed-form", float(bundle.meta.get("tau_t2s_closed_form", bundle.tau)), bundle,
                        settings, profile)
-    return _selected("t2s-closed-form", profile, settings, bundle.system_matrices,
-                     lambda xp: T2SClosedFormDecoder(
-                         bundle.system_matrices, tau, xp, open_rtol=float(settings.get("open_rtol", 1e-6)),
-                         max_open_rank=int(settings.get("max_open_rank", 8)),
-                         mode_rtol=_mode_rtol(settings)))  # type: ignore[return-value]
+    build = _binnable(bundle.system_matrices, tau, lambda sm, t, xp: T2SClosedFormDecoder(
+        sm, t, xp, open_rtol=float(settings.get("open_rtol", 1e-6)),
+        max_open_rank=int(settings.get("max_open_rank", 8)), mode_rtol=_mode_rtol(settings)))
+    return _selected("t2s-closed-form", profile, settings, bundle.system_matrices, build,
+                     binnable=True)  # type: ignore[return-value]
 
 
 @thintact_sdk.hookimpl

@@ -157,6 +157,12 @@ def run(args: argparse.Namespace) -> int:
     from thintact_decoders.backend_cache import BackendCache
     from thintact_decoders.candidates import candidate_specs
     from thintact_decoders.selection import Probe, select_backend
+    from thintact_decoders.sensor_binning import (
+        SENSOR_BIN,
+        SensorBinnedDecoder,
+        bin_system_matrices,
+        binning_possible,
+    )
     from thintact_sdk.compute_threads import prepare_worker_thread, single_threaded_kernels
     from thintact_sdk.machine import host_capabilities, machine_summary
     from thintact_sdk.profile import load_profile
@@ -181,25 +187,41 @@ def run(args: argparse.Namespace) -> int:
             "tau": {"thintact-noniterative": tau_ni, "t2s-closed-form / iterative": tau_cf},
             "latency_ms": {}, "latency_ms_from_uint16": {}, "quality": {},
         }
+        sensor_bin = SENSOR_BIN if binning_possible(dev.sm.sensor_shape, dev.sm.scene_shape) else 1
+        binned_sm = bin_system_matrices(dev.sm, sensor_bin) if sensor_bin > 1 else None
+
+        def t2s_build(be: Any, b: int = 1, **kw: Any) -> Any:
+            """t2s-closed-form, or on the sensor binned b × b (τ / b², the same objective)."""
+            if b == 1:
+                return T2SClosedFormDecoder(dev.sm, tau_cf, be, **kw)
+            return SensorBinnedDecoder(T2SClosedFormDecoder(binned_sm, tau_cf / b**2, be, **kw),
+                                       dev.sm.sensor_shape, dev.sm.channels, b)
+
         builders: dict[str, Callable[..., Any]] = {
             "thintact-noniterative": partial(NonIterativeDecoder, dev.sm, dev.filter, tau_ni),
-            "t2s-closed-form": partial(T2SClosedFormDecoder, dev.sm, tau_cf),
+            "t2s-closed-form": t2s_build,
         }
         caps = host_capabilities()
         result["host"] = caps.lines()
         specs = candidate_specs(caps)
+        specs_t2s = candidate_specs(caps, sensor_bin=sensor_bin)
         result["roofline"] = {}
         raw = dev.raw[2]
         binned = _as_binned(raw)
         (r, s), (n, _) = dev.sm.sensor_shape, dev.sm.scene_shape
-        # (tag, backend, mode_rtol): every real backend of this host with the default mode
-        # truncation, and numpy float32 with every mode (the work before truncation)
-        runs: list[tuple[str, Any, float | None]] = [(spec.key, spec.make(), None) for spec in specs]
-        runs.append(("numpy-float32, all modes", ArrayBackend("numpy", "float32"), 0.0))
-        for tag, be, rtol in runs:
+        # (tag, backend, mode_rtol, sensor bin): every real backend of this host with the default
+        # mode truncation, numpy float32 with every mode (the work before truncation), and
+        # t2s-closed-form on the sensor binned 2 × 2 where the sensor oversamples the scene
+        runs: list[tuple[str, Any, float | None, int]] = [
+            (spec.key, spec.make(), None, spec.sensor_bin) for spec in specs_t2s]
+        runs.append(("numpy-float32, all modes", ArrayBackend("numpy", "float32"), 0.0, 1))
+        for tag, be, rtol, b in runs:
             say(f"timing non-iterative decoders ({tag})")
             for label, build in builders.items():
-                dec = build(be) if rtol is None else build(be, mode_rtol=rtol)
+                if b > 1 and label != "t2s-closed-form":
+                    continue
+                kw = {} if rtol is None else {"mode_rtol": rtol}
+                dec = build(be, b, **kw) if b > 1 else build(be, **kw)
                 key = f"{label} [{tag}]"
                 sgemm = measure_sgemm_gflops(dev.sm.channels, n, r, s)  # same run, same load
                 ms = _median_ms(_raw_call(dec, binned, black), args.repeats)
@@ -224,7 +246,8 @@ def run(args: argparse.Namespace) -> int:
         result["backend_choice"] = {}
         with tempfile.TemporaryDirectory() as tmp:
             for label, build in builders.items():
-                _, choice = select_backend(build, lambda: probes, specs, f"bench|{label}",
+                _, choice = select_backend(build, lambda: probes, specs_t2s if label == "t2s-closed-form" else specs,
+                                           f"bench|{label}",
                                            cache=BackendCache(Path(tmp) / "backends.json"))
                 result["backend_choice"][label] = choice.summary()
         say("oracle open-term removal")

@@ -167,13 +167,19 @@ def _time_ms(fn: Callable[[], Any], repeats: int, give_up_ms: float) -> float:
     return float(np.median(times))
 
 
+def build_for(build: Callable[..., Decoder], spec: BackendSpec) -> Decoder:
+    """``build(backend)``, or ``build(backend, sensor_bin)`` for a binned spec."""
+    return build(spec.make()) if spec.sensor_bin == 1 else build(spec.make(), spec.sensor_bin)
+
+
 def measure_backends(
-    build: Callable[[ArrayBackend], Decoder], probes: Sequence[Probe], specs: Sequence[BackendSpec],
+    build: Callable[..., Decoder], probes: Sequence[Probe], specs: Sequence[BackendSpec],
     repeats: int = 5,
 ) -> tuple[dict[str, float], dict[str, float], dict[str, str], dict[str, Decoder]]:
     """Time and score every spec: ``(measured_ms, psnr_cost_db, failed, decoders)``.
 
-    ``build(backend)`` makes the decoder; the reference is ``build`` on numpy float64.
+    ``build(backend)`` makes the decoder (``build(backend, sensor_bin)`` a binned one); the
+    reference is ``build`` on numpy float64, unbinned.
     """
     reference = _scores(build(ArrayBackend("numpy", "float64")), probes)
     measured: dict[str, float] = {}
@@ -182,7 +188,7 @@ def measure_backends(
     decoders: dict[str, Decoder] = {}
     for spec in specs:
         try:
-            decoder = build(spec.make())
+            decoder = build_for(build, spec)
             give_up = 3.0 * min(measured.values()) if measured else np.inf
             measured[spec.key] = _time_ms(_decode_fn(decoder, probes[0]), repeats, give_up)
             cost[spec.key] = float(max(r - s for r, s in zip(reference, _scores(decoder, probes), strict=True)))
@@ -193,7 +199,7 @@ def measure_backends(
 
 
 def select_backend(
-    build: Callable[[ArrayBackend], Decoder], probes: Callable[[], Sequence[Probe]],
+    build: Callable[..., Decoder], probes: Callable[[], Sequence[Probe]],
     specs: Sequence[BackendSpec], cache_key: str, preferred: BackendSpec | None = None,
     preferred_from: str = "preference", not_candidates: dict[str, str] | None = None,
     cache: BackendCache | None = None, bound_db: float = PSNR_BOUND_DB, slack: float = PREFERENCE_SLACK,
@@ -205,7 +211,8 @@ def select_backend(
     Parameters
     ----------
     build
-        ``build(backend) -> Decoder`` for the operator at hand.
+        ``build(backend) -> Decoder`` for the operator at hand (``build(backend, sensor_bin)``
+        when ``specs`` holds binned candidates).
     probes
         Called on a cache miss for the probe frames (:func:`make_probes`).
     specs
@@ -242,7 +249,7 @@ def select_backend(
         warnings.warn(note, BackendPreferenceWarning, stacklevel=3)
     spec = next(s for s in specs if s.key == chosen)
     choice = BackendChoice(chosen, measured, cost, unavailable, note, from_cache, bound_db)
-    decoder = built[chosen] if chosen in built else build(spec.make())
+    decoder = built[chosen] if chosen in built else build_for(build, spec)
     decoder.backend_choice = choice  # type: ignore[attr-defined]
     return decoder, choice
 
