@@ -25,8 +25,20 @@ code with the simulator's diffraction path (:mod:`thintact_sdk.physics.diffracti
   ``w² = λ·(z/n)·d/(z/n + d)``. The contract does not spell out this composition; this is
   the definition the simulator documents, checked here for its numerics.
 
-Only the pixel integration is approximate; its error falls as ``n`` grows (shown in
-``tools/measure_diffraction_reference.py`` and in the tests).
+Only the pixel integration is approximate. Three integrators, each converged by refining it:
+
+- :func:`subsampled_reference_kernel`: the definition read literally, ``n²`` sub-samples per
+  sensor pixel and per scene pixel. Simple but slow to converge: the fringes of far edges
+  (period ``w²/x``, under 1 µm) alias until ``n`` resolves them in both pixels (on the test
+  device n = 48 is still 6e-4 off);
+- :func:`crossing_grid_reference_kernel` (straight rays): the exact change of variables
+  ``(u, s) → (m, δ)``, a fine midpoint grid in the mask plane and Gauss-Legendre in ``δ``;
+  converges as ``step²`` (5e-6 between 0.1 and 0.05 µm);
+- :func:`ray_offset_reference_kernel` (straight or refracted rays): ``δ`` outermost,
+  summed-area table of ``|U|²`` inside.
+
+The three agree where all converge (tests/simulator/test_sim_diffraction_bruteforce.py);
+``tools/measure_diffraction_reference.py`` prints the simulator's error table.
 """
 
 from __future__ import annotations
