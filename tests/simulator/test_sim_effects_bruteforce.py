@@ -8,7 +8,8 @@ Snell crossing and the rotation all matter. The brute force's own error falls ro
 ``n`` to ``2n`` samples and requires the simulator to come closer by at least a factor 2 (the
 gap is the brute force's error, not the simulator's) and to end within the contract's 1e-3
 (the slow matrix, ``2n = 24``) or a looser bound at ``2n = 16`` (the default quick cases).
-Diffraction has no brute force here: its compositions are checked against their limits.
+Diffraction's brute force (a Fresnel integral per ray) is in test_sim_diffraction_bruteforce.py;
+here its compositions with refraction are also checked against their limits.
 """
 
 from __future__ import annotations
