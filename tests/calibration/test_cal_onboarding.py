@@ -46,6 +46,22 @@ def test_direct_generation_honours_the_mask_pose_and_distances() -> None:
         {"mask_misalignment": {"angle_deg": 0.2}})).meta["unmodelled_angle_deg"] == 0.2
 
 
+def test_direct_generation_honours_a_turned_mask_as_its_separable_mean() -> None:
+    """A mask turned by 1° (and shifted): direct generation reads each axis's pattern at the
+    turn's mean shift and averaged over its spread across the sensor, which brings its coding
+    term closer to the simulator's best two-term fit of the turned device than leaving the
+    turn out (measured: 0.9977 against 0.9906 at 1°, 0.979 against 0.930 at 2°)."""
+    nominal = small_profile(("G",))
+    shift = {"dx_um": 30.0, "dy_um": -40.0}
+    turned = nominal.with_physics({"mask_misalignment": {"angle_deg": 1.0, **shift}})
+    reference = SystemMatrices.two_term_fit(Simulator(turned))
+    honoured = _coding_similarity(SystemMatrices.direct(turned), reference)
+    left_out = _coding_similarity(SystemMatrices.direct(
+        nominal.with_physics({"mask_misalignment": {"angle_deg": 0.0, **shift}})), reference)
+    assert honoured > 0.997
+    assert 1.0 - honoured < 0.5 * (1.0 - left_out)
+
+
 @pytest.mark.parametrize("decoder", ["thintact-noniterative", "t2s-closed-form", "flatcam",
                                      "t2s-iterative"])
 def test_monochrome_device_calibrates_and_decodes(tmp_path: Path, decoder: str) -> None:

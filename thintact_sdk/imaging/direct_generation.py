@@ -101,6 +101,10 @@ class AxisGeometry:
     mask_shift_um
         Shift of the mask pattern along the axis, um: the pattern is read at ``m − shift``
         (``dx_um`` / ``dy_um`` of the ``mask_misalignment`` effect, CONTRACTS §5).
+    turn_blur_um
+        Width (um) of the range of shifts a turned mask's pattern takes along this axis
+        across the other axis: the separable model reads the pattern averaged over it (see
+        :meth:`rows_of`); 0 for an unturned mask.
     """
 
     n_sensor: int
@@ -112,31 +116,47 @@ class AxisGeometry:
     z_mm: float
     d_mm: float
     mask_shift_um: float = 0.0
+    turn_blur_um: float = 0.0
 
     @classmethod
     def rows_of(cls, profile: Profile, K: int | None = None) -> AxisGeometry:  # noqa: N803
         """The y axis of ``profile`` (rows: ``P``, R × N); ``K`` overrides the mask length.
 
-        The profile's ``physics`` is honoured: ``geometry`` replaces z and d, and
-        ``mask_misalignment.dy_um`` shifts the pattern (its ``angle_deg`` cannot be
-        represented by a separable model, see ``SystemMatrices.direct``'s
-        ``meta["unmodelled_angle_deg"]``).
+        The profile's ``physics`` is honoured: ``geometry`` replaces z and d,
+        ``mask_misalignment.dy_um`` shifts the pattern, and its ``angle_deg`` θ as far as a
+        separable model can: a mask turned by θ reads the y pattern (cells ``δ/cos θ``) at
+        the shift ``dy + tan θ·(m_x − dx)``, which varies with the column's mask-plane
+        coordinate ``m_x = α·x`` (α = z/H) across the sensor. The separable matrices take the
+        mean over the sensor's columns: the shift's centre ``dy − tan θ·dx`` and the pattern
+        averaged over its spread ``2·|tan θ|·α·S·p/2`` (``turn_blur_um``, exact: a third box in
+        the footprint). What no separable model holds (the shift's dependence on the column)
+        is ``SystemMatrices.direct``'s ``meta["unmodelled_angle_deg"]``.
         """
         pose = MaskPose.of(profile)
+        t = math.tan(math.radians(pose.angle_deg))
+        alpha = pose.z_mm / (pose.z_mm + pose.d_mm)
+        half_other_um = alpha * profile.sensor.cols * profile.sensor.pixel_pitch_um / 2.0
         return cls(profile.sensor.rows, profile.sensor.pixel_pitch_um, profile.scene.rows,
-                   profile.scene.pixel_pitch_um, profile.mask.feature_um,
-                   profile.mask.K if K is None else int(K), pose.z_mm, pose.d_mm, pose.dy_um)
+                   profile.scene.pixel_pitch_um, profile.mask.feature_um / math.cos(math.radians(pose.angle_deg)),
+                   profile.mask.K if K is None else int(K), pose.z_mm, pose.d_mm, pose.dy_um - t * pose.dx_um,
+                   2.0 * abs(t) * half_other_um)
 
     @classmethod
     def cols_of(cls, profile: Profile, K: int | None = None) -> AxisGeometry:  # noqa: N803
         """The x axis of ``profile`` (columns: ``Q``, S × M); ``K`` overrides the mask length.
 
-        Honours ``physics`` like :meth:`rows_of` (``mask_misalignment.dx_um`` here).
+        Honours ``physics`` like :meth:`rows_of`: the x pattern of a turned mask is read at
+        ``dx − tan θ·(m_y − dy)``, centred at ``dx + tan θ·dy`` and spread over
+        ``2·|tan θ|·α·R·p/2`` across the sensor's rows.
         """
         pose = MaskPose.of(profile)
+        t = math.tan(math.radians(pose.angle_deg))
+        alpha = pose.z_mm / (pose.z_mm + pose.d_mm)
+        half_other_um = alpha * profile.sensor.rows * profile.sensor.pixel_pitch_um / 2.0
         return cls(profile.sensor.cols, profile.sensor.pixel_pitch_um, profile.scene.cols,
-                   profile.scene.pixel_pitch_um, profile.mask.feature_um,
-                   profile.mask.K if K is None else int(K), pose.z_mm, pose.d_mm, pose.dx_um)
+                   profile.scene.pixel_pitch_um, profile.mask.feature_um / math.cos(math.radians(pose.angle_deg)),
+                   profile.mask.K if K is None else int(K), pose.z_mm, pose.d_mm, pose.dx_um + t * pose.dy_um,
+                   2.0 * abs(t) * half_other_um)
 
     @property
     def h_mm(self) -> float:
@@ -211,6 +231,21 @@ def _trapezoid_cdf(x: np.ndarray, a: float, b: float) -> np.ndarray:
     return (_ramp2(x + s) - _ramp2(x + t) - _ramp2(x - t) + _ramp2(x - s)) / (a * b)
 
 
+def _ramp3(t: np.ndarray) -> np.ndarray:
+    return np.power(np.maximum(t, 0.0), 3) / 6.0
+
+
+def _three_box_cdf(x: np.ndarray, a: float, b: float, w: float) -> np.ndarray:
+    """CDF at ``x`` of the sum of three centred uniform variables of widths ``a``, ``b``, ``w``
+    (``w`` > 0): the mean of :func:`_trapezoid_cdf` over ``[x − w/2, x + w/2]``, in closed form."""
+    s, t = (a + b) / 2.0, abs(a - b) / 2.0
+
+    def antiderivative(u: np.ndarray) -> np.ndarray:
+        return (_ramp3(u + s) - _ramp3(u + t) - _ramp3(u - t) + _ramp3(u - s)) / (a * b)
+
+    return (antiderivative(x + w / 2.0) - antiderivative(x - w / 2.0)) / w
+
+
 def crossing_points_um(axis: AxisGeometry) -> np.ndarray:
     """``n_sensor × n_scene``: where the ray from each scene pixel centre to each sensor pixel
     centre crosses the mask, ``(z·y_r + d·y_n) / H`` (um, unshifted)."""
@@ -227,15 +262,21 @@ def _footprint_weights(axis: AxisGeometry, m_um: np.ndarray) -> tuple[np.ndarray
     h_um = axis.h_mm * 1e3
     a_um = axis.z_mm * 1e3 * axis.sensor_pitch_um / h_um  # footprint of the sensor pixel on the mask
     b_um = axis.d_mm * 1e3 * axis.scene_pitch_um / h_um  # footprint of the scene pixel on the mask
-    half_um = (a_um + b_um) / 2.0
+    w_um = axis.turn_blur_um
+    half_um = (a_um + b_um + w_um) / 2.0
     delta = axis.feature_um
     lo_cell = np.floor((m_um - half_um) / delta + axis.K / 2.0).astype(np.int64)
     n_cells = int(math.ceil(2.0 * half_um / delta)) + 1
     weights = np.empty((n_cells,) + m_um.shape)
+
+    def cdf(x: np.ndarray) -> np.ndarray:
+        if w_um > 1e-9:  # a turned mask: the footprint also spans the turn's shifts
+            return _three_box_cdf(x, a_um, b_um, w_um)
+        return _trapezoid_cdf(x, a_um, b_um)
+
     for ell in range(n_cells):
         left_um = (lo_cell + ell - axis.K / 2.0) * delta - m_um
-        weights[ell] = (_trapezoid_cdf(left_um + delta, a_um, b_um)
-                        - _trapezoid_cdf(left_um, a_um, b_um))
+        weights[ell] = cdf(left_um + delta) - cdf(left_um)
     return lo_cell, weights
 
 
@@ -374,8 +415,9 @@ def direct_system_matrices(
     Notes
     -----
     The profile's ``physics`` is honoured where a separable model can: the ``geometry``
-    distances and the ``mask_misalignment`` shift. Its rotation is not (a rotated mask is
-    not separable); ``MaskPose.of(profile).angle_deg`` says how much is left out.
+    distances, the ``mask_misalignment`` shift, and its rotation as the separable mean over
+    the sensor (:meth:`AxisGeometry.rows_of`); a turned mask is not separable, and the part
+    of the turn no separable model holds is left out.
     """
     phi_arr = np.asarray(phi)
     rows_phi = phi_arr if phi_rows is None else np.asarray(phi_rows)
