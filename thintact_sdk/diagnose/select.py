@@ -131,10 +131,11 @@ class Trial:
         return out
 
     def active(self, include_slow: bool = False) -> list[int]:
-        """Flat indices of the parameters to vary (the slow ones only with ``include_slow``)."""
+        """Flat indices of the parameters to vary (the slow ones only with ``include_slow``;
+        never those the model holds, :attr:`DiagnosisModel.held`)."""
         return [
             int(a) + i for c, a in zip(self.cands, self.offsets, strict=False)
-            for i in range(c.k) if include_slow or i not in c.slow_params
+            for i in self.model.free(c, include_slow)
         ]
 
     def channel_blocks(self) -> list[list[int]]:
@@ -176,22 +177,20 @@ def score_candidate(
         return _score_by_search(model, values, ev0, cand)
     at_gains = Trial(model, values, (cand.name,), beta=ev0.beta)
     cols: list[np.ndarray] = []
+    fast = model.free(cand, include_slow=False)
     if cand.channelwise:
-        diff = at_gains(null + step).pred_dn - ev0.pred_dn
-        for i in range(cand.k):
+        diff = at_gains(null + step * np.isin(np.arange(cand.k), fast)).pred_dn - ev0.pred_dn
+        for i in fast:
             ci = np.zeros_like(diff)
             ci[..., i] = diff[..., i] / step[i]
             cols.append(ci)
     else:
-        for i in range(cand.k):
-            if i in cand.slow_params:
-                continue
+        for i in fast:
             v = null.copy()
             v[i] += step[i]
             v = at_gains.box.clip(v)
             d_i = float(v[i] - null[i]) or step[i]
             cols.append((at_gains(v).pred_dn - ev0.pred_dn) / d_i)
-    fast = [i for i in range(cand.k) if i not in cand.slow_params]
     a, gain = optimise.score_test(
         cols, model.data.measured_dn - ev0.pred_dn, model.weights,
         model.nuisance_directions(values, ev0), [signed[i] for i in fast],
@@ -301,12 +300,13 @@ def _refine(
     cur = vals[cand.name]
     if cand.channelwise and not deadline.expired():
         cur, ev = optimise.channel_polish(own, cur, ev, own.data, own.box, own.step)
-    for i in cand.slow_params:
+    slow = [i for i in cand.slow_params if i in model.free(cand)]
+    for i in slow:
         if not deadline.allows(3.5 * model.slow_sim_s):
             break
         cur, ev = _parabola(own, cur, ev, i, float(own.step[i]))
     vals[cand.name] = cur
-    if cand.slow_params and not np.allclose(cur[list(cand.slow_params)], 0.0) \
+    if slow and not np.allclose(cur[slow], 0.0) \
             and deadline.allows((cand.k + 2) * model.slow_sim_s):
         # one joint step over every parameter (each simulation on the slow path)
         cur, ev = optimise.levenberg_marquardt(
@@ -552,7 +552,7 @@ def _fit_proxied(
             for j, width in enumerate(px.widths):
                 if j > 0 and not deadline.allows(3.5 * model.slow_sim_s):
                     break
-                for i in range(cand.k):
+                for i in model.free(cand):
                     cur, ev = _parabola(trial, cur, ev, i, width * abs(float(cur[i])))
         except SIMULATION_ERRORS as err:
             state.drop(name, f"fitting it from {px.source} failed in the simulator ({err})")
