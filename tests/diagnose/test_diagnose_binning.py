@@ -204,3 +204,34 @@ def test_cli_screens_a_mask_shift_with_the_angle_held(tmp_path: Path,
     assert "angle_deg was held" in f["evidence"]
     assert rep["baseline"]["chi2_per_dof"] > 2.0
     assert rep["full_size"]["final"]["chi2_per_dof"] < 1.2
+
+
+def test_unbinned_amplitude_admits_an_effect_binning_hides(tmp_path: Path) -> None:
+    """A mask shift changes the binned prediction less than the unbinned one (binning
+    averages its fine structure away). With the amplitude floor between the two, the
+    binned diagnosis rejects it on its own but names it when the change is measured on
+    the unbinned recording (as the CLI does)."""
+    from thintact_sdk.diagnose import DiagnoseOptions, diagnose, load_diagnosis_data
+    from thintact_sdk.diagnose.binning import bin_data, unbinned_amplitude_fn
+
+    prof = _device(32, 48)
+    shift = {"angle_deg": 0.0, "dx_um": 7.0, "dy_um": -4.0}
+    _write_recording(prof, {"mask_misalignment": shift}, tmp_path / "rec")
+    full = load_diagnosis_data(tmp_path / "rec")
+    data = bin_data(full, 4)
+    fine = unbinned_amplitude_fn(full)
+    vec = np.array([0.0, 7.0, -4.0])
+    fine_amp = fine({}, {"mask_misalignment": vec})
+    coarse_amp = unbinned_amplitude_fn(data)({}, {"mask_misalignment": vec})
+    assert fine_amp > 1.2 * coarse_amp > 0
+    floor = float(np.sqrt(fine_amp * coarse_amp))
+    opts = DiagnoseOptions(candidates=["mask_misalignment"], amp_floor=floor, max_effects=1,
+                           held_params={"mask_misalignment": ("angle_deg",)})
+    d = diagnose(data, variance_fn=binned_variance_fn(4), options=opts)
+    assert d.report["findings"] == []
+    assert "unbinned" not in " ".join(d.selection.log)
+    opts.fine_amplitude = fine
+    d = diagnose(data, variance_fn=binned_variance_fn(4), options=opts)
+    f = d.report["findings"][0]
+    assert f["effect"] == "mask_misalignment" and abs(f["params"]["dx_um"] - 7.0) < 1.0
+    assert "on the unbinned recording" in f["evidence"]

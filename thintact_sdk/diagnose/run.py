@@ -21,7 +21,7 @@ from thintact_sdk.diagnose.model import (
     Values,
     default_simulate,
 )
-from thintact_sdk.diagnose.select import Round, Selection, select_effects
+from thintact_sdk.diagnose.select import FineAmplitude, Round, Selection, select_effects
 from thintact_sdk.diagnose.stats import (
     FitStats,
     VarianceFn,
@@ -67,6 +67,11 @@ class DiagnoseOptions:
         mask's ``angle_deg`` at the paper's size (:func:`~thintact_sdk.diagnose.binning.screening_limits`);
         the effect's other parameters are screened and fitted, and an effect with every
         parameter held is not tried.
+    fine_amplitude
+        For binned data: the effect's change of the prediction measured on the unbinned
+        recording (:func:`~thintact_sdk.diagnose.binning.unbinned_amplitude_fn`), which
+        an effect whose binned change is under ``amp_floor`` may reach instead
+        (:func:`~thintact_sdk.diagnose.select.select_effects`).
     """
 
     sys_frac: float = 1e-3
@@ -78,6 +83,7 @@ class DiagnoseOptions:
     fit_frames: int = 12
     blas_threads: int | None = 1
     held_params: dict[str, tuple[str, ...]] = field(default_factory=dict)
+    fine_amplitude: FineAmplitude | None = None
 
 
 @dataclass
@@ -245,6 +251,7 @@ def _diagnose(
     sel = select_effects(
         fit_model, cands, base_values, max_effects=opt.max_effects, margin=opt.margin,
         amp_floor=opt.amp_floor, deadline=deadline, progress=say,
+        fine_amplitude=opt.fine_amplitude,
     )
     ev1 = _evaluate_full(model, sel.values)
     final = _view(model, data, ev1.pred_dn, sel.values)
@@ -258,6 +265,7 @@ def _diagnose(
         sel = select_effects(
             fit2, cands, base_values, max_effects=opt.max_effects, margin=opt.margin,
             amp_floor=opt.amp_floor, deadline=deadline, progress=say,
+            fine_amplitude=opt.fine_amplitude,
         )
         fit_model = fit2
         ev1 = _evaluate_full(model, sel.values)
@@ -340,7 +348,9 @@ def _finding(
         f"{describe_effect(rnd.name, params, prof)} Adding it lowers χ² by {rnd.dchi2:.0f} "
         f"(with a {model.sys_frac:.1%} systematic allowance), above the {rnd.threshold:.0f} that "
         f"{rnd.k} parameter(s) must earn (BIC k·ln n + margin); it changes the prediction by "
-        f"{rnd.amplitude_dn:.2f} DN rms."
+        f"{rnd.amplitude_dn:.2f} DN rms"
+        + ("." if rnd.fine_amplitude is None else
+           f" ({rnd.fine_amplitude:.1e} of the signal on the unbinned recording).")
     )
     alts = []
     for a in rnd.alternatives:

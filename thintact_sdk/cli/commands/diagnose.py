@@ -62,6 +62,7 @@ def run(args: argparse.Namespace) -> int:
         full_size_check,
         screening_limits,
         unbin_hotspots,
+        unbinned_amplitude_fn,
     )
     from thintact_sdk.diagnose.outputs import write_outputs
     from thintact_sdk.diagnose.run import known_candidates
@@ -87,6 +88,7 @@ def run(args: argparse.Namespace) -> int:
         skipped = limits.not_screened
         opts.candidates = [c for c in known_candidates(data.profile) if c not in limits.dropped]
         opts.held_params = limits.held
+        opts.fine_amplitude = unbinned_amplitude_fn(full_data, sys_frac=args.sys_frac)
         for name, why in skipped.items():
             con.print(f"not screened: {name} ({why})")
     with con.status("diagnosing...") as status:
