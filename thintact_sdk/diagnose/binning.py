@@ -222,10 +222,13 @@ def unbinned_amplitude_fn(data: DiagnosisData, n_frames: int = FINE_AMPLITUDE_FR
     from thintact_sdk.diagnose.model import DiagnosisModel
     from thintact_sdk.diagnose.run import subset_frames
 
-    model = DiagnosisModel(subset_frames(data, n_frames), _simulate_float32,
-                           default_variance_fn(), sys_frac=sys_frac, cache_size=2)
+    made: list[DiagnosisModel] = []  # built at the first call (most runs never need it)
 
     def amplitude(before: Values, after: Values) -> float:
+        if not made:
+            made.append(DiagnosisModel(subset_frames(data, n_frames), _simulate_float32,
+                                       default_variance_fn(), sys_frac=sys_frac, cache_size=2))
+        model = made[0]
         p0 = model.evaluate(before).pred_dn
         p1 = model.evaluate(after).pred_dn
         m = model.fit_mask
