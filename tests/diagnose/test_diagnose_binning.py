@@ -202,6 +202,7 @@ def test_cli_screens_a_mask_shift_with_the_angle_held(tmp_path: Path,
     assert f["params"]["angle_deg"] == 0.0
     assert abs(f["params"]["dx_um"] - 7.0) < 1.0 and abs(f["params"]["dy_um"] + 4.0) < 1.0
     assert "angle_deg was held" in f["evidence"]
+    assert "2 parameter(s) must earn" in f["evidence"]  # BIC counts the fitted ones only
     assert rep["baseline"]["chi2_per_dof"] > 2.0
     assert rep["full_size"]["final"]["chi2_per_dof"] < 1.2
 

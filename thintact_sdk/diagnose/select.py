@@ -59,7 +59,7 @@ class CandidateResult:
     """What one round learned about one candidate."""
 
     name: str
-    k: int
+    k: int  # parameters fitted (held ones not counted): the BIC penalty's k
     score_dchi2: float
     vector: np.ndarray
     dchi2: float | None = None  # from the full fit
@@ -204,7 +204,7 @@ def score_candidate(
     full = np.zeros(cand.k)
     full[fast] = a
     vec = at_gains.box.clip(null + full)
-    return CandidateResult(cand.name, cand.k, gain, vec)
+    return CandidateResult(cand.name, len(model.free(cand)), gain, vec)
 
 
 def _score_by_search(
@@ -223,12 +223,13 @@ def _score_by_search(
         if ev0.chi2 - e.chi2 > best_d:
             best_d, best_v, best_ev = ev0.chi2 - e.chi2, v, e
     if best_ev is None:
-        return CandidateResult(cand.name, cand.k, 0.0, null)
+        return CandidateResult(cand.name, len(model.free(cand)), 0.0, null)
     if cand.search.exact(best_v, m):
-        return CandidateResult(cand.name, cand.k, best_d, best_v, best_d, best_v, best_ev, refined=True)
+        return CandidateResult(cand.name, len(model.free(cand)), best_d, best_v, best_d, best_v,
+                               best_ev, refined=True)
     v, e = _parabola(trial, best_v, best_ev, 0, cand.search.refine_width(best_v))
     d = ev0.chi2 - e.chi2
-    return CandidateResult(cand.name, cand.k, d, v, d, v, e, refined=True)
+    return CandidateResult(cand.name, len(model.free(cand)), d, v, d, v, e, refined=True)
 
 
 def fit_candidate(
@@ -594,7 +595,8 @@ def _fit_proxied(
         except SIMULATION_ERRORS as err:
             state.drop(name, f"fitting it from {px.source} failed in the simulator ({err})")
             continue
-        res = CandidateResult(name, cand.k, 0.0, cur, ev0.chi2 - ev.chi2, cur, ev, refined=True)
+        res = CandidateResult(name, len(model.free(cand)), 0.0, cur, ev0.chi2 - ev.chi2, cur, ev,
+                              refined=True)
         res.amplitude_dn = _amplitude(model, ev0, ev)
         fitted.append(res)
         say(f"{name} (from the {px.source} fit): {cand.to_params(cur, model.profile)}, "
