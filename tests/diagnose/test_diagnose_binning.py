@@ -236,3 +236,12 @@ def test_unbinned_amplitude_admits_an_effect_binning_hides(tmp_path: Path) -> No
     f = d.report["findings"][0]
     assert f["effect"] == "mask_misalignment" and abs(f["params"]["dx_um"] - 7.0) < 1.0
     assert "on the unbinned recording" in f["evidence"]
+
+
+def test_held_params_name_fit_parameters() -> None:
+    """Held parameters are named by the effect's fit labels; a wrong label is refused."""
+    from thintact_sdk.diagnose.run import held_indices
+
+    assert held_indices({"mask_misalignment": ("angle_deg",)}) == {"mask_misalignment": (0,)}
+    with pytest.raises(ThinTactError, match="not fit parameters of mask_misalignment"):
+        held_indices({"mask_misalignment": ("angle",)})
