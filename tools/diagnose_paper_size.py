@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import resource
 import shutil
 import subprocess
@@ -45,6 +46,10 @@ CASES: dict[str, dict[str, Any]] = {
     "mask_leakage": {
         "physics": {"mask_leakage": {"transmittance": 0.03}},
         "check": {"transmittance": (0.03, 0.005)},
+    },
+    "mask_shift": {
+        "physics": {"mask_misalignment": {"angle_deg": 0.0, "dx_um": 7.0, "dy_um": -4.0}},
+        "check": {"dx_um": (7.0, 1.0), "dy_um": (-4.0, 1.0), "angle_deg": (0.0, 0.05)},
     },
     "geometry": {
         "physics": {"geometry": {"scene_to_mask_mm": 4.95, "mask_to_sensor_mm": 1.04}},
@@ -153,7 +158,9 @@ def main(argv: list[str] | None = None) -> int:
     else:
         rec, _, t_make = make_recording(args.case, args.out)
         print(f"rendered {rec} in {t_make:.1f} s")
+    load_before = os.getloadavg()[0]
     rc, wall, rss, log = run_diagnose(rec, args.out, args.time_budget)
+    load_after = os.getloadavg()[0]
     print(log.rstrip())
     problems = [f"thintact diagnose exited {rc}"] if rc != 0 else []
     report: dict[str, Any] = {}
@@ -165,10 +172,12 @@ def main(argv: list[str] | None = None) -> int:
     if rss > args.max_gib:
         problems.append(f"peak RSS {rss:.2f} GiB > {args.max_gib:g} GiB")
     result = {"case": args.case, "render_s": round(t_make, 1), "diagnose_s": round(wall, 1),
-              "peak_rss_gib": round(rss, 2), "findings": report.get("findings", []),
+              "peak_rss_gib": round(rss, 2),
+              "load_1min": [round(load_before, 1), round(load_after, 1)], "findings": report.get("findings", []),
               "binned": report.get("binned"), "problems": problems}
     (args.out / "result.json").write_text(json.dumps(result, indent=1) + "\n")
-    print(f"diagnose: {wall:.1f} s, peak RSS {rss:.2f} GiB; "
+    print(f"diagnose: {wall:.1f} s, peak RSS {rss:.2f} GiB, load {load_before:.1f} -> "
+          f"{load_after:.1f}; "
           + ("finding right" if not problems else "; ".join(problems)))
     return 0 if not problems else 1
 

@@ -10,11 +10,13 @@ import numpy as np
 import pytest
 
 from thintact_sdk.diagnose.binning import (
+    ScreeningLimits,
     auto_bin_factor,
     bin_frames,
     binned_profile,
     binned_variance_fn,
     oversized_candidates,
+    screening_limits,
     unbin_hotspots,
 )
 from thintact_sdk.errors import ThinTactError
@@ -103,11 +105,18 @@ def test_unbin_hotspots_scales_rectangles() -> None:
 
 
 def test_family_candidates_oversized_at_paper_size_only() -> None:
+    """At paper size refraction is not tried and the mask's angle is held at 0 (its
+    rotated family is too large), but the mask shift is still screened."""
     paper = binned_profile(load_profile("thintact-paper"), 8)
+    lim = screening_limits(paper)
+    assert lim.dropped == ("refraction",)
+    assert lim.held == {"mask_misalignment": ("angle_deg",), "refraction": ("n_scene_side",)}
     big = oversized_candidates(paper)
-    assert set(big) == {"mask_misalignment", "refraction"}
+    assert set(big) == {"mask_misalignment.angle_deg", "refraction"}
     assert "MiB" in big["refraction"]
+    assert big["mask_misalignment.angle_deg"].startswith("held at 0 (dx_um, dy_um screened)")
     assert oversized_candidates(_device(128, 160)) == {}
+    assert screening_limits(_device(128, 160)) == ScreeningLimits()
 
 
 def test_rotated_kernel_refuses_a_family_over_the_limit() -> None:
@@ -152,3 +161,87 @@ def test_cli_bins_and_checks_the_fit_unbinned(tmp_path: Path) -> None:
     assert rep["full_size"]["final"]["chi2_per_dof"] < 1.2
     fitted = json.loads((tmp_path / "o" / "fitted_profile.json").read_text())
     assert fitted["sensor"]["rows"] == 32  # the device itself, not the binned one
+
+
+def _write_recording(prof: Profile, hidden: dict, path: Path, seed: int = 5) -> None:
+    from thintact_sdk.imaging.noise import signal_to_dn
+    from thintact_sdk.recording import RecordingWriter
+
+    rng = np.random.default_rng(seed)
+    scenes = np.concatenate([np.ones((1, 12, 16, 3)), rng.random((3, 12, 16, 3))]).astype(np.float32)
+    white = Simulator(prof).linear_batch(scenes[:1])[0]
+    gains = [0.6 * 4031 / float(white[..., c].max()) for c in range(3)]
+    signal = Simulator(prof.with_physics(hidden)).predict_signal_dn(scenes, gains)
+    w = RecordingWriter(path, prof)
+    for i, sc in enumerate(scenes):
+        w.add(np.round(signal_to_dn(signal[i], prof.noise, rng)).astype(np.uint16), scene=sc)
+
+
+def test_cli_screens_a_mask_shift_with_the_angle_held(tmp_path: Path,
+                                                      monkeypatch: pytest.MonkeyPatch) -> None:
+    """Issue 17 at a small binned size: with the family limit lowered so that the rotated
+    kernel and refraction count as too large (as at the paper's size), a hidden pure mask
+    shift is still named with its parameters; the angle is held at 0 and the report says
+    so, and refraction is not tried."""
+    from thintact_sdk.cli.main import main
+    from thintact_sdk.diagnose import binning
+
+    monkeypatch.setattr(binning, "DIAGNOSIS_FAMILY_BYTES", 1024.0)
+    prof = _device(32, 48)
+    _write_recording(prof, {"mask_misalignment": {"angle_deg": 0.0, "dx_um": 7.0, "dy_um": -4.0}},
+                     tmp_path / "rec")
+    rc = main(["diagnose", str(tmp_path / "rec"), "--out", str(tmp_path / "o"), "--quiet",
+               "--bin", "2", "--max-effects", "1"])
+    assert rc == 0
+    rep = json.loads((tmp_path / "o" / "report.json").read_text())
+    skipped = rep["binned"]["not_screened"]
+    assert set(skipped) == {"mask_misalignment.angle_deg", "refraction"}
+    assert "held at 0" in skipped["mask_misalignment.angle_deg"]
+    f = rep["findings"][0]
+    assert f["effect"] == "mask_misalignment"
+    assert f["params"]["angle_deg"] == 0.0
+    assert abs(f["params"]["dx_um"] - 7.0) < 1.0 and abs(f["params"]["dy_um"] + 4.0) < 1.0
+    assert "angle_deg was held" in f["evidence"]
+    assert "2 parameter(s) must earn" in f["evidence"]  # BIC counts the fitted ones only
+    assert rep["baseline"]["chi2_per_dof"] > 2.0
+    assert rep["full_size"]["final"]["chi2_per_dof"] < 1.2
+
+
+def test_unbinned_amplitude_admits_an_effect_binning_hides(tmp_path: Path) -> None:
+    """A mask shift changes the binned prediction less than the unbinned one (binning
+    averages its fine structure away). With the amplitude floor between the two, the
+    binned diagnosis rejects it on its own but names it when the change is measured on
+    the unbinned recording (as the CLI does)."""
+    from thintact_sdk.diagnose import DiagnoseOptions, diagnose, load_diagnosis_data
+    from thintact_sdk.diagnose.binning import bin_data, unbinned_amplitude_fn
+
+    prof = _device(32, 48)
+    shift = {"angle_deg": 0.0, "dx_um": 7.0, "dy_um": -4.0}
+    _write_recording(prof, {"mask_misalignment": shift}, tmp_path / "rec")
+    full = load_diagnosis_data(tmp_path / "rec")
+    data = bin_data(full, 4)
+    fine = unbinned_amplitude_fn(full)
+    vec = np.array([0.0, 7.0, -4.0])
+    fine_amp = fine({}, {"mask_misalignment": vec})
+    coarse_amp = unbinned_amplitude_fn(data)({}, {"mask_misalignment": vec})
+    assert fine_amp > 1.2 * coarse_amp > 0
+    floor = float(np.sqrt(fine_amp * coarse_amp))
+    opts = DiagnoseOptions(candidates=["mask_misalignment"], amp_floor=floor, max_effects=1,
+                           held_params={"mask_misalignment": ("angle_deg",)})
+    d = diagnose(data, variance_fn=binned_variance_fn(4), options=opts)
+    assert d.report["findings"] == []
+    assert "unbinned" not in " ".join(d.selection.log)
+    opts.fine_amplitude = fine
+    d = diagnose(data, variance_fn=binned_variance_fn(4), options=opts)
+    f = d.report["findings"][0]
+    assert f["effect"] == "mask_misalignment" and abs(f["params"]["dx_um"] - 7.0) < 1.0
+    assert "on the unbinned recording" in f["evidence"]
+
+
+def test_held_params_name_fit_parameters() -> None:
+    """Held parameters are named by the effect's fit labels; a wrong label is refused."""
+    from thintact_sdk.diagnose.run import held_indices
+
+    assert held_indices({"mask_misalignment": ("angle_deg",)}) == {"mask_misalignment": (0,)}
+    with pytest.raises(ThinTactError, match="not fit parameters of mask_misalignment"):
+        held_indices({"mask_misalignment": ("angle",)})

@@ -33,6 +33,23 @@ def test_paper_size_concealed_case_is_diagnosed_within_limits(repo_root: Path, t
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(1800)  # render (~2.5-3 min) + the diagnosis's own 10-minute bound
+def test_paper_size_mask_shift_is_named_with_the_angle_held(repo_root: Path, tmp_path: Path) -> None:
+    """A pure mask shift (7, -4) um at the paper's size: the rotated family is too large
+    there, so the angle is held at 0 and said so in ``binned.not_screened``; the shift is
+    screened on the plain separable kernel and named (its binned change is under the
+    amplitude floor, its unbinned one above it)."""
+    tool = _tool(repo_root, "diagnose_paper_size")
+    rc = tool.main(["--out", str(tmp_path), "--case", "mask_shift"])
+    result = json.loads((tmp_path / "result.json").read_text())
+    assert rc == 0, result["problems"]
+    f = result["findings"][0]
+    assert f["effect"] == "mask_misalignment" and f["params"]["angle_deg"] == 0.0
+    assert "mask_misalignment.angle_deg" in result["binned"]["not_screened"]
+    assert result["diagnose_s"] <= 600 and result["peak_rss_gib"] <= 8
+
+
+@pytest.mark.slow
 @pytest.mark.timeout(3600)  # 17 effects, up to ~3 min each under load
 def test_every_effect_simulates_at_paper_size_or_refuses_cleanly(repo_root: Path, tmp_path: Path) -> None:
     """Each single effect simulates 12 paper-size frames within 8 GiB, except the rotated

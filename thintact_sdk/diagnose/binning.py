@@ -19,7 +19,9 @@ meaning (CONTRACTS §6) on the binned data. A block with a saturated pixel is ma
 from __future__ import annotations
 
 import math
-from typing import Any
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -27,6 +29,9 @@ from thintact_sdk.diagnose.data import DiagnosisData
 from thintact_sdk.diagnose.stats import VarianceFn, default_variance_fn
 from thintact_sdk.errors import ThinTactError
 from thintact_sdk.profile import NoiseSpec, Profile, profile_from_dict
+
+if TYPE_CHECKING:
+    from thintact_sdk.diagnose.model import Values
 
 MAX_DIAGNOSIS_PIXELS = 160 * 128
 """Sensor pixels (per frame and channel) above which ``thintact diagnose`` bins the sensor:
@@ -116,26 +121,55 @@ DIAGNOSIS_FAMILY_BYTES = 256 * 1024**2
 fit builds tens of kernels, each family costing seconds per 100 MiB on this project's 2-core
 reference host."""
 
-PROBES: dict[str, dict[str, dict[str, float]]] = {
-    "mask_misalignment": {"mask_misalignment": {"angle_deg": 0.3, "dx_um": 0.0, "dy_um": 0.0}},
-    "refraction": {"refraction": {"n_scene_side": 1.41}},
+PROBES: dict[str, tuple[dict[str, dict[str, float]], tuple[str, ...]]] = {
+    "mask_misalignment": ({"mask_misalignment": {"angle_deg": 0.3, "dx_um": 0.0, "dy_um": 0.0}},
+                          ("angle_deg",)),
+    "refraction": ({"refraction": {"n_scene_side": 1.41}}, ("n_scene_side",)),
 }
-"""The physics at which a family-building candidate's kernel size is estimated (the first
-step of its fit is of this order)."""
+"""Per family-building candidate: the physics at which its kernel size is estimated (the
+first step of its fit is of this order) and the fit parameters that need the family (held
+at their null value when it is too large; the others are still screened: a mask *shift*
+keeps the plain separable kernel, only the angle needs the rotated family)."""
 
 
-def oversized_candidates(profile: Profile, limit_bytes: float = DIAGNOSIS_FAMILY_BYTES
-                         ) -> dict[str, str]:
-    """Candidates whose kernels need tabulated families above ``limit_bytes`` on this
-    device (``{name: reason}``): the rotated mask's displacement family and refraction's
-    ``D²`` family grow with the sensor's and the scene's extent, not with binning alone."""
+@dataclass(frozen=True)
+class ScreeningLimits:
+    """What the diagnosis cannot screen on a device, and why (:func:`screening_limits`).
+
+    Attributes
+    ----------
+    held
+        ``{effect: fit-parameter labels}`` held at their null value
+        (:attr:`~thintact_sdk.diagnose.run.DiagnoseOptions.held_params`).
+    dropped
+        Effects with every fit parameter held: not tried at all.
+    not_screened
+        ``{"effect" or "effect.param": reason}`` for ``report.json`` ``binned.not_screened``
+        (a whole effect when dropped, else each held parameter).
+    """
+
+    held: dict[str, tuple[str, ...]] = field(default_factory=dict)
+    dropped: tuple[str, ...] = ()
+    not_screened: dict[str, str] = field(default_factory=dict)
+
+
+def screening_limits(profile: Profile, limit_bytes: float | None = None) -> ScreeningLimits:
+    """The fit parameters whose kernels need tabulated families above ``limit_bytes`` on
+    this device: the rotated mask's displacement family and refraction's ``D²`` family grow
+    with the sensor's and the scene's extent, not with binning alone. Their parameters are
+    held at the null value; the rest of the effect (a mask shift) is still screened
+    (``limit_bytes`` default: :data:`DIAGNOSIS_FAMILY_BYTES`)."""
+    from thintact_sdk.diagnose.candidates import CANDIDATES
     from thintact_sdk.imaging import sim_refracted, sim_rotated
     from thintact_sdk.imaging.sim_params import kernel_params
     from thintact_sdk.imaging.simulator import _expansion
     from thintact_sdk.physics import resolve_physics
 
-    out: dict[str, str] = {}
-    for name, probe in PROBES.items():
+    limit = DIAGNOSIS_FAMILY_BYTES if limit_bytes is None else float(limit_bytes)
+    held: dict[str, tuple[str, ...]] = {}
+    dropped: list[str] = []
+    why: dict[str, str] = {}
+    for name, (probe, params) in PROBES.items():
         if name in profile.physics:
             continue
         phys = resolve_physics({**dict(profile.physics), **probe})
@@ -144,12 +178,64 @@ def oversized_candidates(profile: Profile, limit_bytes: float = DIAGNOSIS_FAMILY
             size = sim_rotated.rotated_family_bytes(kp, _expansion(kp).rank)
         else:
             size = sim_refracted.refracted_family_bytes(kp)
-        if size > limit_bytes:
-            out[name] = (f"its kernel family at {probe[name]} would be {size / 1024**2:.0f} MiB "
-                         f"on the {profile.sensor.rows}×{profile.sensor.cols} → "
-                         f"{profile.scene.rows}×{profile.scene.cols} device (limit "
-                         f"{limit_bytes / 1024**2:.0f} MiB)")
-    return out
+        if size <= limit:
+            continue
+        reason = (f"its kernel family at {probe[name]} would be {size / 1024**2:.0f} MiB "
+                  f"on the {profile.sensor.rows}×{profile.sensor.cols} → "
+                  f"{profile.scene.rows}×{profile.scene.cols} device (limit "
+                  f"{limit / 1024**2:.0f} MiB)")
+        labels = CANDIDATES[name].labels if name in CANDIDATES else params
+        held[name] = params
+        if set(params) >= set(labels):
+            dropped.append(name)
+            why[name] = reason
+            continue
+        rest = ", ".join(lab for lab in labels if lab not in params)
+        for p in params:
+            null = CANDIDATES[name].null(profile)[labels.index(p)]
+            why[f"{name}.{p}"] = f"held at {null:g} ({rest} screened): {reason}"
+    return ScreeningLimits(held, tuple(dropped), why)
+
+
+def oversized_candidates(profile: Profile, limit_bytes: float | None = None) -> dict[str, str]:
+    """``{"effect" or "effect.param": reason}``: what :func:`screening_limits` leaves
+    unscreened on this device."""
+    return screening_limits(profile, limit_bytes).not_screened
+
+
+FINE_AMPLITUDE_FRAMES = 4
+"""Frames of the unbinned recording on which :func:`unbinned_amplitude_fn` measures an
+effect's change (spread over the recording; each costs a full-size simulation)."""
+
+
+def unbinned_amplitude_fn(data: DiagnosisData, n_frames: int = FINE_AMPLITUDE_FRAMES,
+                          sys_frac: float = 1e-3) -> Callable[[Values, Values], float]:
+    """``(values before, values after) -> rms change of the prediction / rms signal`` on
+    ``n_frames`` frames of the **unbinned** recording ``data`` (gains solved there for each;
+    float32 products, simulations cached), for
+    :attr:`~thintact_sdk.diagnose.run.DiagnoseOptions.fine_amplitude`.
+
+    Binning averages away structure finer than a block: a 7 um mask shift of the paper's
+    device changes its 8×8-binned prediction by 4e-4 of the signal but is clearly above the
+    diagnosis's amplitude floor (6e-4, the simulator's own accuracy) on the unbinned one.
+    """
+    from thintact_sdk.diagnose.model import DiagnosisModel
+    from thintact_sdk.diagnose.run import subset_frames
+
+    made: list[DiagnosisModel] = []  # built at the first call (most runs never need it)
+
+    def amplitude(before: Values, after: Values) -> float:
+        if not made:
+            made.append(DiagnosisModel(subset_frames(data, n_frames), _simulate_float32,
+                                       default_variance_fn(), sys_frac=sys_frac, cache_size=2))
+        model = made[0]
+        p0 = model.evaluate(before).pred_dn
+        p1 = model.evaluate(after).pred_dn
+        m = model.fit_mask
+        sig = float(np.sqrt(np.mean((p0[m] - model.black) ** 2)))
+        return float(np.sqrt(np.mean((p1[m] - p0[m]) ** 2))) / max(sig, 1e-12)
+
+    return amplitude
 
 
 def _simulate_float32(profile: Profile, scenes: np.ndarray) -> np.ndarray:

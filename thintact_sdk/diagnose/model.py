@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import json
 from collections import OrderedDict
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -84,6 +84,11 @@ class DiagnosisModel:
         Optional ``R × S`` mask of sensor pixels left out of the fits (defects).
     cache_size
         Simulator results kept (each ``F × R × S × C`` float64).
+    held
+        ``{effect: parameter indices}`` held at their null value in every fit: parameters
+        whose kernels the simulator cannot build on this device within the diagnosis's
+        memory (e.g. a rotated mask's angle at the paper's size); the effect's other
+        parameters are still screened and fitted.
     """
 
     def __init__(
@@ -94,8 +99,10 @@ class DiagnosisModel:
         sys_frac: float = 1e-3,
         exclude: np.ndarray | None = None,
         cache_size: int = 24,
+        held: Mapping[str, tuple[int, ...]] | None = None,
     ) -> None:
         self.data = data
+        self.held: dict[str, tuple[int, ...]] = {k: tuple(v) for k, v in (held or {}).items()}
         self.profile = data.profile
         self.simulate = simulate
         self.variance_fn = variance_fn
@@ -118,6 +125,13 @@ class DiagnosisModel:
         self.base_physics = dict(self.profile.physics)
         self.weights = np.zeros_like(m)
         self.set_reference(None)
+
+    def free(self, cand: Candidate, include_slow: bool = True) -> list[int]:
+        """Indices of ``cand``'s parameters a fit may vary: not held (:attr:`held`) and,
+        unless ``include_slow``, not on the simulator's slow path (``slow_params``)."""
+        held = self.held.get(cand.name, ())
+        return [i for i in range(cand.k)
+                if i not in held and (include_slow or i not in cand.slow_params)]
 
     # ------------------------------------------------------------------ variance
     def variance(self, pred_dn: np.ndarray) -> np.ndarray:

@@ -21,7 +21,7 @@ from thintact_sdk.diagnose.model import (
     Values,
     default_simulate,
 )
-from thintact_sdk.diagnose.select import Round, Selection, select_effects
+from thintact_sdk.diagnose.select import FineAmplitude, Round, Selection, select_effects
 from thintact_sdk.diagnose.stats import (
     FitStats,
     VarianceFn,
@@ -61,6 +61,17 @@ class DiagnoseOptions:
     fit_frames
         Effects are named and fitted on at most this many frames spread over the
         recording (the simulator's cost grows with frames); every frame is evaluated.
+    held_params
+        ``{effect: parameter labels}`` held at their null value (not screened): what the
+        simulator cannot build on this device within the diagnosis's memory, e.g. a rotated
+        mask's ``angle_deg`` at the paper's size (:func:`~thintact_sdk.diagnose.binning.screening_limits`);
+        the effect's other parameters are screened and fitted, and an effect with every
+        parameter held is not tried.
+    fine_amplitude
+        For binned data: the effect's change of the prediction measured on the unbinned
+        recording (:func:`~thintact_sdk.diagnose.binning.unbinned_amplitude_fn`), which
+        an effect whose binned change is under ``amp_floor`` may reach instead
+        (:func:`~thintact_sdk.diagnose.select.select_effects`).
     """
 
     sys_frac: float = 1e-3
@@ -71,6 +82,8 @@ class DiagnoseOptions:
     candidates: list[str] | None = None
     fit_frames: int = 12
     blas_threads: int | None = 1
+    held_params: dict[str, tuple[str, ...]] = field(default_factory=dict)
+    fine_amplitude: FineAmplitude | None = None
 
 
 @dataclass
@@ -104,6 +117,23 @@ def known_candidates(profile: Profile) -> list[str]:
     """Effects the diagnosis can try: every registered effect that declares a fit, minus
     those already in the profile's physics."""
     return [n for n in CANDIDATES if n not in profile.physics]
+
+
+def held_indices(held_params: dict[str, tuple[str, ...]]) -> dict[str, tuple[int, ...]]:
+    """``{effect: labels}`` → ``{effect: indices into its fit vector}`` (unknown effects
+    are ignored; an unknown label is a :class:`~thintact_sdk.errors.ThinTactError`)."""
+    from thintact_sdk.errors import ThinTactError
+
+    out: dict[str, tuple[int, ...]] = {}
+    for name, labels in held_params.items():
+        if name not in CANDIDATES:
+            continue
+        known = CANDIDATES[name].labels
+        bad = [lab for lab in labels if lab not in known]
+        if bad:
+            raise ThinTactError(f"held parameters {bad} are not fit parameters of {name} {known}")
+        out[name] = tuple(known.index(lab) for lab in labels)
+    return out
 
 
 def contract_params(name: str, vec: np.ndarray, model: DiagnosisModel, beta: np.ndarray,
@@ -205,7 +235,9 @@ def _diagnose(
         for n in prof.physics
         if n in CANDIDATES and CANDIDATES[n].domain != "optical"
     }
-    cands = opt.candidates if opt.candidates is not None else known_candidates(prof)
+    held = held_indices(opt.held_params)
+    cands = [c for c in (opt.candidates if opt.candidates is not None else known_candidates(prof))
+             if len(held.get(c, ())) < CANDIDATES[c].k]
     timing: dict[str, float] = {}
 
     ev0 = _evaluate_full(model, base_values)
@@ -215,10 +247,11 @@ def _diagnose(
     say(f"baseline: rms {base.stats.rms_dn:.2f} DN, χ²/dof {base.stats.chi2_per_dof:.3f}")
 
     sub = subset_frames(data, opt.fit_frames)
-    fit_model = DiagnosisModel(sub, sim, var_fn, sys_frac=opt.sys_frac)
+    fit_model = DiagnosisModel(sub, sim, var_fn, sys_frac=opt.sys_frac, held=held)
     sel = select_effects(
         fit_model, cands, base_values, max_effects=opt.max_effects, margin=opt.margin,
         amp_floor=opt.amp_floor, deadline=deadline, progress=say,
+        fine_amplitude=opt.fine_amplitude,
     )
     ev1 = _evaluate_full(model, sel.values)
     final = _view(model, data, ev1.pred_dn, sel.values)
@@ -226,11 +259,13 @@ def _diagnose(
     if struct.significant and deadline.remaining_s() > 0.25 * opt.time_budget_s:
         # a local defect biases the effect fits: fit again without its pixels
         say("local defect found: refitting the effects without it")
-        fit2 = DiagnosisModel(sub, sim, var_fn, sys_frac=opt.sys_frac, exclude=struct.mask)
+        fit2 = DiagnosisModel(sub, sim, var_fn, sys_frac=opt.sys_frac, exclude=struct.mask,
+                              held=held)
         fit2.cache = fit_model.cache
         sel = select_effects(
             fit2, cands, base_values, max_effects=opt.max_effects, margin=opt.margin,
             amp_floor=opt.amp_floor, deadline=deadline, progress=say,
+            fine_amplitude=opt.fine_amplitude,
         )
         fit_model = fit2
         ev1 = _evaluate_full(model, sel.values)
@@ -251,6 +286,10 @@ def _diagnose(
             ev_r = _evaluate_full(model, accepted)
             view = _view(model, data, ev_r.pred_dn, accepted)
         findings.append(_finding(rnd, fit_model, sub, prof, view, ev1.beta, sel.values))
+        if opt.held_params.get(rnd.name):
+            findings[-1]["evidence"] += (
+                f" Its {', '.join(opt.held_params[rnd.name])} was held at the null value: "
+                "not screened on this device (the kernels would not fit in memory).")
         history.append((f"+ {rnd.name}", view.stats.rms_dn, view.stats.chi2_per_dof))
         phys[rnd.name] = profile_params(rnd.name, findings[-1]["params"])
     fitted = prof.with_physics(phys)
@@ -309,7 +348,9 @@ def _finding(
         f"{describe_effect(rnd.name, params, prof)} Adding it lowers χ² by {rnd.dchi2:.0f} "
         f"(with a {model.sys_frac:.1%} systematic allowance), above the {rnd.threshold:.0f} that "
         f"{rnd.k} parameter(s) must earn (BIC k·ln n + margin); it changes the prediction by "
-        f"{rnd.amplitude_dn:.2f} DN rms."
+        f"{rnd.amplitude_dn:.2f} DN rms"
+        + ("." if rnd.fine_amplitude is None else
+           f" ({rnd.fine_amplitude:.1e} of the signal on the unbinned recording).")
     )
     alts = []
     for a in rnd.alternatives:

@@ -60,8 +60,9 @@ def run(args: argparse.Namespace) -> int:
         bin_data,
         binned_variance_fn,
         full_size_check,
-        oversized_candidates,
+        screening_limits,
         unbin_hotspots,
+        unbinned_amplitude_fn,
     )
     from thintact_sdk.diagnose.outputs import write_outputs
     from thintact_sdk.diagnose.run import known_candidates
@@ -83,8 +84,11 @@ def run(args: argparse.Namespace) -> int:
     opts = DiagnoseOptions(sys_frac=args.sys_frac, time_budget_s=args.time_budget, max_effects=args.max_effects)
     skipped: dict[str, str] = {}
     if b > 1:
-        skipped = oversized_candidates(data.profile)
-        opts.candidates = [c for c in known_candidates(data.profile) if c not in skipped]
+        limits = screening_limits(data.profile)
+        skipped = limits.not_screened
+        opts.candidates = [c for c in known_candidates(data.profile) if c not in limits.dropped]
+        opts.held_params = limits.held
+        opts.fine_amplitude = unbinned_amplitude_fn(full_data, sys_frac=args.sys_frac)
         for name, why in skipped.items():
             con.print(f"not screened: {name} ({why})")
     with con.status("diagnosing...") as status:
