@@ -116,6 +116,29 @@ def test_prior_cross_validation_never_scores_a_scene_with_a_tau_tuned_on_it() ->
     assert plain_only.fold_tau == alone[None].fold_tau  # type: ignore[union-attr]
 
 
+def test_a_prior_that_wins_the_mean_on_one_scene_only_is_not_deployed() -> None:
+    # the prior's estimate is far too bright (clipped to 1): a perfect white scene, ∞ dB, wins the
+    # mean; plain Tikhonov (0.6 / (1 + τ) ≈ 0.3) is far better on the four other scenes
+    values = [1.0, 0.305, 0.31, 0.295, 0.315]
+    truths = [np.full((1, 1, 1), v) for v in values]
+    signals = [np.ones((1, 1, 1), np.float32)] * len(values)
+    labels = ["white", "b", "c", "d", "e"]
+    prior = ScenePrior(1.5, 4.0)
+    scales = {None: 0.6, prior: 10.0}
+
+    class _Decoder(_PriorDecoder):
+        def decode(self, y: np.ndarray) -> np.ndarray:
+            return np.asarray(y, np.float32) * scales[self.prior] / (1.0 + self.tau)
+
+    taus = np.array([1.0, 2.0])
+    alone = cross_validate(_Decoder(prior), "stub", signals, truths, labels, taus)
+    assert alone is not None and alone.held_out_psnr["white"] == np.inf
+    assert alone.held_out_mean_db > cross_validate(_Decoder(None), "stub", signals, truths, labels,  # type: ignore[union-attr]
+                                                   taus).held_out_mean_db
+    cv = cross_validate_prior(_Decoder, "stub", signals, truths, labels, taus, [prior])
+    assert cv is not None and cv.prior is None and "median scene" in cv.curve.note
+
+
 def test_bootstrap_spread_says_how_well_the_scenes_determine_tau() -> None:
     taus = np.geomspace(1.0, 1e4, 41)
     lt = np.log10(taus)
