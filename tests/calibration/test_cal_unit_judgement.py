@@ -211,6 +211,9 @@ def test_healthy_unit_passes_against_its_own_prediction(healthy: tuple[Path, Pat
     report = (cal / "report.html").read_text()
     assert "Health" in report and "predicted PSNR" in report and "below limit" not in report
     assert "τ per channel" in report and "per_channel_check" in m["tau_selection"]
+    # the scene-prior criterion: every candidate's held-out mean in the report and the json
+    assert "Scene prior for" in report and "held-out mean PSNR (dB)" in report
+    assert len(m["tau_selection"]["scene_prior_candidates"]["t2s-closed-form"]) == 9
     assert not re.search(r"\d\.\d{9,}", report.split("<img")[0])  # no raw 15-digit floats
 
 
