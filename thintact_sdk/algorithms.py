@@ -17,6 +17,7 @@ name                         what it is
 ``canonical_gauge``          the same T2S operator with a smooth (low-rank) open term
 ``CalibrationBundle``        a device's calibration (matrices, filter, τ); ``find_latest``
 ``TikhonovSolver``           closed-form separable Tikhonov solve (SVDs once, any τ)
+``ScenePrior``               DCT-domain weights of generalised Tikhonov (change of variable)
 ``JointFilter``              the paper's Φs/Φf joint filter; ``joint_filter_open`` applies it
 ``SeparableDCT``             orthonormal 2-D DCT (scipy, or by matrices on any backend); ``dct_matrix``
 ``largest_eigenvalue``       power method; ``nesterov``: accelerated gradient, fixed step
@@ -65,6 +66,7 @@ _WHERE = {
     "gelsight_count": "imaging.scenes", "make_scene": "imaging.scenes", "usaf": "imaging.scenes",
     "white": "imaging.scenes",
     "Simulator": "imaging.simulator",
+    "ScenePrior": "imaging.scene_prior",
     "SystemMatrices": "imaging.t2s", "kron_sum_norm2": "imaging.t2s",
     "tune_decoder_tau": "imaging.tau_sweep",
     "TikhonovSolver": "imaging.tikhonov",

@@ -8,8 +8,9 @@ per scene: dark, white, every row and column slit and six validation scenes. A s
 of the same unit holds 23 scenes the calibration never saw (the test scenes).
 
 Measured, for the healthy unit: ``thintact calibrate --from-recording`` (verdict, the τ each
-criterion chose, τ per channel kept or not), the mean PSNR of default ``thintact reconstruct``
-on the test scenes, the same decoder with the best τ in hindsight, and the paper's Alg. 1-3
+criterion chose, τ per channel kept or not, the scene prior chosen), the mean PSNR of default
+``thintact reconstruct`` on the test scenes, the same decoder with the best τ in hindsight (with
+the bundle's scene prior, and with plain Tikhonov), and the paper's Alg. 1-3
 (``--method paper``) + exact ``t2s-closed-form`` with its best τ in hindsight. Then the same
 unit with a dust speck, with a dim column and with a ghost, each calibrated on its own: the
 exit status and the defects named.
@@ -143,6 +144,9 @@ def measure_healthy(root: Path, filter_steps: int | None, *, reuse: bool = False
     print("best tau in hindsight on the test scenes ...", file=sys.stderr, flush=True)
     hindsight = {name: best_in_hindsight(make_decoder(profile, bundle, name), frames)
                  for name in (sel["decoder_taus"] if all_decoders else [meta["decoder"]])}
+    # the same decoders with plain Tikhonov (a bundle's scene prior left out): one τ, best in hindsight
+    plain = {name: best_in_hindsight(make_decoder(profile, bundle, name, prior=None), frames)
+             for name in (meta.get("scene_prior") or {}) if name in hindsight}
     print("Alg. 1-3 (--method paper) + t2s-closed-form ...", file=sys.stderr, flush=True)
     paper_sm, _ = solve_matrices(collect_slits(Recording(root / "rec")), CalibrationOptions(method="paper"), profile)
     paper = CalibrationBundle.create(profile, paper_sm, None, tau=1.0, source="recording")
@@ -161,7 +165,9 @@ def measure_healthy(root: Path, filter_steps: int | None, *, reuse: bool = False
         "shortfall_db": [[s.get("scene"), s.get("shortfall_db")] for s in m["verdict"]["scenes"]],
         "test_scenes": len(frames),
         "default_reconstruct_db": round(default, 3),
+        "scene_prior": sel.get("scene_prior", {}), "scene_prior_candidates": sel.get("scene_prior_candidates", {}),
         "hindsight_db": {k: [round(v[0], 3), float(f"{v[1]:.3g}")] for k, v in hindsight.items()},
+        "hindsight_plain_tikhonov_db": {k: [round(v[0], 3), float(f"{v[1]:.3g}")] for k, v in plain.items()},
         "paper_alg13_t2s_hindsight_db": [round(reference[0], 3), float(f"{reference[1]:.3g}")],
         "paper_reference_open_modes": "all" if exact_open else "t2s-closed-form default (gauge-aware rank 8)",
     }

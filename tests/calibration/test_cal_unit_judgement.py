@@ -21,11 +21,17 @@ from independent_device import (
 
 from thintact_sdk.calibration.collect import collect_slits, signal_of
 from thintact_sdk.calibration.pipeline import CalibrationOptions, solve_matrices
-from thintact_sdk.calibration.tau import assign_folds, bootstrap_spread, cross_validate
+from thintact_sdk.calibration.tau import (
+    assign_folds,
+    bootstrap_spread,
+    cross_validate,
+    cross_validate_prior,
+)
 from thintact_sdk.calibration.validation import make_decoder
 from thintact_sdk.cli.main import main
 from thintact_sdk.imaging.calibration_bundle import CalibrationBundle
 from thintact_sdk.imaging.metrics import psnr
+from thintact_sdk.imaging.scene_prior import ScenePrior
 from thintact_sdk.imaging.scenes import gelsight
 from thintact_sdk.imaging.t2s import SystemMatrices
 from thintact_sdk.profile import Profile
@@ -61,6 +67,76 @@ def test_cross_validation_never_scores_a_scene_with_a_tau_tuned_on_it() -> None:
     assert cv.held_out_psnr["b"] == pytest.approx(psnr(np.full((1, 1, 1), 0.5), truths[1]))
     # one distinct scene per fold is too few to tune on
     assert cross_validate(_ScaledDecoder(), "stub", signals[:2], truths[:2], labels[:2], np.array([1.0])) is None
+
+
+class _PriorDecoder:
+    """Stand-in decoder of one prior on a 1×1 grid: ``decode(y) = s·y / (1 + τ)`` with
+    ``s = 0.05`` for plain Tikhonov and ``SCALE[p]`` for prior ``p``."""
+
+    SCALE = {ScenePrior(1.0, 8.0): 1.2, ScenePrior(0.5, 8.0): 0.3}
+
+    def __init__(self, prior: ScenePrior | None, scale: dict[ScenePrior, float] | None = None) -> None:
+        self.prior, self.tau = prior, 1.0
+        self.scale = self.SCALE if scale is None else scale
+
+    def set_tau(self, tau: float) -> None:
+        self.tau = tau
+
+    def decode(self, y: np.ndarray) -> np.ndarray:
+        s = 0.05 if self.prior is None else self.scale[self.prior]
+        return np.asarray(y, np.float32) * s / (1.0 + self.tau)
+
+
+def test_prior_cross_validation_never_scores_a_scene_with_a_tau_tuned_on_it() -> None:
+    # fold 0 (truths ≈ 0.6) wants τ = 1 with the first prior, fold 1 (≈ 0.4) τ = 2; plain is poor
+    values = [0.605, 0.41, 0.61, 0.39, 0.59]
+    truths = [np.full((1, 1, 1), v) for v in values]
+    signals = [np.ones((1, 1, 1), np.float32)] * len(values)
+    labels = ["a", "b", "c", "d", "e"]
+    taus = np.array([1.0, 2.0])
+    p1, p2 = list(_PriorDecoder.SCALE)
+    cv = cross_validate_prior(_PriorDecoder, "stub", signals, truths, labels, taus, [p1, p2])
+    assert cv is not None and cv.folds == [0, 1, 0, 1, 0]
+    # every candidate is cross-validated over τ on its own, the best held out is deployed
+    alone = {p: cross_validate(_PriorDecoder(p), "stub", signals, truths, labels, taus) for p in (None, p1, p2)}
+    assert cv.prior_held_out_db == {p: alone[p].held_out_mean_db for p in (p1, p2)}  # type: ignore[union-attr]
+    best = max(alone, key=lambda p: alone[p].held_out_mean_db)  # type: ignore[union-attr]
+    assert cv.prior == best == p1 and cv.fold_prior == [p1, p1]
+    assert cv.held_out_mean_db > cv.plain_held_out_db == alone[None].held_out_mean_db  # type: ignore[union-attr]
+    # each scene is scored with the τ tuned on the other fold: 0.4 for fold 0, 0.6 for fold 1
+    assert cv.fold_tau == [1.0, 2.0]
+    for label, x, fold in zip(labels, values, cv.folds, strict=True):
+        other = 0.4 if fold == 0 else 0.6
+        assert cv.held_out_psnr[label] == pytest.approx(psnr(np.full((1, 1, 1), other), np.full((1, 1, 1), x)))
+    # priors that score worse held out than plain Tikhonov are not deployed
+    bad = {p1: 0.01, p2: 0.02}
+    plain_only = cross_validate_prior(lambda p: _PriorDecoder(p, bad), "stub", signals, truths, labels, taus,
+                                      [p1, p2])
+    assert plain_only is not None and plain_only.prior is None and "not used" in plain_only.curve.note
+    assert plain_only.fold_tau == alone[None].fold_tau  # type: ignore[union-attr]
+
+
+def test_a_prior_that_wins_the_mean_on_one_scene_only_is_not_deployed() -> None:
+    # the prior's estimate is far too bright (clipped to 1): a perfect white scene, ∞ dB, wins the
+    # mean; plain Tikhonov (0.6 / (1 + τ) ≈ 0.3) is far better on the four other scenes
+    values = [1.0, 0.305, 0.31, 0.295, 0.315]
+    truths = [np.full((1, 1, 1), v) for v in values]
+    signals = [np.ones((1, 1, 1), np.float32)] * len(values)
+    labels = ["white", "b", "c", "d", "e"]
+    prior = ScenePrior(1.5, 4.0)
+    scales = {None: 0.6, prior: 10.0}
+
+    class _Decoder(_PriorDecoder):
+        def decode(self, y: np.ndarray) -> np.ndarray:
+            return np.asarray(y, np.float32) * scales[self.prior] / (1.0 + self.tau)
+
+    taus = np.array([1.0, 2.0])
+    alone = cross_validate(_Decoder(prior), "stub", signals, truths, labels, taus)
+    assert alone is not None and alone.held_out_psnr["white"] == np.inf
+    assert alone.held_out_mean_db > cross_validate(_Decoder(None), "stub", signals, truths, labels,  # type: ignore[union-attr]
+                                                   taus).held_out_mean_db
+    cv = cross_validate_prior(_Decoder, "stub", signals, truths, labels, taus, [prior])
+    assert cv is not None and cv.prior is None and "median scene" in cv.curve.note
 
 
 def test_bootstrap_spread_says_how_well_the_scenes_determine_tau() -> None:
@@ -135,6 +211,9 @@ def test_healthy_unit_passes_against_its_own_prediction(healthy: tuple[Path, Pat
     report = (cal / "report.html").read_text()
     assert "Health" in report and "predicted PSNR" in report and "below limit" not in report
     assert "τ per channel" in report and "per_channel_check" in m["tau_selection"]
+    # the scene-prior criterion: every candidate's held-out mean in the report and the json
+    assert "Scene prior for" in report and "held-out mean PSNR (dB)" in report
+    assert len(m["tau_selection"]["scene_prior_candidates"]["t2s-closed-form"]) == 9
     assert not re.search(r"\d\.\d{9,}", report.split("<img")[0])  # no raw 15-digit floats
 
 
@@ -243,6 +322,43 @@ def test_bundle_tau_per_channel_is_used_unless_tau_is_given(tmp_path: Path) -> N
 
     with pytest.raises(CalibrationError, match="channel_tau"):
         CalibrationBundle.load(tmp_path / "cal")
+
+
+def test_bundle_scene_prior_is_used_unless_tau_is_given_and_old_bundles_decode_as_before(tmp_path: Path) -> None:
+    from thintact_decoders import ArrayBackend, T2SClosedFormDecoder
+
+    from thintact_sdk.errors import CalibrationError
+
+    profile = small_profile(("R", "G", "B"))
+    sm = _random_matrices(profile, seed=6)
+    prior = ScenePrior(1.0, 8.0)
+    y = sm.forward(gelsight(profile.scene.rows, profile.scene.cols, 0)).astype(np.float32)
+    # an old bundle (no scene_prior): plain Tikhonov at its τ, as before
+    CalibrationBundle.create(profile, sm, None, tau=7.0, source="recording", decoder="t2s-closed-form",
+                             tau_t2s_closed_form=80.0).save(tmp_path / "old")
+    old = make_decoder(profile, CalibrationBundle.load(tmp_path / "old"), "t2s-closed-form")
+    assert old.prior is None  # type: ignore[attr-defined]
+    plain = T2SClosedFormDecoder(sm, 80.0, ArrayBackend("numpy")).decode(y)
+    np.testing.assert_allclose(old.decode(y), plain, rtol=1e-4, atol=1e-4)
+    # a bundle with a scene prior: generalised Tikhonov at its τ; tau in the settings (--tau) is plain
+    CalibrationBundle.create(profile, sm, None, tau=7.0, source="recording", decoder="t2s-closed-form",
+                             tau_t2s_closed_form=80.0,
+                             scene_prior={"t2s-closed-form": prior.to_json()}).save(tmp_path / "new")
+    bundle = CalibrationBundle.load(tmp_path / "new")
+    new = make_decoder(profile, bundle, "t2s-closed-form")
+    assert new.prior == prior  # type: ignore[attr-defined]
+    generalised = T2SClosedFormDecoder(sm, 80.0, ArrayBackend("numpy"), prior=prior).decode(y)
+    np.testing.assert_allclose(new.decode(y), generalised, rtol=1e-4, atol=1e-4)
+    assert not np.allclose(generalised, plain, atol=1e-3)
+    overridden = make_decoder(profile, bundle, "t2s-closed-form", tau=80.0)
+    assert overridden.prior is None  # type: ignore[attr-defined]
+    np.testing.assert_allclose(overridden.decode(y), plain, rtol=1e-4, atol=1e-4)
+    # a malformed prior is refused naming the field
+    meta = json.loads((tmp_path / "new" / "calibration.json").read_text())
+    meta["scene_prior"] = {"t2s-closed-form": {"kind": "dct-power", "alpha": -1.0, "k0": 8.0}}
+    (tmp_path / "new" / "calibration.json").write_text(json.dumps(meta))
+    with pytest.raises(CalibrationError, match="scene_prior"):
+        CalibrationBundle.load(tmp_path / "new")
 
 
 @pytest.fixture(scope="module", params=[Ghost(6, -9, 0.08), Ghost(0, 11, 0.08)], ids=["diagonal", "separable"])

@@ -312,7 +312,8 @@ def calibrate_recording(
         prediction = predict_validation(
             profile, sm, frames.labels, frames.truths, selection.decoder, k,
             filter_steps=opts.filter_steps, filter_scenes=opts.filter_scenes, method=opts.method,
-            max_iter=opts.max_iter, tol=opts.tol, rank=opts.rank)
+            max_iter=opts.max_iter, tol=opts.tol, rank=opts.rank,
+            prior=selection.priors.get(selection.decoder))
     lim = limits_of(profile)
     verdict = judge(val, prediction, health, lim, registration)
     passed = verdict.passed

@@ -216,8 +216,32 @@ def _selection_text(outcome: CalibrationOutcome) -> str:
             f"<b>{html.escape(sel.criterion)}</b>. Cross-validation tunes τ on one fold of the validation "
             "scenes and scores the other fold with it, so no scene is scored with a τ tuned on it.</p>"
             + _table(rows, ["decoder", "τ (DN²)", "held-out mean PSNR (dB)"])
-            + _channel_tau_text(outcome)
+            + _channel_tau_text(outcome) + _prior_text(outcome)
             + "<p>τ each criterion would choose:</p>" + _table(crit, ["criterion", "τ (DN²)", "note"]))
+
+
+def _prior_text(outcome: CalibrationOutcome) -> str:
+    """The scene-prior check: each candidate prior's cross-validated τ and held-out mean PSNR
+    against plain Tikhonov's, and what the bundle uses."""
+    sel = outcome.selection
+    if sel is None:
+        return ""
+    parts = []
+    for name, cv in sel.cross_validation.items():
+        if not cv.prior_curves:
+            continue
+        rows = [["plain Tikhonov", "", "", f"{cv.plain_held_out_db:.2f}", "" if cv.prior else "used"]]
+        rows += [[f"{p.alpha:g}", f"{p.k0:g}", f"{c.tau:.4g}", f"{cv.prior_held_out_db[p]:.2f}",
+                  "used" if p == cv.prior else ""] for p, c in cv.prior_curves]
+        verdict = (f"the bundle uses α {cv.prior.alpha:g}, k0 {cv.prior.k0:g} at τ {cv.curve.tau:.4g} DN²"
+                   if cv.prior is not None else "the bundle uses plain Tikhonov")
+        parts.append(
+            f"<p>Scene prior for <b>{html.escape(name)}</b>: generalised Tikhonov τ‖W_L X W_Rᵀ‖² with DCT "
+            "weights (1 + k/k0)^α per axis, solved by the same closed form. Each candidate's τ is "
+            "cross-validated like plain τ (tuned on one fold, the other fold scored with it); the "
+            f"candidate with the best held-out mean PSNR is deployed: {verdict}.</p>"
+            + _table(rows, ["α", "k0", "τ (DN²)", "held-out mean PSNR (dB)", ""]))
+    return "".join(parts)
 
 
 def _channel_tau_text(outcome: CalibrationOutcome) -> str:

@@ -20,9 +20,11 @@ import numpy as np
 from thintact_sdk.calibration.collect import SlitCollection, signal_of
 from thintact_sdk.calibration.health import NoiseEstimate
 from thintact_sdk.calibration.tau import (
+    PRIOR_DECODERS,
     CrossValidation,
     TauCurve,
     cross_validate,
+    cross_validate_prior,
     noise_criteria,
     tau_grid,
 )
@@ -33,6 +35,7 @@ from thintact_sdk.calibration.validation import (
     score,
 )
 from thintact_sdk.imaging.calibration_bundle import CalibrationBundle
+from thintact_sdk.imaging.scene_prior import ScenePrior
 from thintact_sdk.profile import Profile
 from thintact_sdk.recording import Recording
 
@@ -70,6 +73,12 @@ class TauSelection:
         held out than one τ; ``calibration.json`` → ``channel_tau``)."""
         return {name: cv.channel_tau for name, cv in self.cross_validation.items() if cv.channel_tau is not None}
 
+    @property
+    def priors(self) -> dict[str, ScenePrior]:
+        """Per decoder, the scene prior cross-validation chose (only where it scored better held
+        out than plain Tikhonov; ``calibration.json`` → ``scene_prior``)."""
+        return {name: cv.prior for name, cv in self.cross_validation.items() if cv.prior is not None}
+
     def to_json(self) -> dict[str, object]:
         return {
             "decoder": self.decoder, "tau": float(f"{self.tau:.4g}"), "criterion": self.criterion,
@@ -84,6 +93,17 @@ class TauSelection:
                     "held_out_tau_per_channel_db": round(v.held_out_channel_db, 3),
                     "gain_standard_error_db": round(v.channel_gain_se_db, 3)}
                 for k, v in self.cross_validation.items() if v.channel_fold_tau},
+            "scene_prior": {
+                k: {**v.prior.to_json(), "tau": float(f"{v.curve.tau:.4g}"),
+                    "held_out_mean_psnr_db": round(v.held_out_mean_db, 3),
+                    "plain_held_out_mean_psnr_db": round(v.plain_held_out_db, 3),
+                    "fold_tau": [float(f"{t:.4g}") for t in v.fold_tau]}
+                for k, v in self.cross_validation.items() if v.prior is not None},
+            "scene_prior_candidates": {
+                k: [{"alpha": p.alpha, "k0": p.k0, "tau": float(f"{c.tau:.4g}"),
+                     "held_out_mean_psnr_db": round(v.prior_held_out_db[p], 3),
+                     "all_scenes_mean_psnr_db": round(max(c.values), 3)} for p, c in v.prior_curves]
+                for k, v in self.cross_validation.items() if v.prior_curves},
             "curves": [c.to_json() for c in self.curves],
         }
 
@@ -94,6 +114,9 @@ class TauSelection:
         meta.pop("channel_tau", None)
         if self.channel_taus:
             meta["channel_tau"] = {k: [float(t) for t in v] for k, v in self.channel_taus.items()}
+        meta.pop("scene_prior", None)
+        if self.priors:
+            meta["scene_prior"] = {k: v.to_json() for k, v in self.priors.items()}
 
 
 def validation_frames(recording: Recording, collection: SlitCollection, saturation_dn: float) -> ValidationFrames:
@@ -166,10 +189,16 @@ def select(
     decoders = {name: make_decoder(profile, bundle, name) for name in names}
     cvs: dict[str, CrossValidation] = {}
     for name, dec in decoders.items():
-        cv = cross_validate(dec, name, frames.signals, frames.truths, frames.labels, grid)
+        if name in PRIOR_DECODERS:
+            cv = cross_validate_prior(
+                lambda prior, name=name: make_decoder(profile, bundle, name, prior=prior),  # type: ignore[misc]
+                name, frames.signals, frames.truths, frames.labels, grid)
+        else:
+            cv = cross_validate(dec, name, frames.signals, frames.truths, frames.labels, grid)
         if cv is not None:
             cvs[name] = cv
-            curves.append(TauCurve(f"cross-validation ({name})", cv.curve.taus, cv.curve.values,
+            what = "" if cv.prior is None else f", scene prior alpha {cv.prior.alpha:g} k0 {cv.prior.k0:g}"
+            curves.append(TauCurve(f"cross-validation ({name}{what})", cv.curve.taus, cv.curve.values,
                                    cv.curve.tau, cv.curve.unit, cv.curve.note))
     if cvs:
         best = max(cvs.values(), key=lambda cv: cv.held_out_mean_db)

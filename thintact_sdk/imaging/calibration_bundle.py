@@ -8,6 +8,9 @@ A bundle directory holds
     (``import``: matrices calibrated elsewhere, :mod:`thintact_sdk.calibration.matrices_io`);
     optional ``tau_t2s_closed_form`` (that decoder's τ) and ``channel_tau``
     (``{decoder name: [τ per channel]}``, DN², where the calibration found a τ per channel better)
+    and ``scene_prior`` (``{decoder name: {"kind": "dct-power", "alpha", "k0"}}``: that decoder
+    solves generalised Tikhonov with this :class:`~thintact_sdk.imaging.scene_prior.ScenePrior`
+    at its τ; absent: plain Tikhonov)
 ``system_matrices.npz``
     :class:`~thintact_sdk.imaging.t2s.SystemMatrices` (DN above black per display unit).
 ``filter.npz``
@@ -28,6 +31,7 @@ from typing import TYPE_CHECKING, Any
 
 from thintact_sdk.errors import CalibrationError
 from thintact_sdk.imaging.recon_filter import JointFilter
+from thintact_sdk.imaging.scene_prior import ScenePrior
 from thintact_sdk.imaging.t2s import SystemMatrices
 
 if TYPE_CHECKING:
@@ -205,6 +209,13 @@ def _check_meta(meta: dict[str, Any], meta_path: Path) -> None:
             raise CalibrationError(
                 f"{meta_path}: field 'channel_tau' is {channel_tau!r}, which is invalid: it must map "
                 "decoder names to lists of finite numbers > 0 (one per channel)")
+    priors = meta.get("scene_prior")
+    if priors is not None:
+        if not isinstance(priors, dict):
+            raise CalibrationError(f"{meta_path}: field 'scene_prior' is {priors!r}, which is invalid: it must "
+                                   "map decoder names to scene priors")
+        for name, prior in priors.items():
+            ScenePrior.from_json(prior, f"{meta_path}: field 'scene_prior' → {name!r}")
     if "metrics" in meta and not isinstance(meta["metrics"], dict):
         raise CalibrationError(f"{meta_path}: field 'metrics' must be an object")
 

@@ -19,6 +19,10 @@ exact full-T2S Tikhonov minimiser without iterations, see :mod:`thintact_decoder
 takes ``open_rtol`` and ``max_open_rank`` and uses the bundle's ``tau_t2s_closed_form`` if present.
 A bundle's per-channel τ (``channel_tau`` → decoder name → one τ per channel, chosen by the
 calibration where it helps) is used by that decoder unless ``tau`` is given in the settings.
+A bundle's ``scene_prior`` → ``t2s-closed-form`` (generalised Tikhonov with DCT-domain weights,
+chosen by the calibration's cross-validation) is used with the bundle's τ; ``tau`` in the
+settings means plain Tikhonov at that τ unless ``prior`` (a ``ScenePrior`` or its JSON form) is
+given too (``prior: None``: plain Tikhonov whatever the bundle says).
 """
 
 from __future__ import annotations
@@ -49,7 +53,7 @@ from thintact_decoders.sensor_binning import (
     binning_offered,
 )
 from thintact_decoders.t2s_closed_form import T2SClosedFormDecoder
-from thintact_sdk.algorithms import CalibrationBundle, SystemMatrices
+from thintact_sdk.algorithms import CalibrationBundle, ScenePrior, SystemMatrices
 from thintact_sdk.errors import CalibrationError
 from thintact_sdk.interfaces import Decoder
 from thintact_sdk.machine import host_capabilities, host_fingerprint
@@ -189,15 +193,30 @@ def _binnable(sm: SystemMatrices, tau: TauSpec,
     return build
 
 
+def _prior(name: str, bundle: CalibrationBundle, settings: dict[str, Any]) -> ScenePrior | None:
+    """The settings' ``prior`` (``None`` there: plain Tikhonov); else, unless ``tau`` is given,
+    the bundle's ``scene_prior`` for decoder ``name``; else none (plain Tikhonov)."""
+    if "prior" in settings:
+        given = settings["prior"]
+        if given is None or isinstance(given, ScenePrior):
+            return given
+        return ScenePrior.from_json(given, "decoder settings: prior")
+    if "tau" in settings:
+        return None
+    stored = (bundle.meta.get("scene_prior") or {}).get(name)
+    return None if stored is None else ScenePrior.from_json(stored, f"{bundle.path}: scene_prior → {name!r}")
+
+
 def make_t2s_closed_form(profile: Profile, settings: dict[str, Any]) -> T2SClosedFormDecoder:
     """Build the exact non-iterative full-T2S decoder for ``profile`` (on the sensor binned
     2 × 2 where the selection finds that faster and as accurate)."""
     bundle = resolve_bundle(profile, settings)
     tau = _decoder_tau("t2s-closed-form", float(bundle.meta.get("tau_t2s_closed_form", bundle.tau)), bundle,
                        settings, profile)
+    prior = _prior("t2s-closed-form", bundle, settings)
     build = _binnable(bundle.system_matrices, tau, lambda sm, t, xp: T2SClosedFormDecoder(
         sm, t, xp, open_rtol=float(settings.get("open_rtol", 1e-6)),
-        max_open_rank=int(settings.get("max_open_rank", 8)), mode_rtol=_mode_rtol(settings)))
+        max_open_rank=int(settings.get("max_open_rank", 8)), mode_rtol=_mode_rtol(settings), prior=prior))
     return _selected("t2s-closed-form", profile, settings, bundle.system_matrices, build,
                      binnable=True)  # type: ignore[return-value]
 

@@ -44,6 +44,7 @@ from thintact_decoders.modes import (
     representative_tau,
 )
 from thintact_sdk.algorithms import (
+    ScenePrior,
     SystemMatrices,
     TikhonovSolver,
     canonical_gauge,
@@ -80,6 +81,11 @@ class T2SClosedFormDecoder(ClosedFormDecoder):
         the Tikhonov modes whose filter factor reaches this
         (:func:`~thintact_decoders.modes.kept_mode_counts`); the rest of the solve keeps
         every mode. :attr:`kept_modes` says how many were kept.
+    prior
+        Generalised Tikhonov ``τ‖W_L X W_Rᵀ‖²`` instead of ``τ‖X‖²``
+        (:class:`~thintact_sdk.algorithms.ScenePrior`; ``None`` or α = 0: plain). Solved
+        exactly by the same closed form on ``P W_L⁻¹``, ``Q W_R⁻¹`` with ``W_L⁻¹``, ``W_R⁻ᵀ``
+        folded into the final synthesis products: the per-frame cost is unchanged.
     """
 
     name = "t2s-closed-form"
@@ -92,12 +98,19 @@ class T2SClosedFormDecoder(ClosedFormDecoder):
         open_rtol: float = 1e-6,
         max_open_rank: int = 8,
         mode_rtol: float = DEFAULT_MODE_RTOL,
+        prior: ScenePrior | None = None,
     ) -> None:
         self.xp = backend or ArrayBackend("numpy")
+        self.prior = None if prior is None or prior.is_plain else prior
+        if self.prior is not None:
+            system_matrices = self.prior.transform(system_matrices)
         sm = _least_truncated(system_matrices, open_rtol, max_open_rank)
         (r, s), (n, m) = sm.sensor_shape, sm.scene_shape
         if r < n or s < m:
             raise InvalidShapeError("t2s-closed-form needs at least as many sensor rows/cols as scene rows/cols")
+        # synthesis X = W_L⁻¹ (V_P ξ V_Qᵀ) W_R⁻ᵀ: the prior's inverse weights folded into V_P, V_Qᵀ
+        out_left = np.eye(n) if self.prior is None else self.prior.inverse_weight(n)
+        out_right_t = np.eye(m) if self.prior is None else self.prior.inverse_weight(m).T
         self.channels, self.sensor_shape, self.scene_shape = sm.channels, (r, s), (n, m)
         self.channel_tau = channel_taus(tau, sm.channels)
         self.tau = representative_tau(self.channel_tau)
@@ -131,8 +144,8 @@ class T2SClosedFormDecoder(ClosedFormDecoder):
             per["sq"].append(sol.singular_values_q)
             per["den"].append(sol.inv_denom)
             per["sig2"].append(sig2)
-            per["vp"].append(sol.vp)
-            per["vqt"].append(sol.vqt)
+            per["vp"].append(out_left @ sol.vp)
+            per["vqt"].append(sol.vqt @ out_right_t)
             per["uq"].append(uq)
             per["scale"].append(np.outer(sp, sq))
             for key, val in (("a", a), ("b", b), ("a2", a2), ("b2", b2)):

@@ -101,6 +101,10 @@ def run(args: argparse.Namespace) -> int:
     per_channel = sel.get("channel_tau", {}).get(sel.get("decoder"))
     if per_channel:
         print(f"  tau per channel: {', '.join(f'{t:.4g}' for t in per_channel)} DN² (better held out than one tau)")
+    prior = sel.get("scene_prior", {}).get(sel.get("decoder"))
+    if prior:
+        print(f"  scene prior: DCT weights (1 + k/{prior['k0']:g})^{prior['alpha']:g}, held out "
+              f"{prior['held_out_mean_psnr_db']:.2f} dB vs {prior['plain_held_out_mean_psnr_db']:.2f} dB plain Tikhonov")
     print(f"validation (held out): mean PSNR {m['mean_psnr_db']:.2f} dB, mean SSIM {m['mean_ssim']:.3f} "
           f"-> {verdict}")
     for f in m.get("verdict", {}).get("failures", []):
