@@ -132,6 +132,19 @@ def test_rotated_kernel_refuses_a_family_over_the_limit() -> None:
     sim_rotated.check_rotated_size(kernel_params(small, resolve_physics(small.physics)), 7)
 
 
+def test_rotated_kernel_refuses_too_many_terms_instead_of_crashing() -> None:
+    """A 6° turn on a 128×160 unit passes the family check but needs 20 384 separable terms
+    (8.7 GiB, measured) before compression; it crashed inside OpenBLAS (SIGSEGV) and is now
+    refused with a ThinTactError naming the angle. The 1° kernel (874 terms) still builds."""
+    prof = _device(128, 160, {"mask_misalignment": {"angle_deg": 6.0, "dx_um": 0.0, "dy_um": 0.0}})
+    kp = kernel_params(prof, resolve_physics(prof.physics))
+    with pytest.raises(ThinTactError, match="rotated by 6.*separable terms"):
+        sim_rotated.check_rotated_terms(kp, 2, [1, 91], [1, 112])
+    sim_rotated.check_rotated_terms(kp, 2, [1, 19], [1, 23])
+    with pytest.raises(ThinTactError, match="rotated by 6"):
+        Simulator(prof).linear_batch(np.ones((1, prof.scene.rows, prof.scene.cols, 3)))
+
+
 def test_cli_bins_and_checks_the_fit_unbinned(tmp_path: Path) -> None:
     """``thintact diagnose --bin 2`` on a small device with a hidden angular response:
     the effect is found on the binned data, the report says how it was binned, the hotspots

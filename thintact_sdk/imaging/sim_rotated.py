@@ -101,6 +101,26 @@ def check_rotated_size(kp: KernelParams, rank: int, n_values: int = 2,
         )
 
 
+def check_rotated_terms(kp: KernelParams, rank: int, ranks_x: np.ndarray | list[int],
+                        ranks_y: np.ndarray | list[int], limit_bytes: float = FAMILY_MAX_BYTES) -> None:
+    """Refuse (``ThinTactError``) a rotated kernel whose separable terms, before compression,
+    would exceed ``limit_bytes``: each profile's block holds ``rank·r_x·r_y`` terms of
+    ``R·N + S·M`` values, stacked once more for the compression, plus its two Gram matrices.
+    The displacement families can fit (:func:`check_rotated_size`) while this does not (a 6°
+    turn on a 128×160 unit needs tens of GiB here; without the check OpenBLAS crashed)."""
+    n_terms = rank * int(max(ranks_x)) * int(max(ranks_y))
+    per_term = kp.rows * kp.scene_rows + kp.cols * kp.scene_cols
+    size = 8.0 * (2.0 * n_terms * per_term + 2.0 * float(n_terms) ** 2)
+    if size > limit_bytes:
+        raise ThinTactError(
+            f"physics: a mask rotated by {kp.angle_deg:g}° on this device "
+            f"({kp.rows}×{kp.cols} sensor, {kp.scene_rows}×{kp.scene_cols} scene) needs "
+            f"{n_terms} separable terms ({size / 1024**3:.1f} GiB, limit {limit_bytes / 1024**3:.1f} GiB) "
+            "before compression: the rotated kernel is made for turns of a few degrees on devices up "
+            "to about 128×160 sensor pixels and 50×64 scene pixels"
+        )
+
+
 def pair_centres_mm(grid: AxisGrid, alpha: float, beta: float) -> np.ndarray:
     """``(n_sensor, n_scene)`` centre crossing points ``alpha·u + beta·s`` of every pixel pair (mm)."""
     return alpha * grid.sensor_centres_mm()[:, None] + beta * grid.scene_centres_mm()[None, :]
@@ -231,6 +251,7 @@ def rotated_terms(
                                       dx - t_x.max() / c, dx - t_x.min() / c)
     nodes_y, w_y, b_y, ranks_y = _shift_family(gy, alpha, beta, ey / c, vy, exp.gy_derivs, kp.n_sub,
                                       dy + t_y.min() / c, dy + t_y.max() / c)
+    check_rotated_terms(kp, exp.rank, ranks_x, ranks_y)
     # weights of the x family at each y pair, of the y family at each x pair
     u_x = interp_weights(nodes_x, w_x, dx - t_x / c)  # (V, r_x, R, N)
     u_y = interp_weights(nodes_y, w_y, dy + t_y / c)  # (V, r_y, S, M)
