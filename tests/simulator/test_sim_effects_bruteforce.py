@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from tests.simulator.sim_helpers import rel_rms, tiny_profile
-from thintact_sdk.imaging.sim_reference import reference_forward
+from thintact_sdk.imaging.sim_reference import reference_forward, reference_kernel
 from thintact_sdk.imaging.simulator import Simulator
 
 #: 25 µm cells, 20 µm pixels, 60 µm scene pixels, H = 1.3 mm
@@ -117,3 +117,30 @@ def test_diffraction_with_refraction_tends_to_its_limits(extra):
     real = Simulator(tiny_profile({**extra, **REFR, **diff}, **device)).forward(x)
     assert rel_rms(short, geo) < rel_rms(real, geo) / 5
     assert rel_rms(short, geo) < 3e-3
+
+
+#: 16×20 sensor pixels of 20 µm, 6×8 scene pixels of 60 µm (test_sim_diffraction_bruteforce's
+#: device): offsets up to ~21° in both axes at once
+WIDE = dict(rows=16, cols=20, pitch_um=20.0, scene_rows=6, scene_cols=8, scene_pitch_um=60.0,
+            feature_um=20.0, k=24, z_mm=1.0, d_mm=0.3)
+WIDE_SENSOR = np.array([0, 9, 19, 7 * 20 + 9, 8 * 20 + 10, 15 * 20, 15 * 20 + 19, 3 * 20 + 15])
+WIDE_SCENE = np.array([0, 2 * 8 + 3, 5 * 8 + 7])
+
+
+def test_refraction_at_wide_offsets_against_brute_force():
+    """Refraction (n = 1.4) at offsets large in both axes (sensor (15, 19) to scene (0, 0):
+    δ = (−400, −300) µm): the x crossing depends on δ_y through κ, frozen at the pair's
+    centre and corrected to first order in the separable path. Brute force at 16² → 32²
+    samples per pixel: 1.7e-3 → 7.1e-4, converging onto the simulator; without the
+    correction 1.26e-3 at 32² (measured)."""
+    prof = tiny_profile(REFR, **WIDE)
+    x = np.zeros((WIDE_SCENE.size, WIDE["scene_rows"], WIDE["scene_cols"], 3))
+    for i, j in enumerate(WIDE_SCENE):
+        x[i].reshape(-1, 3)[j] = 1.0
+    sim = Simulator(prof)
+    y = sim.forward_batch(x)[..., 0].reshape(WIDE_SCENE.size, -1)[:, WIDE_SENSOR].T
+    e16 = rel_rms(y, reference_kernel(prof, 16, 16, WIDE_SENSOR, WIDE_SCENE))
+    e32 = rel_rms(y, reference_kernel(prof, 32, 32, WIDE_SENSOR, WIDE_SCENE))
+    assert sim.separable
+    assert e32 < 1e-3
+    assert e32 < e16 / 2
