@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from thintact_sdk.calibration.pipeline import CalibrationOptions
@@ -42,9 +43,12 @@ def test_wizard_calibrates_virtual_mini(tmp_path: Path) -> None:
     # matrices: within a few percent of the simulator's two-term fit (gauge-free operator error)
     assert max(m["reference"]["operator_error"]) < 0.04, m["reference"]["operator_error"]
     assert max(t["open_term"] for t in m["reference"]["term_errors"]) < 0.03
-    # reconstructions: close to those from the true matrices on the same measured frames
+    # reconstructions: close to those from the true matrices on the same measured frames, both
+    # with plain Tikhonov held out (what the unit is judged on); the deployed decode (a scene
+    # prior where cross-validation chose one) at least as good as the plain one on average
     for label in ("val_gelsight_0", "val_smooth_color"):
-        assert m["psnr_db"][label] > m["reference"]["reference_psnr_db"][label] - 4.0
+        assert m["judged_psnr_db"][label] > m["reference"]["reference_psnr_db"][label] - 4.0
         assert m["psnr_db"][label] > 20.0
+    assert np.mean(list(m["psnr_db"].values())) >= np.mean(list(m["judged_psnr_db"].values())) - 0.5
     assert out.path == tmp_path / "cal"
     assert bench.get_scene_slot(prof.name).get() is None  # the display handed the slot back

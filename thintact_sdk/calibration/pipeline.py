@@ -215,7 +215,7 @@ def compare_with_reference(
         frames = validation_frames(recording, collection, profile.noise.saturation_dn)
         ref_sel = select(profile, ref_bundle, frames, noise, decoder=options.decoder,
                          simulated=_simulated_curve(table), noise_criteria_curves=False)
-        ref_val = ref_sel.validation
+        ref_val = ref_sel.verdict_validation  # plain Tikhonov, as the unit is judged
         ref_bundle.meta["tau"] = ref_sel.tau
     else:
         ref_val = validate(recording, collection, profile, ref_bundle, options.decoder)
@@ -312,15 +312,16 @@ def calibrate_recording(
         prediction = predict_validation(
             profile, sm, frames.labels, frames.truths, selection.decoder, k,
             filter_steps=opts.filter_steps, filter_scenes=opts.filter_scenes, method=opts.method,
-            max_iter=opts.max_iter, tol=opts.tol, rank=opts.rank,
-            prior=selection.priors.get(selection.decoder))
+            max_iter=opts.max_iter, tol=opts.tol, rank=opts.rank)
     lim = limits_of(profile)
-    verdict = judge(val, prediction, health, lim, registration)
+    # the unit against its design, both with plain Tikhonov (``TauSelection.verdict_validation``)
+    verdict = judge(selection.verdict_validation, prediction, health, lim, registration)
     passed = verdict.passed
     mean_psnr = float(np.mean([v.psnr_db for v in val])) if val else float("nan")
     mean_ssim = float(np.mean([v.ssim for v in val])) if val else float("nan")
     metrics: dict[str, Any] = {
         "psnr_db": {v.label: v.psnr_db for v in val},
+        "judged_psnr_db": {v.label: v.psnr_db for v in selection.verdict_validation},
         "ssim": {v.label: v.ssim for v in val},
         "mean_psnr_db": mean_psnr,
         "mean_ssim": mean_ssim,

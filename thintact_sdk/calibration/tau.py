@@ -124,6 +124,10 @@ class CrossValidation:
         Set by :func:`cross_validate_prior`: the deployed scene prior (``None``: plain
         Tikhonov), the prior each fold's τ was tuned with, each candidate prior's mean-PSNR
         curve and held-out mean PSNR (dB), and plain Tikhonov's held-out mean PSNR (dB).
+    plain
+        Set by :func:`cross_validate_prior` when a prior is deployed: plain Tikhonov's own
+        cross-validation (the unit is judged against its design on it, see
+        :func:`thintact_sdk.calibration.selection.select`).
     """
 
     decoder: str
@@ -145,6 +149,7 @@ class CrossValidation:
     prior_curves: list[tuple[ScenePrior, TauCurve]] = field(default_factory=list)
     prior_held_out_db: dict[ScenePrior, float] = field(default_factory=dict)
     plain_held_out_db: float = float("nan")
+    plain: CrossValidation | None = None
 
     @property
     def held_out_mean_db(self) -> float:
@@ -354,6 +359,8 @@ def cross_validate_prior(make: Callable[[ScenePrior | None], Any], name: str, si
                          for p, cv in curves]
     best.prior_held_out_db = {p: cv.held_out_mean_db for p, cv in curves}
     best.plain_held_out_db = plain.held_out_mean_db
+    if best is not plain:
+        best.plain = plain
     if best.prior is None:
         best.curve.note += ("; scene prior not used: no candidate scored better held out than plain "
                             f"Tikhonov ({plain.held_out_mean_db:.3f} dB) on the mean and on the median scene")
