@@ -76,6 +76,21 @@ def cell_amplitudes(profile: Profile, transmittance: float) -> np.ndarray:
     return np.where(open_, 1.0, math.sqrt(transmittance))
 
 
+def _contract_setup(profile: Profile) -> tuple[float, float, float, float, tuple[float, float, float], np.ndarray]:
+    """What the contract's §4/§5 definitions take from ``profile`` and its ``physics``: z and d
+    (mm, ``geometry`` or nominal), the scene-side index, the angular-response exponent, the mask's
+    (angle °, dx µm, dy µm) and the cells' amplitudes (``mask_leakage`` included)."""
+    ph = resolve_physics(profile.physics)
+    g = ph.get("geometry", {})
+    z = g.get("scene_to_mask_mm") or profile.geometry.scene_to_mask_mm
+    d = g.get("mask_to_sensor_mm") or profile.geometry.mask_to_sensor_mm
+    mis = ph.get("mask_misalignment", {})
+    return (float(z), float(d), float(ph.get("refraction", {}).get("n_scene_side", 1.0)),
+            float(ph.get("pixel_angular_response", {}).get("exponent", 0.0)),
+            (float(mis.get("angle_deg", 0.0)), float(mis.get("dx_um", 0.0)), float(mis.get("dy_um", 0.0))),
+            cell_amplitudes(profile, ph.get("mask_leakage", {}).get("transmittance", 0.0)))
+
+
 def _edge_differences(p_mm: np.ndarray, edges_mm: np.ndarray, w_mm: float) -> np.ndarray:
     """``E(t_{j+1}) - E(t_j)`` with ``t = sqrt(2)(e - p)/w``: ``p.shape + (K,)`` complex."""
     t = math.sqrt(2.0) * (edges_mm - p_mm[..., None]) / w_mm
@@ -120,15 +135,7 @@ def subsampled_reference_kernel(profile: Profile, wavelength_nm: float, n_sensor
         ``(sensor pixels, scene pixels)``: irradiance averaged over the sensor pixel and
         integrated over the scene pixel, per unit scene radiance (the simulator's units).
     """
-    ph = resolve_physics(profile.physics)
-    g = ph.get("geometry", {})
-    z = g.get("scene_to_mask_mm") or profile.geometry.scene_to_mask_mm
-    d = g.get("mask_to_sensor_mm") or profile.geometry.mask_to_sensor_mm
-    n_idx = ph.get("refraction", {}).get("n_scene_side", 1.0)
-    p_exp = ph.get("pixel_angular_response", {}).get("exponent", 0.0)
-    mis = ph.get("mask_misalignment", {})
-    angle, dx_um, dy_um = mis.get("angle_deg", 0.0), mis.get("dx_um", 0.0), mis.get("dy_um", 0.0)
-    amps = cell_amplitudes(profile, ph.get("mask_leakage", {}).get("transmittance", 0.0))
+    z, d, n_idx, p_exp, (angle, dx_um, dy_um), amps = _contract_setup(profile)
     k = profile.mask.K
     delta = profile.mask.feature_um * 1e-3
     edges = (np.arange(k + 1) - k / 2) * delta
@@ -216,18 +223,12 @@ def crossing_grid_reference_kernel(profile: Profile, wavelength_nm: float, step_
     numpy.ndarray
         ``(sensor pixels, scene pixels)`` in the simulator's units.
     """
-    ph = resolve_physics(profile.physics)
-    if ph.get("refraction", {}).get("n_scene_side", 1.0) != 1.0:
+    z, d, n_idx, p_exp, (angle_deg, dx_um, dy_um), amps = _contract_setup(profile)
+    if n_idx != 1.0:
         raise ValueError("crossing_grid_reference_kernel: straight rays only (no refraction)")
-    g = ph.get("geometry", {})
-    z = g.get("scene_to_mask_mm") or profile.geometry.scene_to_mask_mm
-    d = g.get("mask_to_sensor_mm") or profile.geometry.mask_to_sensor_mm
-    p_exp = ph.get("pixel_angular_response", {}).get("exponent", 0.0)
-    mis = ph.get("mask_misalignment", {})
-    a = math.radians(mis.get("angle_deg", 0.0))
+    a = math.radians(angle_deg)
     ca, sa = math.cos(a), math.sin(a)
-    sx_mm, sy_mm = mis.get("dx_um", 0.0) * 1e-3, mis.get("dy_um", 0.0) * 1e-3
-    amps = cell_amplitudes(profile, ph.get("mask_leakage", {}).get("transmittance", 0.0))
+    sx_mm, sy_mm = dx_um * 1e-3, dy_um * 1e-3
     k = profile.mask.K
     edges = (np.arange(k + 1) - k / 2) * profile.mask.feature_um * 1e-3
     h = z + d
@@ -320,15 +321,7 @@ def ray_offset_reference_kernel(profile: Profile, wavelength_nm: float, step_um:
     numpy.ndarray
         ``(sensor pixels, scene pixels)`` in the simulator's units.
     """
-    ph = resolve_physics(profile.physics)
-    g = ph.get("geometry", {})
-    z = g.get("scene_to_mask_mm") or profile.geometry.scene_to_mask_mm
-    d = g.get("mask_to_sensor_mm") or profile.geometry.mask_to_sensor_mm
-    n_idx = ph.get("refraction", {}).get("n_scene_side", 1.0)
-    p_exp = ph.get("pixel_angular_response", {}).get("exponent", 0.0)
-    mis = ph.get("mask_misalignment", {})
-    angle, dx_um, dy_um = mis.get("angle_deg", 0.0), mis.get("dx_um", 0.0), mis.get("dy_um", 0.0)
-    amps = cell_amplitudes(profile, ph.get("mask_leakage", {}).get("transmittance", 0.0))
+    z, d, n_idx, p_exp, (angle, dx_um, dy_um), amps = _contract_setup(profile)
     k = profile.mask.K
     edges = (np.arange(k + 1) - k / 2) * profile.mask.feature_um * 1e-3
     z_opt = z / n_idx

@@ -344,33 +344,11 @@ class _CoupledFamily:
         weights, basis, ranks = compress_family(fam[0], tol)
         parts.append((interp(weights), basis, ranks))
         scale = np.linalg.norm(fam[0].reshape(fam.shape[1:3] + (-1,)), axis=(0, 2))  # (V,)
-        weights, basis, ranks = _compress_absolute(dfam, tol * scale / max(span, 1e-12))
+        weights, basis, ranks = compress_family(dfam, abs_cut=tol * scale / max(span, 1e-12))
         parts.append((interp(weights), basis, ranks))
         weights, basis, ranks = compress_family(fam[1], CORRECTION_RANK_TOL)
         parts.append((interp(weights), basis, ranks))
         return cls(parts)
-
-
-def _compress_absolute(fam: np.ndarray, cut: np.ndarray
-                       ) -> tuple[np.ndarray, np.ndarray, list[int]]:
-    """:func:`~thintact_sdk.imaging.sim_rotated.compress_family` with an absolute Frobenius
-    cut ``cut[v]`` per profile (at least rank 1)."""
-    n, n_v = fam.shape[:2]
-    per_v = []
-    for v in range(n_v):
-        mat = fam[:, v].reshape(n, -1)
-        ev, u = np.linalg.eigh(mat @ mat.T)
-        ev, u = np.clip(ev[::-1], 0.0, None), u[:, ::-1]
-        tail = np.sqrt(np.cumsum(ev[::-1])[::-1])
-        rank = max(1, int(np.sum(tail > cut[v])))
-        per_v.append((u[:, :rank], u[:, :rank].T @ mat))
-    r_max = max(b.shape[0] for _, b in per_v)
-    weights = np.zeros((n_v, n, r_max))
-    basis = np.zeros((n_v, r_max) + fam.shape[2:])
-    for v, (u, b) in enumerate(per_v):
-        weights[v, :, : u.shape[1]] = u
-        basis[v, : b.shape[0]] = b.reshape((b.shape[0],) + fam.shape[2:])
-    return weights, basis, [b.shape[0] for _, b in per_v]
 
 
 def _main_products(fx: _CoupledFamily, fy: _CoupledFamily, v: int, coef: float, part: str,

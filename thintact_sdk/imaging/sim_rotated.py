@@ -158,11 +158,12 @@ def _shift_family(
     return nodes, weights, basis, ranks
 
 
-def compress_family(fam: np.ndarray, rel_tol: float = SHIFT_RANK_TOL
+def compress_family(fam: np.ndarray, rel_tol: float = SHIFT_RANK_TOL, abs_cut: np.ndarray | None = None,
                     ) -> tuple[np.ndarray, np.ndarray, list[int]]:
     """Factor a tabulated family ``(T, V, ...)`` per profile ``v`` as
     ``A(t) ≈ Σ_j u_j(t)·B_j`` (SVD over the node index ``t``, relative Frobenius cut
-    ``rel_tol``): weights ``(V, T, r)``, basis ``(V, r, ...)`` and the rank of each profile
+    ``rel_tol``, or the absolute Frobenius cut ``abs_cut[v]`` per profile when given; at
+    least rank 1): weights ``(V, T, r)``, basis ``(V, r, ...)`` and the rank of each profile
     (unused columns of lower-rank profiles are zero)."""
     n, n_v = fam.shape[:2]
     per_v = []
@@ -172,7 +173,10 @@ def compress_family(fam: np.ndarray, rel_tol: float = SHIFT_RANK_TOL
         ev, u = np.linalg.eigh(mat @ mat.T)
         ev, u = np.clip(ev[::-1], 0.0, None), u[:, ::-1]
         tail = np.sqrt(np.cumsum(ev[::-1])[::-1])  # tail[i]: Frobenius norm beyond rank i
-        rank = max(1, int(np.sum(tail > rel_tol * tail[0]))) if ev[0] > 0 else 1
+        if abs_cut is not None:
+            rank = max(1, int(np.sum(tail > abs_cut[v])))
+        else:
+            rank = max(1, int(np.sum(tail > rel_tol * tail[0]))) if ev[0] > 0 else 1
         per_v.append((u[:, :rank], u[:, :rank].T @ mat))
     r_max = max(b.shape[0] for _, b in per_v)
     weights = np.zeros((n_v, n, r_max))
