@@ -29,7 +29,6 @@ from thintact_sdk.imaging.filter_training import (
     training_scenes,
 )
 from thintact_sdk.imaging.noise import signal_to_dn
-from thintact_sdk.imaging.scene_prior import ScenePrior
 from thintact_sdk.imaging.simulator import Simulator
 from thintact_sdk.imaging.t2s import SystemMatrices
 from thintact_sdk.profile import NoiseSpec, Profile
@@ -115,7 +114,6 @@ def predict_validation(
     tol: float = 1e-7,
     rank: int = DEFAULT_RANK,
     seed: int = 0,
-    prior: ScenePrior | None = None,
 ) -> Prediction:
     """Predicted held-out PSNR of each validation scene for a unit built exactly to ``profile``.
 
@@ -127,9 +125,6 @@ def predict_validation(
         The validation frames' labels and displayed scenes (``N × M × C``).
     decoder
         The decoder the unit is validated with.
-    prior
-        The scene prior the unit's decoder uses (the design is decoded with the same one, its τ
-        cross-validated on the design's own frames).
     frames_averaged, filter_steps, filter_scenes, method, max_iter, tol, rank
         As for the unit's own calibration.
     """
@@ -146,7 +141,7 @@ def predict_validation(
         jf = train_joint_filter(design, training_scenes(n, m, count=filter_scenes, seed=0),
                                 noise=noise, steps=filter_steps, seed=0)
     bundle = CalibrationBundle.create(profile, design, jf, tau=1.0, source="simulator")
-    dec = make_decoder(profile, bundle, decoder, **({} if prior is None else {"prior": prior}))
+    dec = make_decoder(profile, bundle, decoder)
     signals = []
     for x in scenes:
         expected = sim.predict_signal_dn(scene_for_channels(x, c).astype(np.float64), gains)
@@ -155,10 +150,7 @@ def predict_validation(
     grid = tau_grid(design)
     cv = cross_validate(dec, decoder, signals, scenes, labels, grid)
     if cv is not None:
-        how: dict[str, Any] = {"fold_tau": cv.fold_tau}
-        if prior is not None:
-            how["scene_prior"] = prior.to_json()
-        return Prediction(dict(cv.held_out_psnr), gains.tolist(), cv.curve.tau, how)
+        return Prediction(dict(cv.held_out_psnr), gains.tolist(), cv.curve.tau, {"fold_tau": cv.fold_tau})
     best: dict[str, float] = {}  # one scene: the best τ in hindsight is the design's potential
     for tau in grid:
         dec.set_tau(float(tau))  # type: ignore[attr-defined]

@@ -196,12 +196,16 @@ def select(
         return TauSelection(name, float(tau), "given (--tau)", {name: float(tau)}, curves,
                             validation=_results(frames, estimates))
     grid = tau_grid(sm)
-    decoders = {name: make_decoder(profile, bundle, name) for name in names}
+    # plain Tikhonov for a decoder that can take a scene prior, whatever the bundle already holds
+    decoders = {name: make_decoder(profile, bundle, name, **({"prior": None} if name in PRIOR_DECODERS else {}))
+                for name in names}
     cvs: dict[str, CrossValidation] = {}
     for name, dec in decoders.items():
         if name in PRIOR_DECODERS:
+            # plain Tikhonov is the decoder already built for this name (not a second copy)
             cv = cross_validate_prior(
-                lambda prior, name=name: make_decoder(profile, bundle, name, prior=prior),  # type: ignore[misc]
+                lambda prior, name=name, dec=dec: dec if prior is None else  # type: ignore[misc]
+                make_decoder(profile, bundle, name, prior=prior),
                 name, frames.signals, frames.truths, frames.labels, grid)
         else:
             cv = cross_validate(dec, name, frames.signals, frames.truths, frames.labels, grid)
