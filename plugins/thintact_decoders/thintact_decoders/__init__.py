@@ -44,14 +44,10 @@ from thintact_decoders.flatcam import FlatCamDecoder
 from thintact_decoders.identity import IdentityDecoder, make_identity
 from thintact_decoders.iterative import T2SIterativeDecoder
 from thintact_decoders.loading import resolve_bundle
-from thintact_decoders.modes import DEFAULT_MODE_RTOL, TauSpec, channel_taus
+from thintact_decoders.modes import DEFAULT_MODE_RTOL, TauSpec
 from thintact_decoders.noniterative import NonIterativeDecoder
 from thintact_decoders.selection import BackendPreferenceWarning, make_probes, select_backend
-from thintact_decoders.sensor_binning import (
-    SensorBinnedDecoder,
-    bin_system_matrices,
-    binning_offered,
-)
+from thintact_decoders.sensor_binning import binnable_build, binning_offered
 from thintact_decoders.t2s_closed_form import T2SClosedFormDecoder
 from thintact_sdk.algorithms import CalibrationBundle, ScenePrior, SystemMatrices
 from thintact_sdk.errors import CalibrationError
@@ -112,8 +108,7 @@ def _selected(name: str, profile: Profile, settings: dict[str, Any], sm: SystemM
     (r, s), (n, m) = sm.sensor_shape, sm.scene_shape
     key = f"{host_fingerprint(caps)}|{name}|{sm.channels}x{r}x{s}->{n}x{m}|{dtype}"
     try:
-        offered = binning_offered((r, s), (n, m), sm.channels, settings.get("sensor_bin", "auto"))
-        sensor_bin = offered if binnable else 1
+        sensor_bin = binning_offered((r, s), (n, m), sm.channels, settings.get("sensor_bin", "auto")) if binnable else 1
     except ValueError as err:
         raise CalibrationError(str(err)) from None
     decoder, _ = select_backend(
@@ -176,23 +171,6 @@ def make_flatcam(profile: Profile, settings: dict[str, Any]) -> FlatCamDecoder:
                      lambda xp: FlatCamDecoder(bundle.system_matrices, tau, xp, _mode_rtol(settings)))  # type: ignore[return-value]
 
 
-def _binnable(sm: SystemMatrices, tau: TauSpec,
-              make: Callable[[SystemMatrices, TauSpec, ArrayBackend], Decoder]) -> Callable[..., Decoder]:
-    """``build(backend, b=1)``: ``make`` on ``sm``, or on ``sm`` binned ``b × b`` (τ / b², the
-    same objective) wrapped to bin each frame (:mod:`thintact_decoders.sensor_binning`)."""
-    binned: dict[int, SystemMatrices] = {}
-
-    def build(xp: ArrayBackend, b: int = 1) -> Decoder:
-        if b == 1:
-            return make(sm, tau, xp)
-        if b not in binned:
-            binned[b] = bin_system_matrices(sm, b)
-        inner = make(binned[b], channel_taus(tau, sm.channels) / b**2, xp)
-        return SensorBinnedDecoder(inner, sm.sensor_shape, sm.channels, b)
-
-    return build
-
-
 def _prior(name: str, bundle: CalibrationBundle, settings: dict[str, Any]) -> ScenePrior | None:
     """The settings' ``prior`` (``None`` there: plain Tikhonov); else, unless ``tau`` is given,
     the bundle's ``scene_prior`` for decoder ``name``; else none (plain Tikhonov)."""
@@ -214,7 +192,7 @@ def make_t2s_closed_form(profile: Profile, settings: dict[str, Any]) -> T2SClose
     tau = _decoder_tau("t2s-closed-form", float(bundle.meta.get("tau_t2s_closed_form", bundle.tau)), bundle,
                        settings, profile)
     prior = _prior("t2s-closed-form", bundle, settings)
-    build = _binnable(bundle.system_matrices, tau, lambda sm, t, xp: T2SClosedFormDecoder(
+    build = binnable_build(bundle.system_matrices, tau, lambda sm, t, xp: T2SClosedFormDecoder(
         sm, t, xp, open_rtol=float(settings.get("open_rtol", 1e-6)),
         max_open_rank=int(settings.get("max_open_rank", 8)), mode_rtol=_mode_rtol(settings), prior=prior))
     return _selected("t2s-closed-form", profile, settings, bundle.system_matrices, build,

@@ -157,12 +157,7 @@ def run(args: argparse.Namespace) -> int:
     from thintact_decoders.backend_cache import BackendCache
     from thintact_decoders.candidates import candidate_specs
     from thintact_decoders.selection import Probe, select_backend
-    from thintact_decoders.sensor_binning import (
-        SENSOR_BIN,
-        SensorBinnedDecoder,
-        bin_system_matrices,
-        binning_possible,
-    )
+    from thintact_decoders.sensor_binning import SENSOR_BIN, binnable_build, binning_possible
     from thintact_sdk.compute_threads import prepare_worker_thread, single_threaded_kernels
     from thintact_sdk.machine import host_capabilities, machine_summary
     from thintact_sdk.profile import load_profile
@@ -188,18 +183,10 @@ def run(args: argparse.Namespace) -> int:
             "latency_ms": {}, "latency_ms_from_uint16": {}, "quality": {},
         }
         sensor_bin = SENSOR_BIN if binning_possible(dev.sm.sensor_shape, dev.sm.scene_shape) else 1
-        binned_sm = bin_system_matrices(dev.sm, sensor_bin) if sensor_bin > 1 else None
-
-        def t2s_build(be: Any, b: int = 1, **kw: Any) -> Any:
-            """t2s-closed-form, or on the sensor binned b × b (τ / b², the same objective)."""
-            if b == 1:
-                return T2SClosedFormDecoder(dev.sm, tau_cf, be, **kw)
-            return SensorBinnedDecoder(T2SClosedFormDecoder(binned_sm, tau_cf / b**2, be, **kw),
-                                       dev.sm.sensor_shape, dev.sm.channels, b)
-
         builders: dict[str, Callable[..., Any]] = {
             "thintact-noniterative": partial(NonIterativeDecoder, dev.sm, dev.filter, tau_ni),
-            "t2s-closed-form": t2s_build,
+            # t2s-closed-form, or on the sensor binned b × b (τ / b², the same objective)
+            "t2s-closed-form": binnable_build(dev.sm, tau_cf, T2SClosedFormDecoder),
         }
         caps = host_capabilities()
         result["host"] = caps.lines()

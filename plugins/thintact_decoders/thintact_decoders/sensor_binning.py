@@ -24,6 +24,7 @@ unbinned τ, as every other decoder and the calibration bundle do.
 from __future__ import annotations
 
 import threading
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -140,6 +141,23 @@ def bin_frame(frame: np.ndarray, b: int = SENSOR_BIN, out: np.ndarray | None = N
         if offset:
             plane -= np.float32(offset)
     return out
+
+
+def binnable_build(sm: SystemMatrices, tau: TauSpec, make: Callable[..., Decoder]) -> Callable[..., Decoder]:
+    """``build(backend, b=1, **kw)`` for the backend selection: ``make(sm, tau, backend, **kw)``,
+    or ``make`` on ``sm`` binned ``b × b`` at τ / b² (the same objective) wrapped to bin each
+    frame (:class:`SensorBinnedDecoder`); the binned operator is made once per ``b``."""
+    binned: dict[int, SystemMatrices] = {}
+
+    def build(xp: Any, b: int = 1, **kw: Any) -> Decoder:
+        if b == 1:
+            return make(sm, tau, xp, **kw)
+        if b not in binned:
+            binned[b] = bin_system_matrices(sm, b)
+        inner = make(binned[b], channel_taus(tau, sm.channels) / b**2, xp, **kw)
+        return SensorBinnedDecoder(inner, sm.sensor_shape, sm.channels, b)
+
+    return build
 
 
 class SensorBinnedDecoder(Decoder):
