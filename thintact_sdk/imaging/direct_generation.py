@@ -132,14 +132,7 @@ class AxisGeometry:
         the footprint). What no separable model holds (the shift's dependence on the column)
         is ``SystemMatrices.direct``'s ``meta["unmodelled_angle_deg"]``.
         """
-        pose = MaskPose.of(profile)
-        t = math.tan(math.radians(pose.angle_deg))
-        alpha = pose.z_mm / (pose.z_mm + pose.d_mm)
-        half_other_um = alpha * profile.sensor.cols * profile.sensor.pixel_pitch_um / 2.0
-        return cls(profile.sensor.rows, profile.sensor.pixel_pitch_um, profile.scene.rows,
-                   profile.scene.pixel_pitch_um, profile.mask.feature_um / math.cos(math.radians(pose.angle_deg)),
-                   profile.mask.K if K is None else int(K), pose.z_mm, pose.d_mm, pose.dy_um - t * pose.dx_um,
-                   2.0 * abs(t) * half_other_um)
+        return cls._of(profile, K, along_rows=True)
 
     @classmethod
     def cols_of(cls, profile: Profile, K: int | None = None) -> AxisGeometry:  # noqa: N803
@@ -149,13 +142,23 @@ class AxisGeometry:
         ``dx − tan θ·(m_y − dy)``, centred at ``dx + tan θ·dy`` and spread over
         ``2·|tan θ|·α·R·p/2`` across the sensor's rows.
         """
+        return cls._of(profile, K, along_rows=False)
+
+    @classmethod
+    def _of(cls, profile: Profile, K: int | None, along_rows: bool) -> AxisGeometry:  # noqa: N803
+        """:meth:`rows_of` (``along_rows``) or :meth:`cols_of`: the axis' pixels, the pose's
+        distances, and the turn's mean shift and spread across the other axis' sensor extent."""
         pose = MaskPose.of(profile)
         t = math.tan(math.radians(pose.angle_deg))
         alpha = pose.z_mm / (pose.z_mm + pose.d_mm)
-        half_other_um = alpha * profile.sensor.rows * profile.sensor.pixel_pitch_um / 2.0
-        return cls(profile.sensor.cols, profile.sensor.pixel_pitch_um, profile.scene.cols,
-                   profile.scene.pixel_pitch_um, profile.mask.feature_um / math.cos(math.radians(pose.angle_deg)),
-                   profile.mask.K if K is None else int(K), pose.z_mm, pose.d_mm, pose.dx_um + t * pose.dy_um,
+        n_sensor, n_other = ((profile.sensor.rows, profile.sensor.cols) if along_rows
+                             else (profile.sensor.cols, profile.sensor.rows))
+        n_scene = profile.scene.rows if along_rows else profile.scene.cols
+        shift_um = pose.dy_um - t * pose.dx_um if along_rows else pose.dx_um + t * pose.dy_um
+        half_other_um = alpha * n_other * profile.sensor.pixel_pitch_um / 2.0
+        return cls(n_sensor, profile.sensor.pixel_pitch_um, n_scene, profile.scene.pixel_pitch_um,
+                   profile.mask.feature_um / math.cos(math.radians(pose.angle_deg)),
+                   profile.mask.K if K is None else int(K), pose.z_mm, pose.d_mm, shift_um,
                    2.0 * abs(t) * half_other_um)
 
     @property

@@ -91,6 +91,17 @@ def _contract_setup(profile: Profile) -> tuple[float, float, float, float, tuple
             cell_amplitudes(profile, ph.get("mask_leakage", {}).get("transmittance", 0.0)))
 
 
+def _pixel_grids(profile: Profile, sensor_pixels: np.ndarray | None, scene_pixels: np.ndarray | None,
+                 ) -> tuple[tuple[int, int, float], tuple[int, int, float], np.ndarray, np.ndarray]:
+    """``(rows, cols, pitch mm)`` of the sensor and of the scene, and the flat indices of the
+    sensor and scene pixels asked for (every pixel when ``None``)."""
+    rows, cols, nr, nc = profile.sensor.rows, profile.sensor.cols, profile.scene.rows, profile.scene.cols
+    sens = np.arange(rows * cols) if sensor_pixels is None else np.asarray(sensor_pixels)
+    scen = np.arange(nr * nc) if scene_pixels is None else np.asarray(scene_pixels)
+    return ((rows, cols, profile.sensor.pixel_pitch_um * 1e-3), (nr, nc, profile.scene.pixel_pitch_um * 1e-3),
+            sens, scen)
+
+
 def _edge_differences(p_mm: np.ndarray, edges_mm: np.ndarray, w_mm: float) -> np.ndarray:
     """``E(t_{j+1}) - E(t_j)`` with ``t = sqrt(2)(e - p)/w``: ``p.shape + (K,)`` complex."""
     t = math.sqrt(2.0) * (edges_mm - p_mm[..., None]) / w_mm
@@ -142,12 +153,7 @@ def subsampled_reference_kernel(profile: Profile, wavelength_nm: float, n_sensor
     z_opt = z / n_idx
     w = math.sqrt(wavelength_nm * 1e-6 * z_opt * d / (z_opt + d))
 
-    rows, cols = profile.sensor.rows, profile.sensor.cols
-    pitch = profile.sensor.pixel_pitch_um * 1e-3
-    nr, nc = profile.scene.rows, profile.scene.cols
-    spitch = profile.scene.pixel_pitch_um * 1e-3
-    sens = np.arange(rows * cols) if sensor_pixels is None else np.asarray(sensor_pixels)
-    scen = np.arange(nr * nc) if scene_pixels is None else np.asarray(scene_pixels)
+    (rows, cols, pitch), (nr, nc, spitch), sens, scen = _pixel_grids(profile, sensor_pixels, scene_pixels)
     off_u, wt_u = pixel_nodes(n_sensor, pitch, rule)
     off_s, wt_s = pixel_nodes(n_scene, spitch, rule)
     # weights of the (uy, ux, sy, sx) sub-sample grid; the scene pixel is integrated
@@ -237,12 +243,7 @@ def crossing_grid_reference_kernel(profile: Profile, wavelength_nm: float, step_
     step = step_um * 1e-3
     xg, wg = np.polynomial.legendre.leggauss(n_delta)
 
-    rows, cols = profile.sensor.rows, profile.sensor.cols
-    pitch = profile.sensor.pixel_pitch_um * 1e-3
-    nr, nc = profile.scene.rows, profile.scene.cols
-    spitch = profile.scene.pixel_pitch_um * 1e-3
-    sens = np.arange(rows * cols) if sensor_pixels is None else np.asarray(sensor_pixels)
-    scen = np.arange(nr * nc) if scene_pixels is None else np.asarray(scene_pixels)
+    (rows, cols, pitch), (nr, nc, spitch), sens, scen = _pixel_grids(profile, sensor_pixels, scene_pixels)
 
     def box(i: int, n: int, pit: float) -> tuple[float, float]:
         c = (i - (n - 1) / 2) * pit
@@ -329,12 +330,7 @@ def ray_offset_reference_kernel(profile: Profile, wavelength_nm: float, step_um:
     step = step_um * 1e-3
     xg, wg = np.polynomial.legendre.leggauss(n_delta)
 
-    rows, cols = profile.sensor.rows, profile.sensor.cols
-    pitch = profile.sensor.pixel_pitch_um * 1e-3
-    nr, nc = profile.scene.rows, profile.scene.cols
-    spitch = profile.scene.pixel_pitch_um * 1e-3
-    sens = np.arange(rows * cols) if sensor_pixels is None else np.asarray(sensor_pixels)
-    scen = np.arange(nr * nc) if scene_pixels is None else np.asarray(scene_pixels)
+    (rows, cols, pitch), (nr, nc, spitch), sens, scen = _pixel_grids(profile, sensor_pixels, scene_pixels)
     corner = math.hypot(rows * pitch + nr * spitch, cols * pitch + nc * spitch) / 2
     rho_t = np.linspace(0.0, corner * 1.001 + 1e-9, SNELL_TABLE_POINTS)
     if n_idx == 1.0:
