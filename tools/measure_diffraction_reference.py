@@ -66,6 +66,8 @@ def case_list() -> list[tuple[str, dict, dict, dict, str, float]]:
                                                       "mask_to_sensor_mm": 0.35}},
          {}, BIG, "big", 530.0),
         ("+ refraction n = 1.4", REFR, {}, BIG, "big", 530.0),
+        ("+ refraction + rotation 0.35°", {**REFR, mis: {"angle_deg": 0.35}}, REFR, BIG, "big",
+         530.0),
         ("+ refraction n = 1.4", REFR, {}, WIN, "win", 530.0),
         ("+ refraction + shift (7, −5) µm", {**REFR, **shift}, REFR, WIN, "win", 530.0),
         ("+ refraction + rotation 0.35°", {**REFR, mis: {"angle_deg": 0.35}}, REFR,
@@ -105,6 +107,7 @@ def main() -> None:
     ap.add_argument("--quick", action="store_true", help="coarser reference steps (0.2/0.1 µm)")
     ap.add_argument("--subsampling", action="store_true",
                     help="also show plain 4-D sub-sampling converging (alone, 530 nm)")
+    ap.add_argument("--only", default="", help="only the cases whose name contains this text")
     args = ap.parse_args()
     steps = (0.2, 0.1) if args.quick else (0.1, 0.05)
     wl = [625.0, 530.0, 465.0]
@@ -112,6 +115,8 @@ def main() -> None:
           "without the effect vs ref | sim s | ref s |")
     print("|---|---|---|---|---|---|---|")
     for name, extra, base, device, kind, lam in case_list():
+        if args.only and (args.only not in f"{name} {'16×20' if kind == 'big' else '3×3'}"):
+            continue
         sens, scen = pixels(kind, device)
         ch = wl.index(lam)
         t0 = time.perf_counter()

@@ -68,6 +68,14 @@ CORRECTION_COMPRESS_TOL = 1e-2
 """Relative cut when the correction products are compressed (separately from the main
 products, relative to their own norm)."""
 
+CORRECTION_ERROR = 5e-5
+"""Error of the kernel (relative Frobenius, a twentieth of the contract's 1e-3) the rotated +
+refracted path may spend on truncating its coupling correction: the correction's factors are
+cut at ``CORRECTION_ERROR / size`` of their own norm (``size`` the correction's estimated
+relative size, :func:`correction_size`), at most 0.5 and at least :data:`CORRECTION_RANK_TOL`.
+Its two-parameter derivative family has ranks 33-43 at a 1 % cut on golden-mini at 0.3°
+(126-203 with the unrotated path's cut), so a fixed cut made that kernel take minutes."""
+
 MERGE_TERMS = 300
 """Terms accumulated before an intermediate compression (rotated + refracted kernel)."""
 
@@ -332,23 +340,53 @@ class _CoupledFamily:
 
     @classmethod
     def build(cls, fam: np.ndarray, dfam: np.ndarray, span: float, tol: float,
-              interp: Callable[[np.ndarray], np.ndarray]) -> _CoupledFamily:
+              interp: Callable[[np.ndarray], np.ndarray],
+              corr_rel: np.ndarray | None = None,
+              norms: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> _CoupledFamily:
         """From the tabulated ``(2, T, V, ...)`` plain and weighted families and the plain
         family's ``D²`` derivative ``(T, V, ...)`` over a node range ``span`` (mm²): compress
         each over the nodes and ``interp`` their weights ``(V, T, r)`` at the other axis's
-        pairs. The plain family is cut at ``tol``, the weighted one at
-        :data:`CORRECTION_RANK_TOL` of its norm, the derivative at ``tol`` of the plain
-        family's norm over ``span`` (a relative cut of a family that hardly moves would keep
-        its rounding noise)."""
+        pairs. The plain family is cut at ``tol``; the weighted one at ``corr_rel`` (one per
+        profile; default :data:`CORRECTION_RANK_TOL`) of its norm; the derivative at ``tol``
+        of the plain family's norm over ``span`` (a relative cut of a family that hardly
+        moves would keep its rounding noise), or, when ``corr_rel`` is given, at ``corr_rel``
+        of its own norm where that is larger.
+        ``norms``: the three families' :func:`family_norms` when already computed."""
         parts = []
+        n0, nd, n1 = family_norms(fam, dfam) if norms is None else norms
         weights, basis, ranks = compress_family(fam[0], tol)
         parts.append((interp(weights), basis, ranks))
-        scale = np.linalg.norm(fam[0].reshape(fam.shape[1:3] + (-1,)), axis=(0, 2))  # (V,)
-        weights, basis, ranks = compress_family(dfam, abs_cut=tol * scale / max(span, 1e-12))
+        rel = np.full(fam.shape[2], CORRECTION_RANK_TOL) if corr_rel is None else corr_rel
+        cut = tol * n0 / max(span, 1e-12)
+        if corr_rel is not None:
+            cut = np.maximum(cut, corr_rel * nd)
+        weights, basis, ranks = compress_family(dfam, abs_cut=cut)
         parts.append((interp(weights), basis, ranks))
-        weights, basis, ranks = compress_family(fam[1], CORRECTION_RANK_TOL)
+        weights, basis, ranks = compress_family(fam[1], abs_cut=rel * n1)
         parts.append((interp(weights), basis, ranks))
         return cls(parts)
+
+
+def family_norms(fam: np.ndarray, dfam: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(V,)`` Frobenius norms per profile of the plain and weighted families
+    (``fam``: ``(2, T, V, ...)``) and of the derivative ``dfam`` ``(T, V, ...)``:
+    ``(|X|, |∂X/∂D²|, |X₁|)``."""
+    def per_v(a: np.ndarray) -> np.ndarray:
+        flat = a.reshape(a.shape[0], a.shape[1], -1)
+        return np.sqrt(np.einsum("tvk,tvk->v", flat, flat))
+    return per_v(fam[0]), per_v(dfam), per_v(fam[1])
+
+
+def correction_size(norms_x: tuple[np.ndarray, np.ndarray, np.ndarray],
+                    norms_y: tuple[np.ndarray, np.ndarray, np.ndarray]) -> np.ndarray:
+    """``(V,)`` estimated size of the first-order coupling correction relative to the kernel,
+    per profile: ``|∂X/∂D²|/|X|·|Y₁|/|Y| + |X₁|/|X|·|∂Y/∂D²|/|Y|`` from each axis's
+    :func:`family_norms`. 1.5e-3 on the 16×20 test window at ~21° offsets, 1.8e-4 on
+    golden-mini (an upper estimate: the correction measured there changes the frames by
+    3e-6)."""
+    (x0, xd, x1), (y0, yd, y1) = norms_x, norms_y
+    x0, y0 = np.maximum(x0, 1e-300), np.maximum(y0, 1e-300)
+    return np.asarray(xd / x0 * y1 / y0 + x1 / x0 * yd / y0)
 
 
 def _main_products(fx: _CoupledFamily, fy: _CoupledFamily, v: int, coef: float, part: str,
@@ -449,33 +487,38 @@ def refracted_rotated_terms(
     # x profile read at m - (dx - t_x/c) after scaling its edges by 1/c; y at m - (dy + t_y/c)
     disp_x = sx_mm - s * (cross_y - sy_mm) / c  # (R, N): a function of the y pair
     disp_y = sy_mm + s * (cross_x - sx_mm) / c  # (S, M): a function of the x pair
-    families = []
+    tabulated = []
     for grid, prof, derivs, other, disp in ((gx, profiles_x, exp.fx_derivs, oy, disp_x),
                                             (gy, profiles_y, exp.gy_derivs, ox, disp_y)):
         o2 = other**2
         width = min((1 - k0) * grid.sensor_pitch_mm, k0 * grid.scene_pitch_mm)
         n_r2 = _r2_nodes(float(o2.min()), float(o2.max()), tables, grid.max_offset_mm(), width)
         n_sh = _shift_nodes(float(disp.min()), float(disp.max()), width)
-        _check_family_size(grid, n_r2.size * n_sh.size, prof[1].shape[0], exp.rank)
-        edges = prof[0] / c
-        fam = refracted_axis_family(grid, edges, prof[1], derivs, tables.kappa, n_r2, kp.n_sub,
-                                    n_sh)  # (T1, T2, V, L, r, n)
-        fam = fam.reshape((n_r2.size * n_sh.size,) + fam.shape[2:])
-        weights, basis, ranks = compress_family(fam, SHIFT_RANK_TOL)
-        del fam
-        families.append((interp_weights_2d(n_r2, n_sh, weights, o2, disp), basis, ranks))
-    (u_x, b_x, ranks_x), (u_y, b_y, ranks_y) = families
+        _check_family_size(grid, 3 * n_r2.size * n_sh.size, prof[1].shape[0], exp.rank)
+        fam = refracted_axis_family(grid, prof[0] / c, prof[1], derivs, tables.kappa, n_r2,
+                                    kp.n_sub, n_sh, weighted=True)  # (2, T1, T2, V, L, r, n)
+        dfam = np.gradient(fam[0], n_r2, axis=0, edge_order=2)
+        flat = (2, n_r2.size * n_sh.size) + fam.shape[3:]
+        tabulated.append((fam.reshape(flat), dfam.reshape(flat[1:]), n_r2,
+                          partial(interp_weights_2d, n_r2, n_sh, t1=o2, t2=disp)))
+        del fam, dfam
+    norms = [family_norms(fam, dfam) for fam, dfam, _, _ in tabulated]
+    corr_rel = np.clip(CORRECTION_ERROR / np.maximum(correction_size(*norms), 1e-300),
+                       CORRECTION_RANK_TOL, 0.5)
+    families = [_CoupledFamily.build(fam, dfam, float(np.ptp(nodes)), SHIFT_RANK_TOL, interp,
+                                     corr_rel, nrm)
+                for (fam, dfam, nodes, interp), nrm in zip(tabulated, norms, strict=True)]
+    del tabulated
+    fx, fy = families
     terms: list[SeparableTerm] = []
     for part, v, coef in pairs:
         if coef == 0:
             continue
-        n_products = exp.rank * ranks_x[v] * ranks_y[v]
-        if n_products <= ONE_SHOT_TERMS:
-            block = [SeparableTerm(coef * u_x[v, j] * b_y[v, i, ll], b_x[v, j, ll] * u_y[v, i],
-                                   part)
-                     for ll in range(exp.rank) for j in range(ranks_x[v])
-                     for i in range(ranks_y[v])]
-            terms += compress_terms(block, kp.compress_tol / 4)
+        terms += compress_terms(_correction_products(fx, fy, v, coef, part, exp.rank),
+                                float(max(CORRECTION_COMPRESS_TOL, corr_rel[v])))
+        if exp.rank * fx.ranks[v] * fy.ranks[v] <= ONE_SHOT_TERMS:
+            terms += compress_terms(_main_products(fx, fy, v, coef, part, exp.rank),
+                                    kp.compress_tol / 4)
             continue
         # large angles: the two-parameter families have high ranks, so the r_x·r_y·L products
         # are compressed one x basis matrix at a time and merged (bounded memory, slower)
@@ -483,11 +526,9 @@ def refracted_rotated_terms(
         # merge, merging at a fixed 300 recompressed ~320 terms after every block
         acc: list[SeparableTerm] = []
         merge_at = MERGE_TERMS
-        for j in range(ranks_x[v]):
-            block = [SeparableTerm(coef * u_x[v, j] * b_y[v, i, ll], b_x[v, j, ll] * u_y[v, i],
-                                   part)
-                     for ll in range(exp.rank) for i in range(ranks_y[v])]
-            acc += compress_terms(block, kp.compress_tol / 8)
+        for j in range(fx.ranks[v]):
+            acc += compress_terms(_main_products(fx, fy, v, coef, part, exp.rank, j_only=j),
+                                  kp.compress_tol / 8)
             if len(acc) > merge_at:
                 acc = compress_terms(acc, kp.compress_tol / 8)
                 merge_at = max(MERGE_TERMS, 2 * len(acc))
