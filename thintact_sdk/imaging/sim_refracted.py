@@ -39,6 +39,7 @@ from functools import partial
 import numpy as np
 
 from thintact_sdk.errors import ThinTactError
+from thintact_sdk.imaging.build_threads import build_threads, thread_map
 from thintact_sdk.imaging.sim_axis import AxisGrid, mask_cell_edges_mm, second_antiderivative
 from thintact_sdk.imaging.sim_params import KernelParams
 from thintact_sdk.imaging.sim_radiometry import SeparableExpansion, TabulatedRadial
@@ -412,6 +413,22 @@ def _correction_products(fx: _CoupledFamily, fy: _CoupledFamily, v: int, coef: f
     return out
 
 
+def _compress_main_products(fx: _CoupledFamily, fy: _CoupledFamily, v: int, coef: float,
+                            part: str, rank: int, tol: float, js: list[int]) -> list[SeparableTerm]:
+    """The main products of profile ``v`` for the x basis indices ``js``, compressed one x
+    basis matrix at a time (relative cut ``tol``) and merged once the list has doubled since
+    the last merge (with ~270 terms kept per merge, merging at a fixed 300 recompressed ~320
+    terms after every block)."""
+    acc: list[SeparableTerm] = []
+    merge_at = MERGE_TERMS
+    for j in js:
+        acc += compress_terms(_main_products(fx, fy, v, coef, part, rank, j_only=j), tol)
+        if len(acc) > merge_at:
+            acc = compress_terms(acc, tol)
+            merge_at = max(MERGE_TERMS, 2 * len(acc))
+    return acc
+
+
 def _lagrange4(nodes: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, list[np.ndarray]]:
     """First index and the four cubic Lagrange weights of uniform ``nodes`` at ``t``."""
     n = nodes.size
@@ -487,9 +504,10 @@ def refracted_rotated_terms(
     # x profile read at m - (dx - t_x/c) after scaling its edges by 1/c; y at m - (dy + t_y/c)
     disp_x = sx_mm - s * (cross_y - sy_mm) / c  # (R, N): a function of the y pair
     disp_y = sy_mm + s * (cross_x - sx_mm) / c  # (S, M): a function of the x pair
-    tabulated = []
-    for grid, prof, derivs, other, disp in ((gx, profiles_x, exp.fx_derivs, oy, disp_x),
-                                            (gy, profiles_y, exp.gy_derivs, ox, disp_y)):
+    def tabulate(axis: tuple[AxisGrid, tuple[np.ndarray, np.ndarray], FactorDerivs, np.ndarray,
+                             np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray,
+                                                   Callable[[np.ndarray], np.ndarray]]:
+        grid, prof, derivs, other, disp = axis
         o2 = other**2
         width = min((1 - k0) * grid.sensor_pitch_mm, k0 * grid.scene_pitch_mm)
         n_r2 = _r2_nodes(float(o2.min()), float(o2.max()), tables, grid.max_offset_mm(), width)
@@ -499,9 +517,12 @@ def refracted_rotated_terms(
                                     kp.n_sub, n_sh, weighted=True)  # (2, T1, T2, V, L, r, n)
         dfam = np.gradient(fam[0], n_r2, axis=0, edge_order=2)
         flat = (2, n_r2.size * n_sh.size) + fam.shape[3:]
-        tabulated.append((fam.reshape(flat), dfam.reshape(flat[1:]), n_r2,
-                          partial(interp_weights_2d, n_r2, n_sh, t1=o2, t2=disp)))
-        del fam, dfam
+        return (fam.reshape(flat), dfam.reshape(flat[1:]), n_r2,
+                partial(interp_weights_2d, n_r2, n_sh, t1=o2, t2=disp))
+
+    # the two axes are independent: tabulated side by side (build_threads)
+    tabulated = thread_map(tabulate, [(gx, profiles_x, exp.fx_derivs, oy, disp_x),
+                                      (gy, profiles_y, exp.gy_derivs, ox, disp_y)])
     norms = [family_norms(fam, dfam) for fam, dfam, _, _ in tabulated]
     corr_rel = np.clip(CORRECTION_ERROR / np.maximum(correction_size(*norms), 1e-300),
                        CORRECTION_RANK_TOL, 0.5)
@@ -521,18 +542,13 @@ def refracted_rotated_terms(
                                     kp.compress_tol / 4)
             continue
         # large angles: the two-parameter families have high ranks, so the r_x·r_y·L products
-        # are compressed one x basis matrix at a time and merged (bounded memory, slower)
-        # merged once the list has doubled since the last merge: with ~270 terms kept per
-        # merge, merging at a fixed 300 recompressed ~320 terms after every block
-        acc: list[SeparableTerm] = []
-        merge_at = MERGE_TERMS
-        for j in range(fx.ranks[v]):
-            acc += compress_terms(_main_products(fx, fy, v, coef, part, exp.rank, j_only=j),
-                                  kp.compress_tol / 8)
-            if len(acc) > merge_at:
-                acc = compress_terms(acc, kp.compress_tol / 8)
-                merge_at = max(MERGE_TERMS, 2 * len(acc))
-        terms += compress_terms(acc, kp.compress_tol / 4)
+        # are compressed one x basis matrix at a time and merged (bounded memory, slower), the
+        # x basis matrices dealt round-robin to the build threads (independent until the end)
+        n_groups = build_threads()
+        groups = [list(range(fx.ranks[v]))[k::n_groups] for k in range(n_groups)]
+        merged = thread_map(partial(_compress_main_products, fx, fy, v, coef, part, exp.rank,
+                                    kp.compress_tol / 8), [g for g in groups if g])
+        terms += compress_terms([t for acc in merged for t in acc], kp.compress_tol / 4)
     return compress_terms(terms, kp.compress_tol)
 
 
