@@ -72,3 +72,14 @@ def test_grouped_rotated_refracted_build_equals_the_serial_one(monkeypatch):
     assert rel_rms(grouped, serial) < 1e-6
     assert rel_rms(serial, one_shot) < 2e-5
     assert rel_rms(grouped, one_shot) < 2e-5
+
+
+def test_thread_map_inside_an_item_runs_inline():
+    def inner(i: int) -> str:
+        return threading.current_thread().name
+
+    def outer(i: int) -> set[str]:
+        return set(thread_map(inner, [0, 1, 2], threads=2)) | {threading.current_thread().name}
+
+    for names in thread_map(outer, [0, 1], threads=2):
+        assert len(names) == 1  # the nested map ran in the item's own thread

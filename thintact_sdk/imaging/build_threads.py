@@ -14,6 +14,7 @@ everything in the calling thread).
 from __future__ import annotations
 
 import os
+import threading
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from typing import TypeVar
@@ -27,6 +28,8 @@ MAX_BUILD_THREADS = 8
 
 T = TypeVar("T")
 R = TypeVar("R")
+
+_worker = threading.local()
 
 
 def build_threads(environ: dict[str, str] | None = None) -> int:
@@ -55,9 +58,18 @@ def build_threads(environ: dict[str, str] | None = None) -> int:
 def thread_map(fn: Callable[[T], R], items: Sequence[T], threads: int | None = None) -> list[R]:
     """``[fn(item) for item in items]``, the items spread over ``threads`` threads
     (default :func:`build_threads`) with OpenBLAS at one thread; results in the items' order.
-    An exception in any item is raised here. One thread, or one item, runs inline."""
+    An exception in any item is raised here. One thread, or one item, runs inline, and so does
+    a map called from inside another map's item (no nested pools)."""
     n = min(len(items), build_threads() if threads is None else threads)
-    if n <= 1:
+    if n <= 1 or getattr(_worker, "active", False):
         return [fn(item) for item in items]
+
+    def run(item: T) -> R:
+        _worker.active = True
+        try:
+            return fn(item)
+        finally:
+            _worker.active = False
+
     with blas_threads(1), ThreadPoolExecutor(max_workers=n, thread_name_prefix="kernel-build") as pool:
-        return list(pool.map(fn, items))
+        return list(pool.map(run, items))
