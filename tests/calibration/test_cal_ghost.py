@@ -134,6 +134,12 @@ def test_echo_scan_of_matrices_that_are_not_the_design_says_so() -> None:
     assert "does not follow the design" in scan.name
     flipped = echo_scan(-unit[None], design, design_open, lags, "columns (Qc echo)")
     assert flipped.lags == lags and not flipped.significant
+    # health.json says the skipped scan did not run (it used to read strength 0.0, lag 0)
+    from thintact_sdk.calibration.health import _scan_json
+    assert _scan_json(scan) == {"scan": scan.name, "scanned": False, "lag_px": None, "strength": None,
+                                "significant": False}
+    ran = _scan_json(flipped)
+    assert ran["scanned"] is True and ran["lag_px"] in lags and isinstance(ran["strength"], float)
 
 
 @pytest.mark.slow

@@ -175,9 +175,18 @@ class HealthReport:
                                        key=lambda kv: -kv[1])[:5]),
             "noise": self.noise.to_json(),
             "defects": [d.to_json() for d in self.defects],
-            "ghost_scans": [{"scan": g.name, "lag_px": g.lag, "strength": round(g.estimate if np.isfinite(g.estimate) else g.value, 4),
-                             "significant": g.significant} for g in self.ghost_scans],
+            "ghost_scans": [_scan_json(g) for g in self.ghost_scans],
         }
+
+
+def _scan_json(g: GhostScan) -> dict[str, Any]:
+    """One ghost scan for ``health.json``; a scan that did not run (no lags: its name says
+    why) has ``"scanned": false`` and null offset and strength, not a strength of 0."""
+    if not g.lags:
+        return {"scan": g.name, "scanned": False, "lag_px": None, "strength": None, "significant": False}
+    strength = g.estimate if np.isfinite(g.estimate) else g.value
+    return {"scan": g.name, "scanned": True, "lag_px": g.lag, "strength": round(strength, 4),
+            "significant": g.significant}
 
 
 def _fit_noise(pred: np.ndarray, r2: np.ndarray, noise: NoiseSpec, frames: int,
