@@ -22,7 +22,10 @@ EXIT_USAGE = 2
 
 
 class _Parser(argparse.ArgumentParser):
-    """argparse parser whose errors are one line and exit status 2 (argparse's default)."""
+    """argparse parser whose errors are one line and exit status 2 (argparse's default);
+    ``command_names`` lists the subcommands :func:`build_parser` registered."""
+
+    command_names: list[str] = []
 
     def error(self, message: str) -> NoReturn:
         self.exit(EXIT_USAGE, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
@@ -52,6 +55,7 @@ def build_parser() -> argparse.ArgumentParser:
             comp.factory(sub)
     except ThinTactError:
         pass
+    parser.command_names = list(sub.choices or ())
     return parser
 
 
@@ -79,17 +83,11 @@ def join_two_word_command(argv: Sequence[str], commands: Sequence[str]) -> list[
     return args
 
 
-def _command_names(parser: argparse.ArgumentParser) -> list[str]:
-    for action in parser._actions:  # argparse keeps the subcommand table on its action
-        if isinstance(action, argparse._SubParsersAction):
-            return list(action.choices)
-    return []
-
-
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the CLI; returns the exit status (0 ok, 2 bad input or device fault)."""
     parser = build_parser()
-    argv = join_two_word_command(sys.argv[1:] if argv is None else argv, _command_names(parser))
+    argv = join_two_word_command(sys.argv[1:] if argv is None else argv,
+                                 getattr(parser, "command_names", []))
     try:
         args = parser.parse_args(argv)
     except SystemExit as done:  # --help and --version exit 0 as argparse does
