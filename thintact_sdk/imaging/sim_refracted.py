@@ -8,7 +8,7 @@ on the y offset only through ``κ``. For one (sensor pixel, scene pixel) pair th
 ``dy`` is frozen at the y pair's centre offset ``D_y`` inside ``κ``, so the x-factor is a
 one-axis box integral of the mask profile along the *curved* map ``m_x(u_x, s_x; D_y²)``
 (the unrotated kernel adds the first-order correction ``∂X/∂D²·(dy² - D_y²)`` as more
-separable products, see :func:`refracted_terms`; the rotated one keeps the freezing):
+separable products, see :func:`refracted_terms`; the rotated one too, within an error budget):
 
 - the pixel pair is split into ``n_sub × n_sub`` sub-rectangles; on each, the map is replaced
   by its tangent at the sub-rectangle's centre, ``m ≈ M + (1 - g')(u - u_c) + g'(s - s_c)``
@@ -492,7 +492,11 @@ def refracted_rotated_terms(
     zero inside ``κ``, which moves it by ``s·D·Δκ``, well under 0.1 µm at the angles a
     misalignment has). The x family then depends on the y pair through two numbers,
     ``(D_y², t_x)``: it is tabulated on their product grid, compressed by one SVD and its
-    weights interpolated bicubically; likewise for y."""
+    weights interpolated bicubically; likewise for y. The first-order coupling correction of
+    :func:`refracted_terms` is added with its factors cut to the error budget
+    :data:`CORRECTION_ERROR` (:func:`correction_size`). The two axes are tabulated, and at
+    large angles the product blocks compressed, on the build threads
+    (:mod:`~thintact_sdk.imaging.build_threads`)."""
     a = math.radians(kp.angle_deg)
     c, s = math.cos(a), math.sin(a)
     sx_mm, sy_mm = kp.dx_um * 1e-3, kp.dy_um * 1e-3
