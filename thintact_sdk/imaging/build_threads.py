@@ -73,3 +73,16 @@ def thread_map(fn: Callable[[T], R], items: Sequence[T], threads: int | None = N
 
     with blas_threads(1), ThreadPoolExecutor(max_workers=n, thread_name_prefix="kernel-build") as pool:
         return list(pool.map(run, items))
+
+
+def per_channel_by_wavelength(wavelengths_nm: Sequence[float], channels: int,
+                              build: Callable[[float], R]) -> list[R]:
+    """``build(λ)`` once per distinct wavelength, the wavelengths side by side on the build
+    threads, listed per channel (channel ``c`` uses ``wavelengths_nm[min(c, len - 1)]``, as
+    the profile's ``diffraction.wavelength_nm`` says). Used where every wavelength's kernel is
+    bounded in size (rotated and refracted kernels refuse large devices); the plain
+    diffraction kernel, which runs at the paper's size, builds them one after another."""
+    lams = [float(wavelengths_nm[min(ch, len(wavelengths_nm) - 1)]) for ch in range(channels)]
+    distinct = list(dict.fromkeys(lams))
+    built = dict(zip(distinct, thread_map(build, distinct), strict=True))
+    return [built[lam] for lam in lams]

@@ -13,6 +13,7 @@ derivatives) from a spline in ``ρ²`` and the same expansion is built from it.
 
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -82,6 +83,8 @@ class SeparableExpansion:
     #: the same pixel-pair offsets again and again (every trial of a diagnosis)
     _memo: dict[tuple[bool, tuple[int, ...], bytes], tuple[np.ndarray, np.ndarray, np.ndarray]] \
         = field(default_factory=dict, repr=False, compare=False)
+    #: kernel builds evaluate both axes on separate threads (``imaging/build_threads.py``)
+    _memo_lock: threading.Lock = field(default_factory=threading.Lock, repr=False, compare=False)
 
     @classmethod
     def build(
@@ -139,7 +142,8 @@ class SeparableExpansion:
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Memoised :meth:`_evaluate` (read-only results, at most :data:`MEMO_BYTES`)."""
         key = (weights is self.left, t.shape, np.ascontiguousarray(t).tobytes())
-        hit = self._memo.get(key)
+        with self._memo_lock:
+            hit = self._memo.get(key)
         if hit is not None:
             return hit
         out = self._evaluate(t, nodes, weights)
@@ -147,11 +151,12 @@ class SeparableExpansion:
             a.setflags(write=False)
         size = sum(a.nbytes for a in out)
         if size <= MEMO_BYTES:
-            held = sum(a.nbytes for v in self._memo.values() for a in v)
-            while self._memo and held + size > MEMO_BYTES:
-                old = self._memo.pop(next(iter(self._memo)))
-                held -= sum(a.nbytes for a in old)
-            self._memo[key] = out
+            with self._memo_lock:
+                held = sum(a.nbytes for v in self._memo.values() for a in v)
+                while self._memo and held + size > MEMO_BYTES:
+                    old = self._memo.pop(next(iter(self._memo)))
+                    held -= sum(a.nbytes for a in old)
+                self._memo[key] = out
         return out
 
     def _evaluate(self, t: np.ndarray, nodes: np.ndarray, weights: np.ndarray

@@ -39,7 +39,7 @@ from functools import partial
 import numpy as np
 
 from thintact_sdk.errors import ThinTactError
-from thintact_sdk.imaging.build_threads import build_threads, thread_map
+from thintact_sdk.imaging.build_threads import build_threads, per_channel_by_wavelength, thread_map
 from thintact_sdk.imaging.sim_axis import AxisGrid, mask_cell_edges_mm, second_antiderivative
 from thintact_sdk.imaging.sim_params import KernelParams
 from thintact_sdk.imaging.sim_radiometry import SeparableExpansion, TabulatedRadial
@@ -587,22 +587,20 @@ def build_refracted_kernel(kp: KernelParams) -> SeparableKernel:
     z_eff = kp.z_mm / kp.n_scene_side  # the spherical wave's curvature in the medium
     k_max = float(np.max(tables.kappa.value(np.linspace(0, exp.x_nodes.max()**2
                                                         + exp.y_nodes.max()**2, 64))))
-    by_wavelength: dict[float, list[SeparableTerm]] = {}
-    per_channel = []
-    for ch in range(kp.channels):
-        lam = kp.wavelengths_nm[min(ch, len(kp.wavelengths_nm) - 1)]
-        if lam not in by_wavelength:
-            profs = []
-            # crossing points in the pattern frame: rotation mixes in the other axis's extent
-            sin_a = abs(math.sin(math.radians(kp.angle_deg)))
-            half = max(g.n_sensor * g.sensor_pitch_mm / 2 + k_max * g.max_offset_mm()
-                       for g in (kp.grid_x(), kp.grid_y()))
-            for grid, phi in ((kp.grid_x(), kp.phi), (kp.grid_y(), kp.phi_rows)):
-                reach = half * (1 + sin_a) + (abs(kp.dx_um) + abs(kp.dy_um)) * 1e-3 \
-                    + 4 * grid.sensor_pitch_mm + 4 * grid.scene_pitch_mm
-                profs.append(diffraction.axis_intensity_profiles(
-                    edges, np.asarray(phi, float), -reach, reach, lam, z_eff, kp.d_mm))
-            by_wavelength[lam] = make(kp, exp, tables, profs[0], profs[1], pairs)
-        per_channel.append(by_wavelength[lam])
+    # crossing points in the pattern frame: rotation mixes in the other axis's extent
+    sin_a = abs(math.sin(math.radians(kp.angle_deg)))
+    half = max(g.n_sensor * g.sensor_pitch_mm / 2 + k_max * g.max_offset_mm()
+               for g in (kp.grid_x(), kp.grid_y()))
+
+    def build(lam: float) -> list[SeparableTerm]:
+        profs = []
+        for grid, phi in ((kp.grid_x(), kp.phi), (kp.grid_y(), kp.phi_rows)):
+            reach = half * (1 + sin_a) + (abs(kp.dx_um) + abs(kp.dy_um)) * 1e-3 \
+                + 4 * grid.sensor_pitch_mm + 4 * grid.scene_pitch_mm
+            profs.append(diffraction.axis_intensity_profiles(
+                edges, np.asarray(phi, float), -reach, reach, lam, z_eff, kp.d_mm))
+        return make(kp, exp, tables, profs[0], profs[1], pairs)
+
+    per_channel = per_channel_by_wavelength(kp.wavelengths_nm, kp.channels, build)
     info["terms"] = float(max(len(t) for t in per_channel))
     return SeparableKernel(per_channel, info)

@@ -39,6 +39,7 @@ import numpy as np
 
 from thintact_sdk.errors import ThinTactError
 from thintact_sdk.imaging import sim_refracted, sim_rotated
+from thintact_sdk.imaging.build_threads import per_channel_by_wavelength
 from thintact_sdk.imaging.sim_axis import AxisGrid, mask_cell_edges_mm
 from thintact_sdk.imaging.sim_direct import DirectKernel, build_direct_kernel
 from thintact_sdk.imaging.sim_params import KernelParams, kernel_params
@@ -170,14 +171,12 @@ def _build_rotated_kernel(kp: KernelParams, exp: SeparableExpansion,
         terms = sim_rotated.rotated_terms(kp, exp, px, py, pairs)
         info["terms"] = float(len(terms))
         return SeparableKernel([terms] * kp.channels, info)
-    by_wavelength: dict[float, list[SeparableTerm]] = {}
-    per_channel = []
-    for ch in range(kp.channels):
-        lam = kp.wavelengths_nm[min(ch, len(kp.wavelengths_nm) - 1)]
-        if lam not in by_wavelength:
-            px, py, pairs = sim_rotated.diffraction_profiles(kp, lam)
-            by_wavelength[lam] = sim_rotated.rotated_terms(kp, exp, px, py, pairs)
-        per_channel.append(by_wavelength[lam])
+
+    def build(lam: float) -> list[SeparableTerm]:
+        px, py, pairs = sim_rotated.diffraction_profiles(kp, lam)
+        return sim_rotated.rotated_terms(kp, exp, px, py, pairs)
+
+    per_channel = per_channel_by_wavelength(kp.wavelengths_nm, kp.channels, build)
     info["terms"] = float(max(len(t) for t in per_channel))
     return SeparableKernel(per_channel, info)
 
