@@ -34,9 +34,16 @@ from thintact_sdk.compute_threads import (
     prepare_worker_thread,
     single_threaded_kernels,
 )
-from thintact_sdk.errors import DeviceError, ProfileError
+from thintact_sdk.errors import DeviceError, InvalidValueError, ProfileError
 from thintact_sdk.frames import Measurement, RawFrame, TactileFrame
-from thintact_sdk.interfaces import Camera, Decoder, LightController, RawDecoder
+from thintact_sdk.interfaces import (
+    BinnedInputDecoder,
+    Camera,
+    Decoder,
+    LightController,
+    RawDecoder,
+    binned_input,
+)
 from thintact_sdk.plugin_manager import PluginRegistry, get_registry
 from thintact_sdk.profile import Profile
 from thintact_sdk.tactile.interpreter import TactileInterpreter
@@ -329,10 +336,24 @@ class Sensor:
         them combined to RGB by :func:`thintact_sdk.bayer.planes_to_rgb`).
 
         Uses the decoder's ``decode_raw(data, black_level_dn)`` when it has one (the black
-        level folded into the solve), else ``decode(signal)``.
+        level folded into the solve), else ``decode(signal)``. A measurement binned for the
+        decoder (``sensor_bin`` > 1, made by :meth:`process` and :meth:`stream` for a
+        :class:`~thintact_sdk.interfaces.BinnedInputDecoder`) goes to its ``decode_binned``.
+
+        Raises
+        ------
+        InvalidValueError
+            For a binned measurement the decoder does not solve on (another ``sensor_bin``).
         """
         decoder = self.decoder
-        if isinstance(decoder, RawDecoder):
+        if measurement.sensor_bin != 1:
+            if binned_input(decoder) != measurement.sensor_bin or not isinstance(decoder, BinnedInputDecoder):
+                raise InvalidValueError(
+                    f"frame {measurement.frame_id} was binned {measurement.sensor_bin}×{measurement.sensor_bin} "
+                    f"but decoder {getattr(decoder, 'name', type(decoder).__name__)!r} solves on sensor_bin "
+                    f"{binned_input(decoder)}; bin it with to_measurement(..., sensor_bin={binned_input(decoder)})")
+            out = decoder.decode_binned(measurement.data, measurement.black_level_dn)
+        elif isinstance(decoder, RawDecoder):
             out = decoder.decode_raw(measurement.data, measurement.black_level_dn)
         else:
             out = decoder.decode(measurement.signal())
@@ -357,9 +378,9 @@ class Sensor:
         :meth:`stream` calls this before it starts reading, outside the read timeout.
         """
         t0 = time.perf_counter()
-        s = self.profile.sensor
-        black = Measurement(np.full((s.rows, s.cols, len(s.channels)), self.profile.noise.black_level_dn,
-                                    np.float32), self.profile.noise.black_level_dn)
+        s, b = self.profile.sensor, self._input_bin()  # the frames' path: binned for the decoder
+        black = Measurement(np.full((s.rows // b, s.cols // b, len(s.channels)), self.profile.noise.black_level_dn,
+                                    np.float32), self.profile.noise.black_level_dn, sensor_bin=b)
         self.reconstruct(black)
         t1 = time.perf_counter()
         self.reconstruct(black)  # warm: what a frame costs on this host (chooses decode workers)
@@ -368,10 +389,24 @@ class Sensor:
         return time.perf_counter() - t0
 
     # -- the stages of process() and stream() --------------------------------------------
+    def decoder_input(self, raw: RawFrame) -> Measurement:
+        """Raw frame → what :meth:`reconstruct` decodes: the measurement
+        (:func:`~thintact_sdk.capture.to_measurement`), or, for a decoder that solves on the
+        sensor binned ``b × b`` (:class:`~thintact_sdk.interfaces.BinnedInputDecoder`), its
+        ``b × b`` block means binned straight from the mosaic in one pass
+        (``Measurement.sensor_bin = b``). :meth:`read_measurement` always gives the measurement."""
+        return to_measurement(raw, self.profile, sensor_bin=self._input_bin())
+
     def _bin_stage(self, item: _InFlight) -> None:
         t0 = time.perf_counter()
-        item.measurement = to_measurement(item.raw, self.profile)
+        item.measurement = self.decoder_input(item.raw)
         item.compute_ms += (time.perf_counter() - t0) * 1e3
+
+    def _input_bin(self) -> int:
+        """The ``b`` to bin raw frames to for this sensor's decoder (1: the measurement)."""
+        b = binned_input(self.decoder)
+        s = self.profile.sensor
+        return b if s.rows % b == 0 and s.cols % b == 0 else 1
 
     def _decode_stage(self, item: _InFlight) -> None:
         assert item.measurement is not None

@@ -236,7 +236,6 @@ def _latency_decoder(profile: Any, name: str | None = None) -> tuple[Any, Any, s
 def latency(args: argparse.Namespace, out: dict[str, Any]) -> None:
     """Raw Bayer → TactileFrame on ``args.latency_profile``, single frames and streamed."""
     from thintact_sdk.bayer import mosaic_from_rgb
-    from thintact_sdk.capture import to_measurement
     from thintact_sdk.frames import RawFrame
     from thintact_sdk.imaging.noise import signal_to_dn
     from thintact_sdk.profile import load_profile
@@ -271,7 +270,7 @@ def latency(args: argparse.Namespace, out: dict[str, Any]) -> None:
         raw = raws[k % len(raws)]
         raw.frame_id = k + 1
         t0 = time.perf_counter()
-        m = to_measurement(raw, profile)
+        m = sensor.decoder_input(raw)  # binned once, straight to a binned decoder's input
         t1 = time.perf_counter()
         img = sensor.reconstruct(m)
         t2 = time.perf_counter()
