@@ -30,9 +30,11 @@ import numpy as np
 from thintact_sdk.bayer import planes_to_rgb
 from thintact_sdk.capture import FrameGapCounter, camera_is_simulated, create_camera, to_measurement
 from thintact_sdk.compute_threads import (
+    PIPELINE_SHARES_CORES_UP_TO,
     decode_workers,
     prepare_worker_thread,
     single_threaded_kernels,
+    usable_cores,
 )
 from thintact_sdk.errors import DeviceError, InvalidValueError, ProfileError
 from thintact_sdk.frames import Measurement, RawFrame, TactileFrame
@@ -378,6 +380,7 @@ class Sensor:
         :meth:`stream` calls this before it starts reading, outside the read timeout.
         """
         t0 = time.perf_counter()
+        prepare_worker_thread()  # a stream holding the kernels at one thread: time the decode so
         s, b = self.profile.sensor, self._input_bin()  # the frames' path: binned for the decoder
         black = Measurement(np.full((s.rows // b, s.cols // b, len(s.channels)), self.profile.noise.black_level_dn,
                                     np.float32), self.profile.noise.black_level_dn, sensor_bin=b)
@@ -448,6 +451,9 @@ class Sensor:
         decode stage gets one worker per usable core (``THINTACT_DECODE_WORKERS`` overrides),
         each decoding whole frames on one kernel thread, with OpenBLAS and torch held at one
         thread while it streams (restored after); see :mod:`thintact_sdk.compute_threads`.
+        On a host with at most :data:`~thintact_sdk.compute_threads.PIPELINE_SHARES_CORES_UP_TO`
+        usable cores the kernels are held at one thread for every stream, one worker included,
+        and the warm-up times the decode that way.
         A frame finished after a newer one is skipped, never delivered out of order.
 
         The decoder is built and warmed up (:meth:`warm_up`) before the first read, so its
@@ -466,8 +472,16 @@ class Sensor:
 
         wait = self.read_timeout_s if timeout_s is None else timeout_s
         self._camera()
-        warm_up_s = self.warm_up()
-        self._start_threads()
+        if self._threads:
+            raise DeviceError("the sensor is already streaming")
+        if usable_cores() <= PIPELINE_SHARES_CORES_UP_TO:
+            self._hold_kernels()  # before the warm-up: it times the decode as the stream will run it
+        try:
+            warm_up_s = self.warm_up()
+            self._start_threads()
+        except BaseException:
+            self._release_kernels()
+            raise
         self.stats.warm_up_s = warm_up_s
         try:
             n = 0
@@ -506,8 +520,7 @@ class Sensor:
         workers = decode_workers(self.decode_ms, self._camera().capabilities().fps)
         self.stats.decode_workers = workers
         if workers > 1:  # frame-parallel decode: one kernel thread per worker, no waits
-            self._kernel_hold = ExitStack()
-            self._kernel_hold.enter_context(single_threaded_kernels())
+            self._hold_kernels()
         stages = [
             ("bin", self._raws, self._measurements, self._bin_stage),
             *((f"decode{i}" if workers > 1 else "decode", self._measurements, self._images,
@@ -533,6 +546,15 @@ class Sensor:
         for t in self._threads:
             t.join(timeout=5.0)
         self._threads = []
+        self._release_kernels()
+
+    def _hold_kernels(self) -> None:
+        """Hold OpenBLAS/torch at one thread per decode worker until :meth:`_release_kernels`."""
+        if self._kernel_hold is None:
+            self._kernel_hold = ExitStack()
+            self._kernel_hold.enter_context(single_threaded_kernels())
+
+    def _release_kernels(self) -> None:
         if self._kernel_hold is not None:
             self._kernel_hold.close()
             self._kernel_hold = None

@@ -43,7 +43,7 @@ def main() -> None:
         thintact_decoders.host_capabilities = lambda: replace(host_capabilities(), native_bf16=False)
     results: dict[str, Any] = {"host": machine_summary(), "load_before": os.getloadavg()[0]}
     with tempfile.TemporaryDirectory() as cache:
-        os.environ["THINTACT_CACHE_DIR"] = cache
+        os.environ.setdefault("THINTACT_CACHE_DIR", cache)  # a given one keeps the backend selection
         for workers in args.workers:
             os.environ["THINTACT_DECODE_WORKERS"] = str(workers)
             out: dict[str, Any] = {}
