@@ -474,10 +474,13 @@ class Sensor:
         self._camera()
         if self._threads:
             raise DeviceError("the sensor is already streaming")
+        t0 = time.perf_counter()
         if usable_cores() <= PIPELINE_SHARES_CORES_UP_TO:
+            _ = self.decoder  # built (backends measured) with the library's threads, as outside a stream
             self._hold_kernels()  # before the warm-up: it times the decode as the stream will run it
         try:
-            warm_up_s = self.warm_up()
+            self.warm_up()
+            warm_up_s = time.perf_counter() - t0
             self._start_threads()
         except BaseException:
             self._release_kernels()
