@@ -50,7 +50,9 @@ def main() -> None:
             latency(argparse.Namespace(latency_profile=args.profile, decoder=args.decoder, seed=0,
                                        latency_frames=args.frames, latency_bundle=args.bundle), out)
             s = out["stream"]
-            results[f"workers={workers}"] = {
+            key = f"workers={workers}"
+            key += f" (run {sum(k.startswith(key) for k in results) + 1})" if key in results else ""
+            results[key] = {
                 "fps": round(s["fps"], 1), "latency_p50_ms": round(s["latency_p50_ms"], 1),
                 "latency_p99_ms": round(s["latency_p99_ms"], 1),
                 "p99_over_p50": round(s["latency_p99_ms"] / s["latency_p50_ms"], 2),
