@@ -23,8 +23,14 @@ from typing import Any
 
 import numpy as np
 
-from thintact_sdk.bayer import bin_bayer, pattern_from_pixel_format, split_bayer
-from thintact_sdk.errors import DeviceError, InvalidShapeError, PluginError, ProfileError
+from thintact_sdk.bayer import bin_bayer, block_mean, pattern_from_pixel_format, split_bayer
+from thintact_sdk.errors import (
+    DeviceError,
+    InvalidShapeError,
+    InvalidValueError,
+    PluginError,
+    ProfileError,
+)
 from thintact_sdk.frames import Measurement, RawFrame
 from thintact_sdk.interfaces import Camera
 from thintact_sdk.plugin_manager import PluginRegistry, get_registry
@@ -90,15 +96,17 @@ def channel_layout(profile: Profile) -> str:
     return "mono" if channels == ["mono"] else "binned"
 
 
-def _bin(data: np.ndarray, pattern: str, layout: str, out: np.ndarray | None) -> np.ndarray:
-    """The frame in the profile's channel layout (float32 DN)."""
+def _bin(data: np.ndarray, pattern: str, layout: str, out: np.ndarray | None, block: int = 1) -> np.ndarray:
+    """The frame in the profile's channel layout (float32 DN), ``block × block`` means of it."""
     if layout == "mono":
         if data.ndim != 2:
             raise InvalidShapeError(f"a monochrome sensor delivers 2-D frames, got shape {data.shape}")
+        if block != 1:
+            return block_mean(data[..., None], block, out)
         return data.astype(np.float32, copy=False)[..., None]
     if layout == "planes":
-        return split_bayer(data, pattern, out=out)
-    return bin_bayer(data, pattern, out=out if pattern != "none" else None)
+        return split_bayer(data, pattern, out=out, block=block)
+    return bin_bayer(data, pattern, out=out if pattern != "none" or block != 1 else None, block=block)
 
 
 def pixel_format_bits(pixel_format: str) -> int | None:
@@ -128,7 +136,7 @@ def bit_depth_problem(pixel_format: str, profile: Profile) -> str | None:
 
 
 def to_measurement(
-    raw: RawFrame, profile: Profile, out: np.ndarray | None = None
+    raw: RawFrame, profile: Profile, out: np.ndarray | None = None, sensor_bin: int = 1
 ) -> Measurement:
     """Linearise and bin one raw frame into a measurement with the profile's black level.
 
@@ -150,7 +158,15 @@ def to_measurement(
         Supplies the expected sensor size ``R × S``, the CFA layout
         (``camera.bayer_pattern``) and ``noise.black_level_dn``.
     out
-        Optional preallocated ``R × S × C`` float32 array for the binned data.
+        Optional preallocated ``R × S × C`` float32 array for the binned data
+        (``R/b × S/b × C`` with ``sensor_bin`` b).
+    sensor_bin
+        ``b`` > 1: return the ``b × b`` block means of the measurement instead
+        (``Measurement.sensor_bin = b``), binned from the mosaic in one pass
+        (:func:`thintact_sdk.bayer.bin_sites`: each pixel averages a ``2b × 2b`` cell per colour
+        site), for a decoder that solves on the binned sensor
+        (:class:`~thintact_sdk.interfaces.BinnedInputDecoder`). The same numbers as binning
+        the measurement afterwards, up to float32 rounding.
 
     Returns
     -------
@@ -165,7 +181,14 @@ def to_measurement(
     DeviceError
         When the frame's size does not give the profile's sensor size after binning, or it
         holds codes beyond the declared tone-curve table.
+    InvalidValueError
+        When ``sensor_bin`` is not a positive divisor of the profile's ``sensor.rows`` and
+        ``sensor.cols``.
     """
+    rows, cols = profile.sensor.rows, profile.sensor.cols
+    if sensor_bin < 1 or rows % sensor_bin or cols % sensor_bin:
+        raise InvalidValueError(f"sensor_bin {sensor_bin}: the {rows}×{cols} measurement of profile "
+                                f"{profile.name!r} cannot be binned in {sensor_bin}×{sensor_bin} blocks")
     data = raw.data
     if data.ndim == 3 and data.shape[2] == 4:
         data = data[..., :3]
@@ -184,20 +207,20 @@ def to_measurement(
             f"frame of shape {data.shape}; deliver the raw mosaic"
         )
     try:
-        binned = _bin(data, pattern, layout, out)
+        binned = _bin(data, pattern, layout, out, sensor_bin)
     except ValueError as err:
         raise DeviceError(f"cannot bin the {raw.pixel_format} frame {raw.frame_id}: {err}") from None
-    if pattern in ("none", "mono") and out is not None:
+    if pattern in ("none", "mono") and out is not None and sensor_bin == 1:
         out[...] = binned
         binned = out
-    expected = (profile.sensor.rows, profile.sensor.cols)
-    if binned.shape[:2] != expected:
+    expected = (rows, cols)
+    if binned.shape[:2] != (rows // sensor_bin, cols // sensor_bin):
         need = {"none": f"{expected[0]}×{expected[1]}×3 RGB frame",
                 "mono": f"{expected[0]}×{expected[1]} monochrome frame"}.get(
             pattern, f"{2 * expected[0]}×{2 * expected[1]} mosaic")
         raise DeviceError(
             f"the camera delivers {data.shape[0]}×{data.shape[1]} {raw.pixel_format} frames, "
-            f"binned to {binned.shape[0]}×{binned.shape[1]}, but profile {profile.name!r} "
+            f"binned to {binned.shape[0] * sensor_bin}×{binned.shape[1] * sensor_bin}, but profile {profile.name!r} "
             f"expects a {expected[0]}×{expected[1]} measurement (a {need}); set the camera's "
             "Width/Height (ROI) or fix sensor.rows/cols"
         )
@@ -217,6 +240,7 @@ def to_measurement(
         frame_id=int(raw.frame_id),
         exposure_us=raw.exposure_us,
         meta=meta,
+        sensor_bin=sensor_bin,
     )
 
 

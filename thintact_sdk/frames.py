@@ -57,6 +57,10 @@ class Measurement:
         Black level of the sensor in DN.
     timestamp_ns, frame_id, exposure_us
         Copied from the raw frame.
+    sensor_bin
+        ``b``: ``data`` holds the ``b × b`` block means of the profile's ``R × S`` measurement,
+        ``R/b × S/b × C`` (made for a :class:`~thintact_sdk.interfaces.BinnedInputDecoder`,
+        see :func:`thintact_sdk.capture.to_measurement`); 1 for the measurement itself.
     """
 
     data: np.ndarray
@@ -65,6 +69,7 @@ class Measurement:
     frame_id: int = 0
     exposure_us: float | None = None
     meta: dict[str, Any] = field(default_factory=dict)
+    sensor_bin: int = 1
 
     def signal(self) -> np.ndarray:
         """``R × S × 3`` float32 signal in DN above black level."""

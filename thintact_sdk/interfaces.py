@@ -201,6 +201,36 @@ class RawDecoder(Protocol):
 
 
 @runtime_checkable
+class BinnedInputDecoder(Protocol):
+    """A decoder that solves on the sensor binned ``b × b`` (``sensor_bin`` = b > 1) and so
+    takes the binned frame directly.
+
+    :meth:`thintact_sdk.sensor.Sensor.process` and :meth:`~thintact_sdk.sensor.Sensor.stream`
+    then bin the camera's Bayer mosaic ``2b × 2b`` per colour site in one pass
+    (:func:`thintact_sdk.bayer.bin_bayer` with ``block=b``) instead of ``2 × 2`` and then
+    ``b × b`` again in the decoder, and hand the result, a :class:`~thintact_sdk.frames.Measurement`
+    with ``sensor_bin = b``, to :meth:`decode_binned`. ``decode`` and ``decode_raw`` still take
+    the profile's full ``R × S × C`` measurement; a decoder without this capability (or with
+    ``sensor_bin`` 1) gets exactly that.
+    """
+
+    sensor_bin: int
+    """Block side ``b`` (sensor pixels) of the binning the decoder solves on."""
+
+    def decode_binned(self, binned: np.ndarray, black_level_dn: float) -> np.ndarray:
+        """``R/b × S/b × C`` block means of the measurement in DN, black level included →
+        ``N × M × C`` float32."""
+        ...
+
+
+def binned_input(decoder: object) -> int:
+    """The ``b`` of a :class:`BinnedInputDecoder` that solves on a binned sensor (> 1), else 1."""
+    if isinstance(decoder, BinnedInputDecoder):
+        return max(1, int(decoder.sensor_bin))
+    return 1
+
+
+@runtime_checkable
 class TunableDecoder(Protocol):
     """A decoder whose Tikhonov weight τ (DN²) changes without rebuilding it (closed forms);
     calibration sweeps τ through it."""

@@ -30,13 +30,22 @@ import numpy as np
 from thintact_sdk.bayer import planes_to_rgb
 from thintact_sdk.capture import FrameGapCounter, camera_is_simulated, create_camera, to_measurement
 from thintact_sdk.compute_threads import (
+    PIPELINE_SHARES_CORES_UP_TO,
     decode_workers,
     prepare_worker_thread,
     single_threaded_kernels,
+    usable_cores,
 )
-from thintact_sdk.errors import DeviceError, ProfileError
+from thintact_sdk.errors import DeviceError, InvalidValueError, ProfileError
 from thintact_sdk.frames import Measurement, RawFrame, TactileFrame
-from thintact_sdk.interfaces import Camera, Decoder, LightController, RawDecoder
+from thintact_sdk.interfaces import (
+    BinnedInputDecoder,
+    Camera,
+    Decoder,
+    LightController,
+    RawDecoder,
+    binned_input,
+)
 from thintact_sdk.plugin_manager import PluginRegistry, get_registry
 from thintact_sdk.profile import Profile
 from thintact_sdk.tactile.interpreter import TactileInterpreter
@@ -329,10 +338,24 @@ class Sensor:
         them combined to RGB by :func:`thintact_sdk.bayer.planes_to_rgb`).
 
         Uses the decoder's ``decode_raw(data, black_level_dn)`` when it has one (the black
-        level folded into the solve), else ``decode(signal)``.
+        level folded into the solve), else ``decode(signal)``. A measurement binned for the
+        decoder (``sensor_bin`` > 1, made by :meth:`process` and :meth:`stream` for a
+        :class:`~thintact_sdk.interfaces.BinnedInputDecoder`) goes to its ``decode_binned``.
+
+        Raises
+        ------
+        InvalidValueError
+            For a binned measurement the decoder does not solve on (another ``sensor_bin``).
         """
         decoder = self.decoder
-        if isinstance(decoder, RawDecoder):
+        if measurement.sensor_bin != 1:
+            if binned_input(decoder) != measurement.sensor_bin or not isinstance(decoder, BinnedInputDecoder):
+                raise InvalidValueError(
+                    f"frame {measurement.frame_id} was binned {measurement.sensor_bin}×{measurement.sensor_bin} "
+                    f"but decoder {getattr(decoder, 'name', type(decoder).__name__)!r} solves on sensor_bin "
+                    f"{binned_input(decoder)}; bin it with to_measurement(..., sensor_bin={binned_input(decoder)})")
+            out = decoder.decode_binned(measurement.data, measurement.black_level_dn)
+        elif isinstance(decoder, RawDecoder):
             out = decoder.decode_raw(measurement.data, measurement.black_level_dn)
         else:
             out = decoder.decode(measurement.signal())
@@ -357,9 +380,10 @@ class Sensor:
         :meth:`stream` calls this before it starts reading, outside the read timeout.
         """
         t0 = time.perf_counter()
-        s = self.profile.sensor
-        black = Measurement(np.full((s.rows, s.cols, len(s.channels)), self.profile.noise.black_level_dn,
-                                    np.float32), self.profile.noise.black_level_dn)
+        prepare_worker_thread()  # a stream holding the kernels at one thread: time the decode so
+        s, b = self.profile.sensor, self._input_bin()  # the frames' path: binned for the decoder
+        black = Measurement(np.full((s.rows // b, s.cols // b, len(s.channels)), self.profile.noise.black_level_dn,
+                                    np.float32), self.profile.noise.black_level_dn, sensor_bin=b)
         self.reconstruct(black)
         t1 = time.perf_counter()
         self.reconstruct(black)  # warm: what a frame costs on this host (chooses decode workers)
@@ -368,10 +392,24 @@ class Sensor:
         return time.perf_counter() - t0
 
     # -- the stages of process() and stream() --------------------------------------------
+    def decoder_input(self, raw: RawFrame) -> Measurement:
+        """Raw frame → what :meth:`reconstruct` decodes: the measurement
+        (:func:`~thintact_sdk.capture.to_measurement`), or, for a decoder that solves on the
+        sensor binned ``b × b`` (:class:`~thintact_sdk.interfaces.BinnedInputDecoder`), its
+        ``b × b`` block means binned straight from the mosaic in one pass
+        (``Measurement.sensor_bin = b``). :meth:`read_measurement` always gives the measurement."""
+        return to_measurement(raw, self.profile, sensor_bin=self._input_bin())
+
     def _bin_stage(self, item: _InFlight) -> None:
         t0 = time.perf_counter()
-        item.measurement = to_measurement(item.raw, self.profile)
+        item.measurement = self.decoder_input(item.raw)
         item.compute_ms += (time.perf_counter() - t0) * 1e3
+
+    def _input_bin(self) -> int:
+        """The ``b`` to bin raw frames to for this sensor's decoder (1: the measurement)."""
+        b = binned_input(self.decoder)
+        s = self.profile.sensor
+        return b if s.rows % b == 0 and s.cols % b == 0 else 1
 
     def _decode_stage(self, item: _InFlight) -> None:
         assert item.measurement is not None
@@ -413,6 +451,9 @@ class Sensor:
         decode stage gets one worker per usable core (``THINTACT_DECODE_WORKERS`` overrides),
         each decoding whole frames on one kernel thread, with OpenBLAS and torch held at one
         thread while it streams (restored after); see :mod:`thintact_sdk.compute_threads`.
+        On a host with at most :data:`~thintact_sdk.compute_threads.PIPELINE_SHARES_CORES_UP_TO`
+        usable cores the kernels are held at one thread for every stream, one worker included,
+        and the warm-up times the decode that way.
         A frame finished after a newer one is skipped, never delivered out of order.
 
         The decoder is built and warmed up (:meth:`warm_up`) before the first read, so its
@@ -431,8 +472,19 @@ class Sensor:
 
         wait = self.read_timeout_s if timeout_s is None else timeout_s
         self._camera()
-        warm_up_s = self.warm_up()
-        self._start_threads()
+        if self._threads:
+            raise DeviceError("the sensor is already streaming")
+        t0 = time.perf_counter()
+        if usable_cores() <= PIPELINE_SHARES_CORES_UP_TO:
+            _ = self.decoder  # built (backends measured) with the library's threads, as outside a stream
+            self._hold_kernels()  # before the warm-up: it times the decode as the stream will run it
+        try:
+            self.warm_up()
+            warm_up_s = time.perf_counter() - t0
+            self._start_threads()
+        except BaseException:
+            self._release_kernels()
+            raise
         self.stats.warm_up_s = warm_up_s
         try:
             n = 0
@@ -471,8 +523,7 @@ class Sensor:
         workers = decode_workers(self.decode_ms, self._camera().capabilities().fps)
         self.stats.decode_workers = workers
         if workers > 1:  # frame-parallel decode: one kernel thread per worker, no waits
-            self._kernel_hold = ExitStack()
-            self._kernel_hold.enter_context(single_threaded_kernels())
+            self._hold_kernels()
         stages = [
             ("bin", self._raws, self._measurements, self._bin_stage),
             *((f"decode{i}" if workers > 1 else "decode", self._measurements, self._images,
@@ -498,6 +549,15 @@ class Sensor:
         for t in self._threads:
             t.join(timeout=5.0)
         self._threads = []
+        self._release_kernels()
+
+    def _hold_kernels(self) -> None:
+        """Hold OpenBLAS/torch at one thread per decode worker until :meth:`_release_kernels`."""
+        if self._kernel_hold is None:
+            self._kernel_hold = ExitStack()
+            self._kernel_hold.enter_context(single_threaded_kernels())
+
+    def _release_kernels(self) -> None:
         if self._kernel_hold is not None:
             self._kernel_hold.close()
             self._kernel_hold = None

@@ -8,7 +8,13 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from thintact_sdk.bayer import bin_bayer, mosaic_from_rgb, pattern_from_pixel_format
+from thintact_sdk.bayer import (
+    bin_bayer,
+    block_mean,
+    mosaic_from_rgb,
+    pattern_from_pixel_format,
+    split_bayer,
+)
 from thintact_sdk.errors import RecordingError
 from thintact_sdk.profile import read_profile_file
 from thintact_sdk.recording import Recording, RecordingWriter
@@ -38,6 +44,35 @@ def test_bin_bayer_errors() -> None:
         bin_bayer(np.zeros((4, 4)), "XYZW")
     assert pattern_from_pixel_format("BayerRG12") == "RGGB"
     assert pattern_from_pixel_format("Mono8") is None
+
+
+@pytest.mark.parametrize("pattern", ["RGGB", "BGGR", "GRBG", "GBRG"])
+@pytest.mark.parametrize("block", [2, 3])
+def test_one_pass_block_binning_is_binning_then_block_means(pattern: str, block: int) -> None:
+    """``bin_bayer``/``split_bayer`` with ``block = b`` read the mosaic once and give what the
+    2 × 2 binning followed by ``b × b`` block means gives: exactly for integer DN and b = 2
+    (every partial sum is exact in float32), to float32 rounding otherwise."""
+    rng = np.random.default_rng(block)
+    raw = rng.integers(0, 4096, (12 * block, 10 * block)).astype(np.uint16)
+    two_pass = block_mean(bin_bayer(raw, pattern), block)
+    one_pass = bin_bayer(raw, pattern, block=block)
+    assert one_pass.shape == (6, 5, 3) and one_pass.dtype == np.float32
+    # by hand, the first pixel's R: the mean of the b² R sites of the top-left 2b × 2b cell
+    r0, c0 = {"RGGB": (0, 0), "BGGR": (1, 1), "GRBG": (0, 1), "GBRG": (1, 0)}[pattern]
+    assert one_pass[0, 0, 0] == pytest.approx(raw[r0:2 * block:2, c0:2 * block:2].mean(), rel=1e-6)
+    if block == 2:
+        np.testing.assert_array_equal(one_pass, two_pass)
+    else:
+        np.testing.assert_allclose(one_pass, two_pass, rtol=2e-7, atol=0)
+    np.testing.assert_allclose(split_bayer(raw, pattern, block=block), block_mean(split_bayer(raw, pattern), block),
+                               rtol=2e-7)
+    floats = raw * np.float32(1.37)  # non-integer DN (a linearised frame)
+    np.testing.assert_allclose(bin_bayer(floats, pattern, block=block), block_mean(bin_bayer(floats, pattern), block),
+                               rtol=1e-6)
+    out = np.zeros((6, 5, 3), np.float32)
+    assert bin_bayer(raw, pattern, out, block=block) is out
+    with pytest.raises(ValueError, match="multiples of"):
+        bin_bayer(raw[:-2], pattern, block=block)
 
 
 def test_recording_roundtrip_and_resume(tmp_path: Path, golden_dir: Path) -> None:

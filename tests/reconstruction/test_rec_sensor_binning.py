@@ -21,8 +21,10 @@ from thintact_decoders.sensor_binning import (
 from thintact_sdk.algorithms import SystemMatrices
 from thintact_sdk.bayer import planar_frame
 from thintact_sdk.errors import InvalidShapeError
+from thintact_sdk.interfaces import Decoder
 from thintact_sdk.machine import HostCapabilities
 from thintact_sdk.profile import load_profile
+from thintact_sdk.sensor import Sensor
 
 HOST = HostCapabilities("Test CPU", 2, "AVX2", False, "openblas (2 threads)", "2.13.0+cpu, 2 threads", (),
                         ("avx2", "fma"))
@@ -198,3 +200,74 @@ def test_the_registry_offers_the_binned_solve_when_the_setting_asks(tmp_path, mo
     assert dec.tau == pytest.approx(plain.tau)  # the unbinned τ either way
     with pytest.raises(CalibrationError, match="sensor_bin"):
         reg.create("decoder", "t2s-closed-form", profile, {"sensor_bin": 3})
+
+
+def _mini_sensor(decoder: Decoder) -> Sensor:
+    return Sensor(load_profile("virtual-mini"), decoder=decoder)
+
+
+@pytest.mark.parametrize("pixel_format", ["BayerRG12", "BayerGB12"])
+def test_sensor_bins_the_mosaic_once_for_a_binned_decoder(pixel_format: str) -> None:
+    """Raw Bayer → the binned decoder's input in one pass (``sensor_bin = 2``: 4 × 4 cells of
+    the mosaic per colour site) decodes to the same scene, to float32 rounding, as binning
+    2 × 2 into the measurement and letting the decoder bin it again; black level included."""
+    from thintact_decoders.sensor_binning import binnable_build
+
+    from thintact_sdk.bayer import mosaic_from_rgb
+    from thintact_sdk.capture import to_measurement
+    from thintact_sdk.frames import RawFrame
+    from thintact_sdk.interfaces import BinnedInputDecoder, binned_input
+    from thintact_sdk.sensor import _InFlight
+
+    profile = load_profile("virtual-mini")  # 128 × 160 sensor, 50 × 64 scene, black 64 DN
+    sm = _operator(128, 160, 50, 64)
+    build = binnable_build(sm, 40.0, lambda s, t, xp: T2SClosedFormDecoder(s, t, xp))
+    dec = build(ArrayBackend("numpy", "float32"), 2)
+    as_object: object = dec
+    assert isinstance(as_object, BinnedInputDecoder) and binned_input(dec) == 2
+    x = np.random.default_rng(4).random((50, 64, 3))
+    pattern = {"BayerRG12": "RGGB", "BayerGB12": "GBRG"}[pixel_format]
+    mosaic = mosaic_from_rgb(sm.forward(x) * 300.0 + 64.0, pattern)  # per-site noise: the two G differ
+    mosaic = np.clip(np.round(mosaic + np.random.default_rng(5).normal(0, 3, mosaic.shape)), 0, 4095)
+    raw = RawFrame(mosaic.astype(np.uint16), 0, 7, pixel_format)
+    sensor = _mini_sensor(dec)
+    m = sensor.decoder_input(raw)  # what the stream's bin stage makes
+    assert m.sensor_bin == 2 and m.data.shape == (64, 80, 3) and m.frame_id == 7 and m.black_level_dn == 64.0
+    # the binned measurement is exactly the block means of the 2 × 2-binned one
+    np.testing.assert_array_equal(m.data, bin_frame(to_measurement(raw, profile).data))
+    one_pass = sensor.reconstruct(m)
+    two_pass = sensor.reconstruct(to_measurement(raw, profile))
+    assert one_pass.shape == (50, 64, 3)
+    scale = float(np.abs(two_pass).max())
+    np.testing.assert_allclose(one_pass, two_pass, rtol=0, atol=1e-5 * scale)
+    # the stream's stages take the same path
+    item = _InFlight(raw, 0)
+    sensor._bin_stage(item)
+    sensor._decode_stage(item)
+    np.testing.assert_array_equal(item.image, one_pass)
+
+
+def test_a_decoder_without_the_capability_gets_the_full_measurement() -> None:
+    from thintact_sdk.capture import to_measurement
+    from thintact_sdk.errors import InvalidValueError
+    from thintact_sdk.frames import RawFrame
+    from thintact_sdk.interfaces import binned_input
+    from thintact_sdk.sensor import _InFlight
+
+    profile = load_profile("virtual-mini")
+    dec = T2SClosedFormDecoder(_operator(128, 160, 50, 64), 40.0, ArrayBackend("numpy", "float32"))
+    assert binned_input(dec) == 1
+    raw = RawFrame(np.random.default_rng(6).integers(64, 4000, (256, 320)).astype(np.uint16), 0, 3, "BayerRG12")
+    sensor = _mini_sensor(dec)
+    m, full = sensor.decoder_input(raw), to_measurement(raw, profile)
+    assert m.sensor_bin == 1
+    np.testing.assert_array_equal(m.data, full.data)
+    item = _InFlight(raw, 0)
+    sensor._bin_stage(item)
+    sensor._decode_stage(item)
+    np.testing.assert_array_equal(item.image, dec.decode_raw(full.data, 64.0))
+    # a measurement binned for another decoder is refused, never decoded as if it were whole
+    with pytest.raises(InvalidValueError, match="frame 3 was binned 2×2"):
+        sensor.reconstruct(to_measurement(raw, profile, sensor_bin=2))
+    with pytest.raises(InvalidValueError, match="sensor_bin 3"):
+        to_measurement(raw, profile, sensor_bin=3)

@@ -195,3 +195,25 @@ def test_a_tau_per_channel_decodes_each_channel_at_its_own_tau() -> None:
             changed.set_tau([1.0, 2.0, 3.0])  # three values for two channels
         with pytest.raises(InvalidValueError):
             changed.set_tau([1.0, 0.0])
+
+
+@pytest.mark.parametrize("block_bytes", [1 << 18, 200])
+def test_blocked_numpy_solve_is_the_generic_solve(monkeypatch: pytest.MonkeyPatch, block_bytes: int) -> None:
+    """numpy's cache-blocked frame solve (the products written into the padded coefficients,
+    scale / project / correct per block of rows) gives the generic path's answer: float64 to
+    1e-10, float32 to float32 rounding; one block and many, with the coding modes truncated
+    (zero-padded coefficients) and a black level."""
+    import thintact_decoders.t2s_closed_form as t2s
+
+    monkeypatch.setattr(t2s, "BLOCK_BYTES", block_bytes)
+    sm = _low_rank_open_matrices(3)
+    rng = np.random.default_rng(4)
+    y = sm.forward(rng.random((*sm.scene_shape, 2))) + 64.0 + rng.standard_normal((*sm.sensor_shape, 2))
+    for dtype, tol in (("float64", 1e-10), ("float32", 2e-5)):
+        blocked = T2SClosedFormDecoder(sm, 3000.0, ArrayBackend("numpy", dtype), mode_rtol=0.2)
+        generic = T2SClosedFormDecoder(sm, 3000.0, ArrayBackend("torch", dtype), mode_rtol=0.2)
+        assert blocked.kept_modes == generic.kept_modes == (10, 11)  # of 12 × 14: zero padding
+        assert t2s._block_rows(2, 14, 8) == (8 if block_bytes == 200 else (1 << 18) // 224)
+        for out_b, out_g in ((blocked.decode_raw(y.astype(dtype), 64.0), generic.decode_raw(y.astype(dtype), 64.0)),
+                             (blocked.decode(y.astype(dtype) - 64), generic.decode(y.astype(dtype) - 64))):
+            np.testing.assert_allclose(out_b, out_g, rtol=0, atol=tol * np.abs(out_g).max())

@@ -179,6 +179,7 @@ def test_streaming_holds_kernel_threads_at_one_and_restores_them(profile, lut, m
     from thintact_sdk.compute_threads import kernel_threads_held
 
     monkeypatch.setenv("THINTACT_DECODE_WORKERS", "2")
+    monkeypatch.setattr("thintact_sdk.sensor.usable_cores", lambda: 8)  # the warm-up keeps the threads
     torch_before, blas_before = torch.get_num_threads(), openblas_threads()
     seen: list[tuple[int, int | None, int]] = []
 
@@ -195,6 +196,33 @@ def test_streaming_holds_kernel_threads_at_one_and_restores_them(profile, lut, m
     if blas_before is not None:
         assert all(b == 1 for _, b, _ in during)
     assert (torch.get_num_threads(), openblas_threads(), kernel_threads_held()) == (torch_before, blas_before, 0)
+
+
+@pytest.mark.parametrize(("cores", "held"), [(2, 1), (8, 0)])
+def test_a_two_core_host_streams_one_worker_on_one_kernel_thread(profile, lut, monkeypatch, cores, held) -> None:
+    """On 2 cores the stream's other stages share the cores with the decode, so even one
+    worker decodes on one kernel thread, timed that way at warm-up; restored after. A larger
+    host keeps the threads for a single worker."""
+    import torch
+
+    from thintact_sdk.blas import openblas_threads
+    from thintact_sdk.compute_threads import kernel_threads_held
+
+    monkeypatch.setenv("THINTACT_DECODE_WORKERS", "1")
+    monkeypatch.setattr("thintact_sdk.sensor.usable_cores", lambda: cores)
+    before = (torch.get_num_threads(), openblas_threads(), 0)
+    seen: list[int] = []
+
+    class Probe(BlockDecoder):
+        def decode(self, signal: np.ndarray) -> np.ndarray:
+            seen.append(kernel_threads_held())
+            return super().decode(signal)
+
+    with Sensor(profile, registry=make_registry(), lut=lut, decoder=Probe()) as s:
+        list(s.stream(max_frames=3, timeout_s=5.0))
+        assert s.stats.decode_workers == 1
+    assert len(seen) >= 5 and set(seen) == {held}  # warm-up (2) and streamed frames alike
+    assert (torch.get_num_threads(), openblas_threads(), kernel_threads_held()) == before
 
 
 def test_workers_are_chosen_from_the_decode_timed_at_warm_up(profile, lut, monkeypatch) -> None:

@@ -40,6 +40,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--decoder", help="decoder plugin (default: each profile's decoder.plugin)")
     p.add_argument("--tau", type=float,
                    help="Tikhonov tau (DN²) for the accuracy decoder instead of the bundle's")
+    p.add_argument("--latency-bundle", type=Path,
+                   help="calibration bundle directory for the latency test's device (default: the "
+                        "profile's; without one, --decoder or flatcam on an in-memory bundle of the "
+                        "directly generated matrices)")
     p.add_argument("--skip-latency", action="store_true")
     p.add_argument("--force-presses", type=int, default=12,
                    help="simulated presses to fit and (as many again) to test force/slip")
@@ -201,17 +205,28 @@ def _simulator_decoder(sensor: Any, slot: Any, name: str) -> tuple[Any, float]:
     return best[2], best[1]
 
 
-def _latency_decoder(profile: Any, name: str | None = None) -> tuple[Any, Any, str]:
-    """``(decoder, system_matrices or None, how)``: the profile's decoder from its bundle, or,
-    without one, the closed-form Tikhonov decoder (``flatcam``: the paper's solve without
-    the joint filter) on the paper's directly generated matrices (seconds to build; the
-    simulator fit of a 1024×1280 device takes minutes)."""
+def _latency_decoder(profile: Any, name: str | None = None,
+                     bundle_dir: Path | None = None) -> tuple[Any, Any, str]:
+    """``(decoder, system_matrices or None, how)``: the decoder ``name`` (default the
+    profile's) from the bundle in ``bundle_dir`` or the profile's bundle, or, without one, a
+    bundle of the paper's directly generated matrices made in memory (seconds to build; the
+    simulator fit of a 1024×1280 device takes minutes) with ``name`` when given, else the
+    closed-form Tikhonov decoder (``flatcam``: the paper's solve without the joint filter).
+    The system matrices are returned where the frames should be rendered with them (a bundle
+    given by directory, or the in-memory one)."""
     from thintact_sdk.errors import CalibrationError
     from thintact_sdk.plugin_manager import get_registry
 
     cfg = profile.decoder
+    given = name
     name = name or (cfg.plugin if cfg is not None else "thintact-noniterative")
     settings = dict(cfg.settings) if cfg is not None else {}
+    if bundle_dir is not None:
+        from thintact_sdk.imaging.calibration_bundle import CalibrationBundle
+
+        loaded = CalibrationBundle.load(bundle_dir)
+        decoder = get_registry().create("decoder", name, profile, {**settings, "bundle": loaded})
+        return decoder, loaded.system_matrices, f"calibration bundle {bundle_dir}"
     try:
         return get_registry().create("decoder", name, profile, settings), None, "calibration bundle"
     except CalibrationError:
@@ -228,6 +243,9 @@ def _latency_decoder(profile: Any, name: str | None = None) -> tuple[Any, Any, s
     # the profile's decoder settings (backend, gemm_dtype, ...) apply; tau was used above
     fallback = {k: v for k, v in settings.items() if k != "tau"}
     fallback["bundle"] = bundle
+    if given is not None:
+        decoder = get_registry().create("decoder", given, profile, fallback)
+        return decoder, sm, f"no bundle on disk: {given} on an in-memory bundle of the directly generated matrices"
     decoder = get_registry().create("decoder", "flatcam", profile, fallback)
     return decoder, sm, ("no bundle: flatcam closed-form Tikhonov (no joint filter) on the "
                          "directly generated matrices")
@@ -236,7 +254,6 @@ def _latency_decoder(profile: Any, name: str | None = None) -> tuple[Any, Any, s
 def latency(args: argparse.Namespace, out: dict[str, Any]) -> None:
     """Raw Bayer → TactileFrame on ``args.latency_profile``, single frames and streamed."""
     from thintact_sdk.bayer import mosaic_from_rgb
-    from thintact_sdk.capture import to_measurement
     from thintact_sdk.frames import RawFrame
     from thintact_sdk.imaging.noise import signal_to_dn
     from thintact_sdk.profile import load_profile
@@ -245,7 +262,7 @@ def latency(args: argparse.Namespace, out: dict[str, Any]) -> None:
 
     profile = load_profile(args.latency_profile)
     t0 = time.perf_counter()
-    decoder, sm, how = _latency_decoder(profile, args.decoder)
+    decoder, sm, how = _latency_decoder(profile, args.decoder, getattr(args, "latency_bundle", None))
     setup_decoder_s = time.perf_counter() - t0
     tsim = TactileSimulator.for_profile(profile)
     rng = np.random.default_rng(args.seed)
@@ -271,7 +288,7 @@ def latency(args: argparse.Namespace, out: dict[str, Any]) -> None:
         raw = raws[k % len(raws)]
         raw.frame_id = k + 1
         t0 = time.perf_counter()
-        m = to_measurement(raw, profile)
+        m = sensor.decoder_input(raw)  # binned once, straight to a binned decoder's input
         t1 = time.perf_counter()
         img = sensor.reconstruct(m)
         t2 = time.perf_counter()
@@ -300,8 +317,18 @@ def latency(args: argparse.Namespace, out: dict[str, Any]) -> None:
           f"{'met' if ratio <= P99_OVER_P50_GOAL else 'NOT met'}); longest wait of a finished frame for "
           f"the consumer {fps['waited_ms_max']:.1f} ms (one camera period {1e3 / fps['camera_fps']:.1f} ms); "
           f"decoder warm-up before the first read {fps['warm_up_s']:.1f} s")
-    out["latency_ms"] = {"median": med, "p95_total": p95, "decoder_source": how}
+    out["latency_ms"] = {"median": med, "p95_total": p95, "decoder_source": how,
+                         "decoder": _decoder_summary(sensor.decoder)}
     out["stream"] = fps
+
+
+def _decoder_summary(decoder: Any) -> str:
+    """Decoder name, the backend the selection chose and the sensor binning it solves on."""
+    from thintact_sdk.interfaces import binned_input
+
+    choice = getattr(decoder, "backend_choice", None)
+    backend = getattr(choice, "chosen", None) or repr(getattr(decoder, "xp", ""))
+    return f"{getattr(decoder, 'name', type(decoder).__name__)} [{backend}] sensor_bin {binned_input(decoder)}"
 
 
 def _streamed_fps(profile: Any, raws: list[Any], sensor: Any, frames: int,
@@ -375,6 +402,7 @@ def _streamed_fps(profile: Any, raws: list[Any], sensor: Any, frames: int,
         "latency_p99_ms": float(np.percentile(latencies, 99)),
         "waited_ms_max": s.stats.waited_ms_max,
         "warm_up_s": s.stats.warm_up_s,
+        "decode_workers": float(s.stats.decode_workers),
     }
 
 

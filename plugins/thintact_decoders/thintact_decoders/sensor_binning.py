@@ -32,9 +32,9 @@ import numpy as np
 from thintact_decoders.modes import TauSpec, channel_taus
 from thintact_decoders.shapes import check_measurement_shape
 from thintact_sdk.algorithms import SystemMatrices
-from thintact_sdk.bayer import planar_frame
+from thintact_sdk.bayer import block_mean, planar_frame
 from thintact_sdk.errors import InvalidShapeError, InvalidValueError
-from thintact_sdk.interfaces import Decoder
+from thintact_sdk.interfaces import Decoder, RawDecoder
 
 SENSOR_BIN = 2
 """The binning offered to the selection (the only one: 2 × 2 halves the work; 3 × 3 would
@@ -108,39 +108,9 @@ def bin_system_matrices(sm: SystemMatrices, b: int = SENSOR_BIN) -> SystemMatric
 
 def bin_frame(frame: np.ndarray, b: int = SENSOR_BIN, out: np.ndarray | None = None,
               offset: float = 0.0) -> np.ndarray:
-    """Block means of ``b × b`` pixels, minus ``offset``.
-
-    Parameters
-    ----------
-    frame
-        ``R × S × C`` DN (any real dtype, any layout), ``R`` and ``S`` multiples of ``b``.
-    b
-        Block side, pixels.
-    out
-        Optional ``R/b × S/b × C`` float32 result (reused across frames: no allocation).
-    offset
-        Subtracted from every block mean (the black level, DN).
-
-    Returns
-    -------
-    numpy.ndarray
-        ``R/b × S/b × C`` float32 in channel-planar storage (:func:`thintact_sdk.bayer.planar_frame`).
-    """
-    r, s, c = frame.shape
-    if out is None:
-        out = planar_frame(r // b, s // b, c)
-    scale = np.float32(1.0 / (b * b))
-    for ch in range(c):
-        plane = out[..., ch]
-        np.add(frame[0::b, 0::b, ch], frame[1::b, 0::b, ch], out=plane, casting="unsafe")
-        for i in range(b):
-            for j in range(b):
-                if (i, j) not in ((0, 0), (1, 0)):
-                    plane += frame[i::b, j::b, ch]
-        plane *= scale
-        if offset:
-            plane -= np.float32(offset)
-    return out
+    """Block means of ``b × b`` pixels of an ``R × S × C`` frame, minus ``offset`` (DN):
+    :func:`thintact_sdk.bayer.block_mean` with this module's default ``b``."""
+    return block_mean(frame, b, out, offset)
 
 
 def binnable_build(sm: SystemMatrices, tau: TauSpec, make: Callable[..., Decoder]) -> Callable[..., Decoder]:
@@ -164,6 +134,10 @@ class SensorBinnedDecoder(Decoder):
     """A decoder built on the binned operator (:func:`bin_system_matrices`) that bins each
     frame itself; it takes and reports the unbinned τ.
 
+    It is a :class:`~thintact_sdk.interfaces.BinnedInputDecoder` (``sensor_bin = b``): the
+    Sensor bins the camera's mosaic straight to ``R/b × S/b`` in one pass and calls
+    :meth:`decode_binned`, so the frame is not binned twice.
+
     Parameters
     ----------
     inner
@@ -183,6 +157,11 @@ class SensorBinnedDecoder(Decoder):
         self.scene_shape = getattr(inner, "scene_shape", None)
         self.xp = getattr(inner, "xp", None)
         self._local = threading.local()
+
+    @property
+    def sensor_bin(self) -> int:
+        """Block side ``b`` the inner decoder solves on (:class:`~thintact_sdk.interfaces.BinnedInputDecoder`)."""
+        return self.b
 
     @property
     def tau(self) -> float:
@@ -228,4 +207,19 @@ class SensorBinnedDecoder(Decoder):
     def decode_raw(self, raw: np.ndarray, black_level_dn: float) -> np.ndarray:
         """Raw ``R × S × C`` DN with the black level included → ``N × M × C`` float32."""
         check_measurement_shape(raw, self.sensor_shape, self.channels)
-        return np.asarray(self.inner.decode(bin_frame(raw, self.b, self._buffer(), float(black_level_dn))))
+        return self._decode_binned(bin_frame(raw, self.b, self._buffer()), black_level_dn)
+
+    def decode_binned(self, binned: np.ndarray, black_level_dn: float) -> np.ndarray:
+        """``R/b × S/b × C`` block means of the raw frame (DN, black level included, e.g.
+        :func:`thintact_sdk.capture.to_measurement` with ``sensor_bin = b``) → ``N × M × C``
+        float32; the same as :meth:`decode_raw` on the unbinned frame up to float32 rounding."""
+        check_measurement_shape(binned, (self.sensor_shape[0] // self.b, self.sensor_shape[1] // self.b),
+                                self.channels)
+        return self._decode_binned(binned, black_level_dn)
+
+    def _decode_binned(self, binned: np.ndarray, black_level_dn: float) -> np.ndarray:
+        """The inner solve with the black level folded in where it can (no full-size pass)."""
+        if isinstance(self.inner, RawDecoder):
+            return np.asarray(self.inner.decode_raw(binned, float(black_level_dn)))
+        signal = np.subtract(binned, np.float32(black_level_dn), out=self._buffer(), dtype=np.float32)
+        return np.asarray(self.inner.decode(signal))
