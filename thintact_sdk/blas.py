@@ -11,6 +11,8 @@ ctypes when it is found, and changes nothing otherwise.
 from __future__ import annotations
 
 import ctypes
+import sys
+import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 from typing import Any
@@ -21,11 +23,32 @@ _GET_NAMES = ("scipy_openblas_get_num_threads64_", "scipy_openblas_get_num_threa
               "openblas_get_num_threads64_", "openblas_get_num_threads")
 
 
+_scanned: tuple[int, list[tuple[Any, Any]]] | None = None
+_scan_lock = threading.Lock()
+
+
 def _loaded_openblas() -> list[tuple[Any, Any]]:
-    """(set, get) function pairs of every OpenBLAS mapped into this process (Linux)."""
+    """(set, get) function pairs of every OpenBLAS mapped into this process (Linux).
+
+    Reading ``/proc/self/maps`` costs about 2 ms, too much for a hold taken once per frame
+    (:meth:`thintact_sdk.sensor.Sensor.process`), so the scan is kept until a module is
+    imported (the only way a new OpenBLAS gets mapped in)."""
+    global _scanned
     import numpy  # noqa: F401 - make sure numpy's BLAS is loaded
     import scipy.linalg  # noqa: F401 - and scipy's
 
+    modules = len(sys.modules)
+    with _scan_lock:
+        if _scanned is not None and _scanned[0] == modules:
+            return _scanned[1]
+    found = _scan_openblas()
+    with _scan_lock:
+        _scanned = (modules, found)
+    return found
+
+
+def _scan_openblas() -> list[tuple[Any, Any]]:
+    """:func:`_loaded_openblas` without the cache."""
     paths: list[str] = []
     try:
         with open("/proc/self/maps", encoding="utf-8") as f:

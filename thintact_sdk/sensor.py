@@ -21,7 +21,7 @@ import threading
 import time
 from collections import deque
 from collections.abc import Iterator
-from contextlib import ExitStack
+from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -366,12 +366,35 @@ class Sensor:
         return self.reconstruct(self.read_measurement())
 
     def process(self, raw: RawFrame) -> TactileFrame:
-        """Raw frame → tactile frame (bin, decode, interpret); sets ``latency_ms``."""
+        """Raw frame → tactile frame (bin, decode, interpret); sets ``latency_ms``.
+
+        On a host with at most :data:`~thintact_sdk.compute_threads.PIPELINE_SHARES_CORES_UP_TO`
+        usable cores the decode runs on one kernel thread, as in :meth:`stream`: a product
+        split over both cores waits for the busier one, and with the second core taken by
+        another job the paper device's decode went from 10.5 to 105 ms per frame on two
+        threads (measured on the 2-core Xeon-AMX), against about 17 ms on one.
+        """
         item = _InFlight(raw, time.monotonic_ns())
-        for stage in (self._bin_stage, self._decode_stage, self._interpret_stage):
-            stage(item)
+        with self.single_frame_kernels():
+            for stage in (self._bin_stage, self._decode_stage, self._interpret_stage):
+                stage(item)
         assert item.frame is not None
         return item.frame
+
+    @contextmanager
+    def single_frame_kernels(self) -> Iterator[None]:
+        """The kernel threads a single frame is decoded with (:meth:`process`, benches timing
+        its stages): one on a host with at most
+        :data:`~thintact_sdk.compute_threads.PIPELINE_SHARES_CORES_UP_TO` usable cores (held
+        for the block, restored after), the library's otherwise. The decoder is built first,
+        with the library's threads, as :meth:`stream` builds it."""
+        if usable_cores() > PIPELINE_SHARES_CORES_UP_TO:
+            yield
+            return
+        _ = self.decoder
+        with single_threaded_kernels():
+            prepare_worker_thread()
+            yield
 
     def warm_up(self) -> float:
         """Build the decoder (its backend selection included), load the LUT and decode one

@@ -237,3 +237,31 @@ def test_workers_are_chosen_from_the_decode_timed_at_warm_up(profile, lut, monke
             next(s.stream(max_frames=1, timeout_s=5.0))
             assert s.decode_ms is not None
             assert s.stats.decode_workers == want, (fps, s.decode_ms)
+
+
+@pytest.mark.parametrize(("cores", "held"), [(2, 1), (8, 0)])
+def test_a_single_frame_decodes_on_one_kernel_thread_on_two_cores(profile, lut, monkeypatch, cores, held) -> None:
+    """``read()`` / ``process()`` on 2 cores: one kernel thread, as in a stream (with another
+    job on the second core, two threads made the paper decode 10× slower); restored after
+    every frame. A larger host keeps the library's threads."""
+    import torch
+
+    from thintact_sdk.blas import openblas_threads
+    from thintact_sdk.compute_threads import kernel_threads_held
+
+    monkeypatch.setattr("thintact_sdk.sensor.usable_cores", lambda: cores)
+    before = (torch.get_num_threads(), openblas_threads(), 0)
+    seen: list[tuple[int, int | None]] = []
+
+    class Probe(BlockDecoder):
+        def decode(self, signal: np.ndarray) -> np.ndarray:
+            seen.append((kernel_threads_held(), openblas_threads()))
+            return super().decode(signal)
+
+    with Sensor(profile, registry=make_registry(), lut=lut, decoder=Probe()) as s:
+        for _ in range(3):
+            s.read()
+            assert (torch.get_num_threads(), openblas_threads(), kernel_threads_held()) == before
+    assert len(seen) == 3 and {h for h, _ in seen} == {held}
+    if held and before[1] is not None:
+        assert {b for _, b in seen} == {1}
