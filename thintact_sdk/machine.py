@@ -181,6 +181,21 @@ def host_fingerprint(caps: HostCapabilities | None = None) -> str:
     return hashlib.sha256(key.encode()).hexdigest()[:16]
 
 
+def kernel_threads_now() -> str:
+    """The kernel threads products run on at this moment, in this thread: OpenBLAS's (process
+    wide) and torch's (this thread's), e.g. ``"blas 1, torch 1"``. Unlike the counts in
+    :func:`host_capabilities` (read once per process) this follows a hold such as
+    :func:`thintact_sdk.compute_threads.single_threaded_kernels`, so a measurement keyed by it
+    is reused only under the same threads."""
+    import sys
+
+    from thintact_sdk.blas import openblas_threads
+
+    torch = sys.modules.get("torch")
+    torch_threads = str(torch.get_num_threads()) if torch is not None else "-"
+    return f"blas {openblas_threads() or '-'}, torch {torch_threads}"
+
+
 def machine_summary() -> str:
     """CPU model, core count, memory, BLAS settings and library versions in one line."""
     caps = host_capabilities()

@@ -386,12 +386,12 @@ class Sensor:
         """The kernel threads a single frame is decoded with (:meth:`process`, benches timing
         its stages): one on a host with at most
         :data:`~thintact_sdk.compute_threads.PIPELINE_SHARES_CORES_UP_TO` usable cores (held
-        for the block, restored after), the library's otherwise. The decoder is built first,
-        with the library's threads, as :meth:`stream` builds it."""
+        for the block, restored after), the library's otherwise. A decoder built inside the
+        block (the first frame) measures its backends on those threads too, as in
+        :meth:`stream`."""
         if usable_cores() > PIPELINE_SHARES_CORES_UP_TO:
             yield
             return
-        _ = self.decoder
         with single_threaded_kernels():
             prepare_worker_thread()
             yield
@@ -400,17 +400,20 @@ class Sensor:
         """Build the decoder (its backend selection included), load the LUT and decode one
         black frame, so the first real frame pays none of it. Returns the seconds spent.
 
-        :meth:`stream` calls this before it starts reading, outside the read timeout.
+        :meth:`stream` calls this before it starts reading, outside the read timeout. The
+        decoder is built and timed on the kernel threads frames will be decoded with
+        (:meth:`single_frame_kernels`; a stream's own hold where it holds one).
         """
         t0 = time.perf_counter()
         prepare_worker_thread()  # a stream holding the kernels at one thread: time the decode so
-        s, b = self.profile.sensor, self._input_bin()  # the frames' path: binned for the decoder
-        black = Measurement(np.full((s.rows // b, s.cols // b, len(s.channels)), self.profile.noise.black_level_dn,
-                                    np.float32), self.profile.noise.black_level_dn, sensor_bin=b)
-        self.reconstruct(black)
-        t1 = time.perf_counter()
-        self.reconstruct(black)  # warm: what a frame costs on this host (chooses decode workers)
-        self.decode_ms = (time.perf_counter() - t1) * 1e3
+        with self.single_frame_kernels():
+            s, b = self.profile.sensor, self._input_bin()  # the frames' path: binned for the decoder
+            black = Measurement(np.full((s.rows // b, s.cols // b, len(s.channels)), self.profile.noise.black_level_dn,
+                                        np.float32), self.profile.noise.black_level_dn, sensor_bin=b)
+            self.reconstruct(black)
+            t1 = time.perf_counter()
+            self.reconstruct(black)  # warm: what a frame costs on this host (chooses decode workers)
+            self.decode_ms = (time.perf_counter() - t1) * 1e3
         _ = self.lut
         return time.perf_counter() - t0
 
@@ -499,8 +502,9 @@ class Sensor:
             raise DeviceError("the sensor is already streaming")
         t0 = time.perf_counter()
         if usable_cores() <= PIPELINE_SHARES_CORES_UP_TO:
-            _ = self.decoder  # built (backends measured) with the library's threads, as outside a stream
-            self._hold_kernels()  # before the warm-up: it times the decode as the stream will run it
+            # before the warm-up, which builds the decoder (its backends measured) and times
+            # the decode as the stream will run them: on one kernel thread
+            self._hold_kernels()
         try:
             self.warm_up()
             warm_up_s = time.perf_counter() - t0

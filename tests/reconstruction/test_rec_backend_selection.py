@@ -198,3 +198,31 @@ def test_cache_lives_in_the_user_cache_dir(monkeypatch, tmp_path) -> None:
     assert cache_dir() == tmp_path / "thintact"
     monkeypatch.setenv("THINTACT_CACHE_DIR", str(tmp_path / "x"))
     assert BackendCache().path == tmp_path / "x" / "decoder-backends.json"
+
+
+def test_the_selection_is_cached_per_kernel_thread_count(monkeypatch, tmp_path) -> None:
+    """A Sensor on a 2-core host decodes on one kernel thread and selects its backend there;
+    `thintact bench reconstruct` measures on the library's threads. The cache keeps the two
+    apart (the float32 ranking differs between them on the 2-core Xeon-AMX)."""
+    import json
+
+    import torch  # noqa: F401 - loaded before the counts are read (the key names its threads)
+
+    from thintact_sdk.blas import openblas_threads
+    from thintact_sdk.compute_threads import prepare_worker_thread, single_threaded_kernels
+    from thintact_sdk.machine import kernel_threads_now
+
+    monkeypatch.setenv("THINTACT_CACHE_DIR", str(tmp_path))
+    profile = load_profile("virtual-mini")
+    library = kernel_threads_now()
+    get_registry().create("decoder", "t2s-closed-form", profile, {})
+    with single_threaded_kernels():
+        prepare_worker_thread()
+        held = kernel_threads_now()
+        get_registry().create("decoder", "t2s-closed-form", profile, {})
+    keys = list(json.loads((tmp_path / "decoder-backends.json").read_text()))
+    if openblas_threads() not in (None, 1) or library != held:
+        assert held.startswith("blas 1") or openblas_threads() is None
+        assert len(keys) == 2 and {k.rsplit("|", 1)[1] for k in keys} == {library, held}
+    else:  # a host already at one thread: one measurement serves both
+        assert len(keys) == 1

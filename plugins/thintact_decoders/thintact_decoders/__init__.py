@@ -52,7 +52,7 @@ from thintact_decoders.t2s_closed_form import T2SClosedFormDecoder
 from thintact_sdk.algorithms import CalibrationBundle, ScenePrior, SystemMatrices
 from thintact_sdk.errors import CalibrationError
 from thintact_sdk.interfaces import Decoder
-from thintact_sdk.machine import host_capabilities, host_fingerprint
+from thintact_sdk.machine import host_capabilities, host_fingerprint, kernel_threads_now
 from thintact_sdk.profile import Profile
 
 REMEASURE_ENV = "THINTACT_BACKEND_REMEASURE"  # set (not "0"): measure again, replace the cached record
@@ -106,7 +106,9 @@ def _selected(name: str, profile: Profile, settings: dict[str, Any], sm: SystemM
         raise CalibrationError(f"{where}: {err}") from None
     not_candidates = {} if caps.native_bf16 else {"torch-bfloat16": EMULATED_BF16}
     (r, s), (n, m) = sm.sensor_shape, sm.scene_shape
-    key = f"{host_fingerprint(caps)}|{name}|{sm.channels}x{r}x{s}->{n}x{m}|{dtype}"
+    # the threads the candidates are timed on: a Sensor on a 2-core host decodes (and so
+    # selects) on one kernel thread, `thintact bench reconstruct` on the library's
+    key = f"{host_fingerprint(caps)}|{name}|{sm.channels}x{r}x{s}->{n}x{m}|{dtype}|{kernel_threads_now()}"
     try:
         sensor_bin = binning_offered((r, s), (n, m), sm.channels, settings.get("sensor_bin", "auto")) if binnable else 1
     except ValueError as err:
