@@ -118,8 +118,6 @@ class CrossValidation:
         16th and 84th percentiles (DN²) of the τ the same criterion chooses on bootstrap
         resamples of the distinct scenes: how well the scenes determine τ (NaN with fewer
         than three distinct scenes).
-    table_db
-        PSNR (dB) of every scene (rows) at every τ of ``curve.taus`` (columns).
     prior, fold_prior, prior_curves, prior_held_out_db, plain_held_out_db
         Set by :func:`cross_validate_prior`: the deployed scene prior (``None``: plain
         Tikhonov), the prior each fold's τ was tuned with, each candidate prior's mean-PSNR
@@ -143,7 +141,6 @@ class CrossValidation:
     held_out_channel_db: float = float("nan")
     channel_gain_se_db: float = float("nan")
     tau_spread: tuple[float, float] = (float("nan"), float("nan"))
-    table_db: np.ndarray = field(default_factory=lambda: np.empty((0, 0)))
     prior: ScenePrior | None = None
     fold_prior: list[ScenePrior | None] = field(default_factory=list)
     prior_curves: list[tuple[ScenePrior, TauCurve]] = field(default_factory=list)
@@ -272,7 +269,7 @@ def cross_validate(decoder: Any, name: str, signals: Sequence[np.ndarray],
                      float(taus[int(np.argmax(mean))]), "mean PSNR dB (each distinct scene once)",
                      f"two folds of {int(np.sum(fold_arr == 0))} and {int(np.sum(fold_arr == 1))} "
                      "scenes; each scene is scored with the tau tuned on the other fold")
-    out = CrossValidation(name, curve, list(labels), folds, fold_tau, table_db=table)
+    out = CrossValidation(name, curve, list(labels), folds, fold_tau)
     out.tau_spread = bootstrap_spread(taus, table, [_scene_key(x) for x in truths], weights)
     if np.isfinite(out.tau_spread[0]):
         curve.note += (f"; bootstrap over the distinct scenes: 68 % of resamples choose "
