@@ -15,7 +15,6 @@ from thintact_sdk.diagnose.binning import (
     bin_frames,
     binned_profile,
     binned_variance_fn,
-    oversized_candidates,
     screening_limits,
     unbin_hotspots,
 )
@@ -111,11 +110,11 @@ def test_family_candidates_oversized_at_paper_size_only() -> None:
     lim = screening_limits(paper)
     assert lim.dropped == ("refraction",)
     assert lim.held == {"mask_misalignment": ("angle_deg",), "refraction": ("n_scene_side",)}
-    big = oversized_candidates(paper)
+    big = lim.not_screened
     assert set(big) == {"mask_misalignment.angle_deg", "refraction"}
     assert "MiB" in big["refraction"]
     assert big["mask_misalignment.angle_deg"].startswith("held at 0 (dx_um, dy_um screened)")
-    assert oversized_candidates(_device(128, 160)) == {}
+    assert screening_limits(_device(128, 160)).not_screened == {}
     assert screening_limits(_device(128, 160)) == ScreeningLimits()
 
 

@@ -197,12 +197,6 @@ def screening_limits(profile: Profile, limit_bytes: float | None = None) -> Scre
     return ScreeningLimits(held, tuple(dropped), why)
 
 
-def oversized_candidates(profile: Profile, limit_bytes: float | None = None) -> dict[str, str]:
-    """``{"effect" or "effect.param": reason}``: what :func:`screening_limits` leaves
-    unscreened on this device."""
-    return screening_limits(profile, limit_bytes).not_screened
-
-
 FINE_AMPLITUDE_FRAMES = 4
 """Frames of the unbinned recording on which :func:`unbinned_amplitude_fn` measures an
 effect's change (spread over the recording; each costs a full-size simulation)."""
