@@ -405,7 +405,6 @@ class Sensor:
         (:meth:`single_frame_kernels`; a stream's own hold where it holds one).
         """
         t0 = time.perf_counter()
-        prepare_worker_thread()  # a stream holding the kernels at one thread: time the decode so
         with self.single_frame_kernels():
             s, b = self.profile.sensor, self._input_bin()  # the frames' path: binned for the decoder
             black = Measurement(np.full((s.rows // b, s.cols // b, len(s.channels)), self.profile.noise.black_level_dn,
