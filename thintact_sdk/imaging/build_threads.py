@@ -76,13 +76,15 @@ def thread_map(fn: Callable[[T], R], items: Sequence[T], threads: int | None = N
 
 
 def per_channel_by_wavelength(wavelengths_nm: Sequence[float], channels: int,
-                              build: Callable[[float], R]) -> list[R]:
-    """``build(λ)`` once per distinct wavelength, the wavelengths side by side on the build
-    threads, listed per channel (channel ``c`` uses ``wavelengths_nm[min(c, len - 1)]``, as
-    the profile's ``diffraction.wavelength_nm`` says). Used where every wavelength's kernel is
-    bounded in size (rotated and refracted kernels refuse large devices); the plain
-    diffraction kernel, which runs at the paper's size, builds them one after another."""
+                              build: Callable[[float], R], threads: int | None = None) -> list[R]:
+    """``build(λ)`` once per distinct wavelength, the wavelengths side by side on ``threads``
+    build threads (default :func:`build_threads`), listed per channel (channel ``c`` uses
+    ``wavelengths_nm[min(c, len - 1)]``, as the profile's ``diffraction.wavelength_nm`` says);
+    channels of one wavelength share the same result object. Side by side where every
+    wavelength's kernel is bounded in size (rotated and refracted kernels refuse large
+    devices); the plain diffraction kernel, which runs at the paper's size, passes
+    ``threads=1`` to build them one after another."""
     lams = [float(wavelengths_nm[min(ch, len(wavelengths_nm) - 1)]) for ch in range(channels)]
     distinct = list(dict.fromkeys(lams))
-    built = dict(zip(distinct, thread_map(build, distinct), strict=True))
+    built = dict(zip(distinct, thread_map(build, distinct, threads), strict=True))
     return [built[lam] for lam in lams]

@@ -134,30 +134,29 @@ def build_separable_kernel(kp: KernelParams) -> SeparableKernel:
         info["terms"] = float(len(terms))
         return SeparableKernel([terms] * kp.channels, info)
     a_o, a_c = mask_leakage.amplitude_coefficients(kp.leakage)
-    by_wavelength: dict[float, list[SeparableTerm]] = {}
-    per_channel = []
-    for ch in range(kp.channels):
-        lam = kp.wavelengths_nm[min(ch, len(kp.wavelengths_nm) - 1)]
-        if lam not in by_wavelength:
-            mats = []
-            for grid, edges, phi, fac in ((gx, edges_x, phi_x, exp.fx_derivs),
-                                          (gy, edges_y, phi_y, exp.gy_derivs)):
-                lo, hi = _crossing_range_mm(grid, alpha, beta)
-                pad = 4 * grid.sensor_pitch_mm + 4 * grid.scene_pitch_mm
-                fe, fv = diffraction.axis_intensity_profiles(
-                    edges, phi, lo - pad, hi + pad, lam, kp.z_mm, kp.d_mm)
-                mats.append(axis_term_matrices(grid, alpha, beta, fe, fv, fac, kp.n_sub))
-            mx, my = mats
-            coefs = (("open", 0, a_o**2), ("open", 1, a_c**2),
-                     ("coding", 2, 2 * a_o * a_c), ("coding", 3, -2 * a_o * a_c))
-            terms = []
-            for part, v, coef in coefs:
-                if coef == 0:
-                    continue
-                for ll in range(exp.rank):
-                    terms.append(SeparableTerm(coef * my[v, ll], mx[v, ll], part))
-            by_wavelength[lam] = compress_terms(terms, kp.compress_tol)
-        per_channel.append(by_wavelength[lam])
+
+    def build(lam: float) -> list[SeparableTerm]:
+        mats = []
+        for grid, edges, phi, fac in ((gx, edges_x, phi_x, exp.fx_derivs),
+                                      (gy, edges_y, phi_y, exp.gy_derivs)):
+            lo, hi = _crossing_range_mm(grid, alpha, beta)
+            pad = 4 * grid.sensor_pitch_mm + 4 * grid.scene_pitch_mm
+            fe, fv = diffraction.axis_intensity_profiles(
+                edges, phi, lo - pad, hi + pad, lam, kp.z_mm, kp.d_mm)
+            mats.append(axis_term_matrices(grid, alpha, beta, fe, fv, fac, kp.n_sub))
+        mx, my = mats
+        coefs = (("open", 0, a_o**2), ("open", 1, a_c**2),
+                 ("coding", 2, 2 * a_o * a_c), ("coding", 3, -2 * a_o * a_c))
+        terms = []
+        for part, v, coef in coefs:
+            if coef == 0:
+                continue
+            for ll in range(exp.rank):
+                terms.append(SeparableTerm(coef * my[v, ll], mx[v, ll], part))
+        return compress_terms(terms, kp.compress_tol)
+
+    # one wavelength after another: this kernel also runs at the paper's size (memory)
+    per_channel = per_channel_by_wavelength(kp.wavelengths_nm, kp.channels, build, threads=1)
     info["terms"] = float(max(len(t) for t in per_channel))
     return SeparableKernel(per_channel, info)
 
