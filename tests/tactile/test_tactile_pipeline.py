@@ -97,6 +97,32 @@ def test_poisson_recovers_a_bump():
     assert float(np.sqrt(np.mean((rec - d) ** 2))) < 0.005
 
 
+@pytest.mark.parametrize("shape, factor", [((400, 512, 3), 4), ((403, 517, 3), 4), ((37, 50), 3),
+                                           ((20, 24, 7), 2), ((5, 6, 3), 8)])
+def test_bin_image_is_the_block_mean(shape, factor):
+    from thintact_sdk.tactile.grid import bin_image
+
+    a = np.random.default_rng(1).random(shape)
+    n, m = shape[0] // factor, shape[1] // factor
+    blocks = a[: n * factor, : m * factor].reshape((n, factor, m, factor) + shape[2:])
+    got = bin_image(a, factor)
+    assert got.dtype == np.float32 and got.shape == (n, m) + shape[2:]
+    np.testing.assert_allclose(got, blocks.mean(axis=(1, 3)), rtol=0, atol=1e-6)
+
+
+def test_lut_lookup_is_trilinear_in_the_table(lut):
+    f = np.random.default_rng(2).normal(0, 0.05, (40, 3))
+    t = lut._coords(f)
+    i0 = t.astype(int)
+    fr = t - i0
+    expected = np.zeros((len(f), 2))
+    for corner in np.ndindex(2, 2, 2):
+        w = np.prod([fr[:, k] if c else 1 - fr[:, k] for k, c in enumerate(corner)], axis=0)
+        expected += w[:, None] * lut.table[i0[:, 0] + corner[0], i0[:, 1] + corner[1], i0[:, 2] + corner[2]]
+    gx, gy = lut.lookup(f)
+    np.testing.assert_allclose(np.stack([gx, gy], axis=1), expected, rtol=0, atol=1e-6)
+
+
 def test_markers_are_found_where_drawn(sim):
     flat = sim.flat()
     det = detect_markers(flat.scene, sim.params)

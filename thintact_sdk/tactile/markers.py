@@ -141,8 +141,10 @@ def detect_markers(
         total = float(win.sum())
         if total <= 0:
             continue
-        rr, cc = np.mgrid[r0:r1, c0:c1]
-        centres.append((float((win * rr).sum() / total), float((win * cc).sum() / total)))
+        # weighted centroid from the window's row and column sums (no index grids)
+        rows = np.arange(r0, r1, dtype=np.float64)
+        cols = np.arange(c0, c1, dtype=np.float64)
+        centres.append((float(win.sum(axis=1) @ rows / total), float(win.sum(axis=0) @ cols / total)))
     rc = np.array(centres, np.float64).reshape(-1, 2)
     grow = max(1, int(round(d_px / 4)))
     mask = cv2.dilate(

@@ -40,5 +40,7 @@ def integrate_gradients(grad_x: np.ndarray, grad_y: np.ndarray, mm_per_px: float
     div = np.gradient(gx, axis=1) + np.gradient(gy, axis=0)  # per px
     rhs = div * mm_per_px  # 5-point Laplacian in px² units, depth in mm
     inv = _inverse_eigenvalues(*gx.shape)
-    depth = idstn(dstn(rhs, type=1, workers=-1) * inv, type=1, workers=-1)
+    # one worker: a per-frame transform of ~100 × 128 gains nothing from threads it must
+    # start and wait for, and a stream runs it beside the decode of the next frame
+    depth = idstn(dstn(rhs, type=1) * inv, type=1)
     return depth.astype(np.float32)
