@@ -231,9 +231,13 @@ def compress_terms(terms: list[SeparableTerm], rel_tol: float = 1e-6) -> list[Se
         coef_p = (vp / sp) @ w[:, :keep] * sig[:keep]
         coef_q = (vq / sq) @ zt[:keep].T
         shape_p, shape_q = ts[0].P.shape, ts[0].Q.shape
-        for i in range(keep):
-            out.append(SeparableTerm((pm @ coef_p[:, i]).reshape(shape_p),
-                                     (qm @ coef_q[:, i]).reshape(shape_q), part))
+        # all new terms in one product each side (``keep × size``, rows contiguous): one
+        # matrix-vector product per term re-read ``pm`` and ``qm`` ``keep`` times, 85 % of a
+        # 16×-binned paper-size rotated kernel's 174 s build
+        new_p = coef_p[:, :keep].T @ pm.T
+        new_q = coef_q[:, :keep].T @ qm.T
+        out.extend(SeparableTerm(new_p[i].reshape(shape_p), new_q[i].reshape(shape_q), part)
+                   for i in range(keep))
     return out
 
 
