@@ -86,13 +86,11 @@ def second_antiderivative(edges_mm: np.ndarray, values: np.ndarray, t_mm: np.nda
     widths = np.diff(edges_mm)
     n_v, n_j = values.shape
     # per interval k (0: below the first edge, J + 1: beyond the last) the quadratic
-    # D(t) = D_k + C_k·dt + A_k·dt²/2 with dt = t - (its left edge), stored as rows (D, C, A/2)
-    # so that one gather fetches a point's three coefficients for every profile
-    table = np.zeros((n_j + 2, 3, n_v))
-    c_edge = np.cumsum(values * widths, axis=1)  # C at edges 1..J
-    table[2:, 1] = c_edge.T
-    table[2:, 0] = np.cumsum(table[1:-1, 1].T * widths + values * widths**2 / 2, axis=1).T
-    table[1:-1, 2] = values.T / 2
+    # D(t) = D_k + C_k·dt + A_k·dt²/2 with dt = t - (its left edge); table[v] = (D, C, A/2)
+    table = np.zeros((n_v, 3, n_j + 2))
+    table[:, 1, 2:] = np.cumsum(values * widths, axis=1)  # C at edges 1..J
+    table[:, 0, 2:] = np.cumsum(table[:, 1, 1:-1] * widths + values * widths**2 / 2, axis=1)
+    table[:, 2, 1:-1] = values / 2
     left = np.concatenate([edges_mm[:1], edges_mm])  # interval k's left edge
     t = np.asarray(t_mm, dtype=float)
     flat = t.ravel()
@@ -104,10 +102,15 @@ def second_antiderivative(edges_mm: np.ndarray, values: np.ndarray, t_mm: np.nda
         np.clip(k, 0, n_j + 1, out=k)
     else:
         k = np.searchsorted(edges_mm, flat, side="right")
-    dt = (flat - left[k])[:, None]
-    g = table[k]  # (P, 3, V)
-    out = g[:, 0] + dt * (g[:, 1] + dt * g[:, 2])  # (P, V); zero below the first edge
-    return out.T.reshape((n_v,) + t.shape)
+    dt = flat - left[k]
+    out = np.empty((n_v, flat.size))
+    for v in range(n_v):  # Horner in place, gathering from each profile's small tables
+        o = out[v]
+        np.multiply(table[v, 2][k], dt, out=o)
+        o += table[v, 1][k]
+        o *= dt
+        o += table[v, 0][k]
+    return out.reshape((n_v,) + t.shape)
 
 
 def box_box_integrals(

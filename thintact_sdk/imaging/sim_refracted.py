@@ -196,9 +196,12 @@ def refracted_axis_family(
         r1 = min(r_all, r0 + rows_per_chunk)
         uc = uc_all[r0 * n_sub:r1 * n_sub]
         dx = sc[None, :] - uc[:, None]  # (r·n_sub, n·n_sub)
-        off = dx.reshape(r1 - r0, n_sub, n, n_sub).transpose(0, 2, 1, 3)
-        centre = off.mean(axis=(2, 3))  # (r, n)
-        rel = off - centre[..., None, None]
+        off = dx.reshape(r1 - r0, n_sub, n, n_sub)  # (r, a, n, b): sub-rectangle (a, b) of pair (r, n)
+        centre = off.mean(axis=(1, 3))  # (r, n)
+        rel = off - centre[:, None, :, None]
+        # powers rel^k of the sub-rectangles' offsets from their pair's centre, for the
+        # moments Σ box·rel^k of every node in one pass (k ≤ 4 with the weighted integrals)
+        powers = np.stack([rel**k for k in range(5 if weighted else 3)])
         f, df, d2f = (np.moveaxis(a, -1, 0) for a in factor_derivs(centre))  # (L, r, n)
         for it, t in enumerate(other_r2_mm2):
             r2 = dx**2 + t
@@ -210,10 +213,10 @@ def refracted_axis_family(
             d = second_antiderivative(edges, values, corners[None] - shifts[:, None, None, None])
             # d: (V, H, 4, ...)
             box = (d[:, :, 0] - d[:, :, 1] - d[:, :, 2] + d[:, :, 3]) / ((1 - gp) * gp)
-            box = box.reshape(n_v, n_h, r1 - r0, n_sub, n, n_sub).transpose(1, 0, 2, 4, 3, 5)
-            b0 = box.sum(axis=(-2, -1))  # (H, V, r, n)
-            b1 = (box * rel).sum(axis=(-2, -1))
-            b2 = (box * (rel**2 + var_in)).sum(axis=(-2, -1))
+            box = box.reshape(n_v, n_h, r1 - r0, n_sub, n, n_sub)
+            moments = np.einsum("vhranb,kranb->khvrn", box, powers)  # Σ box·rel^k: (K, H, V, r, n)
+            b0, b1 = moments[0], moments[1]
+            b2 = moments[2] + var_in * b0  # Σ box·(rel² + var_in)
             blk = (b0[:, :, None] * f + b1[:, :, None] * df + 0.5 * b2[:, :, None] * d2f) / p
             if out is None:
                 out = np.empty((1 + weighted, n_t, n_h, n_v, f.shape[0], r_all, n))
@@ -221,29 +224,31 @@ def refracted_axis_family(
             if weighted:
                 # δ² - D² = 2D·ε + ε² with ε = rel + e (e: the spread inside a sub-rectangle,
                 # mean 0, variance var_in), times the factor's Taylor series in ε
-                out[1, it, :, :, :, r0:r1] = _weighted_block(box, rel, centre, var_in, f, df,
+                out[1, it, :, :, :, r0:r1] = _weighted_block(moments, b2, centre, var_in, f, df,
                                                              d2f) / p
     assert out is not None
     out = out[:, :, 0] if scalar else out
     return out if weighted else out[0]
 
 
-def _weighted_block(box: np.ndarray, rel: np.ndarray, centre: np.ndarray, var_in: float,
+def _weighted_block(moments: np.ndarray, b2: np.ndarray, centre: np.ndarray, var_in: float,
                     f: np.ndarray, df: np.ndarray, d2f: np.ndarray) -> np.ndarray:
     """``Σ box·E[(δ² - D²)·(f + f'·ε + f''·ε²/2)]`` over a pair's sub-rectangles.
 
-    ``box``: ``(H, V, r, n, n_sub, n_sub)`` sub-rectangle integrals; ``rel``:
-    ``(r, n, n_sub, n_sub)`` their centre offsets from the pair's centre ``centre`` ``(r, n)``;
-    ``f, df, d2f``: ``(L, r, n)``. Returns ``(H, V, L, r, n)``.
+    ``moments``: ``(5, H, V, r, n)`` raw moments ``S_k = Σ box·rel^k`` of the sub-rectangle
+    integrals about the pair's centre offset ``centre`` ``(r, n)``; ``b2 = S_2 + var_in·S_0``;
+    ``f, df, d2f``: ``(L, r, n)``. With ``ε = rel + e`` (``e`` the spread inside a
+    sub-rectangle, mean 0, variance ``var_in``), ``δ² - D² = 2D·ε + ε²`` and
+    ``E[ε²] = rel² + var_in``, ``E[ε³] = rel³ + 3·rel·var_in``,
+    ``E[ε⁴] ≈ rel⁴ + 6·rel²·var_in + 1.8·var_in²`` (its share is negligible). Returns
+    ``(H, V, L, r, n)``.
     """
-    two_d = 2 * centre[..., None, None]
-    r2 = rel**2
-    m2 = r2 + var_in  # E[ε²]
-    m3 = r2 * rel + 3 * rel * var_in  # E[ε³]
-    m4 = r2**2 + 6 * r2 * var_in + 1.8 * var_in**2  # E[ε⁴] (≈: its share is negligible)
-    c0 = (box * (two_d * rel + m2)).sum(axis=(-2, -1))
-    c1 = (box * (two_d * m2 + m3)).sum(axis=(-2, -1))
-    c2 = (box * (two_d * m3 + m4)).sum(axis=(-2, -1))
+    s0, s1, _, s3, s4 = moments
+    two_d = 2 * centre
+    e3 = s3 + 3 * var_in * s1  # Σ box·E[ε³]
+    c0 = two_d * s1 + b2
+    c1 = two_d * b2 + e3
+    c2 = two_d * e3 + s4 + 6 * var_in * moments[2] + 1.8 * var_in**2 * s0
     return c0[:, :, None] * f + c1[:, :, None] * df + 0.5 * c2[:, :, None] * d2f
 
 
