@@ -174,12 +174,13 @@ def axis_term_matrices(
         box, off = _shifted_box(grid, r0, r1, alpha, beta, edges_mm, values, n_sub, shift,
                                 shifts)
         centre = off.mean(axis=(2, 3))
-        rel = (off - centre[..., None, None])[None, None]
+        rel = off - centre[..., None, None]  # (r, n, n_sub, n_sub)
         # within-sub-rectangle variance of s - u (exact for a uniform profile there)
         var_in = (grid.sensor_pitch_mm**2 + grid.scene_pitch_mm**2) / (12 * n_sub**2)
-        b0 = box.sum(axis=(-2, -1))
-        b1 = (box * rel).sum(axis=(-2, -1))
-        b2 = (box * (rel**2 + var_in)).sum(axis=(-2, -1))
+        # Σ box·rel^k, k = 0, 1, 2, in one pass over the sub-rectangle integrals
+        moments = np.einsum("tvrnab,krnab->ktvrn", box, np.stack([np.ones_like(rel), rel, rel**2]))
+        b0, b1 = moments[0], moments[1]
+        b2 = moments[2] + var_in * b0  # Σ box·(rel² + var_in)
         f, df, d2f = (np.moveaxis(a, -1, 0)[None, None] for a in factor_derivs(centre))
         blk = (b0[:, :, None] * f + b1[:, :, None] * df + 0.5 * b2[:, :, None] * d2f) \
             / grid.sensor_pitch_mm  # (T, V, L, r, n)
