@@ -221,12 +221,13 @@ def compress_terms(terms: list[SeparableTerm], rel_tol: float = 1e-6) -> list[Se
         if len(ts) <= 1:
             out.extend(ts)
             continue
-        pm = np.stack([t.P.ravel() for t in ts], axis=1)
-        qm = np.stack([t.Q.ravel() for t in ts], axis=1)
+        # one term per row (contiguous rows: stacking along a column axis wrote strided)
+        pm = np.stack([t.P.ravel() for t in ts])
+        qm = np.stack([t.Q.ravel() for t in ts])
         vp, sp = _gram_basis(pm)
         vq, sq = _gram_basis(qm)
         mid = (vp * sp).T @ (vq * sq)  # S_p V_pᵀ V_q S_q
-        w, sig, zt = np.linalg.svd(mid)
+        w, sig, zt = np.linalg.svd(mid, full_matrices=False)
         energy = np.cumsum(sig[::-1] ** 2)[::-1]  # energy[i] = Σ_{j≥i} σ_j²
         keep = max(1, int(np.sum(np.sqrt(energy / energy[0]) > rel_tol)))
         coef_p = (vp / sp) @ w[:, :keep] * sig[:keep]
@@ -235,15 +236,16 @@ def compress_terms(terms: list[SeparableTerm], rel_tol: float = 1e-6) -> list[Se
         # all new terms in one product each side (``keep × size``, rows contiguous): one
         # matrix-vector product per term re-read ``pm`` and ``qm`` ``keep`` times, 85 % of a
         # 16×-binned paper-size rotated kernel's 174 s build
-        new_p = coef_p[:, :keep].T @ pm.T
-        new_q = coef_q[:, :keep].T @ qm.T
+        new_p = coef_p[:, :keep].T @ pm
+        new_q = coef_q[:, :keep].T @ qm
         out.extend(SeparableTerm(new_p[i].reshape(shape_p), new_q[i].reshape(shape_q), part)
                    for i in range(keep))
     return out
 
 
-def _gram_basis(mat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``(V, s)`` with ``mat = U diag(s) Vᵀ``, from the Gram matrix (null directions dropped)."""
-    d, v = np.linalg.eigh(mat.T @ mat)
+def _gram_basis(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(V, s)`` with ``rowsᵀ = U diag(s) Vᵀ`` (one term per row), from the Gram matrix
+    ``rows rowsᵀ`` (null directions dropped)."""
+    d, v = np.linalg.eigh(rows @ rows.T)
     good = d > d.max() * 1e-20
     return v[:, good], np.sqrt(d[good])
