@@ -160,6 +160,12 @@ class _Latest:
             self._cond.notify_all()
 
 
+def _pipeline_shares_cores() -> bool:
+    """True on a host with at most :data:`~thintact_sdk.compute_threads.PIPELINE_SHARES_CORES_UP_TO`
+    usable cores: frames (streamed or single) decode on one kernel thread there."""
+    return usable_cores() <= PIPELINE_SHARES_CORES_UP_TO
+
+
 class Sensor:
     """A ThinTact sensor opened from a profile.
 
@@ -389,7 +395,7 @@ class Sensor:
         for the block, restored after), the library's otherwise. A decoder built inside the
         block (the first frame) measures its backends on those threads too, as in
         :meth:`stream`."""
-        if usable_cores() > PIPELINE_SHARES_CORES_UP_TO:
+        if not _pipeline_shares_cores():
             yield
             return
         with single_threaded_kernels():
@@ -500,7 +506,7 @@ class Sensor:
         if self._threads:
             raise DeviceError("the sensor is already streaming")
         t0 = time.perf_counter()
-        if usable_cores() <= PIPELINE_SHARES_CORES_UP_TO:
+        if _pipeline_shares_cores():
             # before the warm-up, which builds the decoder (its backends measured) and times
             # the decode as the stream will run them: on one kernel thread
             self._hold_kernels()
