@@ -40,8 +40,8 @@ ENV_DECODE_WORKERS = "THINTACT_DECODE_WORKERS"
 
 PIPELINE_SHARES_CORES_UP_TO = 2
 """On a host with at most this many usable cores a stream holds the kernels at one thread
-even with one decode worker. Its other stages (Bayer binning, tactile interpretation, ~17 ms
-of the paper device's 33 ms frame period) run while it decodes, so a product split over both
+even with one decode worker. Its other stages (Bayer binning, tactile interpretation, ~11 ms
+of the paper device's 33 ms frame period; ~17 ms when this was measured) run while it decodes, so a product split over both
 cores waits for the core they hold at every product: on the 2-core Xeon-AMX at load ~2.8,
 ``t2s-closed-form`` (numpy float32, binned 2 × 2) streamed 5.1 frames/s with one worker on two
 kernel threads against 26.7 on one (p50 192 against 90 ms; tools/bench_stream_workers.py).
