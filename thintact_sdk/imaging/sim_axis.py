@@ -30,17 +30,34 @@ class AxisGrid:
         Number of sensor pixels and their pitch; centres at ``(i - (n-1)/2)·pitch``.
     n_scene, scene_pitch_mm
         Number of scene pixels and their pitch, centred on the same axis.
+    sensor_offset_mm
+        Where the centre of these sensor pixels lies on the axis (mm; 0 for a whole sensor,
+        the window's centre for a window of a larger sensor:
+        :func:`~thintact_sdk.imaging.sim_tiled.window_params`).
     """
 
     n_sensor: int
     sensor_pitch_mm: float
     n_scene: int
     scene_pitch_mm: float
+    sensor_offset_mm: float = 0.0
+
+    def sensor_span_mm(self) -> tuple[float, float]:
+        """``(first, last)`` edge of the sensor pixels (mm)."""
+        half = self.n_sensor * self.sensor_pitch_mm / 2
+        return self.sensor_offset_mm - half, self.sensor_offset_mm + half
+
+    def crossing_span_mm(self, alpha: float, beta: float) -> tuple[float, float]:
+        """``(lowest, highest)`` crossing point ``alpha·u + beta·s`` of any sensor and scene
+        point (mm)."""
+        lo, hi = self.sensor_span_mm()
+        half_s = self.n_scene * self.scene_pitch_mm / 2
+        return alpha * lo - beta * half_s, alpha * hi + beta * half_s
 
     def sensor_edges_mm(self, n_sub: int = 1) -> np.ndarray:
         """``n_sensor·n_sub + 1`` edges of the sensor pixels split into ``n_sub`` parts."""
-        half = self.n_sensor * self.sensor_pitch_mm / 2
-        return np.linspace(-half, half, self.n_sensor * n_sub + 1)
+        lo, hi = self.sensor_span_mm()
+        return np.linspace(lo, hi, self.n_sensor * n_sub + 1)
 
     def scene_edges_mm(self, n_sub: int = 1) -> np.ndarray:
         """``n_scene·n_sub + 1`` edges of the scene pixels split into ``n_sub`` parts."""
@@ -49,7 +66,7 @@ class AxisGrid:
 
     def sensor_centres_mm(self) -> np.ndarray:
         """``(n_sensor,)`` pixel centres in mm."""
-        return (np.arange(self.n_sensor) - (self.n_sensor - 1) / 2) * self.sensor_pitch_mm
+        return self.sensor_offset_mm + (np.arange(self.n_sensor) - (self.n_sensor - 1) / 2) * self.sensor_pitch_mm
 
     def scene_centres_mm(self) -> np.ndarray:
         """``(n_scene,)`` pixel centres in mm."""
@@ -57,7 +74,8 @@ class AxisGrid:
 
     def max_offset_mm(self) -> float:
         """Largest ``|s - u|`` between any scene point and any sensor point (mm)."""
-        return (self.n_sensor * self.sensor_pitch_mm + self.n_scene * self.scene_pitch_mm) / 2
+        return (self.n_sensor * self.sensor_pitch_mm + self.n_scene * self.scene_pitch_mm) / 2 \
+            + abs(self.sensor_offset_mm)
 
 
 def mask_cell_edges_mm(k_cells: int, feature_mm: float) -> np.ndarray:

@@ -19,7 +19,11 @@ from thintact_sdk.profile import Profile
 
 @dataclass(frozen=True)
 class KernelParams:
-    """Everything the imaging kernel depends on (the cache key)."""
+    """Everything the imaging kernel depends on (the cache key).
+
+    ``rows × cols`` sensor pixels centred on the optical axis, or, with ``row_offset_px`` /
+    ``col_offset_px`` (pixels, the window centre's offset from the axis), a window of a larger
+    sensor (:class:`~thintact_sdk.imaging.sim_tiled.TiledKernel`)."""
 
     rows: int
     cols: int
@@ -44,17 +48,26 @@ class KernelParams:
     rank_tol: float
     force_direct: bool = False
     compress_tol: float = 1e-5
+    row_offset_px: float = 0.0
+    col_offset_px: float = 0.0
 
     @property
     def separable(self) -> bool:
         """True unless the direct path is forced (every effect has a separable kernel)."""
         return not self.force_direct
 
+    @property
+    def windowed(self) -> bool:
+        """True for a window of a larger sensor (its centre off the optical axis)."""
+        return self.row_offset_px != 0.0 or self.col_offset_px != 0.0
+
     def grid_x(self) -> AxisGrid:
-        return AxisGrid(self.cols, self.pitch_um * 1e-3, self.scene_cols, self.scene_pitch_um * 1e-3)
+        return AxisGrid(self.cols, self.pitch_um * 1e-3, self.scene_cols, self.scene_pitch_um * 1e-3,
+                        self.col_offset_px * self.pitch_um * 1e-3)
 
     def grid_y(self) -> AxisGrid:
-        return AxisGrid(self.rows, self.pitch_um * 1e-3, self.scene_rows, self.scene_pitch_um * 1e-3)
+        return AxisGrid(self.rows, self.pitch_um * 1e-3, self.scene_rows, self.scene_pitch_um * 1e-3,
+                        self.row_offset_px * self.pitch_um * 1e-3)
 
 
 def kernel_params(profile: Profile, physics: dict[str, dict[str, Any]],

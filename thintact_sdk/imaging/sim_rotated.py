@@ -297,9 +297,8 @@ def diffraction_profiles(kp: KernelParams, wavelength_nm: float
     out = []
     for grid, phi, grid_o in ((kp.grid_x(), kp.phi, kp.grid_y()), (kp.grid_y(), kp.phi_rows,
                                                                     kp.grid_x())):
-        half = alpha * grid.n_sensor * grid.sensor_pitch_mm / 2 + beta * grid.n_scene * grid.scene_pitch_mm / 2
-        half_o = alpha * grid_o.n_sensor * grid_o.sensor_pitch_mm / 2 \
-            + beta * grid_o.n_scene * grid_o.scene_pitch_mm / 2
+        half = max(abs(v) for v in grid.crossing_span_mm(alpha, beta))
+        half_o = max(abs(v) for v in grid_o.crossing_span_mm(alpha, beta))
         reach = half + s * half_o + abs(kp.dx_um * 1e-3) + abs(kp.dy_um * 1e-3) \
             + 4 * grid.sensor_pitch_mm + 4 * grid.scene_pitch_mm
         out.append(diffraction.axis_intensity_profiles(

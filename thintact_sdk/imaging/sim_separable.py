@@ -169,8 +169,9 @@ def axis_term_matrices(
     out: np.ndarray | None = None
     for r0 in range(0, grid.n_sensor, rows_per_chunk):
         r1 = min(grid.n_sensor, r0 + rows_per_chunk)
-        # the chunk's sensor centres are displaced from the full grid's by shift
-        shift = (r0 + (r1 - r0 - 1) / 2 - (grid.n_sensor - 1) / 2) * grid.sensor_pitch_mm
+        # the chunk's sensor centres are displaced from the axis by shift (a window of a
+        # larger sensor is itself displaced by its offset)
+        shift = grid.sensor_offset_mm + (r0 + (r1 - r0 - 1) / 2 - (grid.n_sensor - 1) / 2) * grid.sensor_pitch_mm
         box, off = _shifted_box(grid, r0, r1, alpha, beta, edges_mm, values, n_sub, shift,
                                 shifts)
         centre = off.mean(axis=(2, 3))

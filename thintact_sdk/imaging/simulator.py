@@ -33,14 +33,14 @@ from __future__ import annotations
 import functools
 from collections import OrderedDict
 from dataclasses import replace
-from typing import Any, TypeAlias, TypeVar
+from typing import Any, TypeAlias, TypeVar, overload
 
 import numpy as np
 
 from thintact_sdk.errors import ThinTactError
-from thintact_sdk.imaging import sim_refracted, sim_rotated
+from thintact_sdk.imaging import sim_refracted, sim_rotated, sim_tiled
 from thintact_sdk.imaging.build_threads import per_channel_by_wavelength
-from thintact_sdk.imaging.sim_axis import AxisGrid, mask_cell_edges_mm
+from thintact_sdk.imaging.sim_axis import mask_cell_edges_mm
 from thintact_sdk.imaging.sim_direct import DirectKernel, build_direct_kernel
 from thintact_sdk.imaging.sim_params import KernelParams, kernel_params
 from thintact_sdk.imaging.sim_radiometry import SeparableExpansion
@@ -50,6 +50,7 @@ from thintact_sdk.imaging.sim_separable import (
     axis_term_matrices,
     compress_terms,
 )
+from thintact_sdk.imaging.sim_tiled import TiledKernel
 from thintact_sdk.interfaces import ImagingModel
 from thintact_sdk.physics import (
     EFFECTS,
@@ -65,9 +66,10 @@ WHITE_FRACTION = 0.6
 """Default DN level of the brightest all-white pixel, as a fraction of (saturation - black)."""
 
 
-ImagingKernel: TypeAlias = SeparableKernel | DirectKernel
+ImagingKernel: TypeAlias = SeparableKernel | TiledKernel | DirectKernel
 """What :func:`get_kernel` returns: ``apply(scenes F×N×M×C, precision) -> F×R×S×C`` signal
-and an ``info`` dict; the separable one also has its ``terms`` per channel."""
+and an ``info`` dict; the separable one also has its ``terms`` per channel (a tiled one has
+them per sensor window)."""
 
 _KERNEL_CACHE: OrderedDict[KernelParams, ImagingKernel] = OrderedDict()
 _CACHE_SIZE = 4
@@ -94,15 +96,14 @@ def _cached_expansion(h_mm: float, q: float, half_x_mm: float, half_y_mm: float,
     return SeparableExpansion.build(h_mm, q, half_x_mm, half_y_mm, rel_tol=rel_tol)
 
 
-def _crossing_range_mm(grid: AxisGrid, alpha: float, beta: float) -> tuple[float, float]:
-    half = alpha * grid.n_sensor * grid.sensor_pitch_mm / 2 + beta * grid.n_scene * grid.scene_pitch_mm / 2
-    return -half, half
-
-
-def build_separable_kernel(kp: KernelParams) -> SeparableKernel:
-    """Build the ``P_k``, ``Q_k`` of every channel for separable physics."""
+def build_separable_kernel(kp: KernelParams) -> SeparableKernel | TiledKernel:
+    """Build the ``P_k``, ``Q_k`` of every channel for separable physics (per sensor window
+    for a large rotated mask)."""
     if not kp.separable:
         raise ThinTactError("internal: separable kernel requested for non-separable physics")
+    if kp.windowed and kp.n_scene_side != 1.0:
+        raise ThinTactError("a sensor window's kernel is built for straight rays only (the refracted "
+                            "kernel has no sensor offset)")
     if kp.n_scene_side != 1.0:
         return sim_refracted.build_refracted_kernel(kp)
     h = kp.z_mm + kp.d_mm
@@ -139,7 +140,7 @@ def build_separable_kernel(kp: KernelParams) -> SeparableKernel:
         mats = []
         for grid, edges, phi, fac in ((gx, edges_x, phi_x, exp.fx_derivs),
                                       (gy, edges_y, phi_y, exp.gy_derivs)):
-            lo, hi = _crossing_range_mm(grid, alpha, beta)
+            lo, hi = grid.crossing_span_mm(alpha, beta)
             pad = 4 * grid.sensor_pitch_mm + 4 * grid.scene_pitch_mm
             fe, fv = diffraction.axis_intensity_profiles(
                 edges, phi, lo - pad, hi + pad, lam, kp.z_mm, kp.d_mm)
@@ -162,9 +163,24 @@ def build_separable_kernel(kp: KernelParams) -> SeparableKernel:
 
 
 def _build_rotated_kernel(kp: KernelParams, exp: SeparableExpansion,
-                          info: dict[str, float]) -> SeparableKernel:
+                          info: dict[str, float]) -> SeparableKernel | TiledKernel:
     """Separable kernel of a rotated mask (:mod:`~thintact_sdk.imaging.sim_rotated`), with
-    or without diffraction (one set of terms per distinct wavelength)."""
+    or without diffraction (one set of terms per distinct wavelength); on a device whose
+    displacement family exceeds :data:`~thintact_sdk.imaging.sim_tiled.WINDOW_FAMILY_BYTES`,
+    built window by window of the sensor (:mod:`~thintact_sdk.imaging.sim_tiled`)."""
+    n_values = 2 if kp.wavelengths_nm is None else 4
+    if sim_rotated.rotated_family_bytes(kp, exp.rank, n_values) > sim_tiled.WINDOW_FAMILY_BYTES:
+        spans = sim_tiled.plan_windows(kp, lambda w: sim_rotated.rotated_family_bytes(w, exp.rank, n_values),
+                                       sim_tiled.WINDOW_FAMILY_BYTES)
+        if len(spans) > 1:
+            return sim_tiled.build_tiled_kernel(
+                kp, spans, lambda w: _build_rotated_window(w, exp, dict(info)))
+    return _build_rotated_window(kp, exp, info)
+
+
+def _build_rotated_window(kp: KernelParams, exp: SeparableExpansion,
+                          info: dict[str, float]) -> SeparableKernel:
+    """:func:`_build_rotated_kernel` on one piece of sensor (the whole or a window)."""
     if kp.wavelengths_nm is None:
         px, py, pairs = sim_rotated.geometric_profiles(kp)
         terms = sim_rotated.rotated_terms(kp, exp, px, py, pairs)
@@ -181,7 +197,10 @@ def _build_rotated_kernel(kp: KernelParams, exp: SeparableExpansion,
 
 
 def get_kernel(kp: KernelParams) -> ImagingKernel:
-    """The (cached) kernel for these parameters: separable or direct."""
+    """The (cached) kernel for these parameters: separable (whole or tiled) or direct."""
+    if kp.windowed and not kp.separable:
+        raise ThinTactError("a sensor window's kernel is built on the separable path only (the direct "
+                            "kernel has no sensor offset)")
     if kp.separable:
         return _separable_kernel(kp)
     hit = _cache_get(kp)
@@ -190,9 +209,9 @@ def get_kernel(kp: KernelParams) -> ImagingKernel:
     return _cache_put(kp, build_direct_kernel(kp))
 
 
-def _separable_kernel(kp: KernelParams) -> SeparableKernel:
+def _separable_kernel(kp: KernelParams) -> SeparableKernel | TiledKernel:
     hit = _cache_get(kp)
-    if isinstance(hit, SeparableKernel):
+    if isinstance(hit, SeparableKernel | TiledKernel):
         return hit
     if kp.wavelengths_nm is None and kp.leakage != 0.0:
         # geometric leakage only rescales the open and coding halves: reuse the t = 0 kernel
@@ -209,7 +228,7 @@ def _cache_get(kp: KernelParams) -> ImagingKernel | None:
     return hit
 
 
-K = TypeVar("K", SeparableKernel, DirectKernel)
+K = TypeVar("K", bound=SeparableKernel | TiledKernel | DirectKernel)
 
 
 def _cache_put(kp: KernelParams, kern: K) -> K:
@@ -219,8 +238,21 @@ def _cache_put(kp: KernelParams, kern: K) -> K:
     return kern
 
 
-def _rescaled_for_leakage(base: SeparableKernel, transmittance: float) -> SeparableKernel:
-    """The t = 0 kernel with the open half scaled by (1 + t) and the coding half by (1 - t)."""
+@overload
+def _rescaled_for_leakage(base: SeparableKernel, transmittance: float) -> SeparableKernel: ...
+
+
+@overload
+def _rescaled_for_leakage(base: TiledKernel, transmittance: float) -> TiledKernel: ...
+
+
+def _rescaled_for_leakage(base: SeparableKernel | TiledKernel,
+                          transmittance: float) -> SeparableKernel | TiledKernel:
+    """The t = 0 kernel with the open half scaled by (1 + t) and the coding half by (1 - t)
+    (window by window for a tiled kernel)."""
+    if isinstance(base, TiledKernel):
+        return TiledKernel([replace(w, kernel=_rescaled_for_leakage(w.kernel, transmittance))
+                            for w in base.windows], base.rows, base.cols, dict(base.info))
     c_o, c_c = mask_leakage.intensity_coefficients(transmittance)
     scale = {"open": c_o / 0.5, "coding": c_c / 0.5}
     done: dict[int, list[SeparableTerm]] = {}
@@ -410,6 +442,7 @@ class Simulator(ImagingModel):
         kernel = self.kernel if self.separable else None
         if not isinstance(kernel, SeparableKernel) or blockers:
             why = "the forced direct path" if not self.separable \
+                else "a rotated mask built window by window of the sensor" if isinstance(kernel, TiledKernel) \
                 else ", ".join(blockers)
             raise ThinTactError(f"the physics of {self.profile.name!r} is not separable ({why})")
         if not 0 <= channel < self.n_channels:
