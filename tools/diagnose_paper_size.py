@@ -68,12 +68,21 @@ CASES: dict[str, dict[str, Any]] = {
         "check": {"level_dn": (2200.0, 2.0)},
     },
     "sensor_blur": {
-        "physics": {"sensor_blur": {"sigma_um": 6.0}},
-        "check": {"sigma_um": (6.0, 1.0)},
+        "physics": {"sensor_blur": {"sigma_um": 10.0}},
+        "check": {"sigma_um": (10.0, 1.0)},
     },
     "scene_blur": {
-        "physics": {"scene_blur": {"sigma_um": 25.0}},
-        "check": {"sigma_um": (25.0, 3.0)},
+        "physics": {"scene_blur": {"sigma_um": 45.0}},
+        "check": {"sigma_um": (45.0, 3.0)},
+    },
+    # the concealed set's blurs change this device's prediction by 3.7e-4 of the signal, under
+    # the diagnosis's 6e-4 amplitude floor: nothing may be named, and the unbinned stage must
+    # say which effect would explain the unbinned excess below the floor
+    "subfloor_sensor_blur": {
+        "physics": {"sensor_blur": {"sigma_um": 6.0}}, "check": {}, "below_floor": "sensor_blur",
+    },
+    "subfloor_scene_blur": {
+        "physics": {"scene_blur": {"sigma_um": 25.0}}, "check": {}, "below_floor": "scene_blur",
     },
     "display_gamma": {
         "physics": {"display_gamma": {"gamma": 1.15}},
@@ -95,7 +104,8 @@ CASES: dict[str, dict[str, Any]] = {
 }
 """Hidden effects, and ``{param: (truth, tolerance)}`` for the check (the tolerances of
 ``tests/diagnose/test_diagnose_concealed.py``; the angle and shift of ``mask_shift`` and the
-geometry's looser, as binned data see them). Every effect the simulator renders at this
+geometry's looser, as binned data see them; the blurs at widths this device's prediction
+shows above the amplitude floor, ``subfloor_*`` at the concealed set's). Every effect the simulator renders at this
 size is here; the rotated mask and refraction are not (their kernels refuse this size, and
 the diagnosis holds their parameters: ``binned.not_screened``). ``clean``: nothing hidden,
 nothing may be named."""
@@ -166,6 +176,12 @@ def run_diagnose(rec: Path, out: Path, time_budget_s: float) -> tuple[int, float
 def check_finding(report: dict[str, Any], case: str) -> list[str]:
     """Problems with the report's findings for ``case`` (empty: right)."""
     found = [f["effect"] for f in report.get("findings", [])]
+    if "below_floor" in CASES[case]:
+        want = CASES[case]["below_floor"]
+        stage = (report.get("binned") or {}).get("unbinned_stage") or {}
+        low = [b["effect"] for b in stage.get("below_floor", [])]
+        bad = [f"an effect under the amplitude floor, but named {found}"] if found else []
+        return bad + ([] if want in low else [f"the unbinned stage did not name {want} under the floor ({low})"])
     if not CASES[case]["physics"]:
         return [f"nothing hidden, but named {found}"] if found else []
     name = next(iter(CASES[case]["physics"]))

@@ -220,7 +220,7 @@ def unbinned_amplitude_fn(data: DiagnosisData, n_frames: int = FINE_AMPLITUDE_FR
 
     def amplitude(before: Values, after: Values) -> float:
         if not made:
-            made.append(DiagnosisModel(subset_frames(data, n_frames), _simulate_float32,
+            made.append(DiagnosisModel(subset_frames(data, n_frames), simulate_float32,
                                        default_variance_fn(), sys_frac=sys_frac, cache_size=2))
         model = made[0]
         p0 = model.evaluate(before).pred_dn
@@ -232,7 +232,7 @@ def unbinned_amplitude_fn(data: DiagnosisData, n_frames: int = FINE_AMPLITUDE_FR
     return amplitude
 
 
-def _simulate_float32(profile: Profile, scenes: np.ndarray) -> np.ndarray:
+def simulate_float32(profile: Profile, scenes: np.ndarray) -> np.ndarray:
     """The project simulator in float32 products (relative error ~1e-7, about twice as fast
     at full size), float64 out."""
     from thintact_sdk.imaging.simulator import Simulator
@@ -254,7 +254,7 @@ def full_size_check(data: DiagnosisData, final_values: dict[str, np.ndarray],
     from thintact_sdk.diagnose.model import DiagnosisModel
     from thintact_sdk.diagnose.run import _evaluate_full, _view
 
-    model = DiagnosisModel(data, _simulate_float32, default_variance_fn(), sys_frac=sys_frac,
+    model = DiagnosisModel(data, simulate_float32, default_variance_fn(), sys_frac=sys_frac,
                            cache_size=1)
     ev = _evaluate_full(model, final_values)
     st = _view(model, data, ev.pred_dn, final_values).stats

@@ -31,6 +31,7 @@ from thintact_sdk.diagnose.stats import (
     valid_pixels,
 )
 from thintact_sdk.diagnose.structure import Structure, find_structure
+from thintact_sdk.diagnose.unbinned import UnbinnedInput, UnbinnedStage, unbinned_stage
 from thintact_sdk.diagnose.words import describe_effect, tell_apart
 from thintact_sdk.physics import EFFECTS
 from thintact_sdk.profile import Profile
@@ -72,6 +73,10 @@ class DiagnoseOptions:
         recording (:func:`~thintact_sdk.diagnose.binning.unbinned_amplitude_fn`), which
         an effect whose binned change is under ``amp_floor`` may reach instead
         (:func:`~thintact_sdk.diagnose.select.select_effects`).
+    unbinned
+        For binned data: the unbinned recording, on whose frames the accepted model is
+        checked and, where its χ² is in excess, effects finer than a block are selected
+        (:mod:`~thintact_sdk.diagnose.unbinned`).
     """
 
     sys_frac: float = 1e-3
@@ -84,6 +89,7 @@ class DiagnoseOptions:
     blas_threads: int | None = 1
     held_params: dict[str, tuple[str, ...]] = field(default_factory=dict)
     fine_amplitude: FineAmplitude | None = None
+    unbinned: UnbinnedInput | None = None
 
 
 @dataclass
@@ -111,6 +117,7 @@ class Diagnosis:
     selection: Selection
     history: list[tuple[str, float, float]]  # (model, rms_dn, chi2_per_dof)
     timing_s: dict[str, float] = field(default_factory=dict)
+    unbinned: UnbinnedStage | None = None  # the unbinned stage of a binned diagnosis
 
 
 def known_candidates(profile: Profile) -> list[str]:
@@ -272,6 +279,25 @@ def _diagnose(
         final = _view(model, data, ev1.pred_dn, sel.values)
         struct = _structure(final, data, black)
     timing["selection_s"] = time.perf_counter() - t_start - timing["baseline_s"]
+    stage: UnbinnedStage | None = None
+    fine_names: set[str] = set()
+    if opt.unbinned is not None:
+        t_stage = time.perf_counter()
+        say("checking the fit on unbinned frames")
+        stage = unbinned_stage(opt.unbinned, sel.values, cands, sys_frac=opt.sys_frac,
+                               max_effects=opt.max_effects - len(sel.rounds), margin=opt.margin,
+                               amp_floor=opt.amp_floor, held=held, progress=say)
+        fine = stage.selection
+        if fine is not None and (fine.rounds or stage.refitted):
+            for rnd in sel.rounds:  # refitted at full size (and by the joint refits there)
+                rnd.vector = fine.values.get(rnd.name, rnd.vector)
+            fine_names = {r.name for r in fine.rounds}
+            sel = Selection(fine.values, sel.rounds + fine.rounds, sel.evaluation,
+                            sel.rejected + fine.rejected, sel.log + fine.log)
+            ev1 = _evaluate_full(model, sel.values)
+            final = _view(model, data, ev1.pred_dn, sel.values)
+            struct = _structure(final, data, black)
+        timing["unbinned_s"] = time.perf_counter() - t_stage
     loc1 = _locate(final, data, black)
 
     history = [("baseline", base.stats.rms_dn, base.stats.chi2_per_dof)]
@@ -285,7 +311,18 @@ def _diagnose(
         else:
             ev_r = _evaluate_full(model, accepted)
             view = _view(model, data, ev_r.pred_dn, accepted)
-        findings.append(_finding(rnd, fit_model, sub, prof, view, ev1.beta, sel.values))
+        if rnd.name in fine_names and stage is not None and stage.model is not None and stage.data is not None:
+            findings.append(_finding(rnd, stage.model, stage.data, prof, view, ev1.beta, sel.values))
+            findings[-1]["evidence"] += (
+                f" Named on {stage.data.n_frames} unbinned frames: binned {_stage_bin(opt)}×{_stage_bin(opt)} its "
+                f"signature averages out inside a block, while there the fit without it left χ² "
+                f"{stage.excess_z:.1f} standard deviations above the noise.")
+        else:
+            findings.append(_finding(rnd, fit_model, sub, prof, view, ev1.beta, sel.values))
+            if stage is not None and stage.data is not None and rnd.name in stage.refitted:
+                findings[-1]["evidence"] += (
+                    f" Its parameters were refitted on {stage.data.n_frames} unbinned frames (binning "
+                    "only approximates an effect after the imaging kernel).")
         if opt.held_params.get(rnd.name):
             findings[-1]["evidence"] += (
                 f" Its {', '.join(opt.held_params[rnd.name])} was held at the null value: "
@@ -308,8 +345,13 @@ def _diagnose(
     timing["total_s"] = time.perf_counter() - t_start
     timing["simulations"] = float(model.n_sim + fit_model.n_sim)
     return Diagnosis(
-        data, report, fitted, ev0.pred_dn, ev1.pred_dn, loc0, loc1, struct, sel, history, timing
+        data, report, fitted, ev0.pred_dn, ev1.pred_dn, loc0, loc1, struct, sel, history, timing, stage
     )
+
+
+def _stage_bin(opt: DiagnoseOptions) -> int:
+    """The block side of a binned diagnosis (1 without an unbinned stage)."""
+    return 1 if opt.unbinned is None else opt.unbinned.bin_factor
 
 
 def _evaluate_full(model: DiagnosisModel, values: Values) -> Evaluation:

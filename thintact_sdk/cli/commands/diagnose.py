@@ -30,7 +30,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="diagnose the sensor binned B×B (exact for the imaging model; 0: automatic, "
                         "binning sensors above 128×160 pixels, 1: never)")
     p.add_argument("--no-unbinned-check", dest="unbinned_check", action="store_false",
-                   help="after a binned diagnosis, skip evaluating the fit on the unbinned recording")
+                   help="after a binned diagnosis, skip evaluating the fit on the unbinned recording (and the unbinned stage, which names effects finer than a block there)")
     p.add_argument("--png", action="store_true", help="also write the figures as DIR/figures/*.png")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     add_force_argument(p, "into an existing non-empty --out")
@@ -61,11 +61,13 @@ def run(args: argparse.Namespace) -> int:
         binned_variance_fn,
         full_size_check,
         screening_limits,
+        simulate_float32,
         unbin_hotspots,
         unbinned_amplitude_fn,
     )
     from thintact_sdk.diagnose.outputs import write_outputs
     from thintact_sdk.diagnose.run import known_candidates
+    from thintact_sdk.diagnose.unbinned import UnbinnedInput
 
     out = claim_output(args.out, "directory", force=args.force)
     con = Console(stderr=True, quiet=args.quiet)
@@ -89,6 +91,8 @@ def run(args: argparse.Namespace) -> int:
         opts.candidates = [c for c in known_candidates(data.profile) if c not in limits.dropped]
         opts.held_params = limits.held
         opts.fine_amplitude = unbinned_amplitude_fn(full_data, sys_frac=args.sys_frac)
+        if args.unbinned_check:
+            opts.unbinned = UnbinnedInput(full_data, b, simulate=simulate_float32)
         for name, why in skipped.items():
             con.print(f"not screened: {name} ({why})")
     with con.status("diagnosing...") as status:
@@ -99,10 +103,19 @@ def run(args: argparse.Namespace) -> int:
         unbin_hotspots(rep, b)
         rep["binned"] = {"factor": b, "rows": data.profile.sensor.rows, "cols": data.profile.sensor.cols,
                          "not_screened": skipped}
+        if d.unbinned is not None:
+            rep["binned"]["unbinned_stage"] = d.unbinned.to_json()
         d.fitted_profile = full_profile.with_physics(dict(d.fitted_profile.physics))
         if args.unbinned_check:
             con.print("evaluating the fit on the unbinned recording")
-            rep["full_size"] = {"final": full_size_check(full_data, d.selection.values, args.sys_frac)}
+            stage = d.unbinned
+            if stage is not None and stage.check and not (stage.selection and stage.selection.rounds) \
+                    and not stage.refitted:
+                rep["full_size"] = {"final": dict(stage.check)}  # the stage's own evaluation of this model
+            else:
+                rep["full_size"] = {"final": full_size_check(full_data, d.selection.values, args.sys_frac)}
+                if stage is not None and stage.check:
+                    rep["full_size"]["before_unbinned_stage"] = dict(stage.check)
     _check_finite(rep)
     paths = write_outputs(d, out, png=args.png)
     print(f"baseline: rms {rep['baseline']['rms_dn']:.2f} DN, chi2/dof {rep['baseline']['chi2_per_dof']:.3f} "
@@ -114,6 +127,9 @@ def run(args: argparse.Namespace) -> int:
     if "full_size" in rep:
         ff = rep["full_size"]["final"]
         print(f"unbinned: final rms {ff['rms_dn']:.2f} DN, chi2/dof {ff['chi2_per_dof']:.3f}")
+    stage_rep = rep.get("binned", {}).get("unbinned_stage")
+    if stage_rep and stage_rep["ran"]:
+        print(f"unbinned stage: {stage_rep['summary']}")
     if rep["unexplained"]["significant"]:
         print(f"unexplained: {rep['unexplained']['summary']}")
     print(f"wrote {paths['report']}, {paths['fitted_profile']}, {paths['html']} "

@@ -1,0 +1,118 @@
+"""The unbinned stage of a binned diagnosis (:mod:`thintact_sdk.diagnose.unbinned`): effects
+finer than a block are refitted, or named, on the unbinned frames; a right model is left
+alone; an excess under the amplitude floor is reported, not named."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tests.diagnose.test_diagnose_binning import _device, _write_recording
+from thintact_sdk.diagnose import DiagnoseOptions, diagnose, load_diagnosis_data
+from thintact_sdk.diagnose.binning import bin_data, binned_variance_fn, unbinned_amplitude_fn
+from thintact_sdk.diagnose.data import DiagnosisData
+from thintact_sdk.diagnose.unbinned import EXCESS_Z, UnbinnedInput, excess_z, unbinned_candidates
+
+BIN = 4
+
+
+def _recording(tmp_path: Path, hidden: dict) -> tuple[DiagnosisData, DiagnosisData]:
+    _write_recording(_device(32, 48), hidden, tmp_path / "rec")
+    full = load_diagnosis_data(tmp_path / "rec")
+    return full, bin_data(full, BIN)
+
+
+def test_excess_z_counts_standard_deviations_of_chi2():
+    assert excess_z(1.0, 10**6) == 0.0
+    assert excess_z(1.001, 2 * 10**6) == pytest.approx(1.0)
+    assert excess_z(0.99, 200) == pytest.approx(-0.1)
+
+
+def test_stage_candidates_act_after_the_kernel_and_are_not_closed_form():
+    names = ["pixel_angular_response", "mask_misalignment", "sensor_blur", "scene_blur", "veiling_glare",
+             "stray_light", "sensor_gamma"]
+    assert unbinned_candidates(names, {}) == ["sensor_blur", "scene_blur", "veiling_glare", "sensor_gamma"]
+    assert unbinned_candidates(names, {"sensor_blur": np.array([3.0])}) == ["scene_blur", "veiling_glare",
+                                                                            "sensor_gamma"]
+
+
+def test_a_blur_binning_misjudges_is_refitted_at_full_size(tmp_path):
+    """8 um of sensor blur on 10 um pixels: on 4×4-binned data it is named but fitted at
+    about half its width (binning only approximates it); left so, the unbinned frames are 38σ
+    off and a veiling glare was named there to absorb it. The stage refits it on unbinned
+    frames instead: the right width, and nothing else named."""
+    full, data = _recording(tmp_path, {"sensor_blur": {"sigma_um": 8.0}})
+    opts = DiagnoseOptions(max_effects=2)
+    binned_only = diagnose(data, variance_fn=binned_variance_fn(BIN), options=opts)
+    sigma_binned = binned_only.report["findings"][0]["params"]["sigma_um"]
+    assert abs(sigma_binned - 8.0) > 2.0
+    opts.unbinned = UnbinnedInput(full, BIN)
+    d = diagnose(data, variance_fn=binned_variance_fn(BIN), options=opts)
+    assert [f["effect"] for f in d.report["findings"]] == ["sensor_blur"]
+    f = d.report["findings"][0]
+    assert abs(f["params"]["sigma_um"] - 8.0) < 0.5
+    assert "refitted on 4 unbinned frames" in f["evidence"]
+    assert d.unbinned is not None and d.unbinned.ran and d.unbinned.excess_z > EXCESS_Z
+    rep = d.unbinned.to_json()
+    assert rep["refitted"] == ["sensor_blur"] and rep["accepted"] == []
+    assert "Refitted there: sensor_blur" in str(rep["summary"])
+
+
+def test_an_effect_the_binned_stage_did_not_name_is_named_on_unbinned_frames(tmp_path):
+    """The binned selection given no time (it names nothing, as when binning hides an effect
+    entirely: the paper device's blurs); the stage, with its own budget, names the blur on
+    unbinned frames and says why there."""
+    full, data = _recording(tmp_path, {"sensor_blur": {"sigma_um": 8.0}})
+    opts = DiagnoseOptions(max_effects=2, time_budget_s=0.0, unbinned=UnbinnedInput(full, BIN))
+    d = diagnose(data, variance_fn=binned_variance_fn(BIN), options=opts)
+    assert [f["effect"] for f in d.report["findings"]] == ["sensor_blur"]
+    f = d.report["findings"][0]
+    assert abs(f["params"]["sigma_um"] - 8.0) < 0.5
+    assert "Named on 4 unbinned frames" in f["evidence"]
+    assert d.unbinned is not None and d.unbinned.to_json()["accepted"] == ["sensor_blur"]
+
+
+def test_an_excess_under_the_amplitude_floor_is_reported_not_named(tmp_path):
+    full, data = _recording(tmp_path, {"sensor_blur": {"sigma_um": 8.0}})
+    fine_amp = unbinned_amplitude_fn(full)({}, {"sensor_blur": np.array([8.0])})
+    opts = DiagnoseOptions(max_effects=2, amp_floor=1.5 * fine_amp, unbinned=UnbinnedInput(full, BIN))
+    d = diagnose(data, variance_fn=binned_variance_fn(BIN), options=opts)
+    assert d.report["findings"] == []
+    assert d.unbinned is not None and d.unbinned.ran
+    low = d.unbinned.below_floor()
+    assert low and low[0][0] == "sensor_blur" and low[0][2] < 1.5 * fine_amp
+    assert "under the" in d.unbinned.summary() and "nothing more is named" in d.unbinned.summary()
+
+
+def test_a_right_model_is_left_alone(tmp_path):
+    """A hidden angular response is named on the binned data; its fit is exact there (a
+    kernel-stage effect commutes with binning), so the unbinned frames agree with the noise
+    and the stage neither refits nor names anything."""
+    full, data = _recording(tmp_path, {"pixel_angular_response": {"exponent": 4.0}})
+    opts = DiagnoseOptions(max_effects=2, unbinned=UnbinnedInput(full, BIN))
+    d = diagnose(data, variance_fn=binned_variance_fn(BIN), options=opts)
+    assert [f["effect"] for f in d.report["findings"]] == ["pixel_angular_response"]
+    assert d.unbinned is not None and not d.unbinned.ran
+    assert abs(d.unbinned.excess_z) < EXCESS_Z
+    assert d.unbinned.check["chi2_per_dof"] < 1.05
+    assert "also fits the unbinned frames" in d.unbinned.summary()
+
+
+def test_cli_reports_the_stage(tmp_path):
+    from thintact_sdk.cli.main import main
+
+    _write_recording(_device(32, 48), {"sensor_blur": {"sigma_um": 8.0}}, tmp_path / "rec")
+    rc = main(["diagnose", str(tmp_path / "rec"), "--out", str(tmp_path / "o"), "--quiet", "--bin", str(BIN),
+               "--max-effects", "2"])
+    assert rc == 0
+    rep = json.loads((tmp_path / "o" / "report.json").read_text())
+    stage = rep["binned"]["unbinned_stage"]
+    assert stage["ran"] and stage["refitted"] == ["sensor_blur"]
+    assert stage["before"]["chi2_per_dof"] > rep["full_size"]["final"]["chi2_per_dof"]
+    assert rep["full_size"]["before_unbinned_stage"] == stage["before"]
+    assert abs(rep["findings"][0]["params"]["sigma_um"] - 8.0) < 0.5
+    fitted = json.loads((tmp_path / "o" / "fitted_profile.json").read_text())
+    assert abs(fitted["physics"]["sensor_blur"]["sigma_um"] - 8.0) < 0.5
