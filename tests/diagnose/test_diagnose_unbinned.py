@@ -55,6 +55,7 @@ def test_a_blur_binning_misjudges_is_refitted_at_full_size(tmp_path):
     f = d.report["findings"][0]
     assert abs(f["params"]["sigma_um"] - 8.0) < 0.5
     assert "refitted on 4 unbinned frames" in f["evidence"]
+    assert "(0.80 pixels)" in f["evidence"]  # the device's 10 um pixels, not the 40 um blocks
     assert d.unbinned is not None and d.unbinned.ran and d.unbinned.excess_z > EXCESS_Z
     rep = d.unbinned.to_json()
     assert rep["refitted"] == ["sensor_blur"] and rep["accepted"] == []

@@ -304,6 +304,8 @@ def _diagnose(
     findings = []
     phys = dict(prof.physics)
     accepted: Values = dict(base_values)
+    # findings describe the device itself (its pixels), not the binned copy the fit ran on
+    device = opt.unbinned.data.profile if opt.unbinned is not None else prof
     for i, rnd in enumerate(sel.rounds):
         accepted[rnd.name] = rnd.vector
         if i == len(sel.rounds) - 1:
@@ -312,13 +314,13 @@ def _diagnose(
             ev_r = _evaluate_full(model, accepted)
             view = _view(model, data, ev_r.pred_dn, accepted)
         if rnd.name in fine_names and stage is not None and stage.model is not None and stage.data is not None:
-            findings.append(_finding(rnd, stage.model, stage.data, prof, view, ev1.beta, sel.values))
+            findings.append(_finding(rnd, stage.model, stage.data, device, view, ev1.beta, sel.values))
             findings[-1]["evidence"] += (
                 f" Named on {stage.data.n_frames} unbinned frames: binned {_stage_bin(opt)}×{_stage_bin(opt)} its "
                 f"signature averages out inside a block, while there the fit without it left χ² "
                 f"{stage.excess_z:.1f} standard deviations above the noise.")
         else:
-            findings.append(_finding(rnd, fit_model, sub, prof, view, ev1.beta, sel.values))
+            findings.append(_finding(rnd, fit_model, sub, device, view, ev1.beta, sel.values))
             if stage is not None and stage.data is not None and rnd.name in stage.refitted:
                 findings[-1]["evidence"] += (
                     f" Its parameters were refitted on {stage.data.n_frames} unbinned frames (binning "
