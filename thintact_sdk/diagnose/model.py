@@ -221,8 +221,10 @@ class DiagnosisModel:
         """True when a DN-domain effect is on (the gains then need Gauss-Newton)."""
         return any(CANDIDATES[n].domain == "dn" for n in values)
 
-    def columns(self, values: Values) -> list[np.ndarray]:
-        """Per channel, the ``B × F × R × S`` closed-form columns (gain, linear terms)."""
+    def columns(self, values: Values) -> list[list[np.ndarray]]:
+        """Per channel, the ``B`` closed-form columns (gain, linear terms), each ``F × R × S``
+        (a linear term's is a broadcast view of its ``R × S`` basis image: at the paper's size
+        12 frames of stray light's six terms would be 0.9 GB per channel as copies)."""
         sig = self._post(self.irradiance(values), values)
         f = sig.shape[0]
         extra = [self.basis(c.name) for c, _v in self._in_order(values, "linear")]
@@ -231,7 +233,7 @@ class DiagnosisModel:
             cc = [sig[..., c]]
             for basis in extra:
                 cc += [np.broadcast_to(b[None], (f, *b.shape)) for b in basis]
-            cols.append(np.stack(cc))
+            cols.append(cc)
         return cols
 
     def evaluate(self, values: Values, beta: np.ndarray | None = None) -> Evaluation:
@@ -240,32 +242,31 @@ class DiagnosisModel:
         cols = self.columns(values)
         meas = self.data.measured_dn - self.black
         w = self.weights
-        n_b = cols[0].shape[0]
+        n_b = len(cols[0])
         beta_out = np.zeros((len(cols), n_b)) if beta is None else np.array(beta, np.float64)
         lin = np.empty_like(meas)
         for c, bc in enumerate(cols):
             if beta is None:
                 beta_out[c] = self._solve_channel(bc, meas[..., c], w[..., c], values)
-            lin[..., c] = np.tensordot(beta_out[c], bc, axes=1)
+            lin[..., c] = _combine(beta_out[c], bc)
         out, _ = self._dn(lin, values)
         pred = self.black + out
         chi2 = float(np.sum(w * (self.data.measured_dn - pred) ** 2))
         return Evaluation(pred, chi2, beta_out, lin)
 
-    def _solve_channel(self, cols: np.ndarray, meas: np.ndarray, w: np.ndarray, values: Values) -> np.ndarray:
-        b = cols.reshape(cols.shape[0], -1)
-        wv = w.ravel()
-        y = meas.ravel()
-        a = (b * wv) @ b.T
-        beta = np.linalg.lstsq(a, (b * wv) @ y, rcond=None)[0]
+    def _solve_channel(self, cols: list[np.ndarray], meas: np.ndarray, w: np.ndarray,
+                       values: Values) -> np.ndarray:
+        """Weighted least squares for one channel's coefficients (Gauss-Newton through the
+        DN effects), from normal equations summed column pair by column pair (no stacked
+        copy of the columns)."""
+        a, rhs = _normal_equations(cols, w, w * meas)
+        beta = np.linalg.lstsq(a, rhs, rcond=None)[0]
         if not self.has_dn_effects(values):
             return beta
         for _ in range(6):
-            lin = beta @ b
-            out, der = self._dn(lin, values)
-            jac = b * der
-            a = (jac * wv) @ jac.T
-            step = np.linalg.lstsq(a + 1e-12 * np.eye(len(beta)), (jac * wv) @ (y - out), rcond=None)[0]
+            out, der = self._dn(_combine(beta, cols), values)
+            a, rhs = _normal_equations(cols, w * der * der, w * der * (meas - out))
+            step = np.linalg.lstsq(a + 1e-12 * np.eye(len(beta)), rhs, rcond=None)[0]
             beta = beta + step
             if np.all(np.abs(step) <= 1e-7 * (np.abs(beta) + 1e-9)):
                 break
@@ -275,4 +276,27 @@ class DiagnosisModel:
         """Per channel ``B × F × R × S`` derivatives of the prediction w.r.t. the closed-form
         coefficients (what a score test must project out)."""
         _, der = self._dn(ev.linear_dn, values)
-        return [bc * der[None, ..., c] for c, bc in enumerate(self.columns(values))]
+        return [np.stack(bc) * der[None, ..., c] for c, bc in enumerate(self.columns(values))]
+
+
+def _combine(beta: np.ndarray, cols: list[np.ndarray]) -> np.ndarray:
+    """``Σ_b beta[b]·cols[b]`` (``F × R × S``)."""
+    out = beta[0] * cols[0]
+    for b, col in zip(beta[1:], cols[1:], strict=True):
+        out += b * col
+    return out
+
+
+def _normal_equations(cols: list[np.ndarray], weight: np.ndarray, weighted_y: np.ndarray
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """``A[i, j] = Σ weight·cols[i]·cols[j]`` and ``rhs[i] = Σ weighted_y·cols[i]`` over every
+    pixel value, one weighted column in memory at a time."""
+    n = len(cols)
+    a = np.empty((n, n))
+    rhs = np.empty(n)
+    for i, ci in enumerate(cols):
+        wci = weight * ci
+        rhs[i] = float(np.einsum("fij,fij->", weighted_y, ci))
+        for j in range(i + 1):
+            a[i, j] = a[j, i] = float(np.einsum("fij,fij->", wci, cols[j]))
+    return a, rhs
