@@ -84,8 +84,11 @@ def test_an_excess_under_the_amplitude_floor_is_reported_not_named(tmp_path):
     assert d.report["findings"] == []
     assert d.unbinned is not None and d.unbinned.ran
     low = d.unbinned.below_floor()
-    assert low and low[0][0] == "sensor_blur" and low[0][2] < 1.5 * fine_amp
+    assert low and low[0].name == "sensor_blur" and low[0].amplitude_fraction < 1.5 * fine_amp
     assert "under the" in d.unbinned.summary() and "nothing more is named" in d.unbinned.summary()
+    top = d.report["below_floor"]  # binned, it was under the floor already
+    assert top[0]["effect"] == "sensor_blur" and top[0]["dchi2"] > top[0]["threshold"]
+    assert top[0]["amplitude_fraction"] < top[0]["floor"] and top[0]["data"] == "binned 4×4"
 
 
 def test_a_right_model_is_left_alone(tmp_path):
@@ -117,3 +120,23 @@ def test_cli_reports_the_stage(tmp_path):
     assert abs(rep["findings"][0]["params"]["sigma_um"] - 8.0) < 0.5
     fitted = json.loads((tmp_path / "o" / "fitted_profile.json").read_text())
     assert abs(fitted["physics"]["sensor_blur"]["sigma_um"] - 8.0) < 0.5
+
+
+def test_a_small_device_reports_an_effect_under_the_floor(tmp_path):
+    """Not only binned: a leakage the data show (Δχ² far over the BIC threshold) with the
+    floor set above its change of the prediction is not named but listed in
+    ``below_floor`` with its fitted value, and a right model lists nothing (the key is then
+    absent, as CONTRACTS §6 has it)."""
+    _write_recording(_device(32, 48), {"mask_leakage": {"transmittance": 0.03}}, tmp_path / "rec")
+    data = load_diagnosis_data(tmp_path / "rec")
+    named = diagnose(data, options=DiagnoseOptions(max_effects=1, candidates=["mask_leakage"]))
+    assert [f["effect"] for f in named.report["findings"]] == ["mask_leakage"]
+    assert "below_floor" not in named.report
+    change = named.selection.rounds[0].amplitude_dn
+    sig = float(np.sqrt(np.mean((named.final_pred_dn - 64.0) ** 2)))
+    d = diagnose(data, options=DiagnoseOptions(max_effects=1, candidates=["mask_leakage"],
+                                               amp_floor=2.0 * change / sig))
+    assert d.report["findings"] == []
+    low = d.report["below_floor"]
+    assert [b["effect"] for b in low] == ["mask_leakage"] and low[0]["data"] == "fit data"
+    assert abs(low[0]["params"]["transmittance"] - 0.03) < 0.005

@@ -281,6 +281,7 @@ def _diagnose(
     timing["selection_s"] = time.perf_counter() - t_start - timing["baseline_s"]
     stage: UnbinnedStage | None = None
     fine_names: set[str] = set()
+    binned_sel = sel
     if opt.unbinned is not None:
         t_stage = time.perf_counter()
         say("checking the fit on unbinned frames")
@@ -344,11 +345,34 @@ def _diagnose(
             "hotspots": [h.to_json() for h in struct.hotspots],
         },
     }
+    low = _below_floor_json(binned_sel, stage, sel.values, device, opt)
+    if low:  # beyond CONTRACTS §6, only when there is something to say
+        report["below_floor"] = low
     timing["total_s"] = time.perf_counter() - t_start
     timing["simulations"] = float(model.n_sim + fit_model.n_sim)
     return Diagnosis(
         data, report, fitted, ev0.pred_dn, ev1.pred_dn, loc0, loc1, struct, sel, history, timing, stage
     )
+
+
+def _below_floor_json(binned: Selection, stage: UnbinnedStage | None, accepted: Values, device: Profile,
+                      opt: DiagnoseOptions) -> list[dict[str, Any]]:
+    """``report.json`` ``below_floor``: effects the data show (their fit cleared the Δχ²
+    criterion) but whose change of the prediction stayed under the amplitude floor, so none
+    is named; with where that was measured (the fit's data, or the unbinned stage's frames)."""
+    where = "fit data" if opt.unbinned is None else f"binned {opt.unbinned.bin_factor}×{opt.unbinned.bin_factor}"
+    out: list[dict[str, Any]] = []
+    seen: set[str] = set()
+    for b in binned.below_floor:
+        if b.name not in accepted:
+            out.append({**b.to_json(device), "data": where, "floor": opt.amp_floor})
+            seen.add(b.name)
+    if stage is not None and stage.data is not None:
+        for b in stage.below_floor():
+            if b.name not in accepted and b.name not in seen:
+                out.append({**b.to_json(device), "data": f"{stage.data.n_frames} unbinned frames",
+                            "floor": opt.amp_floor})
+    return out
 
 
 def _stage_bin(opt: DiagnoseOptions) -> int:

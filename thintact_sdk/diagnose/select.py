@@ -88,6 +88,31 @@ class Round:
 
 
 @dataclass
+class BelowFloor:
+    """A candidate whose fit cleared the Δχ² criterion but whose change of the prediction
+    stayed under the amplitude floor: the data show it, but a change that small cannot be
+    told from the simulator's own error, so it is reported, not named."""
+
+    name: str
+    dchi2: float
+    threshold: float
+    amplitude_fraction: float  # rms change of the prediction / rms signal
+    fine_amplitude: float | None  # the same on the unbinned recording, when measured
+    vector: np.ndarray
+
+    def to_json(self, profile: object) -> dict[str, object]:
+        """``report.json`` ``below_floor`` entry (parameters in the contract's units)."""
+        cand = CANDIDATES[self.name]
+        out: dict[str, object] = {
+            "effect": self.name, "params": cand.to_params(self.vector, profile),  # type: ignore[arg-type]
+            "dchi2": round(self.dchi2, 1), "threshold": round(self.threshold, 1),
+            "amplitude_fraction": float(f"{self.amplitude_fraction:.3g}")}
+        if self.fine_amplitude is not None:
+            out["unbinned_amplitude_fraction"] = float(f"{self.fine_amplitude:.3g}")
+        return out
+
+
+@dataclass
 class Selection:
     """Result of :func:`select_effects`."""
 
@@ -96,6 +121,7 @@ class Selection:
     evaluation: Evaluation
     rejected: list[CandidateResult] = field(default_factory=list)
     log: list[str] = field(default_factory=list)
+    below_floor: list[BelowFloor] = field(default_factory=list)
 
 
 class Trial:
@@ -394,6 +420,12 @@ def select_effects(
         ]
         if not ok:
             state.rejected.extend(fitted)
+            state.below_floor = sorted(
+                (BelowFloor(r.name, r.dchi2, r.k * ln_n + margin, r.amplitude_dn / max(signal_rms, 1e-12),
+                            r.fine_amplitude, np.asarray(r.fitted, float))
+                 for r in fitted if r.dchi2 is not None and r.fitted is not None
+                 and r.dchi2 > r.k * ln_n + margin),
+                key=lambda b: -b.dchi2)
             state.log.append("no remaining candidate clears the criterion: " + ", ".join(
                 f"{r.name} Δχ²={r.dchi2:.1f} (needs {r.k * ln_n + margin:.1f}), "
                 f"amplitude {r.amplitude_dn:.2f} DN (floor {amp_floor * signal_rms:.2f})"
@@ -413,7 +445,7 @@ def select_effects(
             and r.dchi2 > r.k * ln_n + margin
         ]
         state.accept(best, alts, scores, best.k * ln_n + margin)
-    return Selection(state.values, state.rounds, state.ev, state.rejected, state.log)
+    return Selection(state.values, state.rounds, state.ev, state.rejected, state.log, state.below_floor)
 
 
 def _clears_fine_floor(
@@ -446,6 +478,7 @@ class _SelectionState:
         self.rejected: list[CandidateResult] = []
         self.log: list[str] = []
         self.accepted: tuple[str, ...] = ()
+        self.below_floor: list[BelowFloor] = []
         #: each candidate's score Δχ² in the latest round that scored it
         self.last_score: dict[str, float] = {}
         model.set_reference(None)

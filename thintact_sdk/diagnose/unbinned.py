@@ -25,13 +25,11 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-import numpy as np
-
 from thintact_sdk.diagnose.candidates import CANDIDATES
 from thintact_sdk.diagnose.data import DiagnosisData
 from thintact_sdk.diagnose.deadline import Deadline
 from thintact_sdk.diagnose.model import DiagnosisModel, SimulateFn, Values, default_simulate
-from thintact_sdk.diagnose.select import Selection, select_effects
+from thintact_sdk.diagnose.select import BelowFloor, Selection, select_effects
 from thintact_sdk.diagnose.stats import default_variance_fn
 from thintact_sdk.physics import EFFECTS
 
@@ -107,23 +105,12 @@ class UnbinnedStage:
     data: DiagnosisData | None = None
     check: dict[str, float] = field(default_factory=dict)
     refitted: Values = field(default_factory=dict)
-    signal_rms_dn: float = 1.0
     amp_floor: float = 0.0
 
-    def below_floor(self) -> list[tuple[str, float, float]]:
-        """``(effect, Δχ², change as a fraction of the rms signal)`` of candidates whose Δχ²
-        cleared the criterion but whose change of the prediction stayed under the amplitude
-        floor (what the excess would be, were the simulator exact)."""
-        sel = self.selection
-        if sel is None:
-            return []
-        ln_n = float(np.log(max(self.model.n_fit, 2))) if self.model is not None else 0.0
-        out = []
-        for r in sel.rejected:
-            if r.dchi2 is not None and r.dchi2 > r.k * ln_n \
-                    and r.amplitude_dn <= self.amp_floor * self.signal_rms_dn:
-                out.append((r.name, float(r.dchi2), r.amplitude_dn / self.signal_rms_dn))
-        return sorted(out, key=lambda t: -t[1])
+    def below_floor(self) -> list[BelowFloor]:
+        """The stage's candidates that cleared the Δχ² criterion but not the amplitude floor
+        (what would explain the excess, were the simulator exact)."""
+        return [] if self.selection is None else list(self.selection.below_floor)
 
     def summary(self) -> str:
         """One sentence on what the stage found."""
@@ -139,7 +126,8 @@ class UnbinnedStage:
             return text + f" Named there: {', '.join(r.name for r in sel.rounds)}."
         low = self.below_floor()
         if low:
-            what = ", ".join(f"{n} (Δχ² {d:.0f}, a change of {a:.1e} of the signal)" for n, d, a in low[:3])
+            what = ", ".join(f"{b.name} (Δχ² {b.dchi2:.0f}, a change of {b.amplitude_fraction:.1e} of the signal)"
+                             for b in low[:3])
             return (text + f" {what} would lower it further, but under the {self.amp_floor:.0e} amplitude "
                     "floor (the simulator's own accuracy): a change this small cannot be told from model "
                     "error, so nothing more is named.")
@@ -150,8 +138,7 @@ class UnbinnedStage:
         sel = self.selection
         return {
             "summary": self.summary(),
-            "below_floor": [{"effect": n, "dchi2": round(d, 1), "amplitude_fraction": float(f"{a:.3g}")}
-                            for n, d, a in self.below_floor()],
+            "below_floor": [b.to_json(self.model.profile) for b in self.below_floor()] if self.model else [],
             "excess_z": round(self.excess_z, 2), "threshold_z": EXCESS_Z, "ran": self.ran,
             "frames": 0 if self.data is None else self.data.n_frames,
             "before": dict(self.check),
@@ -251,7 +238,4 @@ def unbinned_stage(
     stage.selection = select_effects(
         model, tried, values, max_effects=max_effects, margin=margin, amp_floor=amp_floor,
         deadline=deadline, progress=say)
-    # the floor as the selection applied it: relative to the rms signal of its own frames
-    sig = (stage.selection.evaluation.pred_dn - model.black)[model.fit_mask]
-    stage.signal_rms_dn = float(np.sqrt(np.mean(sig * sig))) if sig.size else 1.0
     return stage
