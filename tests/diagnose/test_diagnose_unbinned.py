@@ -140,3 +140,56 @@ def test_a_small_device_reports_an_effect_under_the_floor(tmp_path):
     low = d.report["below_floor"]
     assert [b["effect"] for b in low] == ["mask_leakage"] and low[0]["data"] == "fit data"
     assert abs(low[0]["params"]["transmittance"] - 0.03) < 0.005
+
+
+def test_a_rival_as_good_on_unbinned_frames_is_an_alternative(tmp_path, monkeypatch):
+    """The full-size alternative rule: a rival whose fit in place of an accepted effect comes
+    within the selection's tolerance (2·ln n + 0.2 %) is an alternative, one outside it is
+    not. (The rivals' fits are stubbed to land just inside and outside; on the paper's
+    device a 10 um sensor blur and a 50.6 um scene blur are such a pair for real,
+    ``tools/diagnose_paper_size.py --case sensor_blur``.)"""
+    from thintact_sdk.diagnose import select
+    from thintact_sdk.diagnose.deadline import Deadline
+    from thintact_sdk.diagnose.model import DiagnosisModel, default_simulate
+    from thintact_sdk.diagnose.select import CandidateResult
+    from thintact_sdk.diagnose.stats import default_variance_fn
+    from thintact_sdk.diagnose.unbinned import full_size_alternatives
+
+    full, _ = _recording(tmp_path, {"sensor_blur": {"sigma_um": 8.0}})
+    model = DiagnosisModel(full, default_simulate, default_variance_fn(), sys_frac=1e-3)
+    values = {"sensor_blur": np.array([8.0])}
+    seen: list[str] = []
+
+    def fake_score(model, values, ev0, cand):
+        seen.append(cand.name)
+        return CandidateResult(cand.name, cand.k, 1e9, cand.null(model.profile))
+
+    def fake_fit(model, without, ev0, res, deadline, **kw):
+        own = ev0.chi2 - model.evaluate(values).chi2
+        res.fitted = np.array([32.0]) if res.name == "scene_blur" else np.array([0.01])
+        res.dchi2 = own * (0.999 if res.name == "scene_blur" else 0.9)
+        return res
+
+    monkeypatch.setattr(select, "score_candidate", fake_score)
+    monkeypatch.setattr(select, "fit_candidate", fake_fit)
+    alts = full_size_alternatives(model, values, ["sensor_blur"], ["scene_blur", "veiling_glare", "sensor_blur"],
+                                  Deadline.after(60))
+    assert seen == ["scene_blur", "veiling_glare"]  # never itself
+    assert [a.name for a in alts["sensor_blur"]] == ["scene_blur"]
+    assert alts["sensor_blur"][0].own_dchi2 > 1000 and alts["sensor_blur"][0].vector[0] == 32.0
+
+
+def test_full_size_alternatives_reach_the_finding(tmp_path, monkeypatch):
+    from thintact_sdk.diagnose import unbinned
+    from thintact_sdk.diagnose.unbinned import FullSizeAlternative
+
+    full, data = _recording(tmp_path, {"sensor_blur": {"sigma_um": 8.0}})
+    monkeypatch.setattr(unbinned, "full_size_alternatives", lambda *a, **k: {
+        "sensor_blur": [FullSizeAlternative("scene_blur", 6200.0, 6277.0, np.array([32.0]))]})
+    opts = DiagnoseOptions(max_effects=1, unbinned=UnbinnedInput(full, BIN))
+    d = diagnose(data, variance_fn=binned_variance_fn(BIN), options=opts)
+    f = d.report["findings"][0]
+    assert f["effect"] == "sensor_blur" and f["alternatives"] == ["scene_blur"]
+    assert "On 4 unbinned frames scene_blur {'sigma_um': 32.0} explains the recording about as well" in f["evidence"]
+    assert "To tell sensor_blur from scene_blur" in f["evidence"]
+    assert d.unbinned is not None and d.unbinned.to_json()["alternatives"] == {"sensor_blur": ["scene_blur"]}

@@ -326,6 +326,16 @@ def _diagnose(
                 findings[-1]["evidence"] += (
                     f" Its parameters were refitted on {stage.data.n_frames} unbinned frames (binning "
                     "only approximates an effect after the imaging kernel).")
+        if stage is not None and stage.data is not None:
+            for alt in stage.alternatives.get(rnd.name, []):
+                if alt.name in findings[-1]["alternatives"]:
+                    continue
+                findings[-1]["alternatives"].append(alt.name)
+                params = CANDIDATES[alt.name].to_params(alt.vector, device)
+                findings[-1]["evidence"] += (
+                    f" On {stage.data.n_frames} unbinned frames {alt.name} {params} explains the recording "
+                    f"about as well in its place (Δχ² {alt.dchi2:.0f} against {alt.own_dchi2:.0f}). "
+                    + tell_apart(rnd.name, alt.name, "frames that would tell them apart are not in this recording."))
         if opt.held_params.get(rnd.name):
             findings[-1]["evidence"] += (
                 f" Its {', '.join(opt.held_params[rnd.name])} was held at the null value: "
