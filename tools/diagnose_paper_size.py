@@ -44,8 +44,8 @@ CASES: dict[str, dict[str, Any]] = {
         "check": {"exponent": (3.0, 0.3)},
     },
     "mask_leakage": {
-        "physics": {"mask_leakage": {"transmittance": 0.03}},
-        "check": {"transmittance": (0.03, 0.005)},
+        "physics": {"mask_leakage": {"transmittance": 0.06}},
+        "check": {"transmittance": (0.06, 0.005)},
     },
     "mask_shift": {
         "physics": {"mask_misalignment": {"angle_deg": 0.0, "dx_um": 7.0, "dy_um": -4.0}},
@@ -72,8 +72,8 @@ CASES: dict[str, dict[str, Any]] = {
         "check": {"sigma_um": (10.0, 1.0)},
     },
     "scene_blur": {
-        "physics": {"scene_blur": {"sigma_um": 45.0}},
-        "check": {"sigma_um": (45.0, 3.0)},
+        "physics": {"scene_blur": {"sigma_um": 60.0}},
+        "check": {"sigma_um": (60.0, 3.0)},
     },
     # the concealed set's blurs change this device's prediction by 3.7e-4 of the signal, under
     # the diagnosis's 6e-4 amplitude floor: nothing may be named, and the unbinned stage must
@@ -83,6 +83,9 @@ CASES: dict[str, dict[str, Any]] = {
     },
     "subfloor_scene_blur": {
         "physics": {"scene_blur": {"sigma_um": 25.0}}, "check": {}, "below_floor": "scene_blur",
+    },
+    "subfloor_leakage": {  # the concealed set's 3 %: 4.1e-4 of this device's signal
+        "physics": {"mask_leakage": {"transmittance": 0.03}}, "check": {}, "below_floor": "mask_leakage",
     },
     "display_gamma": {
         "physics": {"display_gamma": {"gamma": 1.15}},
@@ -178,13 +181,17 @@ def check_finding(report: dict[str, Any], case: str) -> list[str]:
     found = [f["effect"] for f in report.get("findings", [])]
     if "below_floor" in CASES[case]:
         want = CASES[case]["below_floor"]
-        stage = (report.get("binned") or {}).get("unbinned_stage") or {}
-        low = [b["effect"] for b in stage.get("below_floor", [])]
+        low = [b["effect"] for b in report.get("below_floor", [])]
         bad = [f"an effect under the amplitude floor, but named {found}"] if found else []
         return bad + ([] if want in low else [f"the unbinned stage did not name {want} under the floor ({low})"])
     if not CASES[case]["physics"]:
         return [f"nothing hidden, but named {found}"] if found else []
     name = next(iter(CASES[case]["physics"]))
+    first_alts = report["findings"][0]["alternatives"] if found else []
+    if found and found[0] != name and name in first_alts:
+        # named as an equally good alternative of the first finding (e.g. a sensor blur and
+        # a scene blur, related by d/z): right, and nothing else may be named
+        return [f"also named {x}" for x in found[1:]]
     if not found or found[0] != name:
         return [f"expected {name} first, found {found}"]
     bad = [f"also named {x}" for x in found[1:]]
