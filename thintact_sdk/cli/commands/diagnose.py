@@ -127,10 +127,13 @@ def run(args: argparse.Namespace) -> int:
     if "full_size" in rep:
         ff = rep["full_size"]["final"]
         print(f"unbinned: final rms {ff['rms_dn']:.2f} DN, chi2/dof {ff['chi2_per_dof']:.3f}")
-    for b in rep.get("below_floor", []):
+    low = rep.get("below_floor", [])
+    for b in low[:3]:
         print(f"  under the amplitude floor ({b['data']}): {b['effect']} {b['params']} would lower chi2 by "
               f"{b['dchi2']:.0f} but changes the prediction by {b['amplitude_fraction']:.1e} of the signal "
               f"(floor {b['floor']:.0e}): not named")
+    if len(low) > 3:
+        print(f"  ({len(low) - 3} more under the floor in report.json below_floor)")
     stage_rep = rep.get("binned", {}).get("unbinned_stage")
     if stage_rep and stage_rep["ran"]:
         print(f"unbinned stage: {stage_rep['summary']}")
