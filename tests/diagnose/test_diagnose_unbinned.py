@@ -193,3 +193,23 @@ def test_full_size_alternatives_reach_the_finding(tmp_path, monkeypatch):
     assert "On 4 unbinned frames scene_blur {'sigma_um': 32.0} explains the recording about as well" in f["evidence"]
     assert "To tell sensor_blur from scene_blur" in f["evidence"]
     assert d.unbinned is not None and d.unbinned.to_json()["alternatives"] == {"sensor_blur": ["scene_blur"]}
+
+
+def test_a_rival_better_on_unbinned_frames_takes_the_place(tmp_path, monkeypatch):
+    """A rival that beats the binned choice on unbinned frames by more than the tolerance
+    replaces it (the paper device's 10 um sensor blur, which the binned data took for a
+    50.6 um scene blur): the finding, the fitted profile and the evidence say so."""
+    from thintact_sdk.diagnose import unbinned
+    from thintact_sdk.diagnose.unbinned import FullSizeAlternative
+
+    full, data = _recording(tmp_path, {"sensor_blur": {"sigma_um": 8.0}})
+    monkeypatch.setattr(unbinned, "full_size_alternatives", lambda *a, **k: {
+        "sensor_blur": [FullSizeAlternative("scene_blur", 7000.0, 6277.0, np.array([32.0]), 50.0, 9.0)]})
+    opts = DiagnoseOptions(max_effects=1, unbinned=UnbinnedInput(full, BIN))
+    d = diagnose(data, variance_fn=binned_variance_fn(BIN), options=opts)
+    f = d.report["findings"][0]
+    assert f["effect"] == "scene_blur" and f["params"] == {"sigma_um": 32.0}
+    assert "in place of sensor_blur, which the binned data preferred" in f["evidence"]
+    assert "lowers χ² by 7000 against 6277" in f["evidence"]
+    assert set(d.fitted_profile.physics) == {"scene_blur"}
+    assert d.unbinned is not None and d.unbinned.to_json()["replaced"] == {"sensor_blur": "scene_blur"}

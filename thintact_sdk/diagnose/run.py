@@ -289,12 +289,15 @@ def _diagnose(
                                max_effects=opt.max_effects - len(sel.rounds), margin=opt.margin,
                                amp_floor=opt.amp_floor, held=held, progress=say)
         fine = stage.selection
-        if fine is not None and (fine.rounds or stage.refitted):
-            for rnd in sel.rounds:  # refitted at full size (and by the joint refits there)
-                rnd.vector = fine.values.get(rnd.name, rnd.vector)
-            fine_names = {r.name for r in fine.rounds}
-            sel = Selection(fine.values, sel.rounds + fine.rounds, sel.evaluation,
-                            sel.rejected + fine.rejected, sel.log + fine.log)
+        if fine is not None or stage.replaced:
+            rounds = [_replaced_round(r, stage, opt.margin) if r.name in stage.replaced else r for r in sel.rounds]
+            for rnd in rounds:  # refitted at full size (and by the joint refits there)
+                rnd.vector = stage.values.get(rnd.name, rnd.vector)
+            fine_names = {r.name for r in fine.rounds} if fine is not None else set()
+            fine_names |= {a.name for a in stage.replaced.values()}
+            sel = Selection(stage.values, rounds + (fine.rounds if fine is not None else []), sel.evaluation,
+                            sel.rejected + (fine.rejected if fine is not None else []),
+                            sel.log + (fine.log if fine is not None else []), sel.below_floor)
             ev1 = _evaluate_full(model, sel.values)
             final = _view(model, data, ev1.pred_dn, sel.values)
             struct = _structure(final, data, black)
@@ -314,12 +317,22 @@ def _diagnose(
         else:
             ev_r = _evaluate_full(model, accepted)
             view = _view(model, data, ev_r.pred_dn, accepted)
+        replaced = next((old for old, a in stage.replaced.items() if a.name == rnd.name), None) \
+            if stage is not None else None
         if rnd.name in fine_names and stage is not None and stage.model is not None and stage.data is not None:
             findings.append(_finding(rnd, stage.model, stage.data, device, view, ev1.beta, sel.values))
-            findings[-1]["evidence"] += (
-                f" Named on {stage.data.n_frames} unbinned frames: binned {_stage_bin(opt)}×{_stage_bin(opt)} its "
-                f"signature averages out inside a block, while there the fit without it left χ² "
-                f"{stage.excess_z:.1f} standard deviations above the noise.")
+            if replaced is not None:
+                a = stage.replaced[replaced]
+                findings[-1]["evidence"] += (
+                    f" Named on {stage.data.n_frames} unbinned frames in place of {replaced}, which the "
+                    f"binned data preferred (binning only approximates {rnd.name}): there it lowers χ² by "
+                    f"{a.dchi2:.0f} against {a.own_dchi2:.0f}, beyond the {a.tol:.0f} within which the two "
+                    "would be alternatives.")
+            else:
+                findings[-1]["evidence"] += (
+                    f" Named on {stage.data.n_frames} unbinned frames: binned {_stage_bin(opt)}×{_stage_bin(opt)} "
+                    f"its signature averages out inside a block, while there the fit without it left χ² "
+                    f"{stage.excess_z:.1f} standard deviations above the noise.")
         else:
             findings.append(_finding(rnd, fit_model, sub, device, view, ev1.beta, sel.values))
             if stage is not None and stage.data is not None and rnd.name in stage.refitted:
@@ -383,6 +396,15 @@ def _below_floor_json(binned: Selection, stage: UnbinnedStage | None, accepted: 
                 out.append({**b.to_json(device), "data": f"{stage.data.n_frames} unbinned frames",
                             "floor": opt.amp_floor})
     return out
+
+
+def _replaced_round(rnd: Round, stage: UnbinnedStage, margin: float) -> Round:
+    """The round of the rival that took ``rnd``'s place on the unbinned frames."""
+    a = stage.replaced[rnd.name]
+    k = CANDIDATES[a.name].k
+    n = stage.model.n_fit if stage.model is not None else 2
+    return Round(a.name, a.vector, a.dchi2, k * float(np.log(max(n, 2))) + margin, k, a.amplitude_dn,
+                 [], [], rnd.evaluation)
 
 
 def _stage_bin(opt: DiagnoseOptions) -> int:

@@ -82,6 +82,13 @@ class FullSizeAlternative:
     dchi2: float  # its improvement in place of the accepted effect
     own_dchi2: float  # the accepted effect's
     vector: np.ndarray
+    tol: float = 0.0  # the alternative tolerance (Δχ²)
+    amplitude_dn: float = 0.0  # its rms change of the prediction there
+
+    @property
+    def better(self) -> bool:
+        """True when it beats the accepted effect by more than the tolerance (it replaces it)."""
+        return self.dchi2 > self.own_dchi2 + self.tol
 
 
 @dataclass
@@ -107,6 +114,11 @@ class UnbinnedStage:
     alternatives
         Per accepted effect after the imaging kernel, the rivals that explain the unbinned
         frames about as well in its place (:func:`full_size_alternatives`).
+    replaced
+        Accepted effects a rival beat there by more than the tolerance: the rival takes its
+        place (a sensor blur the binned data took for a scene blur).
+    values
+        Every effect's values after the stage (refits, new effects, replacements).
     check
         ``{"rms_dn", "chi2_per_dof"}`` of the binned stage's model on every unbinned frame
         (:func:`~thintact_sdk.diagnose.binning.full_size_check`'s figures).
@@ -121,6 +133,8 @@ class UnbinnedStage:
     check: dict[str, float] = field(default_factory=dict)
     refitted: Values = field(default_factory=dict)
     alternatives: dict[str, list[FullSizeAlternative]] = field(default_factory=dict)
+    replaced: dict[str, FullSizeAlternative] = field(default_factory=dict)
+    values: Values = field(default_factory=dict)
     amp_floor: float = 0.0
 
     def below_floor(self) -> list[BelowFloor]:
@@ -159,7 +173,8 @@ class UnbinnedStage:
             "frames": 0 if self.data is None else self.data.n_frames,
             "before": dict(self.check),
             "refitted": sorted(self.refitted),
-            "alternatives": {k: [a.name for a in v] for k, v in self.alternatives.items()},
+            "alternatives": {k: [a.name for a in v] for k, v in self.alternatives.items() if v},
+            "replaced": {k: a.name for k, a in self.replaced.items()},
             "tried": list(self.tried),
             "accepted": [] if sel is None else [r.name for r in sel.rounds],
             "log": [] if sel is None else list(sel.log),
@@ -259,6 +274,16 @@ def unbinned_stage(
     if after_kernel:
         rivals = unbinned_candidates(candidates, values)
         stage.alternatives = full_size_alternatives(model, values, after_kernel, rivals, deadline, say)
+        for name, alts in list(stage.alternatives.items()):
+            best = max(alts, key=lambda a: a.dchi2)
+            if not best.better:
+                continue
+            # the unbinned frames prefer the rival beyond the tolerance: it takes the place
+            say(f"unbinned frames: {best.name} explains them better than {name}: it replaces it")
+            stage.replaced[name] = best
+            values = {**{k: v for k, v in values.items() if k != name}, best.name: best.vector}
+            stage.alternatives[name] = [a for a in alts if a is not best]
+    stage.values = values
     return stage
 
 
@@ -299,5 +324,5 @@ def full_size_alternatives(model: DiagnosisModel, values: Values, names: list[st
             say(f"unbinned frames: {rival} in place of {name}: Δχ² {res.dchi2 or 0:.0f} against {own:.0f}")
             if res.dchi2 is not None and res.fitted is not None and res.dchi2 > own - tol:
                 out.setdefault(name, []).append(FullSizeAlternative(rival, float(res.dchi2), float(own),
-                                                                     res.fitted))
+                                                                     res.fitted, tol, res.amplitude_dn))
     return out

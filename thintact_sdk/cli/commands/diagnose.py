@@ -110,7 +110,7 @@ def run(args: argparse.Namespace) -> int:
             con.print("evaluating the fit on the unbinned recording")
             stage = d.unbinned
             if stage is not None and stage.check and not (stage.selection and stage.selection.rounds) \
-                    and not stage.refitted:
+                    and not stage.refitted and not stage.replaced:
                 rep["full_size"] = {"final": dict(stage.check)}  # the stage's own evaluation of this model
             else:
                 rep["full_size"] = {"final": full_size_check(full_data, d.selection.values, args.sys_frac)}
