@@ -213,3 +213,4 @@ def test_a_rival_better_on_unbinned_frames_takes_the_place(tmp_path, monkeypatch
     assert "lowers χ² by 7000 against 6277" in f["evidence"]
     assert set(d.fitted_profile.physics) == {"scene_blur"}
     assert d.unbinned is not None and d.unbinned.to_json()["replaced"] == {"sensor_blur": "scene_blur"}
+    assert "scene_blur explains the recording better than sensor_blur" in d.unbinned.summary()

@@ -144,14 +144,17 @@ class UnbinnedStage:
 
     def summary(self) -> str:
         """One sentence on what the stage found."""
+        swaps = "".join(f" On them {a.name} explains the recording better than {old}, which the binned data "
+                        f"preferred, and takes its place." for old, a in self.replaced.items())
         if not self.ran:
             return (f"The binned fit also fits the unbinned frames: their χ² lies {self.excess_z:.1f} standard "
-                    f"deviations from the noise-only expectation (threshold {EXCESS_Z:g}).")
+                    f"deviations from the noise-only expectation (threshold {EXCESS_Z:g}).{swaps}")
         sel = self.selection
         text = f"The unbinned frames' χ² lay {self.excess_z:.1f} standard deviations above the noise."
         if self.refitted:
             text += (f" Refitted there: {', '.join(sorted(self.refitted))} (binning only approximates "
                      "effects after the imaging kernel).")
+        text += swaps
         if sel is not None and sel.rounds:
             return text + f" Named there: {', '.join(r.name for r in sel.rounds)}."
         low = self.below_floor()
