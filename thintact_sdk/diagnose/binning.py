@@ -213,8 +213,8 @@ def unbinned_amplitude_fn(data: DiagnosisData, n_frames: int = FINE_AMPLITUDE_FR
     device changes its 8×8-binned prediction by 4e-4 of the signal but is clearly above the
     diagnosis's amplitude floor (6e-4, the simulator's own accuracy) on the unbinned one.
     """
+    from thintact_sdk.diagnose.data import subset_frames
     from thintact_sdk.diagnose.model import DiagnosisModel
-    from thintact_sdk.diagnose.run import subset_frames
 
     made: list[DiagnosisModel] = []  # built at the first call (most runs never need it)
 

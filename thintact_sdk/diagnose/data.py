@@ -113,3 +113,14 @@ def _check_alive(scene: np.ndarray, meas: np.ndarray, i: int, name: str, prof: P
             f"frame {i} ({name}): the measurement reads {lo:g} DN at every pixel although its "
             f"scene is lit; a dead frame (camera not exposing, lens cap?) cannot be diagnosed"
         )
+
+
+def subset_frames(data: DiagnosisData, n: int) -> DiagnosisData:
+    """At most ``n`` frames spread evenly over the recording (all when it has fewer)."""
+    f = data.n_frames
+    if n <= 0 or f <= n:
+        return data
+    idx = np.unique(np.round(np.linspace(0, f - 1, n)).astype(int))
+    return DiagnosisData(
+        data.profile, [data.labels[i] for i in idx], data.scenes[idx], data.measured_dn[idx], data.skipped
+    )

@@ -26,7 +26,7 @@ import numpy as np
 
 from thintact_sdk.diagnose.candidates import CANDIDATES, Candidate
 from thintact_sdk.diagnose.data import DiagnosisData
-from thintact_sdk.diagnose.stats import VarianceFn
+from thintact_sdk.diagnose.stats import FitStats, VarianceFn, fit_stats, valid_pixels
 from thintact_sdk.physics import STAGES
 from thintact_sdk.profile import Profile
 
@@ -300,3 +300,28 @@ def _normal_equations(cols: list[np.ndarray], weight: np.ndarray, weighted_y: np
         for j in range(i + 1):
             a[i, j] = a[j, i] = float(np.einsum("fij,fij->", wci, cols[j]))
     return a, rhs
+
+
+def evaluate_self_weighted(model: DiagnosisModel, values: Values) -> Evaluation:
+    """Evaluate with weights taken at the model's own prediction (two passes)."""
+    model.set_reference(None)
+    ev = model.evaluate(values)
+    model.set_reference(ev.pred_dn)
+    return model.evaluate(values)
+
+
+def clip_level_dn(profile: Profile, values: Values) -> float | None:
+    """The lowest clip level (absolute DN) an effect of ``values`` declares, if any."""
+    levels = [
+        clip(v, profile) for n, v in values.items()
+        if (clip := CANDIDATES[n].fit.clip_level_dn) is not None
+    ]
+    return min(levels) if levels else None
+
+
+def contract_stats(model: DiagnosisModel, pred_dn: np.ndarray, values: Values) -> FitStats:
+    """CONTRACTS §6 statistics of ``pred_dn`` against ``model``'s recording (noise-model χ²,
+    no systematic allowance; saturated and clipped pixels left out)."""
+    data = model.data
+    valid = valid_pixels(data.measured_dn, pred_dn, data.profile.noise, clip_level_dn(data.profile, values))
+    return fit_stats(data.measured_dn, pred_dn, model.variance(pred_dn), valid)

@@ -11,7 +11,7 @@ import numpy as np
 
 from thintact_sdk.blas import blas_threads
 from thintact_sdk.diagnose.candidates import CANDIDATES
-from thintact_sdk.diagnose.data import DiagnosisData
+from thintact_sdk.diagnose.data import DiagnosisData, subset_frames
 from thintact_sdk.diagnose.deadline import Deadline
 from thintact_sdk.diagnose.locate import Location, locate
 from thintact_sdk.diagnose.model import (
@@ -19,7 +19,9 @@ from thintact_sdk.diagnose.model import (
     Evaluation,
     SimulateFn,
     Values,
+    clip_level_dn,
     default_simulate,
+    evaluate_self_weighted,
 )
 from thintact_sdk.diagnose.select import FineAmplitude, Round, Selection, select_effects
 from thintact_sdk.diagnose.stats import (
@@ -167,19 +169,9 @@ def profile_params(name: str, params: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
-def _clip_level_dn(profile: Profile, values: Values) -> float | None:
-    """The lowest clip level (absolute DN) an effect of ``values`` declares, if any."""
-    levels = [
-        clip(v, profile) for n, v in values.items()
-        if (clip := CANDIDATES[n].fit.clip_level_dn) is not None
-    ]
-    return min(levels) if levels else None
-
-
 def _view(model: DiagnosisModel, data: DiagnosisData, pred: np.ndarray, values: Values) -> ModelView:
     var = model.variance(pred)
-    lev = _clip_level_dn(data.profile, values)
-    valid = valid_pixels(data.measured_dn, pred, data.profile.noise, lev)
+    valid = valid_pixels(data.measured_dn, pred, data.profile.noise, clip_level_dn(data.profile, values))
     return ModelView(pred, var, valid, fit_stats(data.measured_dn, pred, var, valid))
 
 
@@ -412,23 +404,7 @@ def _stage_bin(opt: DiagnoseOptions) -> int:
     return 1 if opt.unbinned is None else opt.unbinned.bin_factor
 
 
-def _evaluate_full(model: DiagnosisModel, values: Values) -> Evaluation:
-    """Evaluate with weights taken at the model's own prediction (two passes)."""
-    model.set_reference(None)
-    ev = model.evaluate(values)
-    model.set_reference(ev.pred_dn)
-    return model.evaluate(values)
-
-
-def subset_frames(data: DiagnosisData, n: int) -> DiagnosisData:
-    """At most ``n`` frames spread evenly over the recording (all when it has fewer)."""
-    f = data.n_frames
-    if n <= 0 or f <= n:
-        return data
-    idx = np.unique(np.round(np.linspace(0, f - 1, n)).astype(int))
-    return DiagnosisData(
-        data.profile, [data.labels[i] for i in idx], data.scenes[idx], data.measured_dn[idx], data.skipped
-    )
+_evaluate_full = evaluate_self_weighted  # the name the pipeline and binning.py use
 
 
 def _finding(

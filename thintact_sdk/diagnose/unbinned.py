@@ -28,9 +28,16 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from thintact_sdk.diagnose.candidates import CANDIDATES
-from thintact_sdk.diagnose.data import DiagnosisData
+from thintact_sdk.diagnose.data import DiagnosisData, subset_frames
 from thintact_sdk.diagnose.deadline import Deadline
-from thintact_sdk.diagnose.model import DiagnosisModel, SimulateFn, Values, default_simulate
+from thintact_sdk.diagnose.model import (
+    DiagnosisModel,
+    SimulateFn,
+    Values,
+    contract_stats,
+    default_simulate,
+    evaluate_self_weighted,
+)
 from thintact_sdk.diagnose.select import BelowFloor, Selection, select_effects
 from thintact_sdk.diagnose.stats import default_variance_fn
 from thintact_sdk.physics import EFFECTS
@@ -242,15 +249,13 @@ def unbinned_stage(
         As for :func:`~thintact_sdk.diagnose.select.select_effects`; ``max_effects`` is what
         the binned stage left.
     """
-    from thintact_sdk.diagnose.run import _evaluate_full, _view, subset_frames
-
     say = progress or (lambda _m: None)
     simulate = spec.simulate or default_simulate
     # every frame for the decision (a 6 um sensor blur: 8.7 σ on 12 frames, 2.9 on 4), the
     # contract's χ² (noise model only: the fit's systematic allowance alone would pull a
     # right model's χ²/dof about 1 % under 1 at this signal)
     whole = DiagnosisModel(spec.data, simulate, default_variance_fn(), sys_frac=sys_frac, cache_size=1)
-    st = _view(whole, spec.data, _evaluate_full(whole, values).pred_dn, values).stats
+    st = contract_stats(whole, evaluate_self_weighted(whole, values).pred_dn, values)
     del whole
     z = excess_z(st.chi2_per_dof, st.n_pixels)
     sub = subset_frames(spec.data, spec.frames)
