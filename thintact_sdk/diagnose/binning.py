@@ -251,11 +251,7 @@ def full_size_check(data: DiagnosisData, final_values: dict[str, np.ndarray],
     here as χ²/dof above 1. (One evaluation: at the paper's size two evaluations, baseline
     and final, took 500 s of a 647 s run at load 8 and peaked at 5.7 GiB.)
     """
-    from thintact_sdk.diagnose.model import DiagnosisModel
-    from thintact_sdk.diagnose.run import _evaluate_full, _view
+    from thintact_sdk.diagnose.model import full_size_stats
 
-    model = DiagnosisModel(data, simulate_float32, default_variance_fn(), sys_frac=sys_frac,
-                           cache_size=1)
-    ev = _evaluate_full(model, final_values)
-    st = _view(model, data, ev.pred_dn, final_values).stats
+    st = full_size_stats(data, final_values, simulate_float32, sys_frac)
     return {"rms_dn": round(st.rms_dn, 4), "chi2_per_dof": round(st.chi2_per_dof, 4)}

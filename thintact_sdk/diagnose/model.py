@@ -26,7 +26,13 @@ import numpy as np
 
 from thintact_sdk.diagnose.candidates import CANDIDATES, Candidate
 from thintact_sdk.diagnose.data import DiagnosisData
-from thintact_sdk.diagnose.stats import FitStats, VarianceFn, fit_stats, valid_pixels
+from thintact_sdk.diagnose.stats import (
+    FitStats,
+    VarianceFn,
+    default_variance_fn,
+    fit_stats,
+    valid_pixels,
+)
 from thintact_sdk.physics import STAGES
 from thintact_sdk.profile import Profile
 
@@ -319,9 +325,20 @@ def clip_level_dn(profile: Profile, values: Values) -> float | None:
     return min(levels) if levels else None
 
 
-def contract_stats(model: DiagnosisModel, pred_dn: np.ndarray, values: Values) -> FitStats:
-    """CONTRACTS §6 statistics of ``pred_dn`` against ``model``'s recording (noise-model χ²,
-    no systematic allowance; saturated and clipped pixels left out)."""
+def contract_fit(model: DiagnosisModel, pred_dn: np.ndarray, values: Values
+                 ) -> tuple[np.ndarray, np.ndarray, FitStats]:
+    """``(variance DN², valid mask, statistics)`` of ``pred_dn`` against ``model``'s recording
+    as CONTRACTS §6 defines them (noise-model χ², no systematic allowance; saturated and
+    clipped pixels left out)."""
     data = model.data
+    var = model.variance(pred_dn)
     valid = valid_pixels(data.measured_dn, pred_dn, data.profile.noise, clip_level_dn(data.profile, values))
-    return fit_stats(data.measured_dn, pred_dn, model.variance(pred_dn), valid)
+    return var, valid, fit_stats(data.measured_dn, pred_dn, var, valid)
+
+
+def full_size_stats(data: DiagnosisData, values: Values, simulate: SimulateFn, sys_frac: float) -> FitStats:
+    """CONTRACTS §6 statistics of ``values`` on every frame of ``data`` (gains refitted,
+    weights at the model's own prediction; the model is dropped afterwards: one evaluation
+    of a whole paper-size recording)."""
+    model = DiagnosisModel(data, simulate, default_variance_fn(), sys_frac=sys_frac, cache_size=1)
+    return contract_fit(model, evaluate_self_weighted(model, values).pred_dn, values)[2]

@@ -19,7 +19,7 @@ from thintact_sdk.diagnose.model import (
     Evaluation,
     SimulateFn,
     Values,
-    clip_level_dn,
+    contract_fit,
     default_simulate,
     evaluate_self_weighted,
 )
@@ -28,9 +28,7 @@ from thintact_sdk.diagnose.stats import (
     FitStats,
     VarianceFn,
     default_variance_fn,
-    fit_stats,
     normalised_residual,
-    valid_pixels,
 )
 from thintact_sdk.diagnose.structure import Structure, find_structure
 from thintact_sdk.diagnose.unbinned import UnbinnedInput, UnbinnedStage, unbinned_stage
@@ -169,10 +167,8 @@ def profile_params(name: str, params: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
-def _view(model: DiagnosisModel, data: DiagnosisData, pred: np.ndarray, values: Values) -> ModelView:
-    var = model.variance(pred)
-    valid = valid_pixels(data.measured_dn, pred, data.profile.noise, clip_level_dn(data.profile, values))
-    return ModelView(pred, var, valid, fit_stats(data.measured_dn, pred, var, valid))
+def _view(model: DiagnosisModel, pred: np.ndarray, values: Values) -> ModelView:
+    return ModelView(pred, *contract_fit(model, pred, values))
 
 
 def _locate(view: ModelView, data: DiagnosisData, black: float) -> Location:
@@ -239,8 +235,8 @@ def _diagnose(
              if len(held.get(c, ())) < CANDIDATES[c].k]
     timing: dict[str, float] = {}
 
-    ev0 = _evaluate_full(model, base_values)
-    base = _view(model, data, ev0.pred_dn, base_values)
+    ev0 = evaluate_self_weighted(model, base_values)
+    base = _view(model, ev0.pred_dn, base_values)
     loc0 = _locate(base, data, black)
     timing["baseline_s"] = time.perf_counter() - t_start
     say(f"baseline: rms {base.stats.rms_dn:.2f} DN, χ²/dof {base.stats.chi2_per_dof:.3f}")
@@ -252,8 +248,8 @@ def _diagnose(
         amp_floor=opt.amp_floor, deadline=deadline, progress=say,
         fine_amplitude=opt.fine_amplitude,
     )
-    ev1 = _evaluate_full(model, sel.values)
-    final = _view(model, data, ev1.pred_dn, sel.values)
+    ev1 = evaluate_self_weighted(model, sel.values)
+    final = _view(model, ev1.pred_dn, sel.values)
     struct = _structure(final, data, black)
     if struct.significant and deadline.remaining_s() > 0.25 * opt.time_budget_s:
         # a local defect biases the effect fits: fit again without its pixels
@@ -267,8 +263,8 @@ def _diagnose(
             fine_amplitude=opt.fine_amplitude,
         )
         fit_model = fit2
-        ev1 = _evaluate_full(model, sel.values)
-        final = _view(model, data, ev1.pred_dn, sel.values)
+        ev1 = evaluate_self_weighted(model, sel.values)
+        final = _view(model, ev1.pred_dn, sel.values)
         struct = _structure(final, data, black)
     timing["selection_s"] = time.perf_counter() - t_start - timing["baseline_s"]
     stage: UnbinnedStage | None = None
@@ -290,8 +286,8 @@ def _diagnose(
             sel = Selection(stage.values, rounds + (fine.rounds if fine is not None else []), sel.evaluation,
                             sel.rejected + (fine.rejected if fine is not None else []),
                             sel.log + (fine.log if fine is not None else []), sel.below_floor)
-            ev1 = _evaluate_full(model, sel.values)
-            final = _view(model, data, ev1.pred_dn, sel.values)
+            ev1 = evaluate_self_weighted(model, sel.values)
+            final = _view(model, ev1.pred_dn, sel.values)
             struct = _structure(final, data, black)
         timing["unbinned_s"] = time.perf_counter() - t_stage
     loc1 = _locate(final, data, black)
@@ -307,8 +303,8 @@ def _diagnose(
         if i == len(sel.rounds) - 1:
             view = final
         else:
-            ev_r = _evaluate_full(model, accepted)
-            view = _view(model, data, ev_r.pred_dn, accepted)
+            ev_r = evaluate_self_weighted(model, accepted)
+            view = _view(model, ev_r.pred_dn, accepted)
         replaced = next((old for old, a in stage.replaced.items() if a.name == rnd.name), None) \
             if stage is not None else None
         if rnd.name in fine_names and stage is not None and stage.model is not None and stage.data is not None:
@@ -402,9 +398,6 @@ def _replaced_round(rnd: Round, stage: UnbinnedStage, margin: float) -> Round:
 def _stage_bin(opt: DiagnoseOptions) -> int:
     """The block side of a binned diagnosis (1 without an unbinned stage)."""
     return 1 if opt.unbinned is None else opt.unbinned.bin_factor
-
-
-_evaluate_full = evaluate_self_weighted  # the name the pipeline and binning.py use
 
 
 def _finding(

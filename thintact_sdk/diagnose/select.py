@@ -36,8 +36,9 @@ import numpy as np
 from thintact_sdk.diagnose import optimise
 from thintact_sdk.diagnose.candidates import CANDIDATES, Candidate
 from thintact_sdk.diagnose.deadline import Deadline, DeadlineExpired
-from thintact_sdk.diagnose.model import DiagnosisModel, Evaluation, Values
+from thintact_sdk.diagnose.model import DiagnosisModel, Evaluation, Values, evaluate_self_weighted
 from thintact_sdk.errors import ThinTactError
+from thintact_sdk.profile import Profile
 
 #: ``(values before, values after) -> rms change of the prediction as a fraction of the rms
 #: signal``, measured on data finer than the fit's (the unbinned recording of a binned fit)
@@ -100,11 +101,11 @@ class BelowFloor:
     fine_amplitude: float | None  # the same on the unbinned recording, when measured
     vector: np.ndarray
 
-    def to_json(self, profile: object) -> dict[str, object]:
+    def to_json(self, profile: Profile) -> dict[str, object]:
         """``report.json`` ``below_floor`` entry (parameters in the contract's units)."""
         cand = CANDIDATES[self.name]
         out: dict[str, object] = {
-            "effect": self.name, "params": cand.to_params(self.vector, profile),  # type: ignore[arg-type]
+            "effect": self.name, "params": cand.to_params(self.vector, profile),
             "dchi2": round(self.dchi2, 1), "threshold": round(self.threshold, 1),
             "amplitude_fraction": float(f"{self.amplitude_fraction:.3g}")}
         if self.fine_amplitude is not None:
@@ -481,10 +482,7 @@ class _SelectionState:
         self.below_floor: list[BelowFloor] = []
         #: each candidate's score Δχ² in the latest round that scored it
         self.last_score: dict[str, float] = {}
-        model.set_reference(None)
-        ev = model.evaluate(values)
-        model.set_reference(ev.pred_dn)
-        self.ev = model.evaluate(values)
+        self.ev = evaluate_self_weighted(model, values)
 
     def drop(self, name: str, why: str) -> None:
         """Leave ``name`` out of the selection (the simulator failed on it)."""

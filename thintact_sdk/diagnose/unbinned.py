@@ -34,9 +34,9 @@ from thintact_sdk.diagnose.model import (
     DiagnosisModel,
     SimulateFn,
     Values,
-    contract_stats,
     default_simulate,
     evaluate_self_weighted,
+    full_size_stats,
 )
 from thintact_sdk.diagnose.select import BelowFloor, Selection, select_effects
 from thintact_sdk.diagnose.stats import default_variance_fn
@@ -199,10 +199,7 @@ def refit_effects(model: DiagnosisModel, values: Values, names: list[str], deadl
     from thintact_sdk.diagnose import optimise
     from thintact_sdk.diagnose.select import Trial
 
-    model.set_reference(None)
-    ev = model.evaluate(values)
-    model.set_reference(ev.pred_dn)
-    ev = model.evaluate(values)
+    ev = evaluate_self_weighted(model, values)
     trial = Trial(model, values, names)
     x, _ = optimise.levenberg_marquardt(trial, trial.pack(values), ev, trial.data, trial.box, 0.01 * trial.step,
                                         trial.active(), deadline, n_iter, trial.channel_blocks())
@@ -254,9 +251,7 @@ def unbinned_stage(
     # every frame for the decision (a 6 um sensor blur: 8.7 σ on 12 frames, 2.9 on 4), the
     # contract's χ² (noise model only: the fit's systematic allowance alone would pull a
     # right model's χ²/dof about 1 % under 1 at this signal)
-    whole = DiagnosisModel(spec.data, simulate, default_variance_fn(), sys_frac=sys_frac, cache_size=1)
-    st = contract_stats(whole, evaluate_self_weighted(whole, values).pred_dn, values)
-    del whole
+    st = full_size_stats(spec.data, values, simulate, sys_frac)
     z = excess_z(st.chi2_per_dof, st.n_pixels)
     sub = subset_frames(spec.data, spec.frames)
     model = DiagnosisModel(sub, simulate, default_variance_fn(), sys_frac=sys_frac, cache_size=4, held=held)
@@ -311,10 +306,7 @@ def full_size_alternatives(model: DiagnosisModel, values: Values, names: list[st
     from thintact_sdk.diagnose.select import fit_candidate, score_candidate
 
     say = progress or (lambda _m: None)
-    model.set_reference(None)
-    ev_all = model.evaluate(values)
-    model.set_reference(ev_all.pred_dn)
-    ev_all = model.evaluate(values)
+    ev_all = evaluate_self_weighted(model, values)
     ln_n = float(math.log(max(model.n_fit, 2)))
     out: dict[str, list[FullSizeAlternative]] = {}
     for name in names:

@@ -171,10 +171,8 @@ def _build_rotated_kernel(kp: KernelParams, exp: SeparableExpansion,
     n_values = 2 if kp.wavelengths_nm is None else 4
     if sim_rotated.rotated_family_bytes(kp, exp.rank, n_values) > sim_tiled.WINDOW_FAMILY_BYTES:
         spans = sim_tiled.plan_windows(kp, lambda w: sim_rotated.rotated_family_bytes(w, exp.rank, n_values),
-                                       sim_tiled.WINDOW_FAMILY_BYTES)
-        if len(spans) > 1:
-            return sim_tiled.build_tiled_kernel(
-                kp, spans, lambda w: _build_rotated_window(w, exp, dict(info)))
+                                       sim_tiled.WINDOW_FAMILY_BYTES)  # at least 2: the whole is over the limit
+        return sim_tiled.build_tiled_kernel(kp, spans, lambda w: _build_rotated_window(w, exp, dict(info)))
     return _build_rotated_window(kp, exp, info)
 
 
