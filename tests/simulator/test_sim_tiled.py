@@ -134,3 +134,41 @@ def test_refraction_and_direct_paths_refuse_a_window():
     kpd = window_params(kernel_params(prof, {}, force_direct=True), 0, 10, 0, 10)
     with pytest.raises(ThinTactError, match="separable path only"):
         get_kernel(kpd)
+
+
+def test_streamed_windows_give_the_kept_windows_frames(monkeypatch):
+    """``Simulator(stream_windows=True)`` builds each window at the forward call and drops it
+    (for rendering a paper-size rotated recording, whose kept windows would not fit): the same
+    windows, so the same frames as the kept tiled build, and nothing enters the kernel cache."""
+    from thintact_sdk.imaging import simulator as simmod
+    from thintact_sdk.imaging.sim_tiled import StreamedTiledKernel
+
+    physics = {"mask_misalignment": {"angle_deg": 0.35}, "mask_leakage": {"transmittance": 0.03}}
+    prof = load_profile("virtual-mini").with_physics(physics)
+    kp = _kp(physics)
+    x = _scenes(1)
+    monkeypatch.setattr(sim_tiled, "WINDOW_FAMILY_BYTES", sim_rotated.rotated_family_bytes(kp, _rank(kp)) / 2.5)
+    clear_kernel_cache()
+    kept = Simulator(prof).forward_batch(x)
+    clear_kernel_cache()
+    sim = Simulator(prof, stream_windows=True)
+    done: list[tuple[int, int]] = []
+    assert isinstance(sim.kernel, StreamedTiledKernel)
+    sim.kernel.progress = lambda i, n: done.append((i, n))
+    assert rel_rms(sim.forward_batch(x), kept) < 1e-9
+    assert sim.kernel.info["windows"] >= 2 and done[-1][0] == done[-1][1] == sim.kernel.info["windows"]
+    assert not simmod._KERNEL_CACHE
+    # an unrotated device is never streamed
+    assert not isinstance(Simulator(load_profile("virtual-mini"), stream_windows=True).kernel, StreamedTiledKernel)
+    clear_kernel_cache()
+
+
+def test_rotated_build_bytes_sums_the_windows_and_grows_with_the_angle():
+    from thintact_sdk.imaging.simulator import rotated_build_bytes
+
+    assert rotated_build_bytes(_kp({})) == 0.0
+    small = rotated_build_bytes(_kp({"mask_misalignment": {"angle_deg": 0.1}}))
+    large = rotated_build_bytes(_kp({"mask_misalignment": {"angle_deg": 0.35}}))
+    assert 0.0 < small < large
+    kp = _kp({"mask_misalignment": {"angle_deg": 0.35}})
+    assert large == sim_rotated.rotated_family_bytes(kp, _rank(kp))  # under the window limit: one build

@@ -84,6 +84,57 @@ class TiledKernel:
         return out
 
 
+@dataclass
+class StreamedTiledKernel:
+    """A tiled kernel whose windows are built at each :meth:`apply` and dropped after it:
+    the memory of one window at a time, the build's time at every call. For rendering a
+    large rotated device once (a recording at the paper's size), where keeping every
+    window's terms would not fit; :class:`TiledKernel` for anything evaluated repeatedly.
+
+    Attributes
+    ----------
+    kp
+        The whole device's kernel parameters.
+    spans
+        ``(row0, row1, col0, col1)`` windows covering the sensor (:func:`plan_windows`).
+    build_window
+        Kernel of one window's parameters (:func:`window_params`).
+    progress
+        Called as ``progress(done, total)`` after each window of an apply.
+    """
+
+    kp: KernelParams
+    spans: list[tuple[int, int, int, int]]
+    build_window: Callable[[KernelParams], SeparableKernel]
+    progress: Callable[[int, int], None] | None = None
+    info: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def rows(self) -> int:
+        """Sensor rows, pixels."""
+        return self.kp.rows
+
+    @property
+    def cols(self) -> int:
+        """Sensor columns, pixels."""
+        return self.kp.cols
+
+    def apply(self, scenes: np.ndarray, dtype: str = "float64") -> np.ndarray:
+        """As :meth:`TiledKernel.apply`, building each window's kernel on the way."""
+        f, _, _, c = scenes.shape
+        out = np.empty((f, self.rows, self.cols, c))
+        terms = 0.0
+        for i, (r0, r1, c0, c1) in enumerate(self.spans):
+            kern = self.build_window(window_params(self.kp, r0, r1, c0, c1))
+            out[:, r0:r1, c0:c1] = kern.apply(scenes, dtype)
+            terms += kern.info.get("terms", 0.0)
+            del kern
+            if self.progress is not None:
+                self.progress(i + 1, len(self.spans))
+        self.info = {"windows": float(len(self.spans)), "terms": terms, "streamed": 1.0}
+        return out
+
+
 def window_params(kp: KernelParams, row0: int, row1: int, col0: int, col1: int) -> KernelParams:
     """The kernel parameters of sensor rows ``row0:row1``, columns ``col0:col1`` of ``kp``'s
     (centred) sensor: the same optics, fewer sensor pixels, centre off the axis."""

@@ -31,7 +31,9 @@ effects (if any) applied at :meth:`Simulator.reference_gain` and divided back ou
 from __future__ import annotations
 
 import functools
+import math
 from collections import OrderedDict
+from collections.abc import Callable
 from dataclasses import replace
 from typing import Any, TypeAlias, TypeVar, overload
 
@@ -176,6 +178,56 @@ def _build_rotated_kernel(kp: KernelParams, exp: SeparableExpansion,
     return _build_rotated_window(kp, exp, info)
 
 
+def rotated_build_bytes(kp: KernelParams) -> float:
+    """Bytes of displacement families the rotated kernel of ``kp`` tabulates, summed over its
+    sensor windows when it is built window by window: the measure of its build's work
+    (0 for an unrotated mask; ``inf`` where even the smallest windows are refused).
+
+    Measured on the 2-core reference host, 2026-11-25: the 32×-binned paper device at 0.35°,
+    0.31 GiB, builds in 20 s; the 16×-binned one, 0.68 GiB, in 40 s; the 8×-binned one,
+    1.63 GiB, in 99 s. The work grows about as the square of the angle (the separable rank of
+    each axis's displacement family grows with it)."""
+    if kp.angle_deg == 0.0:
+        return 0.0
+    exp = _expansion(kp)
+    n_values = 2 if kp.wavelengths_nm is None else 4
+
+    def family(w: KernelParams) -> float:
+        return sim_rotated.rotated_family_bytes(w, exp.rank, n_values)
+
+    whole = family(kp)
+    if whole <= sim_tiled.WINDOW_FAMILY_BYTES:
+        return whole
+    try:
+        spans = sim_tiled.plan_windows(kp, family, sim_tiled.WINDOW_FAMILY_BYTES, total_limit=math.inf)
+    except ThinTactError:
+        return math.inf
+    return float(sum(family(sim_tiled.window_params(kp, *s)) for s in spans))
+
+
+def streamed_rotated_kernel(kp: KernelParams,
+                            progress: Callable[[int, int], None] | None = None) -> sim_tiled.StreamedTiledKernel:
+    """The rotated kernel of ``kp`` as windows built at each apply and dropped after it
+    (:class:`~thintact_sdk.imaging.sim_tiled.StreamedTiledKernel`): no limit on the windows'
+    sum, one window in memory. For rendering a large rotated device once: the full paper
+    device at 0.1° is 48 windows of 160 MiB families, refused by a kept tiled build.
+
+    Raises
+    ------
+    ThinTactError
+        For an unrotated mask or refraction (not built in windows), or when even the smallest
+        windows' families exceed :data:`~thintact_sdk.imaging.sim_tiled.WINDOW_FAMILY_BYTES`.
+    """
+    if kp.angle_deg == 0.0 or kp.n_scene_side != 1.0 or not kp.separable:
+        raise ThinTactError("a streamed kernel is built for a rotated mask with straight rays only")
+    exp = _expansion(kp)
+    n_values = 2 if kp.wavelengths_nm is None else 4
+    info = {"rank": float(exp.rank), "radiometric_rel_error": exp.rel_error}
+    spans = sim_tiled.plan_windows(kp, lambda w: sim_rotated.rotated_family_bytes(w, exp.rank, n_values),
+                                   sim_tiled.WINDOW_FAMILY_BYTES, total_limit=math.inf)
+    return sim_tiled.StreamedTiledKernel(kp, spans, lambda w: _build_rotated_window(w, exp, dict(info)), progress)
+
+
 def _build_rotated_window(kp: KernelParams, exp: SeparableExpansion,
                           info: dict[str, float]) -> SeparableKernel:
     """:func:`_build_rotated_kernel` on one piece of sensor (the whole or a window)."""
@@ -280,6 +332,12 @@ class Simulator(ImagingModel):
     precision
         Arithmetic of the separable forward: ``"float64"`` (default) or ``"float32"``
         (about twice as fast at full size, relative error ~1e-7). Outputs are float64.
+    stream_windows
+        A rotated mask too large for one build is built window by window at every forward
+        call and each window dropped after it (:func:`streamed_rotated_kernel`): one window's
+        memory and no limit on their number, the build's time at each call. For rendering a
+        large rotated device once; ``False`` (default) keeps the windows (and refuses a
+        build whose windows sum above :data:`~thintact_sdk.imaging.sim_tiled.TILED_FAMILY_BYTES`).
 
     Notes
     -----
@@ -288,7 +346,7 @@ class Simulator(ImagingModel):
     """
 
     def __init__(self, profile: Profile, *, n_sub: int | None = None, rank_tol: float = 1e-7,
-                 direct: bool = False, precision: str = "float64") -> None:
+                 direct: bool = False, precision: str = "float64", stream_windows: bool = False) -> None:
         if precision not in ("float64", "float32"):
             raise ThinTactError(f"precision must be 'float64' or 'float32', got {precision!r}")
         self.precision = precision
@@ -300,15 +358,20 @@ class Simulator(ImagingModel):
                 "physics: diffraction cannot be simulated on the forced direct path (it has "
                 "no diffraction model)"
             )
-        self._kernel: ImagingKernel | None = None
+        self._kernel: ImagingKernel | sim_tiled.StreamedTiledKernel | None = None
+        kp = self.kernel_params
+        self._stream = stream_windows and kp.separable and kp.angle_deg != 0.0 and kp.n_scene_side == 1.0 \
+            and rotated_build_bytes(kp) > sim_tiled.WINDOW_FAMILY_BYTES
         self._ref_gain: float | None = None
 
     # -- kernel ---------------------------------------------------------------------------
     @property
-    def kernel(self) -> ImagingKernel:
-        """The imaging kernel (built on first use, shared through the cache)."""
+    def kernel(self) -> ImagingKernel | sim_tiled.StreamedTiledKernel:
+        """The imaging kernel (built on first use, shared through the cache; a streamed one is
+        built at each forward call, never cached)."""
         if self._kernel is None:
-            self._kernel = get_kernel(self.kernel_params)
+            self._kernel = streamed_rotated_kernel(self.kernel_params) if self._stream \
+                else get_kernel(self.kernel_params)
         return self._kernel
 
     @property
