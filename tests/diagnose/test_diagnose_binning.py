@@ -193,8 +193,8 @@ def test_cli_screens_a_mask_shift_with_the_angle_held(tmp_path: Path,
                                                       monkeypatch: pytest.MonkeyPatch) -> None:
     """Issue 17 at a small binned size: with the family limit lowered so that the rotated
     kernel and refraction count as too large (as at the paper's size), a hidden pure mask
-    shift is still named with its parameters; the angle is held at 0 and the report says
-    so, and refraction is not tried."""
+    shift is still named with its parameters; the angle, held during the selection, is
+    screened on coarser blocks afterwards and stays 0, and refraction is not tried."""
     from thintact_sdk.cli.main import main
     from thintact_sdk.diagnose import binning
 
@@ -206,14 +206,14 @@ def test_cli_screens_a_mask_shift_with_the_angle_held(tmp_path: Path,
                "--bin", "2", "--max-effects", "1"])
     assert rc == 0
     rep = json.loads((tmp_path / "o" / "report.json").read_text())
-    skipped = rep["binned"]["not_screened"]
-    assert set(skipped) == {"mask_misalignment.angle_deg", "refraction"}
-    assert "held at 0" in skipped["mask_misalignment.angle_deg"]
+    assert set(rep["binned"]["not_screened"]) == {"refraction"}
+    coarse = rep["binned"]["coarse_angle"]
+    assert coarse["ran"] and not coarse["accepted"] and coarse["factor"] == 4
     f = rep["findings"][0]
     assert f["effect"] == "mask_misalignment"
     assert f["params"]["angle_deg"] == 0.0
     assert abs(f["params"]["dx_um"] - 7.0) < 1.0 and abs(f["params"]["dy_um"] + 4.0) < 1.0
-    assert "angle_deg was held" in f["evidence"]
+    assert "Its angle was screened on the sensor binned 4×4" in f["evidence"]
     assert "2 parameter(s) must earn" in f["evidence"]  # BIC counts the fitted ones only
     assert rep["baseline"]["chi2_per_dof"] > 2.0
     assert rep["full_size"]["final"]["chi2_per_dof"] < 1.2

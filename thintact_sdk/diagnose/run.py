@@ -11,6 +11,8 @@ import numpy as np
 
 from thintact_sdk.blas import blas_threads
 from thintact_sdk.diagnose.candidates import CANDIDATES
+from thintact_sdk.diagnose.coarse_angle import EFFECT as ANGLE_EFFECT
+from thintact_sdk.diagnose.coarse_angle import CoarseAngle, CoarseAngleInput, coarse_angle_stage
 from thintact_sdk.diagnose.data import DiagnosisData, subset_frames
 from thintact_sdk.diagnose.deadline import Deadline
 from thintact_sdk.diagnose.locate import Location, locate
@@ -33,6 +35,7 @@ from thintact_sdk.diagnose.stats import (
 from thintact_sdk.diagnose.structure import Structure, find_structure
 from thintact_sdk.diagnose.unbinned import UnbinnedInput, UnbinnedStage, unbinned_stage
 from thintact_sdk.diagnose.words import describe_effect, tell_apart
+from thintact_sdk.errors import ThinTactError
 from thintact_sdk.physics import EFFECTS
 from thintact_sdk.profile import Profile
 
@@ -77,6 +80,10 @@ class DiagnoseOptions:
         For binned data: the unbinned recording, on whose frames the accepted model is
         checked and, where its χ² is in excess, effects finer than a block are selected
         (:mod:`~thintact_sdk.diagnose.unbinned`).
+    coarse_angle
+        For binned data whose mask angle is held: the unbinned recording, from which the
+        angle is fitted on coarser blocks after the selection
+        (:mod:`~thintact_sdk.diagnose.coarse_angle`).
     """
 
     sys_frac: float = 1e-3
@@ -90,6 +97,7 @@ class DiagnoseOptions:
     held_params: dict[str, tuple[str, ...]] = field(default_factory=dict)
     fine_amplitude: FineAmplitude | None = None
     unbinned: UnbinnedInput | None = None
+    coarse_angle: CoarseAngleInput | None = None
 
 
 @dataclass
@@ -118,6 +126,8 @@ class Diagnosis:
     history: list[tuple[str, float, float]]  # (model, rms_dn, chi2_per_dof)
     timing_s: dict[str, float] = field(default_factory=dict)
     unbinned: UnbinnedStage | None = None  # the unbinned stage of a binned diagnosis
+    unbinned_skipped: str = ""  # why the unbinned stage could not run (a refused full-size kernel)
+    coarse_angle: CoarseAngle | None = None  # the held angle fitted on coarser blocks
 
 
 def known_candidates(profile: Profile) -> list[str]:
@@ -129,8 +139,6 @@ def known_candidates(profile: Profile) -> list[str]:
 def held_indices(held_params: dict[str, tuple[str, ...]]) -> dict[str, tuple[int, ...]]:
     """``{effect: labels}`` → ``{effect: indices into its fit vector}`` (unknown effects
     are ignored; an unknown label is a :class:`~thintact_sdk.errors.ThinTactError`)."""
-    from thintact_sdk.errors import ThinTactError
-
     out: dict[str, tuple[int, ...]] = {}
     for name, labels in held_params.items():
         if name not in CANDIDATES:
@@ -267,15 +275,36 @@ def _diagnose(
         final = _view(model, ev1.pred_dn, sel.values)
         struct = _structure(final, data, black)
     timing["selection_s"] = time.perf_counter() - t_start - timing["baseline_s"]
+    coarse: CoarseAngle | None = None
+    if opt.coarse_angle is not None and "angle_deg" in opt.held_params.get(ANGLE_EFFECT, ()) \
+            and ANGLE_EFFECT in cands:
+        t_stage = time.perf_counter()
+        coarse, angled = coarse_angle_stage(opt.coarse_angle, sel.values, [r.name for r in sel.rounds],
+                                            sys_frac=opt.sys_frac,
+                                            margin=opt.margin, amp_floor=opt.amp_floor, progress=say)
+        if coarse.accepted:
+            say("evaluating the fitted angle on the diagnosis's binned data")
+            sel = _with_coarse_angle(sel, angled, coarse, fit_model, opt)
+            if coarse.accepted:
+                ev1 = evaluate_self_weighted(model, sel.values)
+                final = _view(model, ev1.pred_dn, sel.values)
+                struct = _structure(final, data, black)
+        timing["coarse_angle_s"] = time.perf_counter() - t_stage
     stage: UnbinnedStage | None = None
+    unbinned_skipped = ""
     fine_names: set[str] = set()
     binned_sel = sel
     if opt.unbinned is not None:
         t_stage = time.perf_counter()
         say("checking the fit on unbinned frames")
-        stage = unbinned_stage(opt.unbinned, sel.values, cands, sys_frac=opt.sys_frac,
-                               max_effects=opt.max_effects - len(sel.rounds), margin=opt.margin,
-                               amp_floor=opt.amp_floor, held=held, progress=say)
+        try:
+            stage = unbinned_stage(opt.unbinned, sel.values, cands, sys_frac=opt.sys_frac,
+                                   max_effects=opt.max_effects - len(sel.rounds), margin=opt.margin,
+                                   amp_floor=opt.amp_floor, held=held, progress=say)
+        except ThinTactError as err:  # the full-size kernel of the fitted model is refused (its size)
+            unbinned_skipped = str(err)
+            say(f"unbinned frames not evaluated: {err}")
+    if stage is not None:
         fine = stage.selection
         if fine is not None or stage.replaced:
             rounds = [_replaced_round(r, stage, opt.margin) if r.name in stage.replaced else r for r in sel.rounds]
@@ -289,6 +318,7 @@ def _diagnose(
             ev1 = evaluate_self_weighted(model, sel.values)
             final = _view(model, ev1.pred_dn, sel.values)
             struct = _structure(final, data, black)
+    if opt.unbinned is not None:
         timing["unbinned_s"] = time.perf_counter() - t_stage
     loc1 = _locate(final, data, black)
 
@@ -337,9 +367,14 @@ def _diagnose(
                     f" On {stage.data.n_frames} unbinned frames {alt.name} {params} explains the recording "
                     f"about as well in its place (Δχ² {alt.dchi2:.0f} against {alt.own_dchi2:.0f}). "
                     + tell_apart(rnd.name, alt.name, "frames that would tell them apart are not in this recording."))
-        if opt.held_params.get(rnd.name):
+        held_here = [p for p in opt.held_params.get(rnd.name, ())
+                     if not (coarse is not None and coarse.ran and rnd.name == ANGLE_EFFECT and p == "angle_deg")]
+        if coarse is not None and coarse.ran and rnd.name == ANGLE_EFFECT:
+            findings[-1]["evidence"] += coarse.evidence(_binned_factor(opt)) if coarse.accepted \
+                else coarse.screened_evidence()
+        if held_here:
             findings[-1]["evidence"] += (
-                f" Its {', '.join(opt.held_params[rnd.name])} was held at the null value: "
+                f" Its {', '.join(held_here)} was held at the null value: "
                 "not screened on this device (the kernels would not fit in memory).")
         history.append((f"+ {rnd.name}", view.stats.rms_dn, view.stats.chi2_per_dof))
         phys[rnd.name] = profile_params(rnd.name, findings[-1]["params"])
@@ -362,7 +397,8 @@ def _diagnose(
     timing["total_s"] = time.perf_counter() - t_start
     timing["simulations"] = float(model.n_sim + fit_model.n_sim)
     return Diagnosis(
-        data, report, fitted, ev0.pred_dn, ev1.pred_dn, loc0, loc1, struct, sel, history, timing, stage
+        data, report, fitted, ev0.pred_dn, ev1.pred_dn, loc0, loc1, struct, sel, history, timing, stage,
+        unbinned_skipped, coarse,
     )
 
 
@@ -393,6 +429,43 @@ def _replaced_round(rnd: Round, stage: UnbinnedStage, margin: float) -> Round:
     n = stage.model.n_fit if stage.model is not None else 2
     return Round(a.name, a.vector, a.dchi2, k * float(np.log(max(n, 2))) + margin, k, a.amplitude_dn,
                  [], [], rnd.evaluation)
+
+
+def _with_coarse_angle(sel: Selection, angled: Values, coarse: CoarseAngle, fit_model: DiagnosisModel,
+                       opt: DiagnoseOptions) -> Selection:
+    """The selection with what the coarse stage accepted (the angle; effects it found to
+    stand in for the rotation dropped), evaluated on the fit's binned data. The mask's
+    finding gets the drop-one Δχ² there (the model without the effect against the model
+    with it) and counts its shift's parameters only when the shift was kept. Left unchanged
+    when that data does not confirm the change, or when every effect slot is taken."""
+    before = fit_model.evaluate(sel.values)
+    after = fit_model.evaluate(angled)
+    coarse.confirmed_dchi2 = before.chi2 - after.chi2
+    ln_n = float(np.log(max(fit_model.n_fit, 2)))
+    kept = [r for r in sel.rounds if r.name in angled]
+    own = next((r for r in kept if r.name == ANGLE_EFFECT), None)
+    if coarse.confirmed_dchi2 <= ln_n or (own is None and len(kept) >= opt.max_effects):
+        coarse.accepted = False
+        coarse.note += (f" Not named: on the diagnosis's binned data it lowers χ² by {coarse.confirmed_dchi2:.0f}."
+                        if coarse.confirmed_dchi2 <= ln_n else
+                        f" Not named: all {opt.max_effects} effect slots are taken.")
+        return sel
+    vec = np.asarray(angled[ANGLE_EFFECT], float)
+    without = fit_model.evaluate({n: v for n, v in angled.items() if n != ANGLE_EFFECT})
+    d = (after.pred_dn - without.pred_dn)[fit_model.fit_mask]
+    amp = float(np.sqrt(np.mean(d * d))) if d.size else 0.0
+    k = 1 + (len(vec) - 1 if np.any(vec[1:]) else 0)
+    rnd = Round(ANGLE_EFFECT, vec, without.chi2 - after.chi2, k * ln_n + opt.margin, k, amp, [], [], after)
+    rounds = [rnd if r is own else r for r in kept] if own is not None else [*kept, rnd]
+    return Selection(angled, rounds, after, sel.rejected, [*sel.log, coarse.summary()], sel.below_floor)
+
+
+def _binned_factor(opt: DiagnoseOptions) -> int:
+    """The block side of the diagnosis's binned data (1 when unbinned)."""
+    for spec in (opt.unbinned, opt.coarse_angle):
+        if spec is not None:
+            return spec.bin_factor
+    return 1
 
 
 def _stage_bin(opt: DiagnoseOptions) -> int:

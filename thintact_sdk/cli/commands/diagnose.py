@@ -31,6 +31,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "binning sensors above 128×160 pixels, 1: never)")
     p.add_argument("--no-unbinned-check", dest="unbinned_check", action="store_false",
                    help="after a binned diagnosis, skip evaluating the fit on the unbinned recording (and the unbinned stage, which names effects finer than a block there)")
+    p.add_argument("--no-coarse-angle", dest="coarse_angle", action="store_false",
+                   help="when the mask angle cannot be screened on the binned data (the paper's device), do not fit "
+                        "it on coarser blocks afterwards (that stage costs minutes at large angles)")
     p.add_argument("--png", action="store_true", help="also write the figures as DIR/figures/*.png")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     add_force_argument(p, "into an existing non-empty --out")
@@ -65,6 +68,7 @@ def run(args: argparse.Namespace) -> int:
         unbin_hotspots,
         unbinned_amplitude_fn,
     )
+    from thintact_sdk.diagnose.coarse_angle import CoarseAngleInput
     from thintact_sdk.diagnose.outputs import write_outputs
     from thintact_sdk.diagnose.run import known_candidates
     from thintact_sdk.diagnose.unbinned import UnbinnedInput
@@ -93,8 +97,12 @@ def run(args: argparse.Namespace) -> int:
         opts.fine_amplitude = unbinned_amplitude_fn(full_data, sys_frac=args.sys_frac)
         if args.unbinned_check:
             opts.unbinned = UnbinnedInput(full_data, b, simulate=simulate_float32)
+        if args.coarse_angle and "angle_deg" in limits.held.get("mask_misalignment", ()):
+            opts.coarse_angle = CoarseAngleInput(full_data, b, simulate=simulate_float32)
         for name, why in skipped.items():
-            con.print(f"not screened: {name} ({why})")
+            later = " (fitted on coarser blocks after the selection)" if opts.coarse_angle is not None \
+                and name == "mask_misalignment.angle_deg" else ""
+            con.print(f"not screened here: {name} ({why}){later}")
     with con.status("diagnosing...") as status:
         d = diagnose(data, variance_fn=binned_variance_fn(b) if b > 1 else None, options=opts,
                      progress=lambda m: status.update(m))
@@ -105,11 +113,17 @@ def run(args: argparse.Namespace) -> int:
                          "not_screened": skipped}
         if d.unbinned is not None:
             rep["binned"]["unbinned_stage"] = d.unbinned.to_json()
+        if d.coarse_angle is not None:
+            rep["binned"]["coarse_angle"] = d.coarse_angle.to_json()
+            if d.coarse_angle.ran:  # screened after all, on coarser blocks
+                skipped.pop("mask_misalignment.angle_deg", None)
         d.fitted_profile = full_profile.with_physics(dict(d.fitted_profile.physics))
         if args.unbinned_check:
             con.print("evaluating the fit on the unbinned recording")
             stage = d.unbinned
-            if stage is not None and stage.check and not (stage.selection and stage.selection.rounds) \
+            if d.unbinned_skipped:
+                rep["full_size"] = {"not_evaluated": d.unbinned_skipped}
+            elif stage is not None and stage.check and not (stage.selection and stage.selection.rounds) \
                     and not stage.refitted and not stage.replaced:
                 rep["full_size"] = {"final": dict(stage.check)}  # the stage's own evaluation of this model
             else:
@@ -124,9 +138,14 @@ def run(args: argparse.Namespace) -> int:
         alt = f" (or: {', '.join(f['alternatives'])})" if f["alternatives"] else ""
         print(f"  + {f['effect']}{alt}: {f['params']} -> chi2/dof {f['chi2_per_dof_after']:.3f}")
     print(f"final: rms {rep['final']['rms_dn']:.2f} DN, chi2/dof {rep['final']['chi2_per_dof']:.3f}")
-    if "full_size" in rep:
+    if "full_size" in rep and "final" in rep["full_size"]:
         ff = rep["full_size"]["final"]
         print(f"unbinned: final rms {ff['rms_dn']:.2f} DN, chi2/dof {ff['chi2_per_dof']:.3f}")
+    elif "full_size" in rep:
+        print(f"unbinned: not evaluated ({rep['full_size']['not_evaluated']})")
+    coarse_rep = rep.get("binned", {}).get("coarse_angle")
+    if coarse_rep:
+        print(f"mask angle: {coarse_rep['summary']}")
     low = rep.get("below_floor", [])
     for b in low[:3]:
         print(f"  under the amplitude floor ({b['data']}): {b['effect']} {b['params']} would lower chi2 by "
