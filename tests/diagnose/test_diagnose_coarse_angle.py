@@ -103,3 +103,31 @@ def test_cli_fits_the_held_angle_on_coarser_blocks(tmp_path, monkeypatch, capsys
     assert rep["full_size"]["final"]["chi2_per_dof"] < 1.1
     fitted = json.loads((tmp_path / "o" / "fitted_profile.json").read_text())
     assert abs(np.asarray(fitted["physics"]["mask_misalignment"]["angle_deg"]) + 0.8) < 0.05
+
+
+def test_window_amplitude_is_the_whole_sensors_change(tmp_path, monkeypatch):
+    """The change a rotation makes, measured on windows of the unbinned sensor: with every
+    window of the plan it is the whole sensor's change (the windows' kernels are the whole
+    kernel on their pixels); with a spread subset of them, an estimate of it."""
+    from thintact_sdk.diagnose.coarse_angle import window_amplitude
+    from thintact_sdk.imaging import sim_rotated, sim_tiled
+    from thintact_sdk.imaging.sim_params import kernel_params
+    from thintact_sdk.imaging.simulator import Simulator, _expansion, clear_kernel_cache
+    from thintact_sdk.physics import resolve_physics
+
+    full = _recording(tmp_path, 0.0)
+    after = {"mask_misalignment": {"angle_deg": 0.8, "dx_um": 0.0, "dy_um": 0.0}}
+    gains = np.array([1.0, 0.9, 0.7])
+    scenes = full.scenes[:4]
+    clear_kernel_cache()
+    y_b = Simulator(full.profile).kernel.apply(scenes) * gains
+    y_a = Simulator(full.profile.with_physics(after)).kernel.apply(scenes) * gains
+    whole = float(np.sqrt(np.sum((y_a - y_b) ** 2) / np.sum(y_b**2)))
+    kp = kernel_params(full.profile.with_physics(after), resolve_physics(after))
+    monkeypatch.setattr(sim_tiled, "WINDOW_FAMILY_BYTES",
+                        sim_rotated.rotated_family_bytes(kp, _expansion(kp).rank) / 3)
+    every, where = window_amplitude(full, {}, after, gains, bin_factor=4, n_windows=100)
+    assert every == pytest.approx(whole, rel=1e-3) and "windows of the unbinned sensor" in where
+    some, where = window_amplitude(full, {}, after, gains, bin_factor=4, n_windows=2)
+    assert where.startswith("on 2 of") and 0.5 * whole < some < 2.0 * whole
+    clear_kernel_cache()
