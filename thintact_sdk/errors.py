@@ -74,3 +74,10 @@ class InvalidValueError(ThinTactError, ValueError):
     """A parameter or setting the user supplied is outside its valid set or range (τ, a Bayer
     pattern, a backend name, an LED level); the message names it and what is allowed. Also a
     :class:`ValueError`, for code that catches that."""
+
+
+class KernelSizeError(ThinTactError):
+    """An imaging kernel whose tabulated families or separable terms would exceed the memory
+    bound on this device (a large rotated mask or refraction); the message names the device,
+    the size and the limit. Raised before anything of that size is allocated, so a caller
+    may try smaller pieces of the sensor instead."""

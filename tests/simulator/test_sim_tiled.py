@@ -172,3 +172,38 @@ def test_rotated_build_bytes_sums_the_windows_and_grows_with_the_angle():
     assert 0.0 < small < large
     kp = _kp({"mask_misalignment": {"angle_deg": 0.35}})
     assert large == sim_rotated.rotated_family_bytes(kp, _rank(kp))  # under the window limit: one build
+
+
+def test_a_window_refused_for_its_size_is_built_in_quadrants():
+    """The planner bounds a window's displacement families, but its separable terms can still
+    be refused (:class:`KernelSizeError`, e.g. a 114×116 window of the paper's sensor at 0.2°):
+    the window is then built as its quadrants, recursively, covering it exactly and giving the
+    same frames; a window still refused after the last split keeps the refusal."""
+    from thintact_sdk.errors import KernelSizeError
+    from thintact_sdk.imaging import simulator as simmod
+    from thintact_sdk.imaging.sim_tiled import MAX_SPLITS, build_window_pieces
+
+    kp = _kp({"mask_misalignment": {"angle_deg": 0.35, "dx_um": 3.0}})
+    exp = simmod._expansion(kp)
+    x = _scenes()
+    whole = build_separable_kernel(kp).apply(x)
+
+    def build(w):  # windows above 40×40 pixels are "too large"
+        if w.rows * w.cols > 1600:
+            raise KernelSizeError(f"{w.rows}×{w.cols} too large")
+        return simmod._build_rotated_window(w, exp, {})
+
+    tiled = sim_tiled.build_tiled_kernel(kp, [(0, kp.rows, 0, 80), (0, kp.rows, 80, kp.cols)], build)
+    assert all(w.kernel is not None and (w.row1 - w.row0) * (w.col1 - w.col0) <= 1600 for w in tiled.windows)
+    covered = np.zeros((kp.rows, kp.cols), int)
+    for w in tiled.windows:
+        covered[w.row0:w.row1, w.col0:w.col1] += 1
+    assert np.all(covered == 1) and tiled.info["windows"] == len(tiled.windows) == 32  # 128×80 → 64×40 → 32×20
+    assert rel_rms(tiled.apply(x), whole) < 1e-4
+
+    def never(w):
+        raise KernelSizeError("always")
+
+    with pytest.raises(KernelSizeError):
+        build_window_pieces(kp, (0, 64, 0, 64), never)
+    assert MAX_SPLITS == 3

@@ -45,6 +45,9 @@ from thintact_sdk.diagnose.model import (
     Values,
     default_simulate,
 )
+from thintact_sdk.errors import ThinTactError
+from thintact_sdk.imaging.sim_params import KernelParams
+from thintact_sdk.imaging.sim_separable import SeparableKernel
 from thintact_sdk.profile import Profile
 
 EFFECT = "mask_misalignment"
@@ -373,10 +376,9 @@ def window_amplitude(data: DiagnosisData, before: dict[str, dict[str, Any]], aft
     ``bin_factor`` builds.
     """
     from thintact_sdk.diagnose.data import subset_frames
-    from thintact_sdk.errors import ThinTactError
     from thintact_sdk.imaging.sim_params import kernel_params
-    from thintact_sdk.imaging.sim_tiled import window_params
-    from thintact_sdk.imaging.simulator import build_separable_kernel, streamed_rotated_kernel
+    from thintact_sdk.imaging.sim_tiled import build_window_pieces, window_params
+    from thintact_sdk.imaging.simulator import streamed_rotated_kernel
     from thintact_sdk.physics import resolve_physics
 
     scenes = subset_frames(data, n_frames).scenes
@@ -392,15 +394,27 @@ def window_amplitude(data: DiagnosisData, before: dict[str, dict[str, Any]], aft
         pick = sorted({int(round(i)) for i in np.linspace(0, len(spans) - 1, min(n_windows, len(spans)))})
         g = np.asarray(gains, float)[None, None, None, :]
         num = den = 0.0
-        for i in pick:
-            y_b = build_separable_kernel(window_params(kp_b, *spans[i])).apply(scenes, "float32") * g
-            y_a = build_separable_kernel(window_params(kp_a, *spans[i])).apply(scenes, "float32") * g
-            num += float(np.sum((y_a - y_b) ** 2))
-            den += float(np.sum(y_b * y_b))
+        for i in pick:  # a window refused for its terms is taken in quadrants
+            for w in build_window_pieces(kp_a, spans[i], _window_kernel):
+                y_a = w.kernel.apply(scenes, "float32") * g
+                kern_b = _window_kernel(window_params(kp_b, w.row0, w.row1, w.col0, w.col1))
+                y_b = kern_b.apply(scenes, "float32") * g
+                num += float(np.sum((y_a - y_b) ** 2))
+                den += float(np.sum(y_b * y_b))
         where = (f"on {len(pick)} of {len(spans)} windows of the unbinned sensor" if f == 1 else
                  f"on {len(pick)} of {len(spans)} windows of the sensor binned {f}×{f}")
         return math.sqrt(num / max(den, 1e-300)), where
     return None
+
+
+def _window_kernel(kp: KernelParams) -> SeparableKernel:
+    """One window's kernel (its family is under the window limit: never tiled again)."""
+    from thintact_sdk.imaging.simulator import build_separable_kernel
+
+    kern = build_separable_kernel(kp)
+    if not isinstance(kern, SeparableKernel):
+        raise ThinTactError(f"internal: the {kp.rows}×{kp.cols} window's kernel was tiled again")
+    return kern
 
 
 def _prune_stand_ins(model: DiagnosisModel, values: Values, ev: Evaluation, named: list[str], ln_n: float,

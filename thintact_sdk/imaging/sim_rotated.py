@@ -32,7 +32,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from thintact_sdk.errors import ThinTactError
+from thintact_sdk.errors import KernelSizeError
 from thintact_sdk.imaging.sim_axis import AxisGrid, mask_cell_edges_mm
 from thintact_sdk.imaging.sim_params import KernelParams
 from thintact_sdk.imaging.sim_radiometry import SeparableExpansion
@@ -88,11 +88,11 @@ def rotated_family_bytes(kp: KernelParams, rank: int, n_values: int = 2) -> floa
 
 def check_rotated_size(kp: KernelParams, rank: int, n_values: int = 2,
                        limit_bytes: float = FAMILY_MAX_BYTES) -> None:
-    """Refuse (``ThinTactError``) a rotated kernel whose displacement family would exceed
-    ``limit_bytes``, before any of it is allocated."""
+    """Refuse (:class:`~thintact_sdk.errors.KernelSizeError`) a rotated kernel whose
+    displacement family would exceed ``limit_bytes``, before any of it is allocated."""
     size = rotated_family_bytes(kp, rank, n_values)
     if size > limit_bytes:
-        raise ThinTactError(
+        raise KernelSizeError(
             f"physics: a mask rotated by {kp.angle_deg:g}° on this device "
             f"({kp.rows}×{kp.cols} sensor, {kp.scene_rows}×{kp.scene_cols} scene) needs a "
             f"displacement family of {size / 1024**3:.1f} GiB per axis (limit "
@@ -103,8 +103,8 @@ def check_rotated_size(kp: KernelParams, rank: int, n_values: int = 2,
 
 def check_rotated_terms(kp: KernelParams, rank: int, ranks_x: np.ndarray | list[int],
                         ranks_y: np.ndarray | list[int], limit_bytes: float = FAMILY_MAX_BYTES) -> None:
-    """Refuse (``ThinTactError``) a rotated kernel whose separable terms, before compression,
-    would exceed ``limit_bytes``: each profile's block holds ``rank·r_x·r_y`` terms of
+    """Refuse (:class:`~thintact_sdk.errors.KernelSizeError`) a rotated kernel whose
+    separable terms, before compression, would exceed ``limit_bytes``: each profile's block holds ``rank·r_x·r_y`` terms of
     ``R·N + S·M`` values, stacked once more for the compression, plus its two Gram matrices.
     The displacement families can fit (:func:`check_rotated_size`) while this does not (a 6°
     turn on a 128×160 unit needs tens of GiB here; without the check OpenBLAS crashed)."""
@@ -112,7 +112,7 @@ def check_rotated_terms(kp: KernelParams, rank: int, ranks_x: np.ndarray | list[
     per_term = kp.rows * kp.scene_rows + kp.cols * kp.scene_cols
     size = 8.0 * (2.0 * n_terms * per_term + 2.0 * float(n_terms) ** 2)
     if size > limit_bytes:
-        raise ThinTactError(
+        raise KernelSizeError(
             f"physics: a mask rotated by {kp.angle_deg:g}° on this device "
             f"({kp.rows}×{kp.cols} sensor, {kp.scene_rows}×{kp.scene_cols} scene) needs "
             f"{n_terms} separable terms ({size / 1024**3:.1f} GiB, limit {limit_bytes / 1024**3:.1f} GiB) "

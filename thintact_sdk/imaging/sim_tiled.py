@@ -26,7 +26,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from thintact_sdk.errors import ThinTactError
+from thintact_sdk.errors import KernelSizeError, ThinTactError
 from thintact_sdk.imaging.sim_params import KernelParams
 from thintact_sdk.imaging.sim_separable import SeparableKernel
 
@@ -124,15 +124,42 @@ class StreamedTiledKernel:
         f, _, _, c = scenes.shape
         out = np.empty((f, self.rows, self.cols, c))
         terms = 0.0
-        for i, (r0, r1, c0, c1) in enumerate(self.spans):
-            kern = self.build_window(window_params(self.kp, r0, r1, c0, c1))
-            out[:, r0:r1, c0:c1] = kern.apply(scenes, dtype)
-            terms += kern.info.get("terms", 0.0)
-            del kern
+        pieces = 0
+        for i, span in enumerate(self.spans):
+            for w in build_window_pieces(self.kp, span, self.build_window):
+                out[:, w.row0 : w.row1, w.col0 : w.col1] = w.kernel.apply(scenes, dtype)
+                terms += w.kernel.info.get("terms", 0.0)
+                pieces += 1
             if self.progress is not None:
                 self.progress(i + 1, len(self.spans))
-        self.info = {"windows": float(len(self.spans)), "terms": terms, "streamed": 1.0}
+        self.info = {"windows": float(pieces), "terms": terms, "streamed": 1.0}
         return out
+
+
+MAX_SPLITS = 3
+"""A window whose kernel is refused for its size is cut into quadrants at most this many
+times over (:func:`build_window_pieces`)."""
+
+
+def build_window_pieces(kp: KernelParams, span: tuple[int, int, int, int],
+                        build_window: Callable[[KernelParams], SeparableKernel],
+                        depth: int = 0) -> list[SensorWindow]:
+    """The kernel of sensor window ``span`` of ``kp``, as one window or, where its build is
+    refused for its size (:class:`~thintact_sdk.errors.KernelSizeError`: the planner bounds
+    the displacement families, but a rotated window's separable terms before compression
+    grow with its rows and columns times its family ranks, e.g. 2.0 GiB for a 114×116 window
+    of the paper's sensor at 0.2°), as the kernels of its quadrants, recursively (at most
+    :data:`MAX_SPLITS` times; then the refusal stands)."""
+    r0, r1, c0, c1 = span
+    try:
+        return [SensorWindow(r0, r1, c0, c1, build_window(window_params(kp, r0, r1, c0, c1)))]
+    except KernelSizeError:
+        if depth >= MAX_SPLITS or (r1 - r0 < 2 and c1 - c0 < 2):
+            raise
+    rm, cm = (r0 + r1) // 2, (c0 + c1) // 2
+    rows = [(r0, rm), (rm, r1)] if r1 - r0 >= 2 else [(r0, r1)]
+    cols = [(c0, cm), (cm, c1)] if c1 - c0 >= 2 else [(c0, c1)]
+    return [w for a, b in rows for c, d in cols for w in build_window_pieces(kp, (a, b, c, d), build_window, depth + 1)]
 
 
 def window_params(kp: KernelParams, row0: int, row1: int, col0: int, col1: int) -> KernelParams:
@@ -211,14 +238,14 @@ def build_tiled_kernel(kp: KernelParams, spans: list[tuple[int, int, int, int]],
     progress
         Called as ``progress(done, total)`` after each window.
     """
-    windows = []
+    windows: list[SensorWindow] = []
     terms = 0.0
     info: dict[str, float] = {}
     for i, span in enumerate(spans):
-        kern = build_window(window_params(kp, *span))
-        windows.append(SensorWindow(*span, kern))
-        terms += kern.info.get("terms", float(max(len(t) for t in kern.terms)))
-        info = {k: v for k, v in kern.info.items() if k != "terms"}
+        for w in build_window_pieces(kp, span, build_window):
+            windows.append(w)
+            terms += w.kernel.info.get("terms", float(max(len(t) for t in w.kernel.terms)))
+            info = {k: v for k, v in w.kernel.info.items() if k != "terms"}
         if progress is not None:
             progress(i + 1, len(spans))
-    return TiledKernel(windows, kp.rows, kp.cols, {**info, "windows": float(len(spans)), "terms": terms})
+    return TiledKernel(windows, kp.rows, kp.cols, {**info, "windows": float(len(windows)), "terms": terms})
