@@ -131,3 +131,19 @@ def test_window_amplitude_is_the_whole_sensors_change(tmp_path, monkeypatch):
     some, where = window_amplitude(full, {}, after, gains, bin_factor=4, n_windows=2)
     assert where.startswith("on 2 of") and 0.5 * whole < some < 2.0 * whole
     clear_kernel_cache()
+
+
+def test_a_rotation_with_a_shift_gets_both(tmp_path):
+    """A −0.8° turn with a 6/−4 um shift, the angle held on the 2×2 data: the angle is fitted
+    on 4×4 blocks, then refitted there together with the shift, which is kept (it earns its
+    two parameters' threshold) and named with the angle."""
+    full = _recording(tmp_path, -0.8, 6.0, -4.0)
+    opts = DiagnoseOptions(max_effects=2, held_params=HELD, coarse_angle=CoarseAngleInput(full, 2))
+    d = diagnose(bin_data(full, 2), variance_fn=binned_variance_fn(2), options=opts)
+    f = next(f for f in d.report["findings"] if f["effect"] == "mask_misalignment")
+    assert abs(f["params"]["angle_deg"] + 0.8) < 0.05
+    assert abs(f["params"]["dx_um"] - 6.0) < 1.0 and abs(f["params"]["dy_um"] + 4.0) < 1.0
+    rep = d.coarse_angle.to_json() if d.coarse_angle else {}
+    assert rep["shift"]["kept"] and rep["shift"]["dchi2"] > rep["shift"]["threshold"]
+    assert "3 parameter(s) must earn" in f["evidence"]
+    assert d.report["final"]["chi2_per_dof"] < 1.1
