@@ -6,7 +6,8 @@ vocabulary at the concealed data set's amplitudes) a child process builds the si
 the shipped ``thintact-paper`` device (1024×1280 sensor, 400×512 scene) with that effect and
 simulates 12 random frames; it reports the kernel build time, the 12-frame simulation time
 (OpenBLAS on one thread, as
-the diagnosis runs it) and its own peak resident memory (``getrusage(RUSAGE_SELF).ru_maxrss``), or the
+the diagnosis runs it) and its own peak resident memory (``VmHWM``, :mod:`peak_memory`: a child's
+``ru_maxrss`` starts at its parent's peak), or the
 ``ThinTactError`` with which the simulator refuses a kernel that does not fit.
 
 Usage::
@@ -26,7 +27,9 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 
 CHILD = r"""
-import json, resource, sys, time
+import json, sys, time
+sys.path.insert(0, sys.argv[3])
+from peak_memory import own_peak_gib
 import thintact_sdk  # noqa: F401  (tunes OpenBLAS before numpy loads)
 import numpy as np
 from thintact_sdk.errors import ThinTactError
@@ -47,7 +50,7 @@ try:
            "terms": sim.info().get("terms")}
 except ThinTactError as e:
     out = {"refused": str(e), "after_s": round(time.perf_counter() - t0, 1)}
-out["peak_rss_gib"] = round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20, 2)
+out["peak_rss_gib"] = round(own_peak_gib(), 2)
 print(json.dumps(out))
 """
 
@@ -73,7 +76,8 @@ def main(argv: list[str] | None = None) -> int:
     rows = []
     for name in names:
         try:
-            proc = subprocess.run([sys.executable, "-c", CHILD, json.dumps(cases[name]), str(args.frames)],
+            proc = subprocess.run([sys.executable, "-c", CHILD, json.dumps(cases[name]), str(args.frames),
+                                   str(REPO / "tools")],
                                   capture_output=True, text=True, timeout=args.timeout, check=False,
                                   env=os.environ | {"OPENBLAS_NUM_THREADS": "1"})
             row = json.loads(proc.stdout.strip().splitlines()[-1]) if proc.returncode == 0 else \
