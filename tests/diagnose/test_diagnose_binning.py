@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 from typing import Any
 
@@ -257,3 +258,43 @@ def test_held_params_name_fit_parameters() -> None:
     assert held_indices({"mask_misalignment": ("angle_deg",)}) == {"mask_misalignment": (0,)}
     with pytest.raises(ThinTactError, match="not fit parameters of mask_misalignment"):
         held_indices({"mask_misalignment": ("angle",)})
+
+
+@pytest.mark.parametrize(("case", "named"), [("refraction", True), ("geometry", False)])
+def test_unscreened_refraction_is_named_beside_a_geometry_stand_in(concealed_case: Any, case: str,
+                                                                    named: bool) -> None:
+    """Where refraction cannot be screened (the paper's size: its kernel is out of reach,
+    ``binned.not_screened``), a hidden n = 1.41 gap is fitted as a much shorter scene gap;
+    that geometry finding then names refraction among its alternatives, with the index it
+    implies, because the recording was never compared with it. A plain geometry error (4.95
+    instead of 4.8 mm: n would be 1.008) is left alone. Shown on the concealed device with
+    refraction held as the paper-size diagnosis holds it."""
+    from thintact_sdk.diagnose import DiagnoseOptions, diagnose, load_diagnosis_data
+
+    data = load_diagnosis_data(concealed_case(case) / "recording")
+    opts = DiagnoseOptions(candidates=["geometry", "refraction"], max_effects=1,
+                           held_params={"refraction": ("n_scene_side",)})
+    f = diagnose(data, options=opts).report["findings"][0]
+    assert f["effect"] == "geometry"
+    assert ("refraction" in f["alternatives"]) is named
+    if named:
+        z, d = f["params"]["scene_to_mask_mm"], f["params"]["mask_to_sensor_mm"]
+        n = (data.profile.geometry.scene_to_mask_mm / data.profile.geometry.mask_to_sensor_mm) / (z / d)
+        assert 1.3 < n < 1.5
+        said = re.search(r"refraction \{'n_scene_side': ([0-9.]+)\} would look the same", f["evidence"])
+        assert said is not None and float(said.group(1)) == pytest.approx(n, rel=1e-4)
+        assert "was not screened on this device" in f["evidence"]
+        assert "only a measured gap would" in f["evidence"]
+    else:
+        assert "not screened" not in f["evidence"]
+
+
+def test_screened_refraction_is_never_named_as_an_unscreened_stand_in(concealed_case: Any) -> None:
+    """With refraction screened (nothing held) the same recording names refraction itself,
+    and no finding carries the unscreened stand-in sentence."""
+    from thintact_sdk.diagnose import DiagnoseOptions, diagnose, load_diagnosis_data
+
+    data = load_diagnosis_data(concealed_case("refraction") / "recording")
+    report = diagnose(data, options=DiagnoseOptions(candidates=["geometry", "refraction"], max_effects=1)).report
+    assert report["findings"][0]["effect"] == "refraction"
+    assert all("was not screened on this device" not in f["evidence"] for f in report["findings"])

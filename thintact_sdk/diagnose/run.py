@@ -376,6 +376,7 @@ def _diagnose(
             findings[-1]["evidence"] += (
                 f" Its {', '.join(held_here)} was held at the null value: "
                 "not screened on this device (the kernels would not fit in memory).")
+        _name_unscreened_stand_ins(findings[-1], rnd, opt, device)
         history.append((f"+ {rnd.name}", view.stats.rms_dn, view.stats.chi2_per_dof))
         phys[rnd.name] = profile_params(rnd.name, findings[-1]["params"])
     fitted = prof.with_physics(phys)
@@ -400,6 +401,31 @@ def _diagnose(
         data, report, fitted, ev0.pred_dn, ev1.pred_dn, loc0, loc1, struct, sel, history, timing, stage,
         unbinned_skipped, coarse,
     )
+
+
+def _name_unscreened_stand_ins(finding: dict[str, Any], rnd: Round, opt: DiagnoseOptions, device: Profile) -> None:
+    """Name, among ``finding``'s alternatives, each effect the diagnosis could not screen on
+    this device (every fit parameter held: ``binned.not_screened``) for which this finding
+    is a plausible stand-in (its :class:`~thintact_sdk.physics.Proxy` points at it from here,
+    e.g. a much shorter scene gap at the paper's size, where refraction is out of reach: near
+    the axis the two look alike). The recording was never compared with it, so the evidence
+    says what it would take."""
+    held = held_indices(opt.held_params)
+    for name, cand in CANDIDATES.items():
+        px = cand.proxy
+        if (px is None or px.source != rnd.name or px.stand_in is None or name in finding["alternatives"]
+                or len(held.get(name, ())) < cand.k):
+            continue
+        start = px.start(np.asarray(rnd.vector, float), device)
+        if start is None or not px.stand_in(start):
+            continue
+        finding["alternatives"].append(name)
+        params = cand.to_params(start, device)
+        finding["evidence"] += (
+            f" {name} was not screened on this device (its kernel is out of reach at this size, "
+            f"report.json binned.not_screened), and near the axis {name} {params} would look the "
+            "same as this finding: the recording cannot tell them apart here. "
+            + tell_apart(rnd.name, name, f"on this device only a measured gap would, {name} being out of reach here."))
 
 
 def _below_floor_json(binned: Selection, stage: UnbinnedStage | None, accepted: Values, device: Profile,

@@ -136,11 +136,17 @@ class Proxy:
         fit does not point at this effect).
     widths
         Relative half-widths of the parabolas that refine the start, in turn.
+    stand_in
+        ``start vector -> bool``: whether a source finding pointing here this far is a
+        plausible stand-in for this effect when the diagnosis could not screen it on the
+        device (its kernel out of reach, ``binned.not_screened``); the finding then names
+        this effect among its alternatives. None: never named so.
     """
 
     source: str
     start: Callable[[np.ndarray, DeviceProfile], np.ndarray | None]
     widths: tuple[float, ...] = (0.02, 0.004)
+    stand_in: Callable[[np.ndarray], bool] | None = None
 
 
 @dataclass(frozen=True)

@@ -92,6 +92,18 @@ def from_geometry_fit(geometry_fit: np.ndarray, p: DeviceProfile) -> np.ndarray 
     return np.array([ratio0 / ratio])
 
 
+STAND_IN_MIN_INDEX = 1.1
+"""Smallest index a geometry finding must imply (its scene gap at least 9 % shorter, relative
+to the mask gap, than the profile's) to be named as possibly refraction where refraction
+could not be screened: an assembly error of that size is rarer than an elastomer, acrylic or
+glass gap (n 1.4-1.5); smaller shortenings are left to the geometry finding alone."""
+
+
+def plausible_stand_in(start: np.ndarray) -> bool:
+    """Whether a geometry fit implying index ``start[0]`` may be refraction in disguise."""
+    return bool(start[0] >= STAND_IN_MIN_INDEX)
+
+
 def describe(params: Params, p: DeviceProfile) -> str:
     """The finding in words."""
     n = float(params["n_scene_side"])
@@ -116,5 +128,5 @@ SPEC = EffectSpec(
     )},
     # started from the geometry fit (near the axis refraction acts like a shorter scene gap)
     fit=scalar_fit("n_scene_side", 1.0, 0.4, signed=False,
-                   proxy=Proxy("geometry", from_geometry_fit)),
+                   proxy=Proxy("geometry", from_geometry_fit, stand_in=plausible_stand_in)),
 )
