@@ -7,8 +7,9 @@ mark of the memory the child leaves (the *parent's*) into the child's ``ru_maxrs
 renders a paper-size recording in its own process and then runs ``thintact diagnose`` as
 a child read 8.91 GiB for every child after it (the slow tests, one pytest process, after
 the rotated mask's recording), whatever the child used; a child that allocates nothing read
-2.82 GiB under a parent that had touched 2.8 GiB. ``VmHWM`` of ``/proc/<pid>/status`` is the high-water
-mark of the child's own address space since its ``exec``: that is what these tools report.
+2.82 GiB under a parent that had touched 2.8 GiB. ``VmHWM`` of ``/proc/<pid>/status`` is
+the high-water mark of the child's own address space since its ``exec``: that is what these
+tools report.
 """
 
 from __future__ import annotations
@@ -36,10 +37,10 @@ runpy.run_module(module, run_name="__main__", alter_sys=True)
 """
 
 
-def own_peak_gib(status_path: str = "/proc/self/status") -> float:
+def own_peak_gib() -> float:
     """This process's peak resident memory (GiB) since its ``exec``: ``VmHWM`` of
-    ``status_path``."""
-    with open(status_path) as f:
+    ``/proc/self/status``."""
+    with open("/proc/self/status") as f:
         kib = next(int(line.split()[1]) for line in f if line.startswith("VmHWM:"))
     return kib / 2**20
 

@@ -376,7 +376,7 @@ def _diagnose(
             findings[-1]["evidence"] += (
                 f" Its {', '.join(held_here)} was held at the null value: "
                 "not screened on this device (the kernels would not fit in memory).")
-        _name_unscreened_stand_ins(findings[-1], rnd, opt, device)
+        _name_unscreened_stand_ins(findings[-1], rnd, held, device)
         history.append((f"+ {rnd.name}", view.stats.rms_dn, view.stats.chi2_per_dof))
         phys[rnd.name] = profile_params(rnd.name, findings[-1]["params"])
     fitted = prof.with_physics(phys)
@@ -403,14 +403,14 @@ def _diagnose(
     )
 
 
-def _name_unscreened_stand_ins(finding: dict[str, Any], rnd: Round, opt: DiagnoseOptions, device: Profile) -> None:
+def _name_unscreened_stand_ins(finding: dict[str, Any], rnd: Round, held: dict[str, tuple[int, ...]],
+                               device: Profile) -> None:
     """Name, among ``finding``'s alternatives, each effect the diagnosis could not screen on
     this device (every fit parameter held: ``binned.not_screened``) for which this finding
     is a plausible stand-in (its :class:`~thintact_sdk.physics.Proxy` points at it from here,
     e.g. a much shorter scene gap at the paper's size, where refraction is out of reach: near
     the axis the two look alike). The recording was never compared with it, so the evidence
-    says what it would take."""
-    held = held_indices(opt.held_params)
+    says what it would take. ``held``: the held fit parameters' indices per effect."""
     for name, cand in CANDIDATES.items():
         px = cand.proxy
         if (px is None or px.source != rnd.name or px.stand_in is None or name in finding["alternatives"]
