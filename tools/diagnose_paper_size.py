@@ -251,7 +251,7 @@ def main(argv: list[str] | None = None) -> int:
     result = {"case": args.case, "render_s": round(t_make, 1), "diagnose_s": round(wall, 1),
               "peak_rss_gib": round(rss, 2),
               "load_1min": [round(load_before, 1), round(load_after, 1)], "findings": report.get("findings", []),
-              "binned": report.get("binned"), "problems": problems}
+              "binned": report.get("binned"), "full_size": report.get("full_size"), "problems": problems}
     (args.out / "result.json").write_text(json.dumps(result, indent=1) + "\n")
     print(f"diagnose: {wall:.1f} s, peak RSS {rss:.2f} GiB, load {load_before:.1f} -> "
           f"{load_after:.1f}; "

@@ -57,7 +57,8 @@ def test_paper_size_mask_rotation_is_named(repo_root: Path, tmp_path: Path) -> N
     """A 0.1° mask rotation at the paper's size (measured: 0.1013°, 142.5 s, 4.09 GiB): held in
     the 8×8 selection, fitted on 32×32 blocks, its change measured on windows of the unbinned
     sensor (1.3e-3 of the signal, over the floor; 1.1e-4 on the blocks), confirmed on the 8×8
-    data. The full-size check says why it was not evaluated (48 windows, 6.6 GiB)."""
+    data. The full-size check says why the whole sensor was not evaluated (48 windows, 6.6 GiB)
+    and checks the fit on 6 of its windows instead."""
     tool = _tool(repo_root, "diagnose_paper_size")
     rc = tool.main(["--out", str(tmp_path), "--case", "mask_rotation"])
     result = json.loads((tmp_path / "result.json").read_text())
@@ -65,6 +66,10 @@ def test_paper_size_mask_rotation_is_named(repo_root: Path, tmp_path: Path) -> N
     coarse = result["binned"]["coarse_angle"]
     assert coarse["accepted"] and coarse["fine_amplitude"] > 6e-4 > coarse["amplitude_fraction"]
     assert result["diagnose_s"] <= 600 and result["peak_rss_gib"] <= 8
+    # the whole sensor's rotated kernel is refused, so the fit is checked on unbinned windows
+    full = result["full_size"]
+    assert "windows" in full["not_evaluated"]
+    assert full["windows"]["chi2_per_dof"] < 1.01, full["windows"]
 
 
 @pytest.mark.slow

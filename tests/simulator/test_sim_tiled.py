@@ -207,3 +207,30 @@ def test_a_window_refused_for_its_size_is_built_in_quadrants():
     with pytest.raises(KernelSizeError):
         build_window_pieces(kp, (0, 64, 0, 64), never)
     assert MAX_SPLITS == 3
+
+
+@pytest.mark.parametrize("physics", [
+    {"mask_misalignment": {"angle_deg": 0.35}},
+    {"color_crosstalk": {"matrix": [[1, 0.04, 0.01], [0.03, 1, 0.03], [0.0, 0.05, 1]]},
+     "display_gamma": {"gamma": 1.15}, "scene_blur": {"sigma_um": 40.0}},
+])
+def test_linear_window_is_the_whole_simulation_on_its_pixels(physics):
+    """``Simulator.linear_window``: stages 1-3 on a window of the sensor only (scene-stage
+    effects and pixel-local signal effects included) give those pixels of ``linear_batch``."""
+    sim = Simulator(load_profile("virtual-mini").with_physics(physics))
+    x = _scenes()
+    whole = sim.linear_batch(x)
+    for span in ((0, 40, 0, 50), (90, 128, 101, 160)):
+        r0, r1, c0, c1 = span
+        assert rel_rms(sim.linear_window(x, span), whole[:, r0:r1, c0:c1]) < 1e-5
+
+
+@pytest.mark.parametrize(("physics", "words"), [
+    ({"sensor_blur": {"sigma_um": 5.0}}, "sensor_blur gives each pixel light from its neighbouring pixels"),
+    ({"veiling_glare": {"fraction": 0.02}}, "veiling_glare gives each pixel a share of the whole frame's mean"),
+    ({"refraction": {"n_scene_side": 1.4}}, "straight rays only"),
+])
+def test_linear_window_refuses_what_reads_beyond_the_window(physics, words):
+    sim = Simulator(load_profile("virtual-mini").with_physics(physics))
+    with pytest.raises(ThinTactError, match=words):
+        sim.linear_window(_scenes(1), (0, 40, 0, 50))

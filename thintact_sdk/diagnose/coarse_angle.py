@@ -46,8 +46,6 @@ from thintact_sdk.diagnose.model import (
     default_simulate,
 )
 from thintact_sdk.errors import ThinTactError
-from thintact_sdk.imaging.sim_params import KernelParams
-from thintact_sdk.imaging.sim_separable import SeparableKernel
 from thintact_sdk.profile import Profile
 
 EFFECT = "mask_misalignment"
@@ -398,8 +396,8 @@ def window_amplitude(data: DiagnosisData, before: dict[str, dict[str, Any]], aft
     """
     from thintact_sdk.diagnose.data import subset_frames
     from thintact_sdk.imaging.sim_params import kernel_params
-    from thintact_sdk.imaging.sim_tiled import build_window_pieces, window_params
-    from thintact_sdk.imaging.simulator import streamed_rotated_kernel
+    from thintact_sdk.imaging.sim_tiled import build_window_pieces, spread_windows, window_params
+    from thintact_sdk.imaging.simulator import build_window_kernel, streamed_rotated_kernel
     from thintact_sdk.physics import resolve_physics
 
     scenes = subset_frames(data, n_frames).scenes
@@ -412,13 +410,13 @@ def window_amplitude(data: DiagnosisData, before: dict[str, dict[str, Any]], aft
         except ThinTactError:
             f *= 2
             continue
-        pick = sorted({int(round(i)) for i in np.linspace(0, len(spans) - 1, min(n_windows, len(spans)))})
+        pick = spread_windows(spans, n_windows)
         g = np.asarray(gains, float)[None, None, None, :]
         num = den = 0.0
-        for i in pick:  # a window refused for its terms is taken in quadrants
-            for w in build_window_pieces(kp_a, spans[i], _window_kernel):
+        for span in pick:  # a window refused for its terms is taken in quadrants
+            for w in build_window_pieces(kp_a, span, build_window_kernel):
                 y_a = w.kernel.apply(scenes, "float32") * g
-                kern_b = _window_kernel(window_params(kp_b, w.row0, w.row1, w.col0, w.col1))
+                kern_b = build_window_kernel(window_params(kp_b, w.row0, w.row1, w.col0, w.col1))
                 y_b = kern_b.apply(scenes, "float32") * g
                 num += float(np.sum((y_a - y_b) ** 2))
                 den += float(np.sum(y_b * y_b))
@@ -472,16 +470,6 @@ def _refit_with_shift(spec: CoarseAngleInput, model: DiagnosisModel, values: Val
     say(f"mask shift with the angle: ({vec[1]:+.2f}, {vec[2]:+.2f}) um, Δχ² {stage.shift_dchi2:.0f} "
         f"(threshold {stage.shift_threshold:.0f}): {'kept' if keep else 'set to 0'}")
     return (fitted, ev_j) if keep else (no_shift, ev_0)
-
-
-def _window_kernel(kp: KernelParams) -> SeparableKernel:
-    """One window's kernel (its family is under the window limit: never tiled again)."""
-    from thintact_sdk.imaging.simulator import build_separable_kernel
-
-    kern = build_separable_kernel(kp)
-    if not isinstance(kern, SeparableKernel):
-        raise ThinTactError(f"internal: the {kp.rows}×{kp.cols} window's kernel was tiled again")
-    return kern
 
 
 def _prune_stand_ins(model: DiagnosisModel, values: Values, ev: Evaluation, named: list[str], ln_n: float,

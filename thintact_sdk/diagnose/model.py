@@ -41,6 +41,18 @@ SimulateFn = Callable[[Profile, np.ndarray], np.ndarray]
 Values = dict[str, np.ndarray]
 
 
+def optical_physics(profile: Profile, values: Values) -> dict[str, dict[str, Any]]:
+    """The ``physics`` section the simulator gets for effect ``values`` on ``profile``: the
+    profile's own optical effects (and any it names that the diagnosis does not fit), with the
+    optical effects of ``values`` set or added."""
+    phys = {k: v for k, v in profile.physics.items() if k not in CANDIDATES or CANDIDATES[k].domain == "optical"}
+    for name, vec in values.items():
+        cand = CANDIDATES[name]
+        if cand.domain == "optical":
+            phys[name] = cand.to_params(vec, profile)
+    return phys
+
+
 def default_simulate(profile: Profile, scenes: np.ndarray) -> np.ndarray:
     """Noiseless irradiance of every scene from the project's simulator."""
     from thintact_sdk.imaging.simulator import Simulator
@@ -128,7 +140,6 @@ class DiagnosisModel:
             self.fit_mask &= ~exclude[None, :, :, None]
         self.n_fit = int(self.fit_mask.sum())
         self._bases: dict[str, np.ndarray] = {}
-        self.base_physics = dict(self.profile.physics)
         self.weights = np.zeros_like(m)
         self.set_reference(None)
 
@@ -154,12 +165,7 @@ class DiagnosisModel:
     # ------------------------------------------------------------------ simulation
     def optical_physics(self, values: Values) -> dict[str, dict[str, Any]]:
         """The ``physics`` section handed to the simulator for these values."""
-        phys = {k: v for k, v in self.base_physics.items() if k not in CANDIDATES or CANDIDATES[k].domain == "optical"}
-        for name, vec in values.items():
-            cand = CANDIDATES[name]
-            if cand.domain == "optical":
-                phys[name] = cand.to_params(vec, self.profile)
-        return phys
+        return optical_physics(self.profile, values)
 
     def irradiance(self, values: Values) -> np.ndarray:
         """``F × R × S × C`` simulator irradiance for the optical part of ``values``."""

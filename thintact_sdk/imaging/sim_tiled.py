@@ -173,6 +173,14 @@ def window_params(kp: KernelParams, row0: int, row1: int, col0: int, col1: int) 
                    col_offset_px=kp.col_offset_px + (col0 + col1) / 2 - kp.cols / 2)
 
 
+def spread_windows(spans: list[tuple[int, int, int, int]], n: int) -> list[tuple[int, int, int, int]]:
+    """``n`` of ``spans`` (all when fewer) spread evenly over the list: a row-major window plan
+    gives windows at its start, middle and end, so across the sensor's rows and columns,
+    centre and edges."""
+    picks = sorted({int(round(i)) for i in np.linspace(0, len(spans) - 1, min(n, len(spans)))})
+    return [spans[i] for i in picks]
+
+
 def split_axis(n: int, parts: int) -> list[tuple[int, int]]:
     """``parts`` contiguous ``(start, stop)`` ranges of ``0..n`` as equal as integers allow."""
     edges = [round(i * n / parts) for i in range(parts + 1)]

@@ -170,6 +170,15 @@ def build_separable_kernel(kp: KernelParams) -> SeparableKernel | TiledKernel:
     return SeparableKernel(per_channel, info)
 
 
+def build_window_kernel(kp: KernelParams) -> SeparableKernel:
+    """The kernel of one sensor window (``kp`` from :func:`~thintact_sdk.imaging.sim_tiled.window_params`)
+    whose family is under the window limit, as one separable kernel (never tiled again)."""
+    kern = build_separable_kernel(kp)
+    if not isinstance(kern, SeparableKernel):
+        raise ThinTactError(f"internal: the {kp.rows}×{kp.cols} window's kernel was tiled again")
+    return kern
+
+
 def _build_rotated_kernel(kp: KernelParams, exp: SeparableExpansion,
                           info: dict[str, float]) -> SeparableKernel | TiledKernel:
     """Separable kernel of a rotated mask (:mod:`~thintact_sdk.imaging.sim_rotated`), with
@@ -427,6 +436,34 @@ class Simulator(ImagingModel):
         """Stages 1-3: ``F × N × M × C`` → ``F × R × S × C`` linear signal (simulator units)."""
         x = self._scene_stage(self._check(scenes))
         return self._signal_stage(self.kernel.apply(x, self.precision))
+
+    def linear_window(self, scenes: np.ndarray, span: tuple[int, int, int, int]) -> np.ndarray:
+        """Stages 1-3 on sensor rows ``row0:row1`` and columns ``col0:col1`` only (``span``):
+        ``F × N × M × C`` → ``F × (row1-row0) × (col1-col0) × C`` linear signal (simulator
+        units), the same numbers as those pixels of :meth:`linear_batch` (to the compression
+        tolerance). The window's own kernel is built for the call and dropped (a window of a
+        rotated mask whose whole-sensor kernel is refused builds in seconds; one refused for
+        its terms is built as its quadrants, :func:`~thintact_sdk.imaging.sim_tiled.build_window_pieces`).
+
+        Raises
+        ------
+        ThinTactError
+            When an effect after the kernel reads beyond its pixel (``reads_beyond_pixel``:
+            a sensor blur, veiling glare), or the kernel has no windows (refraction).
+        """
+        for name in self.physics:
+            beyond = EFFECTS[name].reads_beyond_pixel
+            if beyond is not None and EFFECTS[name].stage != "kernel":
+                raise ThinTactError(f"physics: {name} gives each pixel {beyond}, so a window of the "
+                                    "sensor cannot be simulated alone")
+        if not self.separable:
+            raise ThinTactError("physics: the direct (non-separable) kernel has no sensor windows")
+        r0, r1, c0, c1 = span
+        x = self._scene_stage(self._check(scenes))
+        out = np.empty((x.shape[0], r1 - r0, c1 - c0, x.shape[3]))
+        for w in sim_tiled.build_window_pieces(self.kernel_params, span, build_window_kernel):
+            out[:, w.row0 - r0 : w.row1 - r0, w.col0 - c0 : w.col1 - c0] = w.kernel.apply(x, self.precision)
+        return self._signal_stage(out)
 
     # -- public API -----------------------------------------------------------------------
     def reference_gain(self, white_level_dn: float | None = None) -> float:

@@ -251,6 +251,10 @@ class EffectSpec:
         ``{other effect: what recording tells the two apart}``.
     fit
         How the diagnosis fits it (None: the diagnosis does not try it).
+    reads_beyond_pixel
+        For an effect after the kernel: what a pixel's value takes from outside the pixel
+        itself, in words (None: nothing, so a window of the sensor can be evaluated alone,
+        e.g. :meth:`~thintact_sdk.imaging.simulator.Simulator.linear_window`).
     """
 
     name: str
@@ -265,6 +269,7 @@ class EffectSpec:
     describe: Callable[[Params, DeviceProfile], str] | None = None
     distinguish: dict[str, str] = field(default_factory=dict)
     fit: FitSpec | None = None
+    reads_beyond_pixel: str | None = None
 
     def __post_init__(self) -> None:
         if self.stage not in STAGES:

@@ -55,4 +55,5 @@ SPEC = EffectSpec(
         "single-colour frames: diffraction blurs red more than blue, pixel crosstalk is colour-blind"
     )},
     fit=scalar_fit("sigma_um", 0.0, 8.0, signed=False),
+    reads_beyond_pixel="light from its neighbouring pixels",
 )

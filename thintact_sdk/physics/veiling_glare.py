@@ -62,4 +62,5 @@ SPEC = EffectSpec(
         "does not"
     )},
     fit=scalar_fit("fraction", 0.0, 0.03, signed=False, domain="post"),
+    reads_beyond_pixel="a share of the whole frame's mean signal",
 )

@@ -72,6 +72,7 @@ def run(args: argparse.Namespace) -> int:
     from thintact_sdk.diagnose.outputs import write_outputs
     from thintact_sdk.diagnose.run import known_candidates
     from thintact_sdk.diagnose.unbinned import UnbinnedInput
+    from thintact_sdk.diagnose.window_check import window_check
 
     out = claim_output(args.out, "directory", force=args.force)
     con = Console(stderr=True, quiet=args.quiet)
@@ -122,7 +123,9 @@ def run(args: argparse.Namespace) -> int:
             con.print("evaluating the fit on the unbinned recording")
             stage = d.unbinned
             if d.unbinned_skipped:
-                rep["full_size"] = {"not_evaluated": d.unbinned_skipped}
+                con.print("the whole sensor's kernel is refused: checking the fit on windows of it")
+                rep["full_size"] = {"not_evaluated": d.unbinned_skipped,
+                                    "windows": window_check(full_data, d.selection.values, args.sys_frac).to_json()}
             elif stage is not None and stage.check and not (stage.selection and stage.selection.rounds) \
                     and not stage.refitted and not stage.replaced:
                 rep["full_size"] = {"final": dict(stage.check)}  # the stage's own evaluation of this model
@@ -142,7 +145,13 @@ def run(args: argparse.Namespace) -> int:
         ff = rep["full_size"]["final"]
         print(f"unbinned: final rms {ff['rms_dn']:.2f} DN, chi2/dof {ff['chi2_per_dof']:.3f}")
     elif "full_size" in rep:
-        print(f"unbinned: not evaluated ({rep['full_size']['not_evaluated']})")
+        print(f"unbinned: the whole sensor not evaluated ({rep['full_size']['not_evaluated']})")
+        win = rep["full_size"]["windows"]
+        if "not_evaluated" in win:
+            print(f"  on windows: not evaluated either ({win['not_evaluated']})")
+        else:
+            print(f"  on {win['where']}: rms {win['rms_dn']:.2f} DN, chi2/dof {win['chi2_per_dof']:.3f} "
+                  f"({win['excess_z']:+.1f} standard deviations from the noise)")
     coarse_rep = rep.get("binned", {}).get("coarse_angle")
     if coarse_rep:
         print(f"mask angle: {coarse_rep['summary']}")
