@@ -13,8 +13,9 @@ a few frames: each window is a small recording of its own, with its own gains an
 closed-form terms refitted (as the full-size check refits them), the effects' parameters as
 fitted. A window's own gains can absorb an error that is smooth over the window, but such
 an error is as plain on the binned data, where the fit was made with every pixel; what the
-windows add is structure finer than a block, which no gain absorbs. Effects whose pixels read beyond themselves (a sensor blur, veiling glare:
-``reads_beyond_pixel``) cannot be evaluated on a window alone; the check then says so.
+windows add is structure finer than a block, which no gain absorbs. Effects whose pixels
+read beyond themselves (a sensor blur, veiling glare: ``reads_beyond_pixel``) cannot be
+evaluated on a window alone; the check then says so.
 """
 
 from __future__ import annotations
@@ -108,8 +109,8 @@ def window_check(data: DiagnosisData, values: Values, sys_frac: float = 1e-3,
     try:
         spans = streamed_rotated_kernel(kp).spans
     except ThinTactError:  # not a rotated kernel: a plain grid of windows
-        parts_r, parts_c = (max(1, min(g, n // MIN_WINDOW_SIDE)) for g, n in zip(PLAIN_GRID, (kp.rows, kp.cols),
-                                                                                   strict=True))
+        parts_r = max(1, min(PLAIN_GRID[0], kp.rows // MIN_WINDOW_SIDE))
+        parts_c = max(1, min(PLAIN_GRID[1], kp.cols // MIN_WINDOW_SIDE))
         spans = [(r0, r1, c0, c1) for r0, r1 in split_axis(kp.rows, parts_r) for c0, c1 in split_axis(kp.cols, parts_c)]
     picked = spread_windows(spans, n_windows)
     parts: list[FitStats] = []
