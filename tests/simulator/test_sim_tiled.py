@@ -226,7 +226,7 @@ def test_linear_window_is_the_whole_simulation_on_its_pixels(physics):
 
 
 @pytest.mark.parametrize(("physics", "words"), [
-    ({"sensor_blur": {"sigma_um": 5.0}}, "sensor_blur gives each pixel light from its neighbouring pixels"),
+    ({"sensor_blur": {"sigma_um": 5.0}}, "sensor_blur gives each pixel light from its neighbouring pixels: a window"),
     ({"veiling_glare": {"fraction": 0.02}}, "veiling_glare gives each pixel a share of the whole frame's mean"),
     ({"refraction": {"n_scene_side": 1.4}}, "straight rays only"),
 ])

@@ -36,7 +36,7 @@ from thintact_sdk.diagnose.model import (
 )
 from thintact_sdk.diagnose.stats import FitStats, default_variance_fn
 from thintact_sdk.errors import ThinTactError
-from thintact_sdk.physics import EFFECTS
+from thintact_sdk.physics import window_blocker
 from thintact_sdk.profile import Profile
 
 PLAIN_GRID = (6, 8)
@@ -97,12 +97,9 @@ def window_check(data: DiagnosisData, values: Values, sys_frac: float = 1e-3,
     from thintact_sdk.physics import resolve_physics
 
     prof = data.profile
-    named = [n for n in (*prof.physics, *values)
-             if n in EFFECTS and EFFECTS[n].stage != "kernel" and EFFECTS[n].reads_beyond_pixel]
-    if named:
-        name = named[0]
-        return WindowCheck(None, note=f"{name} gives each pixel {EFFECTS[name].reads_beyond_pixel}: "
-                                      "a window of the sensor cannot be evaluated alone")
+    blocker = window_blocker([*prof.physics, *values])
+    if blocker is not None:
+        return WindowCheck(None, note=blocker)
     sub = subset_frames(data, n_frames)
     phys = optical_physics(prof, values)
     kp = kernel_params(prof.with_physics(phys), resolve_physics(phys))

@@ -61,6 +61,7 @@ from thintact_sdk.physics import (
     mask_leakage,
     resolve_physics,
     stage_effects,
+    window_blocker,
 )
 from thintact_sdk.profile import Profile
 
@@ -451,11 +452,9 @@ class Simulator(ImagingModel):
             When an effect after the kernel reads beyond its pixel (``reads_beyond_pixel``:
             a sensor blur, veiling glare), or the kernel has no windows (refraction).
         """
-        for name in self.physics:
-            beyond = EFFECTS[name].reads_beyond_pixel
-            if beyond is not None and EFFECTS[name].stage != "kernel":
-                raise ThinTactError(f"physics: {name} gives each pixel {beyond}, so a window of the "
-                                    "sensor cannot be simulated alone")
+        blocker = window_blocker(self.physics)
+        if blocker is not None:
+            raise ThinTactError(f"physics: {blocker}")
         if not self.separable:
             raise ThinTactError("physics: the direct (non-separable) kernel has no sensor windows")
         r0, r1, c0, c1 = span

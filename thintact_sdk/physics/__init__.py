@@ -12,6 +12,7 @@ A new effect is one module with a ``SPEC``, added with :func:`register_effect`.
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from types import ModuleType
 from typing import Any
 
@@ -47,6 +48,7 @@ from thintact_sdk.physics._spec import (
 __all__ = [
     "EFFECTS", "STAGES", "DataSearch", "EffectSpec", "FitSpec", "ParamSpec", "PhysicsError",
     "Proxy", "Stage", "register_effect", "resolve_physics", "stage_effects", "unregister_effect",
+    "window_blocker",
 ]
 
 
@@ -88,6 +90,17 @@ def unregister_effect(name: str) -> None:
     if name in _BUILT_IN:
         raise PhysicsError(f"unregister_effect: {name!r} is a CONTRACTS §5 effect")
     EFFECTS.pop(name, None)
+
+
+def window_blocker(names: Iterable[str]) -> str | None:
+    """Why a window of the sensor cannot be evaluated alone with the effects ``names`` (the
+    first after the kernel that reads beyond its pixel, ``EffectSpec.reads_beyond_pixel``),
+    or None when it can. Names that are no effect are ignored."""
+    for name in names:
+        spec = EFFECTS.get(name)
+        if spec is not None and spec.stage != "kernel" and spec.reads_beyond_pixel is not None:
+            return f"{name} gives each pixel {spec.reads_beyond_pixel}: a window of the sensor cannot be evaluated alone"
+    return None
 
 
 def stage_effects(stage: Stage) -> list[EffectSpec]:
