@@ -168,5 +168,5 @@ def test_record_onto_a_full_filesystem(tiny_tmpfs, capsys):
     assert "Traceback" not in err
     log = McapLog(out, recover=True)
     raws = list(log.raw_frames())
-    assert 20 <= len(raws) < 80  # the 4 MiB chunks hold 25 frames
+    assert 19 <= len(raws) < 80  # a 4 MiB chunk holds 19 frames (raw + rgb8 preview)
     assert all(r.data.shape == (256, 320) for r in raws)

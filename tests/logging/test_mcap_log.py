@@ -32,8 +32,8 @@ def _decoded(path):
 
 
 def test_standard_readers_decode_every_topic_with_camera_stamps(tmp_path):
-    path = tmp_path / "log.mcap"
-    stats = _write(path)
+    path = tmp_path / "log.mcap"  # the layout of older logs: capture clock, DN as delivered
+    stats = _write(path, stamps="monotonic", msb_align=False, raw_preview=False)
     assert stats.finished and stats.frames == N
     with open(path, "rb") as f:  # uncompressed chunks by default
         assert {ci.compression for ci in make_reader(f).get_summary().chunk_indexes} == {""}
@@ -80,7 +80,7 @@ def test_standard_readers_decode_every_topic_with_camera_stamps(tmp_path):
 
 def test_summary_chunk_index_and_statistics(tmp_path):
     path = tmp_path / "log.mcap"
-    _write(path, chunk_bytes=200_000, compression="lz4")
+    _write(path, chunk_bytes=200_000, compression="lz4", stamps="monotonic", raw_preview=False)
     with open(path, "rb") as f:
         summary = make_reader(f).get_summary()
     assert summary is not None
@@ -104,9 +104,11 @@ def test_profile_calibration_and_metadata_travel_with_the_log(tmp_path):
     log = McapLog(path)
     meta = log.metadata["thintact"]
     assert meta["format"] == "thintact-mcap/1" and meta["profile"] == "virtual-mini"
-    assert meta["depth_unit"] == "mm" and "monotonic" in meta["clock"]
-    assert int(meta["wall_minus_clock_ns"]) > 0
-    assert log.metadata["thintact.raw"] == {"pixel_format": "BayerRG12", "encoding": "bayer_rggb16"}
+    assert meta["depth_unit"] == "mm" and meta["clock"].startswith("wall clock")
+    assert meta["stamps"] == "wall"
+    assert int(meta["wall_minus_clock_ns"]) == int(meta["stamp_minus_capture_ns"]) > 0
+    assert log.metadata["thintact.raw"] == {"pixel_format": "BayerRG12", "encoding": "bayer_rggb16",
+                                            "bit_depth": "12", "msb_shift": "4"}
     assert json.loads(log.attachments["profile.json"]) == mini_profile().contract_dict()
     assert "calibration/calibration.json" in log.attachments
     assert "calibration/system_matrices.npz" in log.attachments

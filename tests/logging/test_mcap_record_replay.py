@@ -41,7 +41,8 @@ def test_record_mcap_from_the_virtual_sensor(tmp_path, capsys):
     counts = log.message_counts()
     # the interpreter estimates force on every frame (zero without contact), slip only in contact
     assert counts.pop("/thintact/slip", 0) <= 3
-    assert counts == {t: 3 for t in ("/thintact/raw", "/thintact/image", "/thintact/depth",
+    assert counts == {t: 3 for t in ("/thintact/raw", "/thintact/raw_preview", "/thintact/image",
+                                     "/thintact/depth",
                                      "/thintact/markers", "/thintact/contact", "/thintact/force")}
     raws, frames = list(log.raw_frames()), list(log.tactile_frames())
     assert [r.frame_id for r in raws] == [f.frame_id for f in frames]

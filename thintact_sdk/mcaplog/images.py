@@ -13,6 +13,7 @@ Encodings used by a ThinTact log:
 
 from __future__ import annotations
 
+import re
 from typing import Any
 
 import numpy as np
@@ -152,3 +153,68 @@ def decode_image(msg: Any) -> np.ndarray:
             f"expected {int(np.prod(shape)) * np.dtype(dtype).itemsize}"
         )
     return flat.reshape(shape).astype(dtype, copy=False)
+
+
+# -- raw frames that common viewers display ------------------------------------------------
+VIEWER_ENCODINGS = ("mono8", "mono16", "rgb8", "bayer_rggb8", "bayer_bggr8", "bayer_grbg8",
+                    "bayer_gbrg8")
+"""Raw encodings that open-source Foxglove / Lichtblick decode; other raw encodings
+(``bayer_*16``, ``rgb16``) get a ``/thintact/raw_preview`` channel beside the raw."""
+
+
+def bit_depth(pixel_format: str, dtype: np.dtype[Any]) -> int:
+    """Significant bits of a frame: the number in its pixel format, at most the dtype's width.
+
+    ``BayerRG12`` → 12, ``Mono10`` → 10, ``RGB8`` → 8; a name without a number (or one
+    larger than the dtype) → the dtype's width (8 or 16).
+    """
+    width = 8 * np.dtype(dtype).itemsize
+    digits = re.search(r"(\d+)", pixel_format)
+    bits = int(digits.group(1)) if digits else width
+    return bits if 0 < bits <= width else width
+
+
+def msb_align(data: np.ndarray, bits: int, what: str) -> tuple[np.ndarray, int]:
+    """``data`` shifted left so its ``bits`` significant bits fill the dtype; ``(array, shift)``.
+
+    A uint16 frame of 12-bit values becomes ``value << 4`` (a viewer that keeps the high
+    byte, or scales 0..65535, shows it at full range); readers shift right by ``shift``
+    (recorded in the log) to recover the exact DN. uint8 and float frames: shift 0.
+
+    Raises
+    ------
+    RecordingError
+        When a value does not fit in ``bits`` (the pixel format understates the data).
+    """
+    if data.dtype != np.uint16 or bits >= 16:
+        return data, 0
+    shift = 16 - bits
+    if int(data.max(initial=0)) >> bits:
+        raise RecordingError(
+            f"{what}: value {int(data.max())} does not fit the {bits} bits its pixel format "
+            "names; say the right pixel format (e.g. camera.settings.pixel_format: BayerRG16)")
+    return np.left_shift(data, shift), shift
+
+
+def preview_rgb8(data: np.ndarray, pixel_format: str, bits: int) -> np.ndarray:
+    """An ``rgb8`` preview of a raw frame (DN scaled so ``2**bits - 1`` is 255).
+
+    Bayer mosaics are binned to half resolution (R, mean G, B of each 2 × 2 cell, no
+    interpolation); mono frames are repeated in three channels; RGB frames are scaled.
+    """
+    from thintact_sdk.bayer import bin_bayer, pattern_from_pixel_format
+
+    pattern = pattern_from_pixel_format(pixel_format) if data.ndim == 2 else None
+    if pattern is not None and data.shape[0] % 2 == 0 and data.shape[1] % 2 == 0:
+        rgb = bin_bayer(data, pattern)
+    elif data.ndim == 2:
+        rgb = np.repeat(data[..., None].astype(np.float32), 3, axis=2)
+    else:
+        rgb = data[..., :3].astype(np.float32)
+    scale = np.float32(255.0 / float(2**bits - 1))
+    return np.clip(np.rint(rgb * scale), 0, 255).astype(np.uint8)
+
+
+def needs_preview(encoding: str) -> bool:
+    """True for a raw integer encoding that open-source viewers cannot decode."""
+    return encoding not in VIEWER_ENCODINGS and not encoding.startswith("32FC")

@@ -172,6 +172,28 @@ class McapLog:
                 yield LogMessage(chan.topic, schema_rec.name if schema_rec else "",
                                  record.log_time, record.sequence, decode(record.data))
 
+    @property
+    def stamp_offset_ns(self) -> int:
+        """Stamp minus capture-clock time (``time.monotonic_ns``) of every frame, ns.
+
+        ``wall_minus_clock_ns`` for a log stamped in wall time (the default since
+        ``stamps`` metadata exists), 0 for one stamped on the capture clock (older logs).
+        """
+        meta = self.metadata.get("thintact", {})
+        text = meta.get("stamp_minus_capture_ns", "0")
+        try:
+            return int(text)
+        except ValueError:
+            raise RecordingError(f"{self.path}: metadata thintact.stamp_minus_capture_ns is "
+                                 f"{text!r}, not an integer") from None
+
+    def _msb_shift(self) -> int:
+        text = self.metadata.get("thintact.raw", {}).get("msb_shift", "0")
+        if not text.isdigit() or int(text) > 15:
+            raise RecordingError(f"{self.path}: metadata thintact.raw.msb_shift is {text!r}, "
+                                 "not 0..15")
+        return int(text)
+
     def message_counts(self) -> dict[str, int]:
         """Messages per topic (from the summary statistics, else by reading the file)."""
         if self.summary is not None and self.summary.statistics is not None:
@@ -183,36 +205,47 @@ class McapLog:
         return out
 
     def raw_frames(self) -> Iterator[RawFrame]:
-        """The ``/thintact/raw`` frames as the camera delivered them."""
+        """The ``/thintact/raw`` frames as the camera delivered them (exact DN).
+
+        The MSB alignment of 16-bit data is undone (``msb_shift`` metadata) and
+        ``timestamp_ns`` is the capture clock (stamp minus :attr:`stamp_offset_ns`), as
+        the live SDK delivers it; ``meta["stamp_ns"]`` is the header stamp (wall time).
+        """
         pixel_format = self.metadata.get("thintact.raw", {}).get("pixel_format")
+        shift, offset = self._msb_shift(), self.stamp_offset_ns
         for m in self.messages([schemas.RAW.name]):
             enc = str(m.message.encoding)
             fmt = pixel_format if pixel_format else images.pixel_format_of(enc)
-            yield RawFrame(data=images.decode_image(m.message),
-                           timestamp_ns=images.stamp_ns(m.message.header),
-                           frame_id=m.sequence, pixel_format=fmt)
+            data = images.decode_image(m.message)
+            if shift and data.dtype == np.uint16:
+                data = np.right_shift(data, shift)
+            stamp = images.stamp_ns(m.message.header)
+            yield RawFrame(data=data, timestamp_ns=stamp - offset,
+                           frame_id=m.sequence, pixel_format=fmt, meta={"stamp_ns": stamp})
 
     def tactile_frames(self) -> Iterator[TactileFrame]:
         """The tactile frames: image, depth, markers, contact (force, slip when logged).
 
         In a torn log the last frame is dropped when the tear cut its topics short.
+        ``timestamp_ns`` is the capture clock, as in :meth:`raw_frames`.
         """
-        tactile = [t.name for t in schemas.TOPICS if t is not schemas.RAW]
+        offset = self.stamp_offset_ns
+        tactile = [t.name for t in schemas.TOPICS if t not in (schemas.RAW, schemas.RAW_PREVIEW)]
         group: dict[str, Any] = {}
         stamp: int | None = None
         for m in self.messages(tactile):
             if stamp is not None and m.log_time_ns != stamp:
-                yield _tactile_frame(group, stamp, self.path)
+                yield _tactile_frame(group, stamp, self.path, offset)
                 group = {}
             stamp = m.log_time_ns
             group[m.topic] = m.message
         if group and stamp is not None:
             if self.torn is not None and schemas.CONTACT_TOPIC.name not in group:
                 return  # the torn tail cut the last frame's topics short
-            yield _tactile_frame(group, stamp, self.path)
+            yield _tactile_frame(group, stamp, self.path, offset)
 
 
-def _tactile_frame(group: dict[str, Any], stamp: int, path: Path) -> TactileFrame:
+def _tactile_frame(group: dict[str, Any], stamp: int, path: Path, offset: int = 0) -> TactileFrame:
     missing = [t.name for t in (schemas.IMAGE_TOPIC, schemas.DEPTH, schemas.MARKERS_TOPIC,
                                 schemas.CONTACT_TOPIC) if t.name not in group]
     if missing:
@@ -231,7 +264,7 @@ def _tactile_frame(group: dict[str, Any], stamp: int, path: Path) -> TactileFram
         marker_displacements_mm=np.asarray(markers.displacements_mm, np.float32).reshape(-1, 2),
         contact=bool(contact.contact),
         contact_area_mm2=float(contact.contact_area_mm2),
-        timestamp_ns=stamp,
+        timestamp_ns=stamp - offset,
         frame_id=int(contact.camera_frame_id),
         shear_direction_rad=float(contact.shear_direction_rad),
         latency_ms=None if np.isnan(latency) else latency,

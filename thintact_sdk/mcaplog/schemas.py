@@ -107,7 +107,11 @@ class Topic:
 
 
 RAW = Topic("/thintact/raw", IMAGE,
-            "the camera frame as delivered (Bayer mosaic: bayer_rggb16 etc., or mono/rgb)")
+            "the camera frame (Bayer mosaic: bayer_rggb16 etc., or mono/rgb); 16-bit data "
+            "MSB-aligned, the shift in the thintact.raw metadata")
+RAW_PREVIEW = Topic("/thintact/raw_preview", IMAGE,
+                    "rgb8 preview of a raw frame viewers cannot decode (bayer_*16, rgb16): "
+                    "Bayer binned to half resolution")
 IMAGE_TOPIC = Topic("/thintact/image", IMAGE,
                     "reconstructed membrane image (rgb8, or 32FC3 display units)")
 DEPTH = Topic("/thintact/depth", IMAGE, "indentation depth, 32FC1, millimetres")
@@ -117,6 +121,6 @@ FORCE = Topic("/thintact/force", WRENCH_STAMPED,
               "estimated contact force [Fx, Fy, Fz] in newtons (torque 0: not estimated)")
 SLIP_TOPIC = Topic("/thintact/slip", SLIP, "slip ratio, when the frame has one")
 
-TOPICS: tuple[Topic, ...] = (RAW, IMAGE_TOPIC, DEPTH, MARKERS_TOPIC, CONTACT_TOPIC, FORCE,
+TOPICS: tuple[Topic, ...] = (RAW, RAW_PREVIEW, IMAGE_TOPIC, DEPTH, MARKERS_TOPIC, CONTACT_TOPIC, FORCE,
                              SLIP_TOPIC)
 """Every topic a ThinTact log may hold (a topic with no message has no channel)."""

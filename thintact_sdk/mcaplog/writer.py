@@ -35,6 +35,11 @@ from thintact_sdk.profile import Profile
 COMPRESSIONS = ("none", "lz4", "zstd")
 DEFAULT_CHUNK_BYTES = 4 * 2**20
 CLOCK = "host monotonic clock, ns (time.monotonic_ns); wall time = stamp + wall_minus_clock_ns"
+"""``clock`` metadata of a log stamped on the capture clock (``stamps="monotonic"``, older logs)."""
+WALL_CLOCK = ("wall clock, ns since the Unix epoch (ROS time); capture clock (time.monotonic_ns) "
+              "= stamp - wall_minus_clock_ns")
+"""``clock`` metadata of a log stamped in wall time (the default)."""
+STAMPS = ("wall", "monotonic")
 
 
 class _ChunkSink:
@@ -97,6 +102,19 @@ class McapLogWriter:
         (exact float32 display units).
     attach_calibration
         Attach the decoder's calibration bundle and the tactile LUT (default true).
+    stamps
+        ``"wall"`` (default): header stamps and log times in wall/ROS time, ns since the
+        Unix epoch, so the log lines up with a robot's bag: each frame's capture time
+        (``time.monotonic_ns``) plus ``wall_minus_clock_ns``, taken once when the writer
+        opens (metadata ``thintact``; frames are not re-stamped from a jumping wall clock).
+        ``"monotonic"``: the capture clock itself (the stamps of older logs).
+    msb_align
+        Shift 16-bit raw frames of fewer significant bits (``BayerRG12``: 12) left so they
+        fill 16 bits (default true); the shift is the ``msb_shift`` of the ``thintact.raw``
+        metadata and :class:`~thintact_sdk.mcaplog.McapLog` undoes it.
+    raw_preview
+        Also write ``/thintact/raw_preview`` (``rgb8``) for raw frames common viewers cannot
+        decode (``bayer_*16``, ``rgb16``). Default None: exactly for those; False: never.
 
     Raises
     ------
@@ -114,6 +132,9 @@ class McapLogWriter:
         chunk_bytes: int = DEFAULT_CHUNK_BYTES,
         image_encoding: str = "rgb8",
         attach_calibration: bool = True,
+        stamps: str = "wall",
+        msb_align: bool = True,
+        raw_preview: bool | None = None,
     ) -> None:
         from mcap.writer import CompressionType
         from mcap_ros2.writer import Writer
@@ -122,6 +143,14 @@ class McapLogWriter:
             raise RecordingError(f"compression must be one of {', '.join(COMPRESSIONS)}, "
                                  f"not {compression!r}")
         images.check_reconstruction_encoding(image_encoding)
+        if stamps not in STAMPS:
+            raise RecordingError(f"stamps must be 'wall' or 'monotonic', not {stamps!r}")
+        self.wall_minus_clock_ns = time.time_ns() - time.monotonic_ns()
+        self.stamp_offset_ns = self.wall_minus_clock_ns if stamps == "wall" else 0
+        """Added to every capture-clock time to give its stamp."""
+        self.stamps = stamps
+        self.msb_align = msb_align
+        self.raw_preview = raw_preview
         self.profile = profile
         self.image_encoding = image_encoding
         self.frame_id = profile.name
@@ -154,8 +183,10 @@ class McapLogWriter:
             "format": schemas.LOG_FORMAT,
             "sdk_version": __version__,
             "profile": self.profile.name,
-            "clock": CLOCK,
-            "wall_minus_clock_ns": str(time.time_ns() - time.monotonic_ns()),
+            "clock": WALL_CLOCK if self.stamps == "wall" else CLOCK,
+            "stamps": self.stamps,
+            "wall_minus_clock_ns": str(self.wall_minus_clock_ns),
+            "stamp_minus_capture_ns": str(self.stamp_offset_ns),
             "depth_unit": "mm",
             "reconstruction_encoding": self.image_encoding,
         })
@@ -189,16 +220,20 @@ class McapLogWriter:
         self.stats.messages += 1
 
     def write_raw(self, raw: RawFrame) -> None:
-        """Write the camera frame to ``/thintact/raw`` (stamp: ``raw.timestamp_ns``)."""
-        encoding = images.raw_encoding(raw.data, raw.pixel_format)
-        msg = images.image_message(raw.data, encoding, raw.timestamp_ns, self.frame_id)
+        """Write the camera frame to ``/thintact/raw`` (and ``/thintact/raw_preview``).
+
+        Stamp: ``raw.timestamp_ns`` plus :attr:`stamp_offset_ns`.
+        """
+        stamp = raw.timestamp_ns + self.stamp_offset_ns
+        messages, meta = raw_messages(raw, self.frame_id, stamp, msb_align=self.msb_align,
+                                      preview=self.raw_preview)
 
         def write() -> None:
             if raw.pixel_format not in self._raw_formats:
                 self._raw_formats.add(raw.pixel_format)
-                self._writer.add_metadata("thintact.raw",
-                                          {"pixel_format": raw.pixel_format, "encoding": encoding})
-            self._message(schemas.RAW, msg, raw.timestamp_ns, raw.frame_id)
+                self._writer.add_metadata("thintact.raw", meta)
+            for topic, msg in messages:
+                self._message(topic, msg, stamp, raw.frame_id)
             self.stats.frames += 1
 
         self._guard(write)
@@ -211,25 +246,8 @@ class McapLogWriter:
         ``/thintact/slip`` when ``frame.slip_ratio`` is set. ``count_frame``: count it in
         :attr:`stats` ``.frames`` (for logs without raw frames).
         """
-        stamp, seq, fid = frame.timestamp_ns, frame.frame_id, self.frame_id
-        image = images.reconstruction_array(frame.image, self.image_encoding)
-        messages: list[tuple[schemas.Topic, dict[str, Any]]] = [
-            (schemas.IMAGE_TOPIC, images.image_message(image, self.image_encoding, stamp, fid)),
-            (schemas.DEPTH, images.image_message(np.asarray(frame.depth_mm, np.float32),
-                                                 "32FC1", stamp, fid)),
-            (schemas.MARKERS_TOPIC, _markers_message(frame, fid)),
-            (schemas.CONTACT_TOPIC, _contact_message(frame, fid)),
-        ]
-        if frame.force_n is not None:
-            fx, fy, fz = (float(v) for v in np.asarray(frame.force_n, float).reshape(3))
-            messages.append((schemas.FORCE, {
-                "header": images.header(stamp, fid),
-                "wrench": {"force": {"x": fx, "y": fy, "z": fz},
-                           "torque": {"x": 0.0, "y": 0.0, "z": 0.0}},
-            }))
-        if frame.slip_ratio is not None:
-            messages.append((schemas.SLIP_TOPIC, {"header": images.header(stamp, fid),
-                                                  "slip_ratio": float(frame.slip_ratio)}))
+        stamp, seq = frame.timestamp_ns + self.stamp_offset_ns, frame.frame_id
+        messages = tactile_messages(frame, self.frame_id, stamp, self.image_encoding)
 
         def write() -> None:
             for topic, msg in messages:
@@ -276,24 +294,84 @@ class McapLogWriter:
         self.close()
 
 
-def _markers_message(frame: TactileFrame, frame_id: str) -> dict[str, Any]:
+Messages = list[tuple[schemas.Topic, dict[str, Any]]]
+"""``(topic, message dict for the ROS 2 encoder)`` pairs of one frame."""
+
+
+def raw_messages(raw: RawFrame, frame_id: str, stamp: int, *, msb_align: bool = True,
+                 preview: bool | None = None) -> tuple[Messages, dict[str, str]]:
+    """The raw topics of a camera frame and its ``thintact.raw`` metadata.
+
+    ``/thintact/raw`` (16-bit data MSB-aligned with ``msb_align``) and, with ``preview``
+    (None: when the encoding is one viewers cannot decode), ``/thintact/raw_preview``.
+    Shared by :class:`McapLogWriter` and the live server (:mod:`thintact_sdk.mcaplog.live`).
+
+    Raises
+    ------
+    RecordingError
+        For a frame without a ROS encoding, or values beyond its pixel format's bit depth.
+    """
+    encoding = images.raw_encoding(raw.data, raw.pixel_format)
+    bits = images.bit_depth(raw.pixel_format, raw.data.dtype)
+    data, shift = raw.data, 0
+    if msb_align:
+        data, shift = images.msb_align(raw.data, bits, f"raw frame {raw.frame_id} "
+                                       f"({raw.pixel_format})")
+    messages: Messages = [(schemas.RAW, images.image_message(data, encoding, stamp, frame_id))]
+    if preview or (preview is None and images.needs_preview(encoding)):
+        rgb = images.preview_rgb8(raw.data, raw.pixel_format, bits)
+        messages.append((schemas.RAW_PREVIEW, images.image_message(rgb, "rgb8", stamp, frame_id)))
+    meta = {"pixel_format": raw.pixel_format, "encoding": encoding, "bit_depth": str(bits),
+            "msb_shift": str(shift)}
+    return messages, meta
+
+
+def tactile_messages(frame: TactileFrame, frame_id: str, stamp: int,
+                     image_encoding: str = "rgb8") -> Messages:
+    """The tactile topics of ``frame``, every header stamped ``stamp`` (ns).
+
+    Shared by :class:`McapLogWriter` and the live server (:mod:`thintact_sdk.mcaplog.live`).
+    """
+    fid = frame_id
+    image = images.reconstruction_array(frame.image, image_encoding)
+    messages: Messages = [
+        (schemas.IMAGE_TOPIC, images.image_message(image, image_encoding, stamp, fid)),
+        (schemas.DEPTH, images.image_message(np.asarray(frame.depth_mm, np.float32),
+                                             "32FC1", stamp, fid)),
+        (schemas.MARKERS_TOPIC, _markers_message(frame, fid, stamp)),
+        (schemas.CONTACT_TOPIC, _contact_message(frame, fid, stamp)),
+    ]
+    if frame.force_n is not None:
+        fx, fy, fz = (float(v) for v in np.asarray(frame.force_n, float).reshape(3))
+        messages.append((schemas.FORCE, {
+            "header": images.header(stamp, fid),
+            "wrench": {"force": {"x": fx, "y": fy, "z": fz},
+                       "torque": {"x": 0.0, "y": 0.0, "z": 0.0}},
+        }))
+    if frame.slip_ratio is not None:
+        messages.append((schemas.SLIP_TOPIC, {"header": images.header(stamp, fid),
+                                              "slip_ratio": float(frame.slip_ratio)}))
+    return messages
+
+
+def _markers_message(frame: TactileFrame, frame_id: str, stamp: int) -> dict[str, Any]:
     pos = np.asarray(frame.marker_positions_mm, np.float32).reshape(-1, 2)
     disp = np.asarray(frame.marker_displacements_mm, np.float32).reshape(-1, 2)
     return {
-        "header": images.header(frame.timestamp_ns, frame_id),
+        "header": images.header(stamp, frame_id),
         "count": int(pos.shape[0]),
         "positions_mm": pos.ravel().tolist(),
         "displacements_mm": disp.ravel().tolist(),
     }
 
 
-def _contact_message(frame: TactileFrame, frame_id: str) -> dict[str, Any]:
+def _contact_message(frame: TactileFrame, frame_id: str, stamp: int) -> dict[str, Any]:
     disp = np.asarray(frame.marker_displacements_mm, np.float64).reshape(-1, 2)
     finite = disp[np.all(np.isfinite(disp), axis=1)]
     mean = finite.mean(axis=0) if len(finite) else np.zeros(2)
     depth = np.asarray(frame.depth_mm)
     return {
-        "header": images.header(frame.timestamp_ns, frame_id),
+        "header": images.header(stamp, frame_id),
         "camera_frame_id": int(frame.frame_id),
         "contact": bool(frame.contact),
         "contact_area_mm2": float(frame.contact_area_mm2),
