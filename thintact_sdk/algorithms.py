@@ -38,6 +38,8 @@ name                         what it is
 ``scene_for_channels``       an RGB (or grey) scene as the device's channels (mono, R/Gr/Gb/B)
 ``TactileSimulator``         tactile scenes of an indenter pressing the gel; ``Sphere``
 ``ball_radius_for_field``    a calibration ball sized to a field of view
+``simulate_loaded_press``    a press with its elastic force and partial slip; ``Elastomer``
+``calibration_roots``        where calibrations are looked up (user, ./calibrations, packaged)
 ===========================  ===============================================================
 """
 
@@ -73,6 +75,8 @@ _WHERE = {
     "ball_radius_for_field": "tactile.calibration",
     "Sphere": "tactile.indenters",
     "TactileSimulator": "tactile.simulate",
+    "simulate_loaded_press": "tactile.loaded_press", "Elastomer": "tactile.elastic",
+    "calibration_roots": "tactile.store",
 }
 _RENAMED = {"SCENE_LIBRARY": ("imaging.scenes", "LIBRARY")}
 

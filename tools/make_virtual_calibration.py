@@ -3,7 +3,7 @@
 
 Usage::
 
-    .venv/bin/python tools/make_virtual_calibration.py virtual-mini [--out calibrations] [--steps 60]
+    .venv/bin/python tools/make_virtual_calibration.py virtual-mini [--out thintact_sdk/data/calibrations] [--steps 60]
 
 The bundle (two-term fit of the simulator, trained joint filter, τ, validation metrics) goes
 to ``<out>/<profile>/<YYYYmmddTHHMMSS>/``; every file is float32 and compressed.
@@ -30,8 +30,10 @@ MAX_FILE_BYTES = 2 * 1024 * 1024
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("profile", help="profile name or file (virtual-mini, virtual-finger, ...)")
-    ap.add_argument("--out", default=str(Path(__file__).resolve().parents[1] / "calibrations"),
-                    help="root directory of calibration bundles (default: the repository's)")
+    ap.add_argument("--out", default=str(Path(__file__).resolve().parents[1] / "thintact_sdk" / "data"
+                                         / "calibrations"),
+                    help="root directory of calibration bundles (default: the packaged ones, "
+                         "thintact_sdk/data/calibrations)")
     ap.add_argument("--steps", type=int, default=60, help="Adam steps of filter training")
     ap.add_argument("--scenes", type=int, default=48, help="number of training scenes")
     ap.add_argument("--rank", type=int, default=4, help="rank of the spatial filter Φs")

@@ -44,7 +44,7 @@ def test_make_virtual_bundle_on_a_tiny_device(tmp_path) -> None:
 
 @pytest.mark.parametrize("name", ["virtual-mini", "virtual-finger"])
 def test_committed_virtual_bundles_load_and_decode(name) -> None:
-    device_dir = REPO / "calibrations" / name
+    device_dir = REPO / "thintact_sdk" / "data" / "calibrations" / name
     if not device_dir.is_dir():
         pytest.skip(f"no committed bundle for {name}")
     latest = find_latest(device_dir)

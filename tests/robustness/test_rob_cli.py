@@ -127,7 +127,7 @@ def test_out_is_checked_before_any_work(command: str, tiny: dict[str, Any], tmp_
 
 def test_calibrate_tactile_never_overwrites_the_shipped_lut(tmp_path: Path, monkeypatch: Any,
                                                              capfd: Any, repo_root: Path) -> None:
-    shipped = repo_root / "calibrations" / "virtual-finger" / "tactile" / "lut.npz"
+    shipped = repo_root / "thintact_sdk" / "data" / "calibrations" / "virtual-finger" / "tactile" / "lut.npz"
     before = hashlib.sha256(shipped.read_bytes()).hexdigest()
     monkeypatch.chdir(tmp_path)
     monkeypatch.delenv("THINTACT_CALIBRATION_PATH", raising=False)
@@ -268,6 +268,6 @@ def test_new_luts_go_to_the_users_calibrations_never_the_checkout(tmp_path: Path
     monkeypatch.chdir(tmp_path)
     monkeypatch.delenv("THINTACT_CALIBRATION_PATH", raising=False)
     assert user_calibrations_root() == tmp_path / "calibrations"
-    assert repo_root / "calibrations" in calibration_roots()  # still looked up there
+    assert calibration_roots()[-1] == repo_root / "thintact_sdk" / "data" / "calibrations"  # packaged, last
     monkeypatch.setenv("THINTACT_CALIBRATION_PATH", f"{tmp_path / 'a'}:{tmp_path / 'b'}")
     assert user_calibrations_root() == tmp_path / "a"

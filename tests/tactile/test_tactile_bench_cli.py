@@ -29,7 +29,8 @@ def test_latency_decoder_from_a_bundle_directory_or_an_in_memory_bundle():
     from thintact_sdk.profile import load_profile
 
     profile = load_profile("virtual-mini")
-    bundle_dir = find_latest(Path(__file__).resolve().parents[2] / "calibrations" / "virtual-mini")
+    bundle_dir = find_latest(Path(__file__).resolve().parents[2] / "thintact_sdk" / "data" / "calibrations"
+                             / "virtual-mini")
     dec, sm, how = _latency_decoder(profile, "t2s-closed-form", bundle_dir)
     assert dec.name == "t2s-closed-form" and str(bundle_dir) in how
     assert sm is not None and sm.sensor_shape == (128, 160)

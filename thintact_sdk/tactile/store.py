@@ -1,11 +1,12 @@
 """Where a device's tactile LUT lives: ``calibrations/<device>/tactile/lut.npz`` (+ ``.json``).
 
-Same roots as the decoders' calibration bundles: the first directory of
-``$THINTACT_CALIBRATION_PATH`` (``os.pathsep``-separated) when set, else ``./calibrations``
-when that directory exists in the working directory, else the ``calibrations/`` directory
-of the source checkout the SDK runs from. A LUT is looked up in all of them, in that order.
-New LUTs are written under :func:`user_calibrations_root` (never into the checkout's shipped
-``calibrations/`` unless that is the working directory's own).
+Same roots as the decoders' calibration bundles (:func:`calibration_roots`, in this order):
+every directory of ``$THINTACT_CALIBRATION_PATH`` (``os.pathsep``-separated) when set, then
+``./calibrations`` when that directory exists in the working directory, then the bundles
+shipped inside the package (:data:`PACKAGED_CALIBRATIONS`, ``thintact_sdk/data/calibrations``:
+the virtual devices' decoder bundles and tactile LUTs, so a ``pip install`` works from any
+directory). A LUT or bundle is looked up in all of them, in that order. New LUTs are written
+under :func:`user_calibrations_root`, never into the packaged ones.
 """
 
 from __future__ import annotations
@@ -18,15 +19,18 @@ from thintact_sdk.profile import Profile
 from thintact_sdk.tactile.photometric import PhotometricLUT
 
 LUT_NAME = "lut.npz"
+PACKAGED_CALIBRATIONS = Path(__file__).resolve().parents[1] / "data" / "calibrations"
+"""The calibrations shipped as package data (``<device>/<timestamp>/`` bundles and
+``<device>/tactile/lut.npz``) of the virtual profiles; last in :func:`calibration_roots`."""
 
 
 def calibration_roots() -> list[Path]:
-    """Directories searched for ``<device>/`` calibration folders, in order."""
+    """Directories searched for ``<device>/`` calibration folders, in order: the user's
+    (``$THINTACT_CALIBRATION_PATH``), ``./calibrations`` when it exists, the packaged ones."""
     env = [Path(d).expanduser() for d in os.environ.get("THINTACT_CALIBRATION_PATH", "").split(
         os.pathsep) if d]
     cwd = Path.cwd() / "calibrations"
-    repo = Path(__file__).resolve().parents[2] / "calibrations"
-    roots = env + ([cwd] if cwd.is_dir() else []) + [repo]
+    roots = env + ([cwd] if cwd.is_dir() else []) + [PACKAGED_CALIBRATIONS]
     return list(dict.fromkeys(roots))
 
 
@@ -38,7 +42,7 @@ def calibrations_root() -> Path:
 def user_calibrations_root() -> Path:
     """Where a new calibration is written: the first directory of ``$THINTACT_CALIBRATION_PATH``
     when set, else ``./calibrations`` (created on write), so that the LUTs shipped with the
-    source checkout are never replaced by a calibration run elsewhere."""
+    package are never replaced by a calibration run."""
     env = [d for d in os.environ.get("THINTACT_CALIBRATION_PATH", "").split(os.pathsep) if d]
     return Path(env[0]).expanduser() if env else Path.cwd() / "calibrations"
 

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 from typing import Any
 
@@ -11,22 +10,14 @@ from thintact_sdk.capture import camera_is_simulated
 from thintact_sdk.errors import CalibrationError
 from thintact_sdk.profile import Profile
 
-REPO_CALIBRATIONS = Path(__file__).resolve().parents[3] / "calibrations"
-
 
 def calibration_roots() -> list[Path]:
-    """Directories searched for ``<profile>/<timestamp>/`` bundles: ``THINTACT_CALIBRATION_PATH``,
-    ``./calibrations`` and the SDK checkout's ``calibrations/``."""
-    env = [Path(d) for d in os.environ.get("THINTACT_CALIBRATION_PATH", "").split(os.pathsep) if d]
-    import thintact_sdk
+    """Directories searched for ``<profile>/<timestamp>/`` bundles, in order: those of
+    ``$THINTACT_CALIBRATION_PATH``, ``./calibrations`` and the bundles packaged with the SDK
+    (the core's lookup, ``thintact_sdk.algorithms.calibration_roots``)."""
+    from thintact_sdk.algorithms import calibration_roots as core_roots
 
-    sdk_repo = Path(thintact_sdk.__file__).resolve().parents[1] / "calibrations"
-    roots = env + [Path.cwd() / "calibrations", sdk_repo, REPO_CALIBRATIONS]
-    seen: list[Path] = []
-    for r in roots:
-        if r not in seen:
-            seen.append(r)
-    return seen
+    return core_roots()
 
 
 def resolve_bundle(profile: Profile, settings: dict[str, Any]) -> CalibrationBundle:
@@ -56,8 +47,9 @@ def resolve_bundle(profile: Profile, settings: dict[str, Any]) -> CalibrationBun
         else:
             raise CalibrationError(
                 f"no calibration bundle for virtual profile {profile.name!r} under "
-                f"{', '.join(str(r) for r in calibration_roots())}; run "
-                f"`python tools/make_virtual_calibration.py {profile.name}`"
+                f"{', '.join(str(r) for r in calibration_roots())}; make one with "
+                f"`python tools/make_virtual_calibration.py {profile.name} --out DIR` from the "
+                "SDK's source repository and put DIR in THINTACT_CALIBRATION_PATH"
             )
     else:
         raise CalibrationError(
