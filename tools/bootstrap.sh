@@ -20,7 +20,7 @@ stamp=.venv/.thintact-installed
 want=$(cat constraints.txt pyproject.toml plugins/*/pyproject.toml | sha256sum | cut -c1-16)
 if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
   echo "[bootstrap] installing the SDK, its plugins and dev tools (pinned by constraints.txt)"
-  args=(-e ".[genicam,display,dev,ray]")
+  args=(-e ".[genicam,display,dev,ray,live]")
   for d in plugins/*/; do
     [ -f "$d/pyproject.toml" ] && args+=(-e "$d")
   done
