@@ -20,12 +20,21 @@ Guarantees (docs/robot-api.md, "Several sensors"):
   time to the newest frame of the slowest member, and its ``skew_ns`` (newest minus
   oldest timestamp of the pair) is at most ``max_skew_ms``: frames that cannot be paired
   within it are dropped and counted (``unpaired``), never delivered;
-* a member with no frame for ``stall_after_s`` is *stalled*: the group delivers the other
+* a member with no frame for ``stall_after_s`` (or for :data:`STALL_FRAME_PERIODS` of its own
+  recent frame intervals, when that is longer: a slow member is not a stalled one) is
+  *stalled*: the group delivers the other
   members' frames with that member ``None`` and named in ``GroupFrame.missing``, and takes
   it back as soon as it delivers again;
 * a member whose camera is lost (unplugged) or whose source ended is reported in
   ``missing`` and :meth:`SensorGroup.status` with the error, and the others keep running;
   :meth:`SensorGroup.stream` raises only when no member is left.
+
+Before pairing starts, :meth:`SensorGroup.open` warms every member up
+(:meth:`Sensor.warm_up`: decoder built with its backends measured, LUT loaded, one frame
+decoded; one member after the other, so no member's measurement runs against another's), so
+the first pairs are complete instead of one member stalled behind its first decode. Skew
+statistics (:meth:`SensorGroup.skew_summary`) count complete pairs only and say how many
+were incomplete.
 
 A hardware or software trigger is used where the cameras have one (``trigger=``): the
 camera plugin then offers ``set_trigger(source)`` and ``fire_trigger()`` (the GenICam
@@ -59,6 +68,11 @@ MemberState = Literal["starting", "running", "stalled", "lost", "ended", "failed
 TriggerMode = Literal["none", "software", "hardware"]
 BUFFER_FRAMES = 8
 """Frames kept per member while waiting for a partner (older ones are dropped, counted)."""
+STALL_FRAME_PERIODS = 4.0
+"""A running member is stalled after this many of its median recent frame intervals without a
+frame, when that is longer than ``stall_after_s``."""
+PACE_FRAMES = 8
+"""Frame intervals per member its pace (median interval) is taken over."""
 
 
 @runtime_checkable
@@ -71,6 +85,15 @@ class TriggerableCamera(Protocol):
 
     def fire_trigger(self) -> None:
         """Issue one software trigger."""
+
+
+@runtime_checkable
+class WarmableCamera(Protocol):
+    """A camera whose first frames cost more than the later ones (e.g. the virtual camera
+    rendering its scenes) and that can pay for them ahead."""
+
+    def warm_up(self) -> float:
+        """Prepare the next frames; returns the seconds spent."""
 
 
 @dataclass
@@ -125,7 +148,8 @@ class GroupFrame:
     timestamp_ns
         Host monotonic time of the pair's anchor: the newest frame of the slowest member.
     skew_ns
-        Newest minus oldest timestamp among the frames present (0 with one frame).
+        Newest minus oldest timestamp among the frames present (0 with one frame: an
+        incomplete pair has no skew; :meth:`SensorGroup.skew_summary` leaves it out).
     missing
         Member name → state for every member without a frame in this pair.
     index
@@ -160,6 +184,7 @@ class _Member:
         self.pending: deque[TactileFrame | RawFrame] = deque()
         self.status = MemberStatus(name, "starting")
         self.last_frame_s = float("-inf")
+        self.intervals_s: deque[float] = deque(maxlen=PACE_FRAMES)
         self.thread: threading.Thread | None = None
 
     def read_one(self) -> TactileFrame | RawFrame:
@@ -185,11 +210,19 @@ class SensorGroup:
         free-running cameras at f frames/s a partner lies within ``1/(2 f)`` plus jitter,
         so the default of 20 ms suits cameras at 30 fps and faster.
     stall_after_s
-        A member with no frame for this long is reported stalled and left out of pairs
-        until it delivers again.
+        A member with no frame for this long, and for :data:`STALL_FRAME_PERIODS` of its median
+        recent frame interval (the first one counted from the start of capture), is reported
+        stalled and left out of pairs until it delivers again.
     startup_s
-        The first pair waits this long for every member's first frame (a member's first
-        frame may build its decoder or LUT); a member still silent then is stalled.
+        The first pair waits this long for every member's first frame after the warm-up; a
+        member still silent then is stalled.
+    warm_up
+        True (default): :meth:`open` warms every member up before capture starts, one member
+        after the other, outside ``startup_s`` and the read timeout: its camera when that
+        offers ``warm_up()`` (:class:`WarmableCamera`: the virtual camera renders its scenes
+        ahead) and, with ``process=True``, :meth:`Sensor.warm_up` (skipped for a sensor whose
+        decoder was warmed up already). False: the members' first frames pay for it (and
+        may be stalled by ``startup_s`` or come too far apart to be paired).
     process
         True: members deliver :class:`TactileFrame` (decode and interpret in each member's
         thread); False: :class:`RawFrame` as the camera gives it (recording, raw sync).
@@ -214,6 +247,7 @@ class SensorGroup:
         stall_after_s: float = 0.5,
         startup_s: float = 10.0,
         process: bool = True,
+        warm_up: bool = True,
         trigger: TriggerMode = "none",
         trigger_fps: float = 30.0,
         trigger_source: str = "Line0",
@@ -234,6 +268,9 @@ class SensorGroup:
         self.max_skew_ns = int(round(max_skew_ms * 1e6))
         self.stall_after_s = float(stall_after_s)
         self.startup_s = float(startup_s)
+        self.warm_up = bool(warm_up)
+        self.warm_up_s: dict[str, float] = {}
+        """Seconds each member's warm-up took at :meth:`open` (0 where it was warm already)."""
         self._opened_s = 0.0
         self.trigger: TriggerMode = trigger
         self.trigger_fps = float(trigger_fps)
@@ -255,6 +292,7 @@ class SensorGroup:
         self._threads: list[threading.Thread] = []
         self._delivered = 0
         self._skews_ns: list[int] = []
+        self._incomplete = 0
 
     # -- life cycle ------------------------------------------------------------------
     @property
@@ -270,7 +308,8 @@ class SensorGroup:
         raise ThinTactError(f"no member {name!r} in this group; members: {', '.join(self.names)}")
 
     def open(self) -> SensorGroup:
-        """Open every member (closing those it opened when one fails) and start capture."""
+        """Open every member, warm it up (``warm_up``), and start capture; when one fails,
+        close those it opened and raise that member's error, naming it."""
         if self._threads:
             return self
         opened: list[_Member] = []
@@ -279,6 +318,7 @@ class SensorGroup:
                 if not m.sensor.is_open:
                     m.sensor.open()
                     opened.append(m)
+            self._warm_up_members()
             self._configure_triggers()
         except BaseException:
             for m in opened:
@@ -291,6 +331,7 @@ class SensorGroup:
         for m in self.members:
             m.status = MemberStatus(m.name, "starting")
             m.last_frame_s = time.monotonic()
+            m.intervals_s.clear()
             m.thread = threading.Thread(target=self._capture_loop, args=(m,),
                                         name=f"group-{m.name}", daemon=True)
             self._threads.append(m.thread)
@@ -300,6 +341,22 @@ class SensorGroup:
         for t in self._threads:
             t.start()
         return self
+
+    def _warm_up_members(self) -> None:
+        """Warm every member up in turn: its camera (:class:`WarmableCamera`), and, for
+        tactile frames, its decoder and LUT (a sensor timed already is skipped)."""
+        if not self.warm_up:
+            return
+        for m in self.members:
+            took = 0.0
+            try:
+                if isinstance(m.sensor.camera, WarmableCamera):
+                    took += float(m.sensor.camera.warm_up())
+                if m.process and m.sensor.decode_ms is None:
+                    took += m.sensor.warm_up()
+                self.warm_up_s[m.name] = took
+            except ThinTactError as err:
+                raise type(err)(f"group member {m.name!r}: warm-up failed: {err}") from err
 
     def _trigger_cameras(self) -> list[TriggerableCamera]:
         cams: list[TriggerableCamera] = []
@@ -377,7 +434,9 @@ class SensorGroup:
                     m.status.unpaired += 1
                 m.status.captured += 1
                 m.status.camera_dropped = m.sensor.gaps.dropped
-                m.last_frame_s = time.monotonic()
+                now_s = time.monotonic()
+                m.intervals_s.append(now_s - m.last_frame_s)
+                m.last_frame_s = now_s
                 if m.status.state in ("stalled", "starting"):
                     m.status.state = "running"
                     m.status.error = ""
@@ -410,6 +469,8 @@ class SensorGroup:
     def _update_stalls(self, now_s: float) -> None:
         for m in self.members:
             limit = self.startup_s if m.status.state == "starting" else self.stall_after_s
+            if m.status.state == "running" and m.intervals_s:
+                limit = max(limit, STALL_FRAME_PERIODS * float(np.median(m.intervals_s)))
             if m.status.state in ("running", "starting") and now_s - m.last_frame_s > limit:
                 m.status.state = "stalled"
                 m.status.stalls += 1
@@ -450,7 +511,10 @@ class SensorGroup:
         missing = {m.name: m.status.state for m in self.members if m.name not in picked}
         out = GroupFrame(frames, int(anchor), int(skew), missing, self._delivered)
         self._delivered += 1
-        self._skews_ns.append(int(skew))
+        if missing:
+            self._incomplete += 1
+        else:
+            self._skews_ns.append(int(skew))
         return out
 
     def _no_member_left(self) -> BaseException | None:
@@ -520,13 +584,18 @@ class SensorGroup:
             return out
 
     def skew_summary(self) -> dict[str, float]:
-        """Skew of the pairs delivered so far: ``pairs``, ``median_ms``, ``p95_ms``, ``max_ms``."""
+        """Skew of the complete pairs delivered so far (every member present): ``pairs``
+        (complete pairs), ``incomplete`` (pairs delivered with a member missing, left out of
+        the statistics: their skew says nothing about the clocks), ``median_ms``, ``p95_ms``,
+        ``max_ms`` (NaN without a complete pair)."""
         with self._cond:
             skews = np.array(self._skews_ns, np.float64) / 1e6
+            incomplete = self._incomplete
         if len(skews) == 0:
-            return {"pairs": 0, "median_ms": float("nan"), "p95_ms": float("nan"),
-                    "max_ms": float("nan")}
-        return {"pairs": int(len(skews)), "median_ms": float(np.median(skews)),
+            return {"pairs": 0, "incomplete": incomplete, "median_ms": float("nan"),
+                    "p95_ms": float("nan"), "max_ms": float("nan")}
+        return {"pairs": int(len(skews)), "incomplete": incomplete,
+                "median_ms": float(np.median(skews)),
                 "p95_ms": float(np.percentile(skews, 95)), "max_ms": float(skews.max())}
 
 
@@ -534,7 +603,7 @@ def open_group(sensors: Sequence[str | Profile | Sensor], **options: Any) -> Sen
     """Open several sensors as one :class:`SensorGroup` (use it as a context manager).
 
     ``options`` are those of :class:`SensorGroup` (``names``, ``max_skew_ms``,
-    ``stall_after_s``, ``startup_s``, ``process``, ``trigger``, ``trigger_fps``, ``trigger_source``,
+    ``stall_after_s``, ``startup_s``, ``process``, ``warm_up``, ``trigger``, ``trigger_fps``, ``trigger_source``,
     ``sensor_options``).
     """
     return SensorGroup(sensors, **options).open()

@@ -192,6 +192,36 @@ class VirtualCamera(Camera):
         self._frame_id += 1
         return frame
 
+    WARM_UP_SCENES = 64
+    """Most scenes :meth:`warm_up` renders ahead."""
+
+    def warm_up(self) -> float:
+        """Render ahead every scene the next frames show (the tactile cycle, the library's
+        named scenes; not ``random``, whose scenes never repeat), at most
+        :data:`WARM_UP_SCENES`, so that frames come at the camera's pace from the first one
+        on (``open_group`` calls it before pairing). Returns the seconds spent."""
+        if not self._is_open or self._sim is None:
+            raise DeviceError("virtual camera: warm_up() before open()")
+        t0 = time.perf_counter()
+        period = {TACTILE_SCENE: CYCLE, "random": 0}
+        names = self.scene_names
+        if "gelsight" in names:
+            from thintact_sdk.algorithms import gelsight_count
+
+            period["gelsight"] = gelsight_count()
+        frames = len(names) * max(period.get(n, 1) for n in names)
+        start = self._library_index
+        try:
+            for _ in range(min(frames, self.WARM_UP_SCENES)):
+                if names[self._library_index % len(names)] == "random":
+                    self._library_index += 1
+                    continue
+                scene, key = self._current_scene()
+                self._linear(scene, key)
+        finally:
+            self._library_index = start
+        return time.perf_counter() - t0
+
     # -- rendering ------------------------------------------------------------------------
     def _mosaic(self, dn: np.ndarray) -> np.ndarray:
         """The sensor's raw frame: an RGGB mosaic, or the plain frame of a monochrome sensor."""
