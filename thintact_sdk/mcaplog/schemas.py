@@ -66,7 +66,8 @@ float32 latency_ms           # raw frame -> tactile frame processing time; NaN i
 _SLIP = """\
 # Partial-slip signal of one tactile frame.
 std_msgs/Header header
-float32 slip_ratio           # fraction of the contact that slips, 0..1"""
+float32 slip_ratio           # fraction of the loaded contact that slips, 0..1
+bool slipping                # slip_ratio >= 0.15: the contact slips (incipient slip)"""
 
 
 def _definition(main: str, *nested: tuple[str, str]) -> str:
@@ -119,7 +120,8 @@ MARKERS_TOPIC = Topic("/thintact/markers", MARKERS, "marker positions and displa
 CONTACT_TOPIC = Topic("/thintact/contact", CONTACT, "contact flag, area, depth, shear")
 FORCE = Topic("/thintact/force", WRENCH_STAMPED,
               "estimated contact force [Fx, Fy, Fz] in newtons (torque 0: not estimated)")
-SLIP_TOPIC = Topic("/thintact/slip", SLIP, "slip ratio, when the frame has one")
+SLIP_TOPIC = Topic("/thintact/slip", SLIP,
+                   "slip ratio and slipping flag, when the frame has a slip ratio")
 
 TOPICS: tuple[Topic, ...] = (RAW, RAW_PREVIEW, IMAGE_TOPIC, DEPTH, MARKERS_TOPIC, CONTACT_TOPIC, FORCE,
                              SLIP_TOPIC)

@@ -349,8 +349,12 @@ def tactile_messages(frame: TactileFrame, frame_id: str, stamp: int,
                        "torque": {"x": 0.0, "y": 0.0, "z": 0.0}},
         }))
     if frame.slip_ratio is not None:
+        from thintact_sdk.tactile.slip import is_slipping
+
+        ratio = float(frame.slip_ratio)
         messages.append((schemas.SLIP_TOPIC, {"header": images.header(stamp, fid),
-                                              "slip_ratio": float(frame.slip_ratio)}))
+                                              "slip_ratio": ratio,
+                                              "slipping": is_slipping(ratio)}))
     return messages
 
 

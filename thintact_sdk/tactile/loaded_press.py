@@ -29,7 +29,7 @@ from thintact_sdk.tactile.grid import TactileParams
 from thintact_sdk.tactile.indenters import Indenter
 from thintact_sdk.tactile.interpreter import TactileInterpreter
 from thintact_sdk.tactile.simulate import TactileScene, TactileSimulator
-from thintact_sdk.tactile.slip import estimate_slip_ratio
+from thintact_sdk.tactile.slip import SLIPPING_RATIO, estimate_slip_ratio
 
 CLEARANCE_MM = 50.0
 PRESS_MARGIN_MM = 5.0
@@ -272,10 +272,10 @@ def evaluate_force_slip(
             slip_err.append(est_slip - press.slip_ratio)
         if 0.2 <= press.slip_ratio <= 0.8:
             incipient += 1
-            detected += int(est_slip >= 0.15)
+            detected += int(est_slip >= SLIPPING_RATIO)
         if t_shear == 0.0:
             unloaded += 1
-            alarms += int(est_slip >= 0.15)
+            alarms += int(est_slip >= SLIPPING_RATIO)
         rows.append({"indenter": ind.name, "depth_mm": depth, "fz_true_n": float(truth[2]),
                      "fz_est_n": float(fz), "shear_true_n": t_shear,
                      "shear_est_n": float(np.hypot(*fxy)), "shear_direction_error_deg": dir_err,

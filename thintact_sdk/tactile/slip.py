@@ -27,6 +27,15 @@ from thintact_sdk.tactile.force import loaded_core, markers_in
 MIN_SHEAR_MM = 0.05
 STICK_TOLERANCE = 0.2
 STICK_QUANTILE = 0.75
+SLIPPING_RATIO = 0.15
+"""A frame whose slip ratio reaches this share is flagged as slipping (incipient slip): the
+criterion of the force/slip evaluation (``thintact bench tactile``), below which stuck
+presses' ratios stay (tracking noise and the normal-load drag of the markers)."""
+
+
+def is_slipping(slip_ratio: float | None) -> bool:
+    """True when ``slip_ratio`` (None: unknown) is at least :data:`SLIPPING_RATIO`."""
+    return slip_ratio is not None and float(slip_ratio) >= SLIPPING_RATIO
 
 
 def interpolate_markers(
