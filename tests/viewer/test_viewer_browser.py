@@ -81,3 +81,43 @@ def test_screenshots_show_the_panels_following_the_press(tmp_path):
     banner = _panel(second, "contact and shear")[12:44]
     assert np.sum(np.all(np.abs(banner - [230, 70, 60]) < 40, axis=2)) > 3000
     assert stats["served_fps"] is not None and stats["latency_ms"] > 0
+
+
+@pytest.mark.skipif(BROWSER is None, reason="chromium is not installed")
+def test_page_buttons_work_in_chromium_and_a_foreign_page_cannot_reset(tmp_path):
+    """The page's own script sends the token (its reset button works); a page of another
+    origin that POSTs to /reset, with or without CORS, changes nothing."""
+    import http.server
+    import threading
+    import time
+
+    from viewer_kit import CountingLive, HeadlessChromium
+
+    evil_dir = tmp_path / "evil"
+    evil_dir.mkdir()
+    live = CountingLive()
+    with ViewerServer(port=0) as server:
+        server.start(live)
+        (evil_dir / "index.html").write_text(
+            "<!doctype html><title>evil</title>")
+        evil = http.server.ThreadingHTTPServer(
+            ("127.0.0.1", 0), lambda *a: http.server.SimpleHTTPRequestHandler(*a, directory=str(evil_dir)))
+        threading.Thread(target=evil.serve_forever, daemon=True).start()
+        browser = HeadlessChromium(BROWSER, str(tmp_path / "chromium"))
+        try:
+            attack = (f"Promise.allSettled([fetch('{server.url}reset', {{method: 'POST', mode: 'no-cors'}}),"
+                      f" fetch('{server.url}reset', {{method: 'POST', headers: {{'X-ThinTact-Token': 'x'}}}})"
+                      "]).then(() => 'sent')")
+            assert browser.evaluate(f"http://127.0.0.1:{evil.server_address[1]}/", attack) == "sent"
+            assert live.resets == 0
+            clicked = browser.evaluate(server.url, "document.getElementById('reset').click(), 'clicked'")
+            assert clicked == "clicked"
+            deadline = time.monotonic() + 30  # a timeout only: the click's fetch is asynchronous
+            while live.resets == 0 and time.monotonic() < deadline:
+                time.sleep(0.05)
+            assert live.resets == 1
+        finally:
+            browser.close()
+            evil.shutdown()
+            evil.server_close()
+    assert not server.internal_errors

@@ -11,6 +11,8 @@ import sys
 import time
 import urllib.request
 
+import pytest
+
 from thintact_sdk.cli.main import main
 
 
@@ -50,3 +52,61 @@ def test_view_bad_input_is_a_one_line_error(capsys):
         port = busy.getsockname()[1]
         assert main(["view", "virtual-finger", "--port", str(port), "--duration", "1"]) == 2
     assert f"cannot serve the viewer on 127.0.0.1:{port}" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_view_stops_on_a_signal_even_where_sigint_was_ignored(sig):
+    """Issue 30: started as a script's background job (SIGINT ignored on entry), the viewer
+    still stops on Ctrl-C; SIGTERM stops it the same way. Exit 0, the sensor closed."""
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "thintact_sdk.cli.main", "view", "virtual-finger", "--port", "0",
+         "--set", "fps=0"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
+    try:
+        line = proc.stdout.readline()
+        assert "viewing virtual-finger at http://127.0.0.1:" in line, line + proc.stderr.read()
+        proc.send_signal(sig)
+        out, err = proc.communicate(timeout=90)  # a bound on a hang, not a performance figure
+    finally:
+        proc.kill()
+    assert proc.returncode == 0, err
+    assert "stopped: sensor" in out and "Traceback" not in err
+
+
+SLOW_OPEN = """
+import sys, time
+import thintact_sdk, thintact_sdk.cli.main as cli
+real_open = thintact_sdk.open
+def slow_open(*args, **kwargs):
+    print("opening", flush=True)
+    time.sleep(120)  # a camera that takes long to open
+    return real_open(*args, **kwargs)
+thintact_sdk.open = slow_open
+sys.exit(cli.main(["view", "virtual-finger", "--port", "0"]))
+"""
+
+
+def test_view_stops_on_a_signal_while_the_sensor_opens():
+    proc = subprocess.Popen([sys.executable, "-c", SLOW_OPEN], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout.readline().strip() == "opening", proc.stderr.read()
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=60)  # a bound on a hang (the open sleeps 120 s)
+    finally:
+        proc.kill()
+    assert proc.returncode == 0, err
+    assert err.strip() == "stopped before the viewer started" and "viewing" not in out
+
+
+@pytest.mark.parametrize("value", ["nan", "inf", "-inf", "-1", "abc"])
+def test_view_refuses_a_bad_duration_in_one_line(value, capsys):
+    assert main(["view", "virtual-finger", "--port", "0", "--duration", value]) == 2
+    err = capsys.readouterr().err
+    assert "--duration" in err and len(err.strip().splitlines()) == 1
+
+
+def test_view_refuses_a_bad_reference_frame_count(capsys):
+    assert main(["view", "virtual-finger", "--port", "0", "--reference-frames", "0"]) == 2
+    assert "--reference-frames" in capsys.readouterr().err

@@ -16,6 +16,7 @@ from thintact_sdk.frames import RawFrame, TactileFrame
 from thintact_sdk.profile import load_profile
 from thintact_sdk.viewer import LiveView, ViewerServer
 from thintact_sdk.viewer.panels import Rates, dashboard_size, panel_boxes, render_dashboard
+from thintact_sdk.viewer.server import TOKEN_HEADER
 
 ARROW_RGB = np.array([255, 210, 60])
 
@@ -73,8 +74,9 @@ def finger():
         yield sensor
 
 
-def _get(url: str, data: bytes | None = None):
-    with urllib.request.urlopen(urllib.request.Request(url, data=data), timeout=30) as r:
+def _get(url: str, data: bytes | None = None, headers: dict[str, str] | None = None):
+    with urllib.request.urlopen(urllib.request.Request(url, data=data, headers=headers or {}),
+                                timeout=30) as r:
         return r.status, dict(r.headers), r.read()
 
 
@@ -94,7 +96,9 @@ def test_server_serves_page_frames_and_stats_on_loopback(finger):
         stats = json.loads(body)
         assert stats["profile"] == "virtual-finger" and stats["error"] is None
         assert stats["sensor_fps"] > 0 and stats["latency_ms"] > 0
-        assert _get(server.url + "reset", data=b"")[0] == 200
+        with pytest.raises(urllib.error.HTTPError, match="403"):
+            _get(server.url + "reset", data=b"")  # no token: refused
+        assert _get(server.url + "reset", data=b"", headers={TOKEN_HEADER: server.token})[0] == 200
         with pytest.raises(urllib.error.HTTPError, match="404"):
             _get(server.url + "nothing-here")
 

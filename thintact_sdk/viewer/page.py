@@ -1,5 +1,8 @@
 """The viewer's HTML page (no external resources: it works offline on loopback).
 
+The page carries the server's token (``<meta name="thintact-token">``) and its script
+sends it back on every state-changing request (docs/viewer.md#security).
+
 The dashboard image sits at the page's left edge, :data:`HEADER_PX` below its top.
 """
 
@@ -11,7 +14,8 @@ HEADER_PX = 40
 
 _PAGE = """<!doctype html>
 <html lang="en"><head><meta charset="utf-8"><title>{title}</title>
-<style>
+<meta name="thintact-token" content="{token}">
+<style nonce="{nonce}">
  body {{ margin: 0; background: #18181c; color: #ebebeb; font: 14px sans-serif; }}
  header {{ height: {header_px}px; display: flex; align-items: center; gap: 16px; padding: 0 8px;
           white-space: nowrap; overflow: hidden; box-sizing: border-box; }}
@@ -23,7 +27,8 @@ _PAGE = """<!doctype html>
 <header><strong>{title}</strong><span id="stats">connecting…</span>
 <button id="reset" title="the membrane must be free">reset reference</button></header>
 <img id="live" src="/frame.jpg" alt="live tactile dashboard">
-<script>
+<script nonce="{nonce}">
+const TOKEN = document.querySelector('meta[name="thintact-token"]').content;
 const img = document.getElementById("live");
 const stats = document.getElementById("stats");
 let seq = -1;
@@ -49,7 +54,10 @@ async function poll() {{
   }} catch (e) {{ stats.textContent = "viewer stopped"; }}
   setTimeout(poll, 500);
 }}
-document.getElementById("reset").onclick = () => fetch("/reset", {{method: "POST"}});
+function post(path) {{
+  return fetch(path, {{method: "POST", headers: {{"X-ThinTact-Token": TOKEN}}, cache: "no-store"}});
+}}
+document.getElementById("reset").onclick = () => post("/reset");
 img.addEventListener("load", () => {{ if (seq < 0) {{ seq = 0; next(); }} }}, {{once: true}});
 poll();
 </script>
@@ -57,6 +65,12 @@ poll();
 """
 
 
-def page_html(title: str) -> str:
-    """The page for a viewer titled ``title``."""
-    return _PAGE.format(title=html.escape(title), header_px=HEADER_PX)
+def page_html(title: str, token: str, nonce: str) -> str:
+    """The page for a viewer titled ``title``.
+
+    ``token`` is the server's secret, which the page's script sends back in the
+    ``X-ThinTact-Token`` header of every state-changing request; ``nonce`` is the
+    Content-Security-Policy nonce of the page's inline script and style.
+    """
+    return _PAGE.format(title=html.escape(title), header_px=HEADER_PX,
+                        token=html.escape(token, quote=True), nonce=html.escape(nonce, quote=True))

@@ -1,0 +1,188 @@
+"""Shared helpers of the viewer tests: a sensor-less LiveView that counts state changes, and
+a raw-socket HTTP client that sends exactly the bytes a test asks for."""
+
+from __future__ import annotations
+
+import socket
+import threading
+from types import SimpleNamespace
+from typing import Any
+
+from thintact_sdk.errors import EndOfStreamError
+from thintact_sdk.viewer import LiveView
+
+
+class _EndedSensor:
+    """A sensor whose source has already ended: the frame loop stops at once."""
+
+    profile = SimpleNamespace(name="fake-sensor")
+
+    def read_raw(self) -> Any:
+        raise EndOfStreamError("the fake source has no frames")
+
+
+class CountingLive(LiveView):
+    """A LiveView without a sensor that counts :meth:`reset_reference` calls."""
+
+    def __init__(self) -> None:
+        super().__init__(_EndedSensor(), title="fake viewer")  # type: ignore[arg-type]
+        self.resets = 0
+        self._count_lock = threading.Lock()
+
+    def reset_reference(self) -> None:
+        with self._count_lock:
+            self.resets += 1
+
+
+def raw_request(port: int, request: bytes, timeout_s: float = 20.0) -> tuple[int | None, bytes]:
+    """Send ``request`` as it is to 127.0.0.1:``port``, half-close, read the reply.
+
+    Returns the status code (None when the server closed without a status line) and the
+    whole reply.
+    """
+    with socket.create_connection(("127.0.0.1", port), timeout=timeout_s) as sock:
+        try:
+            sock.sendall(request)
+            sock.shutdown(socket.SHUT_WR)
+        except OSError:
+            pass  # the server answered (and closed) before reading everything
+        reply = b""
+        try:
+            while chunk := sock.recv(65536):
+                reply += chunk
+        except ConnectionResetError:
+            pass
+    head = reply.split(b"\r\n", 1)[0].split()
+    status = int(head[1]) if len(head) >= 2 and head[0].startswith(b"HTTP/") and head[1].isdigit() else None
+    return status, reply
+
+
+def http(port: int, method: str, path: str, headers: dict[str, str] | None = None,
+         body: bytes = b"", host: str | None = "default") -> tuple[int | None, bytes]:
+    """A well-formed HTTP/1.1 request; ``host`` "default" is ``127.0.0.1:port``, None none."""
+    lines = [f"{method} {path} HTTP/1.1"]
+    if host is not None:
+        lines.append(f"Host: {f'127.0.0.1:{port}' if host == 'default' else host}")
+    for key, value in (headers or {}).items():
+        lines.append(f"{key}: {value}")
+    if body or method in ("POST", "PUT", "PATCH"):
+        lines.append(f"Content-Length: {len(body)}")
+    lines.append("Connection: close")
+    return raw_request(port, ("\r\n".join(lines) + "\r\n\r\n").encode("latin-1") + body)
+
+
+class HeadlessChromium:
+    """Headless Chromium driven over the DevTools protocol on a pipe (``--remote-debugging-pipe``:
+    JSON messages separated by NUL on file descriptors 3 and 4; no extra package, no port).
+
+    ``evaluate(url, expression)`` opens ``url`` in a new tab, waits for its load event, and
+    returns the value of the JavaScript ``expression`` (promises are awaited).
+    """
+
+    def __init__(self, browser: str, profile_dir: str) -> None:
+        import fcntl
+        import os
+        import subprocess
+
+        def high(fd: int) -> int:  # away from 3 and 4, so that wiring them cannot clobber
+            moved = fcntl.fcntl(fd, fcntl.F_DUPFD_CLOEXEC, 10)
+            os.close(fd)
+            return moved
+
+        to_child_r, self._to_child = (high(fd) for fd in os.pipe())
+        self._from_child, from_child_w = (high(fd) for fd in os.pipe())
+
+        def wire() -> None:  # in the child: the pipe ends become fds 3 and 4 (inheritable)
+            os.dup2(to_child_r, 3)
+            os.dup2(from_child_w, 4)
+
+        self.proc = subprocess.Popen(
+            [browser, "--headless", "--no-sandbox", "--disable-gpu", "--remote-debugging-pipe",
+             "--disable-background-networking", "--disable-component-update", "--disable-sync",
+             "--no-first-run", f"--user-data-dir={profile_dir}", "about:blank"],
+            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+            preexec_fn=wire, close_fds=False)  # every other fd of ours is close-on-exec
+        os.close(to_child_r)
+        os.close(from_child_w)
+        self._buf = b""
+        self._id = 0
+        self._events: list[dict[str, Any]] = []
+
+    def _read(self, deadline: float, what: str) -> dict[str, Any]:
+        """The next message from the browser."""
+        import json
+        import os
+        import select
+        import time
+
+        while b"\0" not in self._buf:
+            left = deadline - time.monotonic()
+            if left <= 0:
+                raise TimeoutError(f"Chromium did not send {what}")
+            ready, _, _ = select.select([self._from_child], [], [], left)
+            if ready:
+                chunk = os.read(self._from_child, 1 << 20)
+                if not chunk:
+                    raise RuntimeError("Chromium exited")
+                self._buf += chunk
+        raw, self._buf = self._buf.split(b"\0", 1)
+        return dict(json.loads(raw))
+
+    def _call(self, method: str, params: dict[str, Any] | None = None, session: str | None = None,
+              timeout_s: float = 60.0) -> dict[str, Any]:
+        import json
+        import os
+        import time
+
+        self._id += 1
+        msg: dict[str, Any] = {"id": self._id, "method": method, "params": params or {}}
+        if session:
+            msg["sessionId"] = session
+        os.write(self._to_child, json.dumps(msg).encode() + b"\0")
+        deadline = time.monotonic() + timeout_s
+        while True:
+            reply = self._read(deadline, f"the answer to {method}")
+            if reply.get("id") == self._id:
+                if "error" in reply:
+                    raise RuntimeError(f"{method}: {reply['error']}")
+                return dict(reply["result"])
+            self._events.append(reply)
+
+    def _wait_event(self, method: str, session: str, timeout_s: float = 60.0) -> None:
+        import time
+
+        deadline = time.monotonic() + timeout_s
+        while True:
+            for k, event in enumerate(self._events):
+                if event.get("method") == method and event.get("sessionId") == session:
+                    del self._events[:k + 1]
+                    return
+            self._events.append(self._read(deadline, method))
+
+    def evaluate(self, url: str, expression: str) -> Any:
+        target = self._call("Target.createTarget", {"url": "about:blank"})["targetId"]
+        session = self._call("Target.attachToTarget", {"targetId": target, "flatten": True})["sessionId"]
+        self._call("Page.enable", session=session)
+        self._events.clear()
+        self._call("Page.navigate", {"url": url}, session)
+        self._wait_event("Page.loadEventFired", session)
+        result = self._call("Runtime.evaluate", {"expression": expression, "awaitPromise": True,
+                                                 "returnByValue": True}, session)
+        if "exceptionDetails" in result:
+            raise RuntimeError(f"page script failed: {result['exceptionDetails']}")
+        return result["result"].get("value")
+
+    def close(self) -> None:
+        import os
+
+        try:
+            self._call("Browser.close", timeout_s=10)
+        except (RuntimeError, TimeoutError, OSError):
+            pass
+        try:
+            self.proc.wait(timeout=10)
+        except Exception:  # noqa: BLE001 - a stuck browser is killed
+            self.proc.kill()
+            self.proc.wait(timeout=10)
+        os.close(self._to_child)
+        os.close(self._from_child)
