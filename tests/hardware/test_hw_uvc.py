@@ -198,3 +198,117 @@ def test_opening_twice_restarts_the_file(tmp_path):
         np.testing.assert_array_equal(to_measurement(raw, prof).data, meas[0])
     finally:
         cam.close()
+
+
+# -- lens sensors: frame geometry and DIGIT LED intensity (docs/lens-sensors.md) -------------
+def _landscape_frames(n, seed=5):
+    rng = np.random.default_rng(seed)
+    return [rng.integers(0, 256, size=(240, 320, 3), dtype=np.uint8) for _ in range(n)]
+
+
+def _lens_profile(name, device, **overrides):
+    base = load_profile(name)
+    settings = {**base.camera.settings, "device": device, **overrides}
+    cam = base.camera.model_copy(update={"settings": settings})
+    return base.model_copy(update={"camera": cam})
+
+
+def test_digit_stream_is_transposed_and_flipped_as_digit_interface_does(tmp_path):
+    frames = _landscape_frames(2)  # QVGA landscape, as the DIGIT streams it
+    _write_video(tmp_path / "digit.mkv", [f[..., ::-1] for f in frames])
+    prof = _lens_profile("digit", str(tmp_path / "digit.mkv"), fps=0)
+    cam = create_camera(prof)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        cam.open()
+    try:
+        caps = cam.capabilities()
+        assert (caps.height, caps.width) == (prof.sensor.rows, prof.sensor.cols) == (320, 240)
+        assert caps.missing == ["led_intensity"]  # a file has no LED
+        assert any("led_intensity" in str(w.message) for w in caught)
+        for f in frames:
+            raw = cam.read()
+            # digit-interface Digit.get_frame: cv2.transpose, then cv2.flip(frame, 0)
+            want = cv2.flip(cv2.transpose(f), 0)
+            np.testing.assert_array_equal(raw.data, want)
+            np.testing.assert_array_equal(raw.data, cv2.rotate(f, cv2.ROTATE_90_COUNTERCLOCKWISE))
+            assert to_measurement(raw, prof).data.shape == (320, 240, 3)
+    finally:
+        cam.close()
+
+
+def test_gelsight_mini_crop_removes_a_seventh_of_each_side_as_gs_sdk_does(tmp_path):
+    frames = _landscape_frames(1, seed=6)
+    _write_video(tmp_path / "mini.mkv", [f[..., ::-1] for f in frames])
+    prof = _lens_profile("gelsight-mini", str(tmp_path / "mini.mkv"))
+    with create_camera(prof) as cam:
+        caps = cam.capabilities()
+        raw = cam.read()
+    f = frames[0]
+    bx, by = int(f.shape[0] * (1 / 7)), int(np.floor(f.shape[1] * (1 / 7)))  # gs_sdk resize_crop
+    np.testing.assert_array_equal(raw.data, f[bx:f.shape[0] - bx, by:f.shape[1] - by])
+    assert raw.data.shape[:2] == (caps.height, caps.width) == (172, 230)
+    assert (prof.sensor.rows, prof.sensor.cols) == (172, 230)
+    # the cropped field is the gel the scene covers: same mm either way
+    assert prof.sensor.cols * prof.sensor.pixel_pitch_um == pytest.approx(
+        prof.scene.cols * prof.scene.pixel_pitch_um, rel=1e-5)
+
+
+@pytest.mark.parametrize("rotate", [90, 180, 270])
+def test_rotate_crop_and_flip_settings(tmp_path, rotate):
+    frames = _landscape_frames(1, seed=7)
+    _write_video(tmp_path / "v.mkv", [f[..., ::-1] for f in frames])
+    crop = {"top": 10, "bottom": 0.25, "left": "1/8", "right": 0}
+    prof = _profile("none", device=str(tmp_path / "v.mkv"), crop=crop, flip="horizontal",
+                    rotate=rotate)
+    with create_camera(prof) as cam:
+        caps = cam.capabilities()
+        raw = cam.read()
+    f = frames[0][10:240 - 60, 40:][:, ::-1]
+    code = {90: cv2.ROTATE_90_COUNTERCLOCKWISE, 180: cv2.ROTATE_180,
+            270: cv2.ROTATE_90_CLOCKWISE}[rotate]
+    want = cv2.rotate(np.ascontiguousarray(f), code)
+    np.testing.assert_array_equal(raw.data, want)
+    assert (caps.height, caps.width) == want.shape[:2]
+
+
+@pytest.mark.parametrize(("settings", "match"), [
+    ({"crop": {"top": 0.5}}, r"crop.top: fraction 0.5 must be in \[0, 0.5\)"),
+    ({"crop": {"left": "a/b"}}, r"crop.left: 'a/b' is neither pixels"),
+    ({"crop": {"top": -3}}, r"crop.top: -3 pixels is negative"),
+    ({"crop": {"top": 200, "bottom": 40}}, r"leave nothing of a 240×320 frame"),
+    ({"rotate": 45}, r"camera.settings.rotate"),
+    ({"flip": "sideways"}, r"camera.settings.flip"),
+    ({"crop": {"middle": 3}}, r"camera.settings.crop.middle"),
+    ({"led_intensity": 0}, r"camera.settings.led_intensity"),
+])
+def test_bad_geometry_settings_name_the_key(tmp_path, settings, match):
+    from thintact_sdk.errors import CameraSettingsError
+
+    _write_video(tmp_path / "v.mkv", [f[..., ::-1] for f in _landscape_frames(1)])
+    with pytest.raises(CameraSettingsError, match=match):
+        with create_camera(_profile("none", device=str(tmp_path / "v.mkv"), **settings)) as cam:
+            cam.read()
+
+
+def test_led_intensity_is_the_uvc_zoom_control_on_live_devices():
+    from thintact_uvc.camera import UvcCamera
+
+    class FakeCapture:
+        def __init__(self):
+            self.props = {}
+
+        def set(self, prop, value):
+            self.props[prop] = value
+            return True
+
+        def get(self, prop):
+            return self.props.get(prop, 0.0)
+
+    cam = UvcCamera.__new__(UvcCamera)
+    cam.settings, cam.strict, cam._missing = {"led_intensity": 128}, False, []
+    cam.source = type("S", (), {"is_live": True, "label": "/dev/video0"})()
+    cam._cap = FakeCapture()
+    cam._exposure_us = None
+    cam._apply_settings()
+    assert cam._cap.props[cv2.CAP_PROP_ZOOM] == 128.0 and cam._missing == []

@@ -18,6 +18,16 @@ pixel_format
     ``BayerRG16`` etc. when the frames are raw mosaics of another layout than the profile's).
 loop
     Files only: start again at the end (default false).
+crop, transpose, flip, rotate
+    Reshape every frame before binning (lens sensors whose stream is not the gel's
+    orientation or includes the housing): margins in pixels or fractions, rows ↔ columns,
+    mirror, degrees counter-clockwise; applied in that order
+    (:class:`thintact_sdk.camera_settings.FrameGeometrySettings`, docs/lens-sensors.md).
+    ``capabilities()`` reports the reshaped size.
+led_intensity
+    Live DIGIT sensors: LED brightness 1..255, sent as the UVC zoom control
+    (``CAP_PROP_ZOOM``) as digit-interface's ``set_intensity`` does; devices without that
+    control list it in ``missing``. Files: missing.
 open_timeout_s
     Limit on opening the source (default 10 s).
 
@@ -42,7 +52,12 @@ import cv2
 import numpy as np
 from pydantic import Field
 
-from thintact_sdk.camera_settings import CameraSettings, parse_camera_settings
+from thintact_sdk.camera_settings import (
+    FrameGeometrySettings,
+    apply_geometry,
+    crop_box,
+    parse_camera_settings,
+)
 from thintact_sdk.errors import (
     DeviceError,
     DeviceLostError,
@@ -80,7 +95,7 @@ class UvcSettingWarning(UserWarning):
     """A setting the device or file cannot honour."""
 
 
-class UvcCameraSettings(CameraSettings):
+class UvcCameraSettings(FrameGeometrySettings):
     """``camera.settings`` of the uvc camera: keys and types (see the module docstring)."""
 
     device: int | str | None = None
@@ -95,6 +110,7 @@ class UvcCameraSettings(CameraSettings):
     loop: bool = Field(default=False, strict=True)
     open_timeout_s: float = Field(default=10.0, gt=0, le=3600)
     convert_rgb: bool = Field(default=True, strict=True)
+    led_intensity: int | None = Field(default=None, ge=1, le=255, strict=True)
 
 
 class UvcCamera(Camera):
@@ -103,7 +119,7 @@ class UvcCamera(Camera):
     name = "uvc"
 
     def __init__(self, profile: Profile, settings: dict[str, Any]) -> None:
-        parse_camera_settings(UvcCameraSettings, settings, "uvc")
+        self.geometry = parse_camera_settings(UvcCameraSettings, settings, "uvc")
         if "device" not in settings:
             raise ProfileError(
                 "uvc camera needs camera.settings.device (index, /dev/video* path, "
@@ -211,6 +227,10 @@ class UvcCamera(Camera):
                 self._want("gain", cv2.CAP_PROP_GAIN, float(s["gain"]))
             else:
                 self._missing.append("gain")
+        if "led_intensity" in s:
+            # DIGIT firmware: LED intensity is the UVC zoom control (digit-interface set_intensity)
+            if not (live and self._cap.set(cv2.CAP_PROP_ZOOM, float(s["led_intensity"]))):
+                self._missing.append("led_intensity")
         if live and "exposure_us" not in self._missing:
             exp = float(self._cap.get(cv2.CAP_PROP_EXPOSURE))
             self._exposure_us = exp * V4L2_EXPOSURE_UNIT_US if exp > 0 else None
@@ -244,15 +264,27 @@ class UvcCamera(Camera):
         if not self.source.is_live and "fps" in self.settings:
             fps = float(self.settings["fps"])
         live_exposure = self.source.is_live and "exposure_us" not in self._missing
+        height, width = self._reshaped_size(int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT)),
+                                            int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)))
         return CameraCapabilities(
-            width=int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)),
-            height=int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT)),
+            width=width,
+            height=height,
             pixel_formats=[self._last_format] if self._last_format else [],
             pixel_format=self._last_format,
             fps=fps if fps > 0 else None,
             exposure_range_us=Range(0.0, float("inf"), "us") if live_exposure else None,
             missing=list(self._missing),
         )
+
+    def _reshaped_size(self, height: int, width: int) -> tuple[int, int]:
+        """``(rows, cols)`` of a delivered ``height × width`` frame after the geometry settings."""
+        g = self.geometry
+        if g.crop is not None and height > 0 and width > 0:
+            t, b, left, right = crop_box(height, width, g.crop)
+            height, width = height - t - b, width - left - right
+        if g.transpose != (g.rotate in (90, 270)):
+            height, width = width, height
+        return height, width
 
     def _capture(self) -> Any:
         if self._cap is None:
@@ -320,6 +352,7 @@ class UvcCamera(Camera):
         self._delivered += 1
         self._index += 1
         data, fmt = self._to_rgb(img)
+        data = apply_geometry(data, self.geometry)
         self._last_format = fmt
         return RawFrame(
             data=data,
