@@ -11,11 +11,16 @@ DeviceTimeoutError  no reply at all after every retry (board silent or not power
 ProtocolError       only garbage / bad checksums came back, or the board refused the command
 DeviceLostError     the port vanished (unplugged, closed by the other end)
 DeviceNotFoundError the port cannot be opened
+InvalidValueError   a bad setting (``light.settings.<key>``) or call argument (index, level)
 """
 
 from __future__ import annotations
 
+import math
+import numbers
+import operator
 import time
+from collections.abc import Mapping
 from typing import Any
 
 import serial
@@ -44,6 +49,7 @@ from thintact_serial_led.protocol import (
     level_to_wire,
     wire_to_level,
 )
+from thintact_serial_led.settings import parse_settings
 
 
 class SerialLedController(LightController):
@@ -55,23 +61,34 @@ class SerialLedController(LightController):
         Device path (``/dev/ttyACM0``), pty path, or any pyserial URL.
     settings
         ``baudrate`` (115200), ``timeout_s`` per attempt (0.25), ``retries`` after the first
-        attempt (3), ``led_count`` expected (10; checked against the board's ``STA``).
+        attempt (3), ``led_count`` expected (10; checked against the board's ``STA``);
+        validated by :class:`thintact_serial_led.settings.SerialLedSettings`.
+
+    Raises
+    ------
+    DeviceNotFoundError
+        No port given.
+    InvalidValueError
+        ``port`` is not text, or a setting is unknown, mistyped or out of range (the
+        message names ``light.port`` or ``light.settings.<key>``).
     """
 
     name = "serial-led"
 
-    def __init__(self, port: str | None, settings: dict[str, Any] | None = None) -> None:
-        settings = dict(settings or {})
+    def __init__(self, port: str | None, settings: Mapping[str, Any] | None = None) -> None:
+        parsed = parse_settings(settings)
+        if port is not None and not isinstance(port, str):
+            raise InvalidValueError(f"light.port must be a device path or pyserial URL, not {port!r}")
         if not port:
             raise DeviceNotFoundError(
                 "serial-led needs a port: set light.port in the profile (e.g. /dev/ttyACM0; "
                 "'thintact devices' lists serial ports)"
             )
         self.port = port
-        self.baudrate = int(settings.get("baudrate", 115200))
-        self.timeout_s = float(settings.get("timeout_s", 0.25))
-        self.retries = int(settings.get("retries", 3))
-        self._expected_leds = int(settings.get("led_count", 10))
+        self.baudrate = parsed.baudrate
+        self.timeout_s = parsed.timeout_s
+        self.retries = parsed.retries
+        self._expected_leds = parsed.led_count
         self._led_count = self._expected_leds
         self.colors: str | None = None
         self._serial: serial.SerialBase | None = None
@@ -100,7 +117,11 @@ class SerialLedController(LightController):
         except BaseException:
             self.close()
             raise
-        count = int(status.get("leds", self._expected_leds))
+        leds = status.get("leds", str(self._expected_leds))
+        if not (leds.isascii() and leds.isdigit()):
+            self.close()
+            raise ProtocolError(f"LED board on {self.port} reports a non-integer LED count {leds!r}")
+        count = int(leds)
         if count != self._expected_leds:
             self.close()
             raise ProtocolError(
@@ -125,16 +146,43 @@ class SerialLedController(LightController):
         return self._led_count
 
     def set_intensity(self, index: int, level: float) -> None:
-        """Set LED ``index`` (0-based) to ``level`` in [0, 1] (12-bit on the wire)."""
-        if not 0 <= index < self._led_count:
-            raise InvalidValueError(f"LED index {index} outside 0..{self._led_count - 1}")
-        self.request(f"SET {index} {level_to_wire(level)}")
+        """Set LED ``index`` (0-based integer) to ``level`` (a real number in [0, 1]; 12-bit
+        on the wire).
+
+        Raises
+        ------
+        InvalidValueError
+            ``index`` is not an integer in ``0..led_count-1`` or ``level`` not a finite
+            number in [0, 1]; nothing is sent.
+        """
+        try:
+            if isinstance(index, bool):
+                raise TypeError
+            position = operator.index(index)
+        except TypeError:
+            raise InvalidValueError(f"LED index must be an integer, not {index!r}") from None
+        if not 0 <= position < self._led_count:
+            raise InvalidValueError(f"LED index {position} outside 0..{self._led_count - 1}")
+        self.request(f"SET {position} {level_to_wire(_level(level, 'level'))}")
 
     def set_all(self, levels: list[float]) -> None:
-        """Set every LED at once (one ``ALL`` command, applied atomically by the board)."""
-        if len(levels) != self._led_count:
-            raise InvalidShapeError(f"set_all needs {self._led_count} levels, got {len(levels)}")
-        self.request("ALL " + " ".join(str(level_to_wire(v)) for v in levels))
+        """Set every LED at once (one ``ALL`` command, applied atomically by the board).
+
+        Raises
+        ------
+        InvalidShapeError
+            ``levels`` is not a sequence of ``led_count`` values.
+        InvalidValueError
+            A level is not a finite number in [0, 1] (named ``levels[i]``); nothing is sent.
+        """
+        if isinstance(levels, str | bytes | Mapping) or not hasattr(levels, "__len__"):
+            raise InvalidShapeError(f"set_all needs a sequence of {self._led_count} levels, "
+                                    f"not {type(levels).__name__}")
+        values = list(levels)
+        if len(values) != self._led_count:
+            raise InvalidShapeError(f"set_all needs {self._led_count} levels, got {len(values)}")
+        wire = [level_to_wire(_level(v, f"levels[{i}]")) for i, v in enumerate(values)]
+        self.request("ALL " + " ".join(str(w) for w in wire))
 
     def get_intensities(self) -> list[float]:
         """The levels the board applies, in [0, 1]."""
@@ -168,6 +216,8 @@ class SerialLedController(LightController):
         DeviceTimeoutError, ProtocolError, DeviceLostError
             See the module docstring.
         """
+        if not isinstance(body, str):
+            raise InvalidValueError(f"an LED board command must be text, not {type(body).__name__}")
         if self._serial is None:
             if self._lost:
                 raise DeviceLostError(f"LED controller port {self.port} vanished earlier; open it again")
@@ -250,3 +300,19 @@ class SerialLedController(LightController):
                 return b"\x00overlong line without newline"
         line, self._rx = self._rx.split(b"\n", 1)
         return line
+
+
+def _level(value: object, name: str) -> float:
+    """``value`` as a finite float in [0, 1] (a real number, not a bool or text).
+
+    Raises
+    ------
+    InvalidValueError
+        Naming ``name``.
+    """
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise InvalidValueError(f"LED {name} must be a number in [0, 1], not {value!r}")
+    level = float(value)
+    if not math.isfinite(level) or not 0.0 <= level <= 1.0:
+        raise InvalidValueError(f"LED {name} {value!r} outside [0, 1]")
+    return level

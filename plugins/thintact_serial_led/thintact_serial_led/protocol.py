@@ -11,6 +11,7 @@ value 0, no reflection: CRC-8/SMBUS) over every byte before the ``*``.
 
 from __future__ import annotations
 
+import numbers
 from dataclasses import dataclass
 
 from thintact_sdk.errors import InvalidValueError
@@ -132,7 +133,16 @@ def decode_line(raw: bytes) -> Line:
 
 
 def level_to_wire(level: float) -> int:
-    """Map an intensity in [0, 1] to the 12-bit wire level (rounded)."""
+    """Map an intensity in [0, 1] to the 12-bit wire level (rounded).
+
+    Raises
+    ------
+    InvalidValueError
+        ``level`` is not a real number (bools and text included) or not in [0, 1] (NaN
+        included).
+    """
+    if isinstance(level, bool) or not isinstance(level, numbers.Real):
+        raise InvalidValueError(f"LED level must be a number in [0, 1], not {level!r}")
     if not 0.0 <= level <= 1.0:
         raise InvalidValueError(f"LED level {level} outside [0, 1]")
     return int(round(level * LEVEL_MAX))
