@@ -109,14 +109,33 @@ class ForceModel:
 
     @classmethod
     def from_profile(cls, profile: Profile) -> ForceModel:
-        """Material from ``tactile.elastomer_*``; gains from ``tactile.force_normal_gain``,
-        ``force_normal_fill_gain`` and ``force_shear_gain`` when a calibration stored them."""
+        """Material from ``tactile.elastomer_*``; each gain from the profile's
+        ``tactile.force_normal_gain``, ``force_normal_fill_gain``, ``force_shear_gain`` when
+        set, else from the device's stored force calibration (``<device>/tactile/force.json``
+        written by ``thintact calibrate-force``, :func:`thintact_sdk.tactile.store.find_force_calibration`),
+        else the shipped gains.
+
+        Raises
+        ------
+        CalibrationError
+            A stored force calibration that is unreadable or was fitted for another gel.
+        """
+        from thintact_sdk.tactile.store import find_force_calibration
+
         extra = (profile.tactile.model_extra or {}) if profile.tactile is not None else {}
+        gains = {"force_normal_gain": NORMAL_GAIN, "force_normal_fill_gain": NORMAL_FILL_GAIN,
+                 "force_shear_gain": SHEAR_GAIN}
+        stored = find_force_calibration(profile)
+        if stored is not None:
+            from thintact_sdk.tactile.force_calibration import read_gains
+
+            gains.update(read_gains(stored, profile))
+        gains.update({k: float(extra[k]) for k in gains if k in extra})
         return cls(
             Elastomer.from_profile(profile),
-            float(extra.get("force_normal_gain", NORMAL_GAIN)),
-            float(extra.get("force_normal_fill_gain", NORMAL_FILL_GAIN)),
-            float(extra.get("force_shear_gain", SHEAR_GAIN)),
+            gains["force_normal_gain"],
+            gains["force_normal_fill_gain"],
+            gains["force_shear_gain"],
         )
 
     def normal_features(self, core: LoadedCore) -> tuple[float, float]:

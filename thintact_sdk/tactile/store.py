@@ -66,6 +66,25 @@ def find_lut(profile: Profile, root: Path | None = None) -> Path | None:
     return None
 
 
+FORCE_NAME = "force.json"
+
+
+def force_calibration_path(profile: Profile, root: Path | None = None) -> Path:
+    """``<root>/<profile.name>/tactile/force.json`` (whether or not it exists; default root:
+    :func:`user_calibrations_root`, where ``thintact calibrate-force`` writes)."""
+    return (root or user_calibrations_root()) / profile.name / "tactile" / FORCE_NAME
+
+
+def find_force_calibration(profile: Profile) -> Path | None:
+    """The device's stored force gains (``thintact calibrate-force``): the first
+    ``<device>/tactile/force.json`` of :func:`calibration_roots`; None when there is none."""
+    for r in calibration_roots():
+        p = force_calibration_path(profile, r)
+        if p.is_file():
+            return p
+    return None
+
+
 def save_device_lut(lut: PhotometricLUT, profile: Profile, root: Path | None = None) -> Path:
     """Store ``lut`` as the device's LUT (under ``root``, default
     :func:`user_calibrations_root`); returns the ``.npz`` path."""
