@@ -1,25 +1,24 @@
 """Reading the ``.npz`` files of a calibration bundle strictly.
 
-Every array is checked to be a finite float (or integer) array, the archive is opened with
-``allow_pickle=False`` only after its magic bytes say it is a zip archive, and every way a
-damaged file can fail (truncated, random bytes, a missing or non-numeric member, a bad
+Every array is checked to be a finite float (or integer) array; the archive is read with
+:func:`thintact_sdk.safe_arrays.read_npz` (magic bytes, each member's header before its data,
+no pickles, declared sizes bounded by the memory there is), and every way a damaged file can
+fail (truncated, random bytes, a missing or non-numeric member, a bad or too deeply nested
 ``meta_json``) becomes one :class:`~thintact_sdk.errors.CalibrationError` naming the file
 and the member.
 """
 
 from __future__ import annotations
 
-import json
-import zipfile
-import zlib
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from thintact_sdk import safe_json
 from thintact_sdk.errors import CalibrationError
-
-_ZIP_MAGIC = (b"PK\x03\x04", b"PK\x05\x06")
+from thintact_sdk.safe_arrays import is_npz
+from thintact_sdk.safe_arrays import read_npz as read_untrusted_npz
 
 
 def read_npz(path: Path, what: str, keys: tuple[str, ...]) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
@@ -42,27 +41,12 @@ def read_npz(path: Path, what: str, keys: tuple[str, ...]) -> tuple[dict[str, np
     """
     if not path.is_file():
         raise CalibrationError(f"{what} file not found: {path}")
-    try:
-        with open(path, "rb") as f:
-            head = f.read(4)
-    except OSError as err:
-        raise CalibrationError(f"cannot read {what} {path}: {err.strerror or err}") from None
-    if head not in _ZIP_MAGIC:
+    if not is_npz(path):
         raise CalibrationError(f"{path} is not a calibration bundle file: not an .npz archive "
                                f"(expected the {what} written by the calibration)")
-    arrays: dict[str, np.ndarray] = {}
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            missing = [k for k in keys if k not in z.files]
-            if missing:
-                raise CalibrationError(f"{path}: missing arrays {', '.join(missing)}")
-            for k in keys:
-                arrays[k] = z[k]
-            meta_text = str(z["meta_json"]) if "meta_json" in z.files else "{}"
-    except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile, zlib.error,
-            NotImplementedError) as err:
-        raise CalibrationError(f"{path} is not a readable calibration bundle file "
-                               f"(truncated or damaged {what}): {err}") from None
+    arrays = read_untrusted_npz(path, what=what, error=CalibrationError, members=keys,
+                                optional=("meta_json",), kinds={"meta_json": "U"})
+    meta_text = str(arrays.pop("meta_json")) if "meta_json" in arrays else "{}"
     for k, arr in arrays.items():
         if arr.dtype.kind not in "fiu" or arr.size == 0:
             raise CalibrationError(f"{path}: array {k} has dtype {arr.dtype} and {arr.size} "
@@ -70,10 +54,7 @@ def read_npz(path: Path, what: str, keys: tuple[str, ...]) -> tuple[dict[str, np
         bad = int(np.count_nonzero(~np.isfinite(arr)))
         if bad:
             raise CalibrationError(f"{path}: array {k} holds {bad} NaN/Inf value(s)")
-    try:
-        meta = json.loads(meta_text)
-    except json.JSONDecodeError as err:
-        raise CalibrationError(f"{path}: meta_json is not valid JSON ({err})") from None
+    meta = safe_json.loads(meta_text, f"{path}: meta_json", CalibrationError)
     if not isinstance(meta, dict):
         raise CalibrationError(f"{path}: meta_json must be a JSON object")
     return arrays, meta
