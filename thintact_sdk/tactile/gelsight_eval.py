@@ -16,12 +16,15 @@ from pathlib import Path
 
 import numpy as np
 
+from thintact_sdk.safe_arrays import ArrayFileError, read_npz
 from thintact_sdk.tactile.calibration import ball_slopes
 from thintact_sdk.tactile.photometric import PhotometricLUT, calibrate_lut
 from thintact_sdk.tactile.poisson import integrate_gradients
 
 GELSIGHT_MM_PER_PX = 0.1245
 GELSIGHT_BALL_RADIUS_MM = 2.0
+PACK_MEMBERS = ("imgs", "f0", "touch_center", "touch_radius")
+"""The members of a press pack the evaluation reads (others, like ``names``, are kept)."""
 
 
 @dataclass
@@ -53,9 +56,23 @@ class GelSightEvaluation:
 
 
 def load_pack(path: str | Path) -> dict[str, np.ndarray]:
-    """Read ``dataPack_small.npz`` (it stores names as a unicode array: pickle allowed)."""
-    with np.load(path, allow_pickle=True) as z:
-        return {k: z[k] for k in z.files}
+    """Every array of ``dataPack_small.npz`` (its ``names`` are a plain unicode array).
+
+    Read with :func:`thintact_sdk.safe_arrays.read_npz`: never unpickles.
+
+    Raises
+    ------
+    ThinTactError
+        Naming the file and member: not an ``.npz``, damaged, a pickled (object) member, a
+        missing or non-numeric ``imgs``, ``f0``, ``touch_center`` or ``touch_radius``, or
+        declared sizes beyond the memory there is.
+    """
+    pack = read_npz(path, what="press pack", kinds=dict.fromkeys(PACK_MEMBERS, "uif"))
+    missing = [k for k in PACK_MEMBERS if k not in pack]
+    if missing:
+        raise ArrayFileError(f"{path}: missing arrays {', '.join(missing)} (a press pack holds "
+                             f"{', '.join(PACK_MEMBERS)})")
+    return pack
 
 
 def _slopes(pack: dict[str, np.ndarray], i: int, rim: float) -> tuple[np.ndarray, ...]:

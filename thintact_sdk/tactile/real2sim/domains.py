@@ -18,6 +18,7 @@ import numpy as np
 
 from thintact_sdk.errors import ThinTactError
 from thintact_sdk.profile import Profile, SceneSpec, TactileConfig, load_profile
+from thintact_sdk.safe_arrays import array_size_limit, read_npz
 from thintact_sdk.tactile.grid import TactileParams
 from thintact_sdk.tactile.indenters import Sphere
 from thintact_sdk.tactile.simulate import TactileScene, TactileSimulator
@@ -43,21 +44,32 @@ class RealPresses:
 
     @classmethod
     def from_pack(cls, path: str | Path) -> RealPresses:
-        """Read a ``dataPack``-style ``.npz`` (``imgs``, ``f0``; other keys ignored)."""
+        """Read a ``dataPack``-style ``.npz`` (``imgs``, ``f0``; other members are not read).
+
+        Read with :func:`thintact_sdk.safe_arrays.read_npz`: never unpickles, refuses declared
+        sizes beyond the memory there is.
+
+        Raises
+        ------
+        ThinTactError
+            Naming the file (and member): not a press pack, damaged, a pickled or non-numeric
+            member, wrong shapes, or NaN/Inf values.
+        """
         p = Path(path)
-        try:
-            with np.load(p, allow_pickle=True) as z:
-                imgs, f0 = np.asarray(z["imgs"]), np.asarray(z["f0"])
-        except (OSError, ValueError, KeyError) as exc:
-            raise ThinTactError(f"{p}: not a tactile press pack with 'imgs' and 'f0' ({exc})") from exc
+        # the images are converted to float32 below: keep room for that copy (4× a uint8 pack)
+        pack = read_npz(p, what="tactile press pack with 'imgs' and 'f0'",
+                        members=("imgs", "f0"), kinds="uif", limit=array_size_limit() // 5)
+        imgs, f0 = pack["imgs"], pack["f0"]
         if imgs.ndim != 4 or imgs.shape[-1] != 3 or f0.shape != imgs.shape[1:]:
             raise ThinTactError(
                 f"{p}: 'imgs' must be P×H×W×3 and 'f0' H×W×3, got {imgs.shape} and {f0.shape}")
         scale = 255.0 if imgs.dtype == np.uint8 else 1.0
         images = imgs.astype(np.float32) / scale
-        if not np.isfinite(images).all():
-            raise ThinTactError(f"{p}: 'imgs' holds NaN or Inf values")
-        return cls(images, f0.astype(np.float32) / scale, str(p))
+        reference = f0.astype(np.float32) / scale
+        for name, arr in (("imgs", images), ("f0", reference)):
+            if not np.isfinite(arr).all():
+                raise ThinTactError(f"{p}: '{name}' holds NaN or Inf values")
+        return cls(images, reference, str(p))
 
     def subset(self, indices: list[int]) -> np.ndarray:
         """The press images at ``indices`` (``len × H × W × 3``)."""
