@@ -43,8 +43,10 @@ from typing import Any, Literal
 
 import numpy as np
 
+from thintact_sdk import safe_json
 from thintact_sdk.errors import ProfileError, RecordingError
 from thintact_sdk.profile import Profile, read_profile_file
+from thintact_sdk.safe_arrays import read_npy
 from thintact_sdk.tone_curve import inline_table
 
 RECORDING_FORMAT = "thintact-recording/1"
@@ -168,13 +170,8 @@ def read_array(path: Path, is_scene: bool) -> np.ndarray:
                                  "compression would corrupt the ground truth")
         return _read_image_file(path, is_scene)
     if path.suffix.lower() == ".npy":
-        try:
-            arr = np.load(path, allow_pickle=False)
-        except (ValueError, OSError, EOFError) as err:
-            raise RecordingError(f"cannot read {path} (truncated or not a .npy file): {err}") from None
-        if not isinstance(arr, np.ndarray) or arr.dtype.kind not in _NUMERIC_KINDS:
-            kind = arr.dtype if isinstance(arr, np.ndarray) else type(arr).__name__
-            raise RecordingError(f"{path}: dtype {kind} is not a number array (uint, int or float)")
+        arr = read_npy(path, what="scene" if is_scene else "measurement", error=RecordingError,
+                       kinds=_NUMERIC_KINDS)
         if is_scene:
             arr = arr.astype(np.float32, copy=False)
         return arr
@@ -214,9 +211,10 @@ class Recording:
         if not mpath.is_file():
             raise RecordingError(f"{self.root} is not a recording: no manifest.json")
         try:
-            manifest = json.loads(mpath.read_text(encoding="utf-8"))
-        except (json.JSONDecodeError, UnicodeDecodeError) as err:
+            text = mpath.read_text(encoding="utf-8")
+        except UnicodeDecodeError as err:
             raise RecordingError(f"{mpath}: invalid JSON ({err})") from None
+        manifest = safe_json.loads(text, mpath, RecordingError)
         if not isinstance(manifest, dict):
             raise RecordingError(f"{mpath}: expected a JSON object, got {type(manifest).__name__}")
         if manifest.get("format") != RECORDING_FORMAT:

@@ -32,6 +32,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from thintact_sdk.errors import InvalidValueError, ProfileError
+from thintact_sdk.safe_arrays import read_npy
 
 
 class _ProfileLike(Protocol):
@@ -136,7 +137,7 @@ def _read_table_file(path: Path, bits: int) -> np.ndarray:
         raise ProfileError(f"{FIELD}.file: {path} not found")
     try:
         if path.suffix.lower() == ".npy":
-            table = np.load(path, allow_pickle=False)
+            table = read_npy(path, what=f"{FIELD}.file", error=ProfileError, kinds="uif")
         else:
             table = np.loadtxt(path, delimiter="," if path.suffix.lower() == ".csv" else None, ndmin=1)
     except (ValueError, OSError, EOFError) as err:

@@ -22,6 +22,7 @@ import numpy as np
 from thintact_sdk.errors import CalibrationError
 from thintact_sdk.imaging.t2s import SystemMatrices
 from thintact_sdk.profile import Profile
+from thintact_sdk.safe_arrays import read_npz
 
 T2S_KEYS = ("Po", "Qo", "Pc", "Qc")
 FLATCAM_KEYS = (("Phi_L", "Phi_R"), ("PhiL", "PhiR"), ("phi_l", "phi_r"))
@@ -37,8 +38,7 @@ def _read(path: Path) -> dict[str, np.ndarray]:
             raw = loadmat(path)
             return {k: np.asarray(v) for k, v in raw.items() if not k.startswith("__")}
         if path.suffix.lower() == ".npz":
-            with np.load(path, allow_pickle=False) as z:
-                return {k: np.asarray(z[k]) for k in z.files}
+            return read_npz(path, what="matrices", error=CalibrationError)
     except (OSError, ValueError, NotImplementedError) as err:
         raise CalibrationError(f"cannot read {path}: {err}") from None
     raise CalibrationError(f"{path}: unknown matrices format {path.suffix!r}; use .npz or .mat")

@@ -17,7 +17,9 @@ from typing import Any
 import numpy as np
 from scipy.ndimage import distance_transform_edt
 
+from thintact_sdk import safe_json
 from thintact_sdk.errors import CalibrationError
+from thintact_sdk.safe_arrays import read_npz
 
 LUT_FORMAT = "thintact-tactile-lut/1"
 
@@ -95,18 +97,21 @@ class PhotometricLUT:
         p = Path(path)
         if not p.is_file():
             raise CalibrationError(f"tactile LUT not found: {p}")
-        try:
-            with np.load(p, allow_pickle=False) as z:
-                lo, hi, table, counts = z["lo"], z["hi"], z["table"], z["counts"]
-        except (OSError, KeyError, ValueError) as err:
-            raise CalibrationError(f"cannot read tactile LUT {p}: {err}") from None
+        z = read_npz(p, what="tactile LUT", error=CalibrationError,
+                     members=("lo", "hi", "table", "counts"), kinds="uif")
+        lo, hi, table, counts = z["lo"], z["hi"], z["table"], z["counts"]
         meta: dict[str, Any] = {}
         mp = p.with_suffix(".json")
         if mp.is_file():
-            meta = json.loads(mp.read_text())
-            if meta.get("format") != LUT_FORMAT:
+            try:
+                text = mp.read_text(encoding="utf-8")
+            except (OSError, UnicodeDecodeError) as err:
+                raise CalibrationError(f"cannot read {mp}: {err}") from None
+            meta = safe_json.loads(text, mp, CalibrationError)
+            if not isinstance(meta, dict) or meta.get("format") != LUT_FORMAT:
+                found = meta.get("format") if isinstance(meta, dict) else type(meta).__name__
                 raise CalibrationError(
-                    f"{mp}: format {meta.get('format')!r}, this SDK reads {LUT_FORMAT!r}"
+                    f"{mp}: format {found!r}, this SDK reads {LUT_FORMAT!r}"
                 )
         if table.ndim != 4 or table.shape[3] != 2 or len(set(table.shape[:3])) != 1:
             raise CalibrationError(f"{p}: table shape {table.shape} is not B×B×B×2")

@@ -30,6 +30,8 @@ import numpy as np
 
 from thintact_masks.errors import MaskDesignError
 from thintact_masks.mls import mls_sequence, repeat_to_length
+from thintact_sdk import safe_json
+from thintact_sdk.safe_arrays import read_npz
 
 CHECKPOINT_NAME = "checkpoint.npz"
 CHECKPOINT_FORMAT = "thintact-ga-checkpoint/1"
@@ -272,17 +274,26 @@ def load_checkpoint(out_dir: str | os.PathLike[str]) -> GAState | None:
     path = Path(out_dir) / CHECKPOINT_NAME
     if not path.is_file():
         return None
+    hint = "; delete it to start over"
     try:
-        with np.load(path, allow_pickle=False) as z:
-            meta = json.loads(str(z["meta"]))
-            if meta.get("format") != CHECKPOINT_FORMAT:
-                raise MaskDesignError(f"{path}: not a {CHECKPOINT_FORMAT} checkpoint")
-            return GAState(int(meta["generation"]), z["population"].astype(np.int8),
-                           z["fitness"].astype(np.float64), z["best_history"].tolist(),
-                           z["mean_history"].tolist(), meta["rng_state"],
-                           float(meta["elapsed_s"]), meta.get("meta", {}))
-    except (OSError, ValueError, KeyError) as err:
-        raise MaskDesignError(f"cannot read checkpoint {path}: {err}; delete it to start over") from None
+        z = read_npz(path, what="GA checkpoint", error=MaskDesignError,
+                     members=("population", "fitness", "best_history", "mean_history", "meta"),
+                     kinds={"meta": "U", "population": "biu", "fitness": "fiu",
+                            "best_history": "fiu", "mean_history": "fiu"})
+    except MaskDesignError as err:
+        raise MaskDesignError(f"cannot read checkpoint {path}: {err}{hint}") from None
+    meta = safe_json.loads(str(z["meta"]), f"checkpoint {path} member 'meta'", MaskDesignError)
+    if not isinstance(meta, dict) or meta.get("format") != CHECKPOINT_FORMAT:
+        raise MaskDesignError(f"{path}: not a {CHECKPOINT_FORMAT} checkpoint")
+    try:
+        if not isinstance(meta["rng_state"], dict) or not isinstance(meta.get("meta", {}), dict):
+            raise TypeError("'rng_state' and 'meta' must be JSON objects")
+        return GAState(int(meta["generation"]), z["population"].astype(np.int8),
+                       z["fitness"].astype(np.float64), z["best_history"].tolist(),
+                       z["mean_history"].tolist(), meta["rng_state"],
+                       float(meta["elapsed_s"]), meta.get("meta", {}))
+    except (ValueError, KeyError, TypeError) as err:
+        raise MaskDesignError(f"cannot read checkpoint {path}: {err!r}{hint}") from None
 
 
 ProgressFn = Callable[[GAState], None]

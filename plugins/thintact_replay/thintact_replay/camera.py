@@ -59,6 +59,7 @@ from thintact_sdk.interfaces import Camera, CameraCapabilities
 from thintact_sdk.profile import Profile
 from thintact_sdk.recording import Recording
 from thintact_sdk.recording_raw import RAW_FIELD, load_raw_data
+from thintact_sdk.safe_arrays import read_npy
 from thintact_sdk.tone_curve import encode as encode_tone
 
 
@@ -84,10 +85,10 @@ def _check_frame_files(rec: Recording, scenes: bool) -> None:
             if not path.is_file():
                 problem = "is missing"
             elif path.suffix.lower() == ".npy":
-                try:
-                    np.load(path, mmap_mode="r", allow_pickle=False)
-                except (ValueError, OSError, EOFError) as err:
-                    problem = f"is truncated or not a .npy file ({err})"
+                try:  # header checked first (no objects, all declared data present), then mapped
+                    read_npy(path, what="frame", error=RecordingError, kinds="uif", mmap=True)
+                except RecordingError as err:
+                    problem = f"is truncated, damaged or not a plain .npy array ({err})"
             if problem:
                 raise RecordingError(
                     f"recording {rec.root} is damaged: frame {i} file {rel} {problem}; "

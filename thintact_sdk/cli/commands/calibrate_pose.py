@@ -45,7 +45,9 @@ def _flat_signal(path: Path, profile: object) -> tuple[object, str]:
         raise CalibrationError(f"recording {path} has no all-white frame to use as a flat field")
     if path.suffix != ".npy" or not path.is_file():
         raise CalibrationError(f"flat field {path}: expected a recording directory or an existing .npy file")
-    raw = np.load(path, allow_pickle=False).astype(np.float64)
+    from thintact_sdk.safe_arrays import read_npy  # header first: no pickle, no huge allocation
+
+    raw = read_npy(path, what="flat field", error=CalibrationError, kinds="uif").astype(np.float64)
     return raw - profile.noise.black_level_dn, f"{path.name} minus the black level"  # type: ignore[attr-defined]
 
 
