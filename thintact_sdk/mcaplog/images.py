@@ -201,11 +201,23 @@ def preview_rgb8(data: np.ndarray, pixel_format: str, bits: int) -> np.ndarray:
 
     Bayer mosaics are binned to half resolution (R, mean G, B of each 2 × 2 cell, no
     interpolation); mono frames are repeated in three channels; RGB frames are scaled.
+    Integer mosaics of 8 bits or more take an integer path (the top 8 bits, truncated: at
+    most 1 below the rounded value).
     """
-    from thintact_sdk.bayer import bin_bayer, pattern_from_pixel_format
+    from thintact_sdk.bayer import _site_offsets, bin_bayer, pattern_from_pixel_format
 
     pattern = pattern_from_pixel_format(pixel_format) if data.ndim == 2 else None
-    if pattern is not None and data.shape[0] % 2 == 0 and data.shape[1] % 2 == 0:
+    even = data.ndim == 2 and data.shape[0] % 2 == 0 and data.shape[1] % 2 == 0
+    if pattern is not None and even and data.dtype.kind == "u" and bits >= 8:
+        (rr, rc), (g1r, g1c), (g2r, g2c), (br, bc) = _site_offsets(pattern)
+        shift = bits - 8
+        out = np.empty((data.shape[0] // 2, data.shape[1] // 2, 3), np.uint8)
+        out[..., 0] = data[rr::2, rc::2] >> shift
+        g = data[g1r::2, g1c::2].astype(np.uint32) + data[g2r::2, g2c::2]
+        out[..., 1] = g >> (shift + 1)
+        out[..., 2] = data[br::2, bc::2] >> shift
+        return out
+    if pattern is not None and even:
         rgb = bin_bayer(data, pattern)
     elif data.ndim == 2:
         rgb = np.repeat(data[..., None].astype(np.float32), 3, axis=2)
