@@ -1,7 +1,12 @@
 """Discovers plugins from the ``thintact`` entry-point group and indexes what they provide.
 
-A plugin that fails to import (or whose hooks raise) is recorded with its error and
-skipped; the others still load. ``thintact plugins`` prints the result.
+A plugin that fails to import, whose hooks raise, or whose hooks return anything but an
+iterable of :class:`~thintact_sdk.hookspecs.Component` is recorded with its error and
+skipped (the valid components of a partly bad hook result are kept); the others still
+load. ``thintact plugins`` prints the result. A component factory that raises anything but
+a :class:`~thintact_sdk.errors.ThinTactError` raises :class:`PluginError` naming the plugin
+and the component (the original exception is its ``__cause__``), recorded in
+:attr:`PluginInfo.failures`.
 
 Every component is reachable by its plain name (``virtual``) and by its namespaced name
 ``<plugin>:<name>`` (``virtual:virtual``, ``acme:virtual``). When two plugins provide a
@@ -13,17 +18,23 @@ package can never silently take the place of the SDK's own component.
 from __future__ import annotations
 
 import importlib.metadata as md
+import itertools
 import traceback
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, Literal, overload
 
 import pluggy
 
-from thintact_sdk.errors import PluginError
+from thintact_sdk.errors import PluginError, ThinTactError
 from thintact_sdk.hookspecs import KINDS, PROJECT, Component, ThinTactSpec
 from thintact_sdk.interfaces import Camera, Decoder, Display, LightController, MaskDesigner
 
 ENTRY_POINT_GROUP = "thintact"
+MAX_COMPONENTS_PER_HOOK = 1000
+"""A hook yielding more components than this is refused (an endless generator)."""
+MAX_FAILURES = 20
+"""Factory failures kept per plugin (the newest)."""
 
 _HOOK_OF_KIND = {
     "camera": "thintact_cameras",
@@ -47,6 +58,12 @@ class PluginInfo:
     version: str | None
     error: str | None = None
     provides: dict[str, list[str]] = field(default_factory=dict)
+    failures: list[str] = field(default_factory=list)
+    """Component factories of this plugin that raised a non-SDK exception (newest last)."""
+
+    def fail(self, message: str) -> None:
+        """Record a load failure (several are joined, the first stays first)."""
+        self.error = message if not self.error else f"{self.error}; {message}"
 
 
 class PluginRegistry:
@@ -98,9 +115,10 @@ class PluginRegistry:
             impls = [i for i in getattr(self.pm.hook, hook_name).get_hookimpls() if i.plugin_name == name]
             for impl in impls:
                 try:
-                    comps = impl.function() or []
-                except Exception as err:  # noqa: BLE001
-                    info.error = f"{hook_name} raised {type(err).__name__}: {err}"
+                    result = impl.function()
+                    comps = _components_of(result, hook_name, info)
+                except Exception as err:  # noqa: BLE001 - a plugin's bug is recorded, not raised
+                    info.fail(f"{hook_name} raised {type(err).__name__}: {err}")
                     continue
                 for comp in comps:
                     comp.plugin = name
@@ -181,8 +199,68 @@ class PluginRegistry:
 
     def create(self, kind: str, name: str, *args: Any, **kwargs: Any) -> Any:
         """Build component ``name`` of ``kind`` with its factory (signatures per kind:
-        :mod:`thintact_sdk.hookspecs`); typed by kind for the kinds with an interface."""
-        return self.get(kind, name).factory(*args, **kwargs)
+        :mod:`thintact_sdk.hookspecs`); typed by kind for the kinds with an interface.
+
+        Raises
+        ------
+        ThinTactError
+            What the factory raised when it is an SDK error (bad settings, missing device).
+        PluginError
+            The name is unknown or ambiguous (:meth:`get`), or the factory raised any other
+            exception: the message names the plugin and the component, the original is the
+            ``__cause__``, and the failure is kept in the plugin's :attr:`PluginInfo.failures`.
+        """
+        comp = self.get(kind, name)
+        try:
+            return comp.factory(*args, **kwargs)
+        except ThinTactError:
+            raise
+        except Exception as err:
+            what = f"{kind.replace('_', ' ')} {comp.name!r} of {self._describe(comp.plugin)}"
+            message = f"{what} failed to build: {type(err).__name__}: {err}"
+            info = self.plugins.get(comp.plugin)
+            if info is not None:
+                info.failures = [*info.failures, message][-MAX_FAILURES:]
+            raise PluginError(message) from err
+
+
+def _components_of(result: object, hook_name: str, info: PluginInfo) -> list[Component]:
+    """The valid components of a hook's ``result``; each invalid entry is recorded on ``info``.
+
+    Raises
+    ------
+    PluginError
+        ``result`` is not an iterable of components at all (a number, text, a mapping), or
+        yields more than :data:`MAX_COMPONENTS_PER_HOOK` entries.
+    """
+    if result is None:
+        return []
+    if isinstance(result, str | bytes | Mapping) or not isinstance(result, Iterable):
+        raise PluginError(f"returned {type(result).__name__} {_short(result)}, not a list of Component")
+    entries = list(itertools.islice(result, MAX_COMPONENTS_PER_HOOK + 1))
+    if len(entries) > MAX_COMPONENTS_PER_HOOK:
+        raise PluginError(f"returned more than {MAX_COMPONENTS_PER_HOOK} components")
+    good: list[Component] = []
+    for k, entry in enumerate(entries):
+        if not isinstance(entry, Component):
+            info.fail(f"{hook_name} entry {k} is {type(entry).__name__} {_short(entry)}, not a Component")
+        elif not isinstance(entry.name, str) or not entry.name or ":" in entry.name:
+            info.fail(f"{hook_name} entry {k} has an invalid name {_short(entry.name)} "
+                      "(non-empty text without ':')")
+        elif not callable(entry.factory):
+            info.fail(f"{hook_name} component {entry.name!r} has a factory that is not callable")
+        else:
+            good.append(entry)
+    return good
+
+
+def _short(value: object) -> str:
+    """``repr(value)``, at most 60 characters (a plugin's repr may be long or fail)."""
+    try:
+        text = repr(value)
+    except Exception:  # noqa: BLE001 - a broken __repr__ must not hide the real problem
+        text = f"<{type(value).__name__}>"
+    return text if len(text) <= 60 else text[:57] + "..."
 
 
 _REGISTRY: PluginRegistry | None = None
