@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import os
 import re
 import warnings
@@ -21,7 +22,9 @@ from typing import Annotated, Any, Literal
 
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic_core import PydanticCustomError
 
+from thintact_sdk import yaml_safe
 from thintact_sdk.errors import ProfileError, ThinTactError
 from thintact_sdk.tone_curve import ToneCurveSpec, check_table_file
 
@@ -34,8 +37,18 @@ MAX_MASK_CELLS = 16384
 """Largest K (mask cells per side)."""
 MAX_PITCH_UM = 10_000.0
 """Largest pixel pitch or mask feature in um (10 mm)."""
+MIN_PITCH_UM = 0.1
+"""Smallest pixel pitch, mask feature or tactile pixel in um (100 nm: below the wavelength
+of visible light, finer than any image sensor or display; smaller values are typos)."""
 MAX_DISTANCE_MM = 1000.0
 """Largest scene → mask or mask → sensor distance in mm."""
+MIN_DISTANCE_MM = 1e-3
+"""Smallest scene → mask or mask → sensor distance in mm (1 um)."""
+MAX_PROFILE_BYTES = 16 * 2**20
+"""Largest profile file read (16 MiB; two 16384-entry mask vectors take about 200 kB)."""
+MEMORY_FRACTION = 1 / 8
+"""Share of this host's physical memory one array implied by a profile may take: the
+pipeline holds several such arrays at once (raw, binned, reconstruction, depth, kernels)."""
 KNOWN_CHANNELS = ("R", "G", "B", "mono", "Gr", "Gb")
 """Channel names a profile may list: the Bayer-binned colours, one monochrome channel, or the
 four Bayer sites ``R, Gr, Gb, B`` kept apart (FlatCam's layout)."""
@@ -46,13 +59,17 @@ _PLUGIN_NAME_RE = re.compile(r"^([A-Za-z0-9][A-Za-z0-9._-]*:)?[A-Za-z0-9][A-Za-z
 
 Count = Annotated[int, Field(strict=True, gt=0, le=MAX_PIXELS_PER_SIDE)]
 """A pixel count: a true integer (not a bool or a float) in [1, 16384]."""
-PitchUm = Annotated[float, Field(gt=0, le=MAX_PITCH_UM, allow_inf_nan=False)]
-"""A finite positive length in um, at most 10 mm."""
-MaskCellUm = Annotated[float, Field(gt=0, le=100 * MAX_PITCH_UM, allow_inf_nan=False)]
-"""A mask cell side in um, at most 1 m: a lens-based sensor's profile declares an open
+PitchUm = Annotated[float, Field(ge=MIN_PITCH_UM, le=MAX_PITCH_UM, allow_inf_nan=False)]
+"""A finite pixel pitch in um, 0.1 um to 10 mm."""
+MaskCellUm = Annotated[float, Field(ge=MIN_PITCH_UM, le=100 * MAX_PITCH_UM, allow_inf_nan=False)]
+"""A mask cell side in um, 0.1 um to 1 m: a lens-based sensor's profile declares an open
 aperture, one cell as wide as the field (``digit``: 15 mm)."""
 DistanceMm = Annotated[float, Field(gt=0, le=MAX_DISTANCE_MM, allow_inf_nan=False)]
 """A finite positive distance in mm, at most 1 m."""
+AxialMm = Annotated[float, Field(ge=MIN_DISTANCE_MM, le=MAX_DISTANCE_MM, allow_inf_nan=False)]
+"""A distance along the optical axis in mm, 1 um to 1 m."""
+TactilePxMm = Annotated[float, Field(ge=MIN_PITCH_UM / 1000, le=MAX_PITCH_UM / 1000, allow_inf_nan=False)]
+"""A tactile pixel size in mm, 0.1 um to 10 mm (as a pixel pitch)."""
 FiniteNonNeg = Annotated[float, Field(ge=0, allow_inf_nan=False)]
 FinitePos = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 PluginName = Annotated[str, Field(pattern=_PLUGIN_NAME_RE.pattern)]
@@ -144,8 +161,8 @@ class MaskSpec(_Section):
 class GeometrySpec(_Section):
     """Distances along the optical axis: scene → mask z, mask → sensor d (mm)."""
 
-    scene_to_mask_mm: DistanceMm = Field(description="z, scene plane to mask in mm")
-    mask_to_sensor_mm: DistanceMm = Field(description="d, mask to sensor in mm")
+    scene_to_mask_mm: AxialMm = Field(description="z, scene plane to mask in mm")
+    mask_to_sensor_mm: AxialMm = Field(description="d, mask to sensor in mm")
 
     @property
     def total_mm(self) -> float:
@@ -218,7 +235,7 @@ class DisplayConfig(_Section):
 class TactileConfig(_Section):
     """Tactile pipeline parameters (photometric stereo, contact, markers)."""
 
-    mm_per_px: DistanceMm | None = Field(default=None, description="scene pixel size in mm")
+    mm_per_px: TactilePxMm | None = Field(default=None, description="scene pixel size in mm")
     contact_threshold_mm: DistanceMm = Field(default=0.1)
     lut: str | None = Field(default=None, description="photometric-stereo LUT file")
     real2sim: str | None = Field(
@@ -297,6 +314,13 @@ class Profile(BaseModel):
             raise ValueError(str(err)) from None
         return v
 
+    @model_validator(mode="after")
+    def _within_limits(self) -> Profile:
+        problem = resource_problem(self)
+        if problem:
+            raise PydanticCustomError("profile_limit", "{problem}", {"problem": problem})
+        return self
+
     @property
     def source(self) -> Path | None:
         """The file this profile was loaded from, if any."""
@@ -329,15 +353,137 @@ class Profile(BaseModel):
         return p
 
 
+_TACTILE_NUMBERS: dict[str, tuple[float, float]] = {
+    "elastomer_sigma_mm": (0.0, MAX_DISTANCE_MM),
+    "elastomer_youngs_mpa": (1e-6, 1e6),
+    "elastomer_poisson": (0.0, 0.5),
+    "force_normal_gain": (-math.inf, math.inf),
+    "force_normal_fill_gain": (-math.inf, math.inf),
+    "force_shear_gain": (-math.inf, math.inf),
+}
+"""Optional ``tactile`` keys the tactile pipeline reads as numbers, with their closed ranges."""
+ELASTOMER_SIGMA_MM = 0.25
+"""The tactile simulator's elastomer blur when ``tactile.elastomer_sigma_mm`` is absent
+(:attr:`thintact_sdk.tactile.grid.TactileParams.elastomer_sigma_mm`), in mm."""
+
+
+def host_memory_bytes() -> int:
+    """Physical memory of this host in bytes (``SC_PHYS_PAGES × SC_PAGE_SIZE``; 16 GiB when
+    the host does not say)."""
+    try:
+        pages, size = os.sysconf("SC_PHYS_PAGES"), os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError, AttributeError):
+        return 16 * 2**30
+    return int(pages) * int(size) if pages > 0 and size > 0 else 16 * 2**30
+
+
+def array_limit_bytes() -> int:
+    """The most bytes one array implied by a profile may take: :data:`MEMORY_FRACTION` of
+    :func:`host_memory_bytes`."""
+    return int(host_memory_bytes() * MEMORY_FRACTION)
+
+
+def _gib(n: float) -> str:
+    return f"{n / 2**30:.1f} GiB" if n >= 2**30 else f"{n / 2**20:.1f} MiB"
+
+
+def implied_arrays(profile: Profile) -> list[tuple[str, str, int]]:
+    """The largest arrays the SDK allocates for ``profile``: ``(fields, what, bytes)``.
+
+    - the raw Bayer mosaic, ``2R × 2S`` float64 (the binned ``R × S × C`` frame is no larger);
+    - the scene grid: the tactile simulator's ``2N × 2M`` float64 convolution grids (a
+      reconstruction ``N × M × C`` float64 is no larger);
+    - the system matrices ``Φ_L`` (``R × N``) and ``Φ_R`` (``S × M``) float64 per channel.
+    """
+    s, sc = profile.sensor, profile.scene
+    c = len(s.channels)
+    return [
+        ("sensor.rows × sensor.cols", f"a {2 * s.rows}×{2 * s.cols} float64 raw frame",
+         8 * 4 * s.rows * s.cols),
+        ("scene.rows × scene.cols", f"a {2 * sc.rows}×{2 * sc.cols} float64 tactile grid",
+         8 * 4 * sc.rows * sc.cols),
+        ("sensor × scene", f"{c} channel(s) of {s.rows}×{sc.rows} and {s.cols}×{sc.cols} float64 "
+         "system matrices", 8 * c * (s.rows * sc.rows + s.cols * sc.cols)),
+    ]
+
+
+def _tactile_problem(profile: Profile) -> str | None:
+    """A physically impossible or unbounded tactile value (with a ``tactile`` section)."""
+    t = profile.tactile
+    if t is None:
+        return None
+    extra = t.model_extra or {}
+    for key, (low, high) in _TACTILE_NUMBERS.items():
+        if key not in extra:
+            continue
+        v = extra[key]
+        try:
+            x = float(v) if not isinstance(v, bool) else math.nan
+        except (TypeError, ValueError, OverflowError):
+            x = math.nan
+        if not (math.isfinite(x) and low <= x <= high):
+            rng = "a finite number" if math.isinf(low) else f"a finite number in [{low:g}, {high:g}]"
+            return f"tactile.{key}: expected {rng}, got {v!r}"
+    mm = float(t.mm_per_px) if t.mm_per_px is not None else profile.scene.pixel_pitch_um / 1000
+    via = "tactile.mm_per_px" if t.mm_per_px is not None else "scene.pixel_pitch_um"
+    side = max(profile.scene.rows, profile.scene.cols)
+    sigma = float(extra.get("elastomer_sigma_mm", ELASTOMER_SIGMA_MM))
+    if sigma / mm > side:
+        given = "" if "elastomer_sigma_mm" in extra else " (the default)"
+        return (f"tactile.elastomer_sigma_mm: {sigma:g} mm{given} is {sigma / mm:.3g} px at {mm:g} "
+                f"mm/px ({via}), wider than the {side} px scene grid it blurs")
+    if t.marker_diameter_mm / mm > MAX_PIXELS_PER_SIDE:
+        return (f"tactile.marker_diameter_mm: {t.marker_diameter_mm:g} mm is "
+                f"{t.marker_diameter_mm / mm:.3g} px at {mm:g} mm/px ({via}), over "
+                f"{MAX_PIXELS_PER_SIDE} px")
+    if t.marker_pitch_mm < mm:
+        return (f"tactile.marker_pitch_mm: {t.marker_pitch_mm:g} mm is below one pixel "
+                f"({mm:g} mm, {via}): more markers than pixels")
+    if t.marker_diameter_mm >= t.marker_pitch_mm:
+        return (f"tactile.marker_diameter_mm: {t.marker_diameter_mm:g} mm is not below "
+                f"tactile.marker_pitch_mm ({t.marker_pitch_mm:g} mm): the markers would overlap")
+    return None
+
+
+def resource_problem(profile: Profile) -> str | None:
+    """Why ``profile`` cannot be run on this host, or None.
+
+    Checked when a profile is validated, before anything is allocated: every array of
+    :func:`implied_arrays` must fit :func:`array_limit_bytes`, and with a ``tactile``
+    section the tactile numbers must be finite and in range, the elastomer blur (a Gaussian
+    of ``elastomer_sigma_mm`` / ``mm_per_px`` pixels) no wider than the scene grid, a marker
+    at most :data:`MAX_PIXELS_PER_SIDE` pixels across, the marker pitch at least one pixel
+    (no more markers than pixels) and above the marker diameter. The reason starts with the dotted field.
+    """
+    limit = array_limit_bytes()
+    for fields, what, size in implied_arrays(profile):
+        if size > limit:
+            return (f"{fields}: {what} of {_gib(size)}, over the {_gib(limit)} one array may "
+                    f"take on this host ({MEMORY_FRACTION:.3g} of {_gib(host_memory_bytes())} memory)")
+    return _tactile_problem(profile)
+
+
+def validation_error_line(err: ValidationError) -> str:
+    """One line for a pydantic error: the first error's dotted field and message, then
+    ``(and N more: f1, f2, f3, ...)`` naming up to three more fields when there are more."""
+    errors = err.errors()
+    if not errors:
+        return str(err).splitlines()[0]
+    e = errors[0]
+    loc = ".".join(str(x) for x in e["loc"])
+    msg = "field required (missing)" if e["type"] == "missing" else e["msg"]
+    msg = msg.removeprefix("Value error, ").removeprefix("Assertion failed, ")
+    msg = " ".join(msg.split())
+    text = f"{loc}: {msg}" if loc else msg
+    if len(errors) > 1:
+        others = list(dict.fromkeys(".".join(str(x) for x in o["loc"]) or "(top level)" for o in errors[1:]))
+        named = ", ".join(others[:3]) + (", ..." if len(others) > 3 else "")
+        text += f" (and {len(errors) - 1} more: {named})"
+    return text
+
+
 def _format_validation_error(err: ValidationError, where: str) -> str:
-    lines = [f"invalid profile {where}:"]
-    for e in err.errors():
-        loc = ".".join(str(x) for x in e["loc"]) or "(top level)"
-        msg = e["msg"]
-        if e["type"] == "missing":
-            msg = "field required (missing)"
-        lines.append(f"  - {loc}: {msg}")
-    return "\n".join(lines)
+    return f"invalid profile {where}: {validation_error_line(err)}"
 
 
 def profile_from_dict(data: Any, where: str = "(in memory)") -> Profile:
@@ -346,12 +492,12 @@ def profile_from_dict(data: Any, where: str = "(in memory)") -> Profile:
     Raises
     ------
     ProfileError
-        With one line per problem, each naming the field (dotted path) and the reason.
+        One line: the first problem's field (dotted path) and reason, and how many more.
     """
     if not isinstance(data, dict):
         raise ProfileError(f"invalid profile {where}: expected a mapping, got {type(data).__name__}")
     if "format" not in data:
-        raise ProfileError(f"invalid profile {where}:\n  - format: field required (missing)")
+        raise ProfileError(f"invalid profile {where}: format: field required (missing)")
     try:
         return Profile.model_validate(data)
     except ValidationError as err:
@@ -364,13 +510,19 @@ def read_profile_file(path: str | os.PathLike[str]) -> Profile:
     Raises
     ------
     ProfileError
-        The file is missing, unreadable, not UTF-8, not JSON/YAML, or fails validation;
-        the message names the file (and the dotted field).
+        The file is missing, unreadable, larger than :data:`MAX_PROFILE_BYTES`, not UTF-8,
+        not JSON/YAML (read by :mod:`thintact_sdk.yaml_safe`: bounded aliases, no duplicate
+        keys, core-schema tags only; JSON without duplicate keys), or fails validation; one
+        line naming the file (and the line, or the dotted field).
     """
     p = Path(path)
     if not p.is_file():
         raise ProfileError(f"profile file not found: {p}")
     try:
+        size = p.stat().st_size
+        if size > MAX_PROFILE_BYTES:
+            raise ProfileError(f"cannot read profile {p}: {size} bytes, over the "
+                               f"{MAX_PROFILE_BYTES} bytes a profile may hold")
         text = p.read_text(encoding="utf-8")
     except UnicodeDecodeError as err:
         raise ProfileError(f"cannot read profile {p}: not UTF-8 text (byte {err.start})") from None
@@ -378,11 +530,15 @@ def read_profile_file(path: str | os.PathLike[str]) -> Profile:
         raise ProfileError(f"cannot read profile {p}: {err.strerror or err}") from None
     try:
         if p.suffix.lower() == ".json":
-            data = json.loads(text)
+            data = yaml_safe.load_json(text)
         else:
-            data = yaml.safe_load(text)
-    except (json.JSONDecodeError, yaml.YAMLError, RecursionError, ValueError) as err:
-        raise ProfileError(f"cannot parse profile {p}: {err}") from None
+            data = yaml_safe.load(text)
+    except yaml.YAMLError as err:
+        raise ProfileError(f"cannot parse profile {p}: {yaml_safe.error_line(err)}") from None
+    except RecursionError:
+        raise ProfileError(f"cannot parse profile {p}: nested too deeply") from None
+    except (json.JSONDecodeError, ValueError) as err:
+        raise ProfileError(f"cannot parse profile {p}: {' '.join(str(err).split())}") from None
     prof = profile_from_dict(data, where=str(p))
     prof._source = p.resolve()
     try:

@@ -21,8 +21,8 @@ def check_profile_plugins(profile: Profile, registry: PluginRegistry | None = No
     Raises
     ------
     ProfileError
-        One line per unknown or ambiguous plugin, naming the file, the dotted field
-        (``camera.plugin``) and the available names.
+        One line naming the file, the first unknown or ambiguous plugin's dotted field
+        (``camera.plugin``) with the available names, and how many more there are.
     """
     reg = registry or get_registry()
     problems = []
@@ -33,7 +33,8 @@ def check_profile_plugins(profile: Profile, registry: PluginRegistry | None = No
         try:
             reg.get(kind, cfg.plugin)
         except PluginError as err:
-            problems.append(f"  - {section}.plugin: {err}")
+            problems.append(f"{section}.plugin: {' '.join(str(err).split())}")
     if problems:
         where = profile.source or "(in memory)"
-        raise ProfileError(f"invalid profile {where}:\n" + "\n".join(problems))
+        more = f" (and {len(problems) - 1} more)" if len(problems) > 1 else ""
+        raise ProfileError(f"invalid profile {where}: {problems[0]}{more}")

@@ -98,13 +98,17 @@ KEY_VALUE_HELP = ("KEY=VALUE, VALUE read as YAML 1.2: 30, 2.5e3, true, null, [1,
 
 
 def _yaml12_loader() -> type:
-    """A safe YAML loader resolving plain scalars by the YAML 1.2 core schema (as JSON does:
-    ``2.5e3`` is a number, ``yes``/``on`` are text), not PyYAML's YAML 1.1 rules."""
+    """The SDK's safe YAML loader (:class:`thintact_sdk.yaml_safe.SafeLoader`: bounded aliases,
+    no duplicate keys, core-schema tags only) resolving plain scalars by the YAML 1.2 core
+    schema (as JSON does: ``2.5e3`` is a number, ``yes``/``on`` are text), not PyYAML's YAML
+    1.1 rules."""
     import re
 
     import yaml
 
-    class Loader(yaml.SafeLoader):
+    from thintact_sdk.yaml_safe import SafeLoader
+
+    class Loader(SafeLoader):
         pass
 
     Loader.yaml_implicit_resolvers = {}  # drop the YAML 1.1 resolvers, add the 1.2 core ones
@@ -152,8 +156,13 @@ def key_value(text: str) -> tuple[str, object]:
     try:
         value = yaml.load(raw, Loader=_yaml12_loader())  # noqa: S506 - a SafeLoader subclass
     except yaml.YAMLError as err:
-        first = str(err).splitlines()[0]
-        raise argparse.ArgumentTypeError(f"{key}: value {raw!r} is not valid YAML ({first})") from None
+        from thintact_sdk.yaml_safe import error_line
+
+        shown = raw if len(raw) <= 60 else raw[:57] + "..."
+        raise argparse.ArgumentTypeError(
+            f"{key}: value {shown!r} is not valid YAML ({error_line(err)})") from None
+    except RecursionError:
+        raise argparse.ArgumentTypeError(f"{key}: value nested too deeply") from None
     if isinstance(value, float) and not math.isfinite(value):
         raise argparse.ArgumentTypeError(f"{key}: expected a finite number, got {raw!r}")
     return key, value

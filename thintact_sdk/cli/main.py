@@ -15,10 +15,24 @@ import sys
 from collections.abc import Sequence
 from typing import NoReturn
 
+from pydantic import ValidationError
+
 from thintact_sdk import __version__
 from thintact_sdk.errors import ThinTactError
+from thintact_sdk.profile import validation_error_line
 
 EXIT_USAGE = 2
+
+
+def _one_line(message: str) -> str:
+    """``message`` on one line: a multi-line error (a headline, then one problem a line)
+    becomes ``headline: first problem (and N more)``; pydantic errors are made one line
+    where they are raised (:func:`thintact_sdk.profile.validation_error_line`)."""
+    lines = [ln.strip() for ln in message.splitlines() if ln.strip()]
+    if len(lines) <= 1:
+        return lines[0] if lines else message
+    return f"{lines[0].rstrip(':')}: {lines[1].lstrip('- ')}" + (
+        f" (and {len(lines) - 2} more)" if len(lines) > 2 else "")
 
 
 class _Parser(argparse.ArgumentParser):
@@ -95,12 +109,15 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise
         return EXIT_USAGE
     if not getattr(args, "func", None):
-        parser.print_help()
+        print(f"{parser.prog}: no command given; try '{parser.prog} --help'", file=sys.stderr)
         return EXIT_USAGE
     try:
         rc = args.func(args)
     except ThinTactError as err:
-        print(f"thintact: error: {err}", file=sys.stderr)
+        print(f"thintact: error: {_one_line(str(err))}", file=sys.stderr)
+        return EXIT_USAGE
+    except ValidationError as err:  # a model built from user input: the first error, one line
+        print(f"thintact: error: {validation_error_line(err)}", file=sys.stderr)
         return EXIT_USAGE
     except OSError as err:  # a file or device the user named cannot be used
         print(f"thintact: error: {err.strerror or err}: {err.filename or ''}".rstrip(": "), file=sys.stderr)
@@ -111,7 +128,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except Exception as err:  # noqa: BLE001 - a bug: say so in one line, traceback on request
         if os.environ.get("THINTACT_DEBUG"):
             raise
-        print(f"thintact: internal error: {type(err).__name__}: {err} "
+        print(f"thintact: internal error: {type(err).__name__}: {_one_line(str(err))} "
               "(set THINTACT_DEBUG=1 for the traceback and please report it)", file=sys.stderr)
         return 1
     return int(rc or 0)
