@@ -18,7 +18,7 @@ from typing import Any
 
 import pytest
 import yaml
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
 from thintact_sdk.cli.main import main
@@ -169,6 +169,124 @@ def test_cli_errors_name_the_file(tmp_path: Path, capsys: pytest.CaptureFixture[
     assert main(["profile", "validate", str(f)]) == 2
     assert str(f) in capsys.readouterr().err
     OUTCOMES["clean_error"] += 1
+
+
+YAML_FUZZ = settings(max_examples=40, deadline=None, database=None,
+                     suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+YAML_LIMIT = 600
+"""The alias-expansion limit during the YAML structure fuzz, lowered so that the fuzz reaches
+it (the base profile alone is about 230 nodes)."""
+SCALARS = ["1", "-3", "0.5", "1e400", ".nan", "x", "''", "null", "true", "R", "virtual", "!!str 7"]
+KEYS = ["rows", "cols", "a", "b", "plugin", "1", "rows"]
+
+
+def _flow(leaf: st.SearchStrategy[str]) -> st.SearchStrategy[str]:
+    return st.recursive(
+        leaf,
+        lambda ch: st.one_of(
+            st.lists(ch, max_size=6).map(lambda xs: "[" + ", ".join(xs) + "]"),
+            st.lists(st.tuples(st.sampled_from(KEYS), ch), max_size=4).map(
+                lambda kv: "{" + ", ".join(f"{k}: {v}" for k, v in kv) + "}"),
+        ),
+        max_leaves=10,
+    )
+
+
+@st.composite
+def yaml_profiles(draw: st.DrawFn) -> tuple[str, bool]:
+    """A profile's YAML text with anchors, aliases (expanding to up to thousands of nodes),
+    flow values (duplicate keys among them) put in for some fields, and maybe a repeated
+    top-level key; and whether that key was repeated."""
+    head = []
+    for i in range(draw(st.integers(0, 6))):
+        if i and draw(st.integers(0, 3)) > 0:  # a "laugh": the previous anchor k times
+            value = "[" + ", ".join([f"*a{i - 1}"] * draw(st.integers(2, 8))) + "]"
+        else:
+            value = draw(_flow(st.sampled_from(SCALARS + [f"*a{j}" for j in range(i)])))
+        head.append(f"x{i}: &a{i} {value}")
+    refs = [f"*a{j}" for j in range(len(head))]
+    d = copy.deepcopy(BASE)
+    values = []
+    for n, path in enumerate(draw(st.lists(st.sampled_from(PATHS), max_size=2))):
+        d = _set(d, path, f"@@{n}@@")
+        values.append(draw(_flow(st.sampled_from(SCALARS + refs))))
+    text = yaml.safe_dump(d, sort_keys=False)
+    for n, v in enumerate(values):
+        text = text.replace(f"'@@{n}@@'", v)
+    repeat = draw(st.booleans()) and draw(st.integers(0, 3)) == 0
+    tail = "name: again\n" if repeat else ""
+    return "\n".join(head) + ("\n" if head else "") + text + tail, repeat
+
+
+def _expanded_size(text: str) -> int:
+    """Nodes of the document with every alias expanded (an oracle independent of yaml_safe:
+    PyYAML's composer shares aliased nodes; sizes are summed over the shared graph)."""
+    sizes: dict[int, int] = {}
+
+    def size(node: yaml.Node) -> int:
+        if id(node) not in sizes:
+            if isinstance(node, yaml.SequenceNode):
+                sizes[id(node)] = 1 + sum(size(c) for c in node.value)
+            elif isinstance(node, yaml.MappingNode):
+                sizes[id(node)] = 1 + sum(size(k) + size(v) for k, v in node.value)
+            else:
+                sizes[id(node)] = 1
+        return sizes[id(node)]
+
+    root = yaml.compose(text, Loader=yaml.SafeLoader)
+    return 0 if root is None else size(root)
+
+
+@YAML_FUZZ
+@given(doc=yaml_profiles(), command=st.sampled_from(["load", "validate", "show"]))
+def test_yaml_structure_fuzz_valid_or_one_clean_line(tmp_path_factory: pytest.TempPathFactory,
+                                                     capsys: pytest.CaptureFixture[str],
+                                                     doc: tuple[str, bool], command: str) -> None:
+    from thintact_sdk import yaml_safe
+    from thintact_sdk.profile import load_profile
+
+    text, repeated = doc
+    f = tmp_path_factory.mktemp("yfuzz") / "p.yaml"
+    f.write_text(text)
+    try:
+        expanded = _expanded_size(text)
+    except yaml.YAMLError:
+        expanded = 0  # not YAML at all: the loader must say so too
+    old = yaml_safe.SafeLoader.max_expanded_nodes
+    yaml_safe.SafeLoader.max_expanded_nodes = YAML_LIMIT
+    try:
+        if command == "load":
+            try:
+                prof = load_profile(f)
+            except ProfileError as err:
+                msg, rc = str(err), 2
+            else:
+                msg, rc = "", 0
+        else:
+            capsys.readouterr()
+            rc = main(["profile", command, str(f)])
+            msg = capsys.readouterr().err
+            assert rc != 2 or (msg.endswith("\n") and msg.count("\n") == 1), msg
+            msg = msg.removeprefix("thintact: error: ").rstrip("\n")
+    except Exception:
+        OUTCOMES["other"] += 1
+        raise
+    finally:
+        yaml_safe.SafeLoader.max_expanded_nodes = old
+    if rc == 0:
+        OUTCOMES["valid"] += 1
+        assert not repeated and expanded <= YAML_LIMIT, (expanded, text)
+        if command == "load":
+            _check_valid(prof)
+        return
+    OUTCOMES["clean_error"] += 1
+    assert rc == 2 and "\n" not in msg and str(f) in msg and "Traceback" not in msg, msg
+    event("too large" if f"larger than {YAML_LIMIT} nodes" in msg else
+          "duplicate key" if "duplicate key" in msg else "other refusal")
+    if expanded > YAML_LIMIT:
+        assert f"larger than {YAML_LIMIT} nodes" in msg or "duplicate key" in msg or "tag" in msg, msg
+    elif repeated:
+        assert "duplicate key" in msg, msg
 
 
 def test_zz_outcome_counts() -> None:

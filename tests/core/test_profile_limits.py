@@ -68,6 +68,26 @@ _EFFECT, _PARAM, _HIGH = _first_bounded_param()
         ("name", "a/b", "not a profile name"),
         ("name", "..", "not a profile name"),
         ("camera.plugin", "../evil", "camera.plugin"),
+        # issue 30: physically impossible values, refused with the field named
+        ("sensor.pixel_pitch_um", 1e-30, "sensor.pixel_pitch_um: Input should be greater than or equal to 0.1"),
+        ("sensor.pixel_pitch_um", -10.0, "sensor.pixel_pitch_um"),
+        ("scene.pixel_pitch_um", 1e-9, "scene.pixel_pitch_um"),
+        ("display.pixel_pitch_um", 0.0, "display.pixel_pitch_um"),
+        ("mask.feature_um", 1e-30, "mask.feature_um"),
+        ("geometry.scene_to_mask_mm", 1e-300, "geometry.scene_to_mask_mm"),
+        ("tactile.mm_per_px", 1e-9, "tactile.mm_per_px: Input should be greater than or equal to 0.0001"),
+        ("tactile.mm_per_px", 0.0, "tactile.mm_per_px"),
+        ("tactile.mm_per_px", float("nan"), "tactile.mm_per_px"),
+        ("tactile.elastomer_sigma_mm", 1e9, "tactile.elastomer_sigma_mm: expected a finite number in [0, 1000]"),
+        ("tactile.elastomer_sigma_mm", float("nan"), "tactile.elastomer_sigma_mm"),
+        ("tactile.elastomer_sigma_mm", "wide", "tactile.elastomer_sigma_mm"),
+        ("tactile.elastomer_sigma_mm", True, "tactile.elastomer_sigma_mm"),
+        ("tactile.elastomer_sigma_mm", 100.0, "wider than the 64 px scene grid it blurs"),
+        ("tactile.elastomer_poisson", 0.7, "tactile.elastomer_poisson"),
+        ("tactile.elastomer_youngs_mpa", -1.0, "tactile.elastomer_youngs_mpa"),
+        ("tactile.force_shear_gain", float("inf"), "tactile.force_shear_gain"),
+        ("tactile.marker_pitch_mm", 1e-6, "tactile.marker_pitch_mm: 1e-06 mm is below one pixel"),
+        ("tactile.marker_diameter_mm", 2.0, "tactile.marker_diameter_mm: 2 mm is not below tactile.marker_pitch_mm"),
     ],
 )
 def test_out_of_range_fields_are_refused_by_name(mini: dict, field: str, value: object, expect: str) -> None:
@@ -117,3 +137,68 @@ def test_strict_validate_names_misspelt_plugin(tmp_path: Path, mini: dict,
     err = capsys.readouterr().err
     assert "camera.plugin" in err and "virtaul" in err and "available:" in err and "virtual" in err
     assert main(["profile", "validate", "--strict", str(SHIPPED_PROFILE_DIR / "virtual-mini.yaml")]) == 0
+
+
+def test_tiny_tactile_pixel_refused_before_any_allocation(mini: dict) -> None:
+    """``tactile.mm_per_px: 1e-9`` made the simulator's elastomer blur a 2e9-tap kernel."""
+    at_floor = _set(mini, "tactile.mm_per_px", 1e-4)  # the floor itself: the default blur is too wide
+    with pytest.raises(ProfileError, match=r"tactile\.elastomer_sigma_mm: 0\.25 mm \(the default\) is 2\.5e\+03 px"):
+        profile_from_dict(at_floor)
+    narrow = _set(at_floor, "tactile.elastomer_sigma_mm", 0.002)
+    narrow = _set(narrow, "tactile.marker_diameter_mm", 0.001)
+    assert profile_from_dict(narrow).tactile is not None
+
+
+def test_elastomer_default_matches_the_simulator() -> None:
+    from thintact_sdk.profile import ELASTOMER_SIGMA_MM
+    from thintact_sdk.tactile.grid import TactileParams
+
+    assert TactileParams(rows=1, cols=1, mm_per_px=1.0).elastomer_sigma_mm == ELASTOMER_SIGMA_MM
+
+
+@pytest.mark.parametrize(("field", "rows", "cols", "expect"), [
+    ("sensor", 4096, 4096, "sensor.rows × sensor.cols: a 8192×8192 float64 raw frame of 512.0 MiB, "
+                           "over the 128.0 MiB one array may take on this host (0.125 of 1.0 GiB memory)"),
+    ("scene", 4096, 2048, "scene.rows × scene.cols: a 8192×4096 float64 tactile grid of 256.0 MiB, "
+                          "over the 128.0 MiB one array may take on this host (0.125 of 1.0 GiB memory)"),
+])
+def test_arrays_beyond_the_memory_limit_refused(mini: dict, monkeypatch: pytest.MonkeyPatch,
+                                                field: str, rows: int, cols: int, expect: str) -> None:
+    import thintact_sdk.profile as prof
+
+    monkeypatch.setattr(prof, "host_memory_bytes", lambda: 2**30)
+    d = _set(_set(mini, f"{field}.rows", rows), f"{field}.cols", cols)
+    with pytest.raises(ProfileError) as err:
+        profile_from_dict(d, where="big.yaml")
+    assert str(err.value) == f"invalid profile big.yaml: {expect}"
+    monkeypatch.setattr(prof, "host_memory_bytes", lambda: 64 * 2**30)
+    assert profile_from_dict(d).name == "virtual-mini"
+
+
+def test_shipped_profiles_fit_a_small_host(monkeypatch: pytest.MonkeyPatch) -> None:
+    import thintact_sdk.profile as prof
+
+    monkeypatch.setattr(prof, "host_memory_bytes", lambda: 2 * 2**30)
+    for f in sorted(SHIPPED_PROFILE_DIR.glob("*.yaml")):
+        assert load_profile(f).source == f.resolve()
+
+
+def test_many_problems_make_one_line(tmp_path: Path, mini: dict, capsys: pytest.CaptureFixture[str]) -> None:
+    bad = _set(_set(_set(mini, "sensor.rows", -1), "scene.cols", "x"), "noise.read_noise_dn", None)
+    bad = _set(_set(bad, "geometry.mask_to_sensor_mm", float("inf")), "mask.phi", [3] * 128)
+    f = tmp_path / "bad.json"
+    f.write_text(json.dumps(bad))
+    assert main(["profile", "validate", str(f)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1, err
+    assert err == (f"thintact: error: invalid profile {f}: sensor.rows: Input should be greater than 0 "
+                   "(and 4 more: scene.cols, mask.phi, geometry.mask_to_sensor_mm, ...)\n")
+
+
+def test_strict_plugin_problems_make_one_line(tmp_path: Path, mini: dict,
+                                              capsys: pytest.CaptureFixture[str]) -> None:
+    f = tmp_path / "typos.yaml"
+    f.write_text(yaml.safe_dump(_set(_set(mini, "camera.plugin", "virtaul"), "decoder.plugin", "nope")))
+    assert main(["profile", "validate", "--strict", str(f)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "camera.plugin" in err and err.endswith(" (and 1 more)\n"), err

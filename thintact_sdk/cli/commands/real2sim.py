@@ -6,7 +6,9 @@ import argparse
 import json
 from pathlib import Path
 
+from thintact_sdk.cli.argtypes import float_range, int_range, positive_float, positive_int, seed
 from thintact_sdk.errors import ThinTactError
+from thintact_sdk.profile import MAX_PITCH_UM, MIN_PITCH_UM
 
 
 def _indices(text: str) -> list[int] | None:
@@ -29,12 +31,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     t.add_argument("--out", type=Path, required=True, help="run directory (checkpoints, generator)")
     t.add_argument("--train", type=_indices, default=None, metavar="even|I,J,…",
                    help="presses to train on (default: the even ones); the rest stay unseen")
-    t.add_argument("--iterations", type=int, default=3000)
-    t.add_argument("--sim-presses", type=int, default=48, help="simulated presses (sim domain)")
-    t.add_argument("--mm-per-px", type=float, default=0.1245, help="real image pixel size, mm")
-    t.add_argument("--ball-radius-mm", type=float, default=2.0)
+    t.add_argument("--iterations", type=positive_int, default=3000)
+    t.add_argument("--sim-presses", type=positive_int, default=48, help="simulated presses (sim domain)")
+    t.add_argument("--mm-per-px", type=float_range(MIN_PITCH_UM / 1000, MAX_PITCH_UM / 1000), default=0.1245,
+                   help="real image pixel size, mm (a tactile pixel: 0.0001 to 10)")
+    t.add_argument("--ball-radius-mm", type=positive_float, default=2.0)
     t.add_argument("--device", default="auto", choices=("auto", "cpu", "cuda"))
-    t.add_argument("--seed", type=int, default=0)
+    t.add_argument("--seed", type=seed, default=0)
     t.add_argument("--fresh", action="store_true",
                    help="ignore an existing checkpoint in --out (default: resume from it)")
     t.set_defaults(func=run_train)
@@ -47,9 +50,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     b.add_argument("--generator", type=Path, required=True)
     b.add_argument("--profile", default="thintact-paper",
                    help="device whose tactile working grid sets the frame size")
-    b.add_argument("--frames", type=int, default=50)
+    b.add_argument("--frames", type=int_range(3), default=50, help="frames timed (>= 3)")
     b.add_argument("--device", default="auto", choices=("auto", "cpu", "cuda"))
-    b.add_argument("--threads", type=int, default=None,
+    b.add_argument("--threads", type=positive_int, default=None,
                    help="torch CPU threads (default: torch's own choice)")
     b.set_defaults(func=run_bench)
 
