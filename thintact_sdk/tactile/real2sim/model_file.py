@@ -36,7 +36,17 @@ def save_generator(path: Path, generator: ResnetGenerator, config: dict[str, Any
 
 
 def load_generator(path: str | Path) -> tuple[ResnetGenerator, dict[str, Any]]:
-    """Read a generator file; returns the network (eval mode, CPU) and its ``meta``."""
+    """Read a generator file; returns the network (eval mode, CPU) and its ``meta``.
+
+    Read with ``torch.load(weights_only=True)``: tensors, numbers, strings, dicts and lists
+    only, never code from the file.
+
+    Raises
+    ------
+    ThinTactError
+        Naming the file: missing, unreadable or foreign, a bad network config, or weights that
+        do not fit it.
+    """
     p = Path(path)
     if not p.is_file():
         raise ThinTactError(f"{p}: no such Real2Sim generator file")
@@ -46,15 +56,28 @@ def load_generator(path: str | Path) -> tuple[ResnetGenerator, dict[str, Any]]:
         raise ThinTactError(f"{p}: not a Real2Sim generator file ({exc.__class__.__name__})") from exc
     if not isinstance(blob, dict) or blob.get("format") != GENERATOR_FORMAT:
         raise ThinTactError(f"{p}: not a {GENERATOR_FORMAT} file")
-    cfg = blob["config"]
+    cfg, state, meta = blob.get("config"), blob.get("state_dict"), blob.get("meta", {})
+    if not isinstance(cfg, dict) or not isinstance(state, dict) or not isinstance(meta, dict):
+        raise ThinTactError(f"{p}: 'config', 'state_dict' and 'meta' of a {GENERATOR_FORMAT} "
+                            "file must be dicts")
     try:
-        net = ResnetGenerator(width=int(cfg["width"]), blocks=int(cfg["blocks"]),
-                              edge_kernel=int(cfg["edge_kernel"]))
+        width, blocks, kernel = (int(cfg[k]) for k in ("width", "blocks", "edge_kernel"))
     except (KeyError, TypeError, ValueError) as exc:
         raise ThinTactError(f"{p}: bad network config {cfg!r}") from exc
+    stored = sum(v.numel() for v in state.values() if isinstance(v, torch.Tensor))
+    # a lower bound of the declared network's weights (residual blocks and edge convolutions):
+    # a config the stored weights cannot fill is refused before the network is allocated
+    least = 288 * width * width * blocks + 6 * width * kernel * kernel
+    if min(width, blocks, kernel) < 1 or least > stored:
+        raise ThinTactError(f"{p}: network config {cfg!r} does not fit the {stored} stored "
+                            "weights")
     try:
-        net.load_state_dict(blob["state_dict"])
-    except RuntimeError as exc:
+        net = ResnetGenerator(width=width, blocks=blocks, edge_kernel=kernel)
+    except (TypeError, ValueError, RuntimeError) as exc:
+        raise ThinTactError(f"{p}: bad network config {cfg!r}") from exc
+    try:
+        net.load_state_dict(state)
+    except (RuntimeError, TypeError, AttributeError) as exc:
         raise ThinTactError(f"{p}: weights do not fit the declared network ({exc})") from exc
     net.eval()
-    return net, dict(blob.get("meta", {}))
+    return net, dict(meta)

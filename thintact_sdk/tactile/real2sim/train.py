@@ -139,31 +139,47 @@ class Real2SimTrainer:
         return self.out_dir / "checkpoint.pt"
 
     def resume(self) -> bool:
-        """Load ``checkpoint.pt`` if there is one; True when it was loaded."""
+        """Load ``checkpoint.pt`` if there is one; True when it was loaded.
+
+        The file is read with ``torch.load(weights_only=True)``: tensors, numbers, strings,
+        dicts and lists only, never code (a checkpoint is a file a user may be handed).
+
+        Raises
+        ------
+        ThinTactError
+            Naming the file: unreadable, torn, foreign (pickled code included), another
+            network shape, or fields of the wrong type.
+        """
         p = self.checkpoint_path
         if not p.is_file():
             return False
         try:
-            blob = torch.load(p, map_location=self.device, weights_only=False)
-        except Exception as exc:  # a torn or foreign file
+            blob = torch.load(p, map_location=self.device, weights_only=True)
+        except Exception as exc:  # a torn or foreign file; torch raises many unrelated types
             raise ThinTactError(f"{p}: unreadable checkpoint ({exc.__class__.__name__}); "
-                                "remove it to start afresh") from exc
+                                "remove it to start afresh") from None
         if not isinstance(blob, dict) or blob.get("format") != CHECKPOINT_FORMAT:
             raise ThinTactError(f"{p}: not a {CHECKPOINT_FORMAT} file")
-        saved = blob["config"]
+        saved = blob.get("config")
+        if not isinstance(saved, dict):
+            raise ThinTactError(f"{p}: checkpoint 'config' must be a dict")
         for key in ("width", "blocks", "edge_kernel", "batch", "crop", "seed"):
-            if saved[key] != getattr(self.config, key):
+            if saved.get(key) != getattr(self.config, key):
                 raise ThinTactError(
-                    f"{p}: checkpoint has {key}={saved[key]}, this run asks for "
+                    f"{p}: checkpoint has {key}={saved.get(key)}, this run asks for "
                     f"{getattr(self.config, key)}; use the same settings or another --out")
-        self.model.load_state_dict(blob["model"])
-        self.opt_g.load_state_dict(blob["opt_g"])
-        self.opt_d.load_state_dict(blob["opt_d"])
-        self.rng.bit_generator.state = blob["numpy_rng"]
-        torch.set_rng_state(blob["torch_rng"])
-        self.iteration = int(blob["iteration"])
-        self.history = list(blob["history"])
-        self.seconds = float(blob.get("seconds", 0.0))
+        try:
+            self.model.load_state_dict(blob["model"])
+            self.opt_g.load_state_dict(blob["opt_g"])
+            self.opt_d.load_state_dict(blob["opt_d"])
+            self.rng.bit_generator.state = blob["numpy_rng"]
+            torch.set_rng_state(blob["torch_rng"])
+            self.iteration = int(blob["iteration"])
+            self.history = [dict(h) for h in blob["history"]]
+            self.seconds = float(blob.get("seconds", 0.0))
+        except (KeyError, TypeError, ValueError, AttributeError, RuntimeError) as exc:
+            raise ThinTactError(f"{p}: damaged checkpoint ({exc.__class__.__name__}: {exc}); "
+                                "remove it to start afresh") from None
         return True
 
     def save_checkpoint(self) -> None:
