@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from thintact_masks.errors import MaskDesignError
-from thintact_sdk import __version__
+from thintact_sdk import __version__, safe_json
 from thintact_sdk.interfaces import Mask
 
 DESIGN_FORMAT = "thintact-mask-design/1"
@@ -56,22 +56,35 @@ def load_design(path: str | os.PathLike[str]) -> tuple[Mask, dict[str, Any]]:
         shipped = ", ".join(sorted(f.stem for f in DESIGNS_DIR.glob("*.json"))) or "(none)"
         raise MaskDesignError(f"design file not found: {path} (shipped designs: {shipped})")
     try:
-        rec = json.loads(p.read_text(encoding="utf-8"))
-    except (OSError, json.JSONDecodeError) as err:
-        raise MaskDesignError(f"cannot read design {p}: {err}") from None
+        text = p.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as err:
+        raise MaskDesignError(f"cannot read design {p}: not a UTF-8 JSON file ({err})") from None
+    rec = safe_json.loads(text, f"design {p}", MaskDesignError)
     if not isinstance(rec, dict) or rec.get("format") != DESIGN_FORMAT:
         raise MaskDesignError(f"{p} is not a {DESIGN_FORMAT} file")
-    phi = np.asarray(rec.get("phi", []))
-    if phi.ndim != 1 or phi.size == 0 or not np.all(np.abs(phi) == 1):
+    phi = _signs(rec.get("phi", []))
+    if phi is None or phi.size == 0:
         raise MaskDesignError(f"{p}: 'phi' must be a non-empty list of +1/-1")
     rows = rec.get("phi_rows")
-    phi_rows = None if rows is None else np.asarray(rows, np.int8)
-    if phi_rows is not None and (phi_rows.shape != phi.shape or not np.all(np.abs(phi_rows) == 1)):
+    phi_rows = None if rows is None else _signs(rows)
+    if rows is not None and (phi_rows is None or phi_rows.shape != phi.shape):
         raise MaskDesignError(f"{p}: 'phi_rows' must be {phi.size} entries of +1/-1")
-    mask = Mask(phi=phi.astype(np.int8), feature_um=float(rec.get("feature_um", 0.0)),
-                phi_rows=phi_rows, design=str(rec.get("design", "custom")),
-                provenance=dict(rec.get("provenance", {})))
+    feature_um, provenance = rec.get("feature_um", 0.0), rec.get("provenance", {})
+    if isinstance(feature_um, bool) or not isinstance(feature_um, int | float):
+        raise MaskDesignError(f"{p}: 'feature_um' must be a number, got {feature_um!r}")
+    if not isinstance(provenance, dict):
+        raise MaskDesignError(f"{p}: 'provenance' must be a JSON object")
+    mask = Mask(phi=phi, feature_um=float(feature_um), phi_rows=phi_rows,
+                design=str(rec.get("design", "custom")), provenance=dict(provenance))
     return mask, rec
+
+
+def _signs(value: Any) -> np.ndarray | None:
+    """``value`` as an int8 vector when it is a flat list of +1/-1 numbers, else None."""
+    if not isinstance(value, list) or not all(
+            isinstance(v, int | float) and not isinstance(v, bool) and v in (1, -1) for v in value):
+        return None
+    return np.asarray(value, np.int8)
 
 
 def render_mask_png(mask: Mask, path: str | os.PathLike[str], cell_px: int = 1) -> Path:
