@@ -31,8 +31,10 @@ from typing import Any
 
 import numpy as np
 
+from thintact_sdk import safe_json
 from thintact_sdk.errors import CalibrationError
 from thintact_sdk.profile import Profile
+from thintact_sdk.safe_arrays import read_npz
 from thintact_sdk.tactile.elastic import Elastomer
 from thintact_sdk.tactile.force import (
     NORMAL_FILL_GAIN,
@@ -123,8 +125,8 @@ def read_gains(path: Path, profile: Profile) -> dict[str, float]:
         number, or fitted for another E or ν than the profile's (the gains include E*).
     """
     try:
-        data = json.loads(path.read_text())
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
+        data = safe_json.loads(path.read_text(), f"force calibration {path}", CalibrationError)
+    except (OSError, UnicodeDecodeError) as err:
         raise CalibrationError(f"force calibration {path}: not readable JSON ({err})") from None
     if not isinstance(data, dict) or data.get("format") != FORMAT:
         raise CalibrationError(f"force calibration {path}: format is not {FORMAT!r}")
@@ -153,11 +155,8 @@ def load_press_pack(path: Path, profile: Profile) -> tuple[np.ndarray, np.ndarra
     CalibrationError
         Naming the file and array: unreadable, a key missing, wrong shape, non-finite.
     """
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            arrays = {k: z[k] for k in ("f0", "imgs") if k in z.files}
-    except (OSError, ValueError, EOFError) as err:
-        raise CalibrationError(f"press pack {path}: not a readable .npz ({err})") from None
+    arrays = read_npz(path, what="press pack", error=CalibrationError, optional=("f0", "imgs"),
+                      members=())  # header first: no pickle, no huge allocation
     for key in ("f0", "imgs"):
         if key not in arrays:
             raise CalibrationError(f"press pack {path}: no array {key!r} (needs f0 and imgs)")
@@ -192,8 +191,8 @@ def load_loads(path: Path, presses: int) -> np.ndarray:
         presses', an entry that is not a number or three numbers, F_z not positive.
     """
     try:
-        data = json.loads(path.read_text())
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
+        data = safe_json.loads(path.read_text(), f"loads file {path}", CalibrationError)
+    except (OSError, UnicodeDecodeError) as err:
         raise CalibrationError(f"loads file {path}: not readable JSON ({err})") from None
     items = data.get("loads_n") if isinstance(data, dict) else None
     if not isinstance(items, list):
