@@ -39,10 +39,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 def _load_scenes(path: Path) -> np.ndarray:
     if not path.is_file():
         raise ThinTactError(f"scenes file not found: {path}")
-    try:
-        x = np.load(path, allow_pickle=False)
-    except (ValueError, OSError, EOFError) as err:
-        raise ThinTactError(f"cannot read scenes {path} (empty, truncated or not a .npy file): {err}") from None
+    from thintact_sdk.safe_arrays import read_npy  # header first: no pickle, no huge allocation
+
+    x = read_npy(path, what="scenes", kinds="uif")
     if not isinstance(x, np.ndarray) or x.dtype.kind not in "uif":
         kind = x.dtype if isinstance(x, np.ndarray) else type(x).__name__
         raise ThinTactError(f"scenes {path}: dtype {kind} is not a number array")
