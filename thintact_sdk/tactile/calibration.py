@@ -13,6 +13,7 @@ Two sources of ground-truth slopes:
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -176,7 +177,8 @@ def find_press_circle(
     Parameters
     ----------
     change
-        ``N × M × 3`` colour minus background.
+        ``N × M × C`` colour minus background (any number of channels C ≥ 1), or ``N × M``
+        for a one-channel image.
     marker_mask
         Pixels to ignore (markers).
     blur_px
@@ -193,7 +195,13 @@ def find_press_circle(
     """
     from scipy.ndimage import binary_fill_holes, label
 
-    mag = np.linalg.norm(change, axis=2).astype(np.float32)
+    arr = np.asarray(change, np.float32)
+    if arr.ndim == 2:
+        arr = arr[..., None]
+    if arr.ndim != 3 or arr.shape[0] < 3 or arr.shape[1] < 3 or arr.shape[2] < 1:
+        raise CalibrationError(
+            f"a press image must be N × M or N × M × C, got shape {'×'.join(map(str, arr.shape))}")
+    mag = np.linalg.norm(arr, axis=2).astype(np.float32)
     if marker_mask is not None:
         mag = fill_masked(mag, marker_mask, 2.0)
     blurred = cv2.GaussianBlur(mag, (0, 0), blur_px)
@@ -222,6 +230,9 @@ def calibrate_from_presses(
     max_work_mm: float = 0.13,
     smooth_px: float = 1.0,
     refine_rounds: int = 1,
+    model: str = "lut",
+    mlp_steps: int = 1500,
+    stage: Callable[[str], None] | None = None,
 ) -> PhotometricLUT:
     """Calibrate a LUT from ball presses against a no-contact reference image.
 
@@ -246,7 +257,28 @@ def calibrate_from_presses(
         the current LUT's slopes to depth, fits the press depth of a ball cap smoothed by the
         elastomer (``tactile.elastomer_sigma_mm``) to it, and recalibrates with that model's
         slopes over the whole image (the ideal cap ignores the smoothing and the rim).
+    model
+        The gradient model: ``"lut"`` (colour change → slope table), ``"mlp"`` (the colour +
+        position network of :mod:`~thintact_sdk.tactile.gradient_model`, the table kept
+        beside it) or ``"auto"``: both are fitted on all presses but every fourth
+        (validation presses) and the one with the lower slope RMS error on the validation
+        presses' trusted pixels is refitted on all presses and stored
+        (``meta["gradient_model"]``, figures in ``meta["validation"]``). ``"auto"`` with
+        fewer than 4 presses keeps the table.
+    mlp_steps
+        Training steps of the network.
+    stage
+        Called with a short message as each stage starts (progress for long runs).
+
+    The result's ``meta["press_report"]`` holds, per ball-model press, the circle found
+    (centre px, radius mm), the fitted press depth and contact radius (mm), and warnings:
+    a circle at least as wide as the ball (``radius ≥ ball radius``: the ball radius or
+    ``tactile.mm_per_px`` is wrong, or the press deeper than the ball model holds), a press
+    depth at the fit's limit, a press touching the frame's edge.
     """
+    say = stage or (lambda _msg: None)
+    if model not in ("lut", "mlp", "auto"):
+        raise CalibrationError(f"gradient model must be 'lut', 'mlp' or 'auto', not {model!r}")
     full = TactileParams.from_profile(profile)
     factor = working_factor(full, max_work_mm)
     params = binned_params(full, factor)
@@ -258,16 +290,23 @@ def calibrate_from_presses(
     gxs: list[np.ndarray] = []
     gys: list[np.ndarray] = []
     valids: list[np.ndarray] = []
+    images: list[np.ndarray] = []
     ball: list[tuple[int, tuple[float, float], np.ndarray]] = []
+    report: list[dict[str, Any]] = []
     rng = np.random.default_rng(0)
-    for press in presses:
+    say(f"{len(presses)} presses: finding the ball in each")
+    for n_press, press in enumerate(presses):
         img = bin_image(press.image, factor)
         det = detect_markers(img, params)
         change = colour_change(img, background, det.mask, sigma, smooth_px)
         if press.grad_x is None or press.grad_y is None:
-            center, radius_px = find_press_circle(change, det.mask)
-            model = fit_ball_to_change(change, center, ball_radius_mm, params, smooth_px)
-            gy, gx = np.gradient(model, params.mm_per_px)
+            try:
+                center, radius_px = find_press_circle(change, det.mask)
+            except CalibrationError as err:
+                raise CalibrationError(f"press {n_press}: {err}") from None
+            cap = fit_ball_to_change(change, center, ball_radius_mm, params, smooth_px)
+            report.append(_press_entry(n_press, center, radius_px, cap, ball_radius_mm, params))
+            gy, gx = np.gradient(cap, params.mm_per_px)
             if smooth_px > 0:
                 gx = cv2.GaussianBlur(gx.astype(np.float32), (0, 0), smooth_px)
                 gy = cv2.GaussianBlur(gy.astype(np.float32), (0, 0), smooth_px)
@@ -284,10 +323,11 @@ def calibrate_from_presses(
             moving = np.hypot(gx, gy) > 1e-3
             valid = (moving | (rng.random(gx.shape) < 0.1)) & ~det.mask
         feats.append(change)
+        images.append(background + change)
         gxs.append(gx)
         gys.append(gy)
         valids.append(valid)
-    info = {
+    info: dict[str, Any] = {
         "profile": profile.name,
         "profile_hash": profile.content_hash(),
         "presses": len(presses),
@@ -296,20 +336,98 @@ def calibrate_from_presses(
         "work_mm_per_px": params.mm_per_px,
     }
     info.update(meta or {})
+    if report:
+        info["press_report"] = report
+    say("fitting the colour → slope table")
     lut = calibrate_lut(feats, gxs, gys, valids, bins=bins, meta=info)
     for _ in range(refine_rounds if ball else 0):
+        say("refining the ball fits through the table")
         for k, center, trusted in ball:
             gx, gy = lut.lookup(feats[k])
             depth = integrate_gradients(gx, gy, params.mm_per_px)
-            model = fit_smoothed_ball(depth, center, ball_radius_mm, params)
-            my, mx = np.gradient(model, params.mm_per_px)
+            refit = fit_smoothed_ball(depth, center, ball_radius_mm, params)
+            my, mx = np.gradient(refit, params.mm_per_px)
             if smooth_px > 0:
                 mx = cv2.GaussianBlur(mx.astype(np.float32), (0, 0), smooth_px)
                 my = cv2.GaussianBlur(my.astype(np.float32), (0, 0), smooth_px)
             gxs[k], gys[k], valids[k] = mx, my, trusted
         lut = calibrate_lut(feats, gxs, gys, valids, bins=bins, meta=info)
         lut.meta["refine_rounds"] = refine_rounds
+    if model == "lut" or (model == "auto" and len(presses) < 4):
+        lut.meta["gradient_model"] = "lut"
+        return lut
+    return _attach_network(lut, model, feats, images, gxs, gys, valids, bins, mlp_steps, say)
+
+
+def _attach_network(
+    lut: PhotometricLUT, model: str, feats: list[np.ndarray], images: list[np.ndarray],
+    gxs: list[np.ndarray], gys: list[np.ndarray], valids: list[np.ndarray], bins: int,
+    steps: int, say: Callable[[str], None],
+) -> PhotometricLUT:
+    """Fit the network on the presses' targets; with ``model == "auto"`` first compare it
+    with the table on every fourth press held out, and keep the table when it is better."""
+    from thintact_sdk.tactile.gradient_model import train_mlp
+
+    def pick(seq: list[np.ndarray], idx: list[int]) -> list[np.ndarray]:
+        return [seq[i] for i in idx]
+
+    if model == "auto":
+        val = [i for i in range(len(feats)) if i % 4 == 3]
+        fit = [i for i in range(len(feats)) if i % 4 != 3]
+        say(f"validation: table and network fitted on {len(fit)} presses, "
+            f"compared on {len(val)}")
+        t_lut = calibrate_lut(pick(feats, fit), pick(gxs, fit), pick(gys, fit),
+                              pick(valids, fit), bins=bins)
+        t_net = train_mlp(pick(feats, fit), pick(images, fit), pick(gxs, fit), pick(gys, fit),
+                          pick(valids, fit), steps=steps)
+        err_lut: list[np.ndarray] = []
+        err_net: list[np.ndarray] = []
+        for i in val:
+            m = valids[i]
+            lx, ly = t_lut.lookup(feats[i])
+            nx, ny = t_net.predict(feats[i], images[i])
+            err_lut.append(np.hypot(lx - gxs[i], ly - gys[i])[m])
+            err_net.append(np.hypot(nx - gxs[i], ny - gys[i])[m])
+        rms_lut = float(np.sqrt(np.mean(np.concatenate(err_lut) ** 2)))
+        rms_net = float(np.sqrt(np.mean(np.concatenate(err_net) ** 2)))
+        lut.meta["validation"] = {"presses": val, "slope_rms_lut": rms_lut,
+                                  "slope_rms_mlp": rms_net}
+        if rms_lut <= rms_net:
+            lut.meta["gradient_model"] = "lut"
+            return lut
+    say(f"training the colour + position network on {len(feats)} presses")
+    lut.net = train_mlp(feats, images, gxs, gys, valids, steps=steps)
+    lut.meta["gradient_model"] = "mlp"
     return lut
+
+
+def _press_entry(
+    index: int, center: tuple[float, float], radius_px: float, cap: np.ndarray,
+    ball_radius_mm: float, params: TactileParams,
+) -> dict[str, Any]:
+    """One press of the calibration report (see :func:`calibrate_from_presses`)."""
+    mm = params.mm_per_px
+    depths = _press_depths(ball_radius_mm)
+    # the press depth of the fitted cap: its smoothed peak is below the press depth, so take
+    # the grid value whose smoothed peak is nearest
+    peaks = [float(smoothed_ball_depth(cap.shape, center, float(p), ball_radius_mm,
+                                       params).max()) for p in depths]
+    press = float(depths[int(np.argmin(np.abs(np.array(peaks) - float(cap.max()))))])
+    contact = float(np.sqrt(max(2 * ball_radius_mm * press - press**2, 0.0)))
+    warnings = []
+    if radius_px * mm >= ball_radius_mm:
+        warnings.append(
+            f"circle radius {radius_px * mm:.2f} mm >= ball radius {ball_radius_mm:g} mm: not "
+            "physical for this ball (check --ball-radius-mm and tactile.mm_per_px)")
+    if press >= float(depths[-1]) - 1e-9:
+        warnings.append(f"press depth at the fit's limit ({press:.2f} mm)")
+    rows, cols = cap.shape
+    if (center[0] - radius_px <= 0 or center[1] - radius_px <= 0
+            or center[0] + radius_px >= rows - 1 or center[1] + radius_px >= cols - 1):
+        warnings.append("the press touches the frame's edge")
+    return {"press": index, "centre_rc": [round(center[0], 2), round(center[1], 2)],
+            "circle_radius_mm": round(radius_px * mm, 4), "press_mm": round(press, 4),
+            "contact_radius_mm": round(contact, 4), "warnings": warnings}
 
 
 def smoothed_ball_depth(

@@ -27,7 +27,7 @@ from thintact_sdk.tactile.grid import (
 )
 from thintact_sdk.tactile.markers import MarkerTracker, detect_markers, mean_shear
 from thintact_sdk.tactile.photometric import PhotometricLUT
-from thintact_sdk.tactile.poisson import integrate_gradients
+from thintact_sdk.tactile.poisson import Boundary, integrate_gradients
 from thintact_sdk.tactile.slip import estimate_slip_ratio
 
 
@@ -59,6 +59,10 @@ class TactileInterpreter:
         Applied to every image on the working grid before anything else (Real2Sim: real
         images made simulation-like, :class:`~thintact_sdk.tactile.real2sim.Real2SimTranslator`);
         ``H × W × 3`` in [0, 1] → the same.
+    boundary
+        Poisson integration's boundary (:func:`~thintact_sdk.tactile.poisson.integrate_gradients`):
+        ``"free"`` (no assumption at the frame's edge; depth 0 where the membrane is flat) or
+        ``"zero"`` (depth pinned to 0 at the frame's edge).
 
     The first image interpreted becomes the reference (no-contact) frame unless
     :meth:`set_reference` is called first.
@@ -74,6 +78,7 @@ class TactileInterpreter:
         smooth_px: float = 1.0,
         reference_frames: int = 1,
         translator: Callable[[np.ndarray], np.ndarray] | None = None,
+        boundary: Boundary = "free",
     ) -> None:
         self.params = TactileParams.from_profile(profile)
         self.factor = working_factor(self.params, max_work_mm)
@@ -91,6 +96,7 @@ class TactileInterpreter:
         self._ref_sum: np.ndarray | None = None
         self._ref_count = 0
         self.translator = translator
+        self.boundary: Boundary = boundary
 
     @classmethod
     def for_profile(cls, profile: Profile, **options: Any) -> TactileInterpreter:
@@ -151,8 +157,8 @@ class TactileInterpreter:
         if self.lut is None:
             return np.zeros(img.shape[:2], np.float32)
         change = colour_change(img, self.background, marker_mask, self._sigma_px, self.smooth_px)
-        gx, gy = self.lut.lookup(change)
-        depth = integrate_gradients(gx, gy, self.work.mm_per_px)
+        gx, gy = self.lut.lookup(change, img)
+        depth = integrate_gradients(gx, gy, self.work.mm_per_px, self.boundary)
         return np.clip(depth, 0.0, None)
 
     def depth_from_image(self, image: np.ndarray) -> np.ndarray:

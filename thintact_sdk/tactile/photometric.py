@@ -12,13 +12,16 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from scipy.ndimage import distance_transform_edt
 
 from thintact_sdk import safe_json
 from thintact_sdk.errors import CalibrationError
+
+if TYPE_CHECKING:
+    from thintact_sdk.tactile.gradient_model import MLPGradient
 from thintact_sdk.safe_arrays import read_npz
 
 LUT_FORMAT = "thintact-tactile-lut/1"
@@ -38,6 +41,11 @@ class PhotometricLUT:
         ``B × B × B`` float32 calibration weight that fell on each node.
     meta
         Provenance (profile, source, ball radius, number of presses, metrics, ...).
+    net
+        A colour + position network
+        (:class:`~thintact_sdk.tactile.gradient_model.MLPGradient`) chosen over the table by
+        validation presses at calibration time (``meta["gradient_model"] == "mlp"``), or
+        None: the table. The table is always kept and used when no image is given.
     """
 
     lo: np.ndarray
@@ -45,6 +53,7 @@ class PhotometricLUT:
     table: np.ndarray
     counts: np.ndarray
     meta: dict[str, Any] = field(default_factory=dict)
+    net: MLPGradient | None = None
 
     @property
     def bins(self) -> int:
@@ -57,13 +66,19 @@ class PhotometricLUT:
         t = (f - self.lo.astype(np.float32)) * scale.astype(np.float32)
         return np.clip(t, 0.0, self.bins - 1 - 1e-4)
 
-    def lookup(self, features: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def lookup(
+        self, features: np.ndarray, image: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Slopes for colour changes.
 
         Parameters
         ----------
         features
             ``... × 3`` colour minus background (display units).
+        image
+            ``N × M × 3`` image the change comes from (display units): with a network
+            (:attr:`net`) the slopes come from the network, which needs the colour and the
+            position; without an image, or without a network, from the table.
 
         Returns
         -------
@@ -72,6 +87,8 @@ class PhotometricLUT:
         """
         from scipy.ndimage import map_coordinates
 
+        if self.net is not None and image is not None:
+            return self.net.predict(np.asarray(features, np.float32), image)
         shape = np.shape(features)[:-1]
         coords = self._coords(features).T  # 3 × P node coordinates, inside the table
         # trilinear interpolation of each slope table (order 1, no prefilter): the same
@@ -83,11 +100,18 @@ class PhotometricLUT:
         return out[0], out[1]
 
     def save(self, path: str | Path) -> Path:
-        """Write ``path`` (``.npz``) and its metadata beside it (``.json``)."""
+        """Write ``path`` (``.npz``) and its metadata beside it (``.json``); a network goes
+        to :func:`net_path` (``<stem>.mlp.npz``) and ``meta["gradient_model"]`` says which
+        model the device uses (``"lut"`` or ``"mlp"``)."""
         p = Path(path)
         p.parent.mkdir(parents=True, exist_ok=True)
         np.savez_compressed(p, lo=self.lo, hi=self.hi, table=self.table, counts=self.counts)
         meta = {"format": LUT_FORMAT, "bins": self.bins, **self.meta}
+        meta["gradient_model"] = "lut" if self.net is None else "mlp"
+        if self.net is not None:
+            self.net.save(net_path(p))
+            meta["mlp_file"] = net_path(p).name
+            meta["mlp"] = self.net.meta
         p.with_suffix(".json").write_text(json.dumps(meta, indent=1, default=str) + "\n")
         return p
 
@@ -115,7 +139,24 @@ class PhotometricLUT:
                 )
         if table.ndim != 4 or table.shape[3] != 2 or len(set(table.shape[:3])) != 1:
             raise CalibrationError(f"{p}: table shape {table.shape} is not B×B×B×2")
-        return cls(lo, hi, table.astype(np.float32), counts.astype(np.float32), meta)
+        net = None
+        choice = meta.get("gradient_model", "lut")
+        if choice == "mlp":
+            from thintact_sdk.tactile.gradient_model import MLPGradient
+
+            name = str(meta.get("mlp_file", net_path(p).name))
+            if Path(name).name != name:
+                raise CalibrationError(f"{mp}: mlp_file {name!r} must be a file name beside it")
+            net = MLPGradient.load(p.with_name(name), meta.get("mlp"))
+        elif choice != "lut":
+            raise CalibrationError(f"{mp}: gradient_model {choice!r}, this SDK reads 'lut' or 'mlp'")
+        return cls(lo, hi, table.astype(np.float32), counts.astype(np.float32), meta, net)
+
+
+def net_path(lut_path: str | Path) -> Path:
+    """Where the network of the LUT file ``lut_path`` lives: ``<stem>.mlp.npz`` beside it."""
+    p = Path(lut_path)
+    return p.with_name(p.stem + ".mlp.npz")
 
 
 def calibrate_lut(

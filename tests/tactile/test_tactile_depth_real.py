@@ -1,0 +1,132 @@
+"""Depth that holds on real gels (issue 29): free-boundary integration, the colour + position
+gradient network, the press circle on one-channel images, ball-press figures."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from thintact_sdk.errors import CalibrationError
+from thintact_sdk.tactile.ball_eval import ball_cap, fit_sphere, press_figures
+from thintact_sdk.tactile.calibration import find_press_circle
+from thintact_sdk.tactile.gradient_model import MLPGradient, train_mlp
+from thintact_sdk.tactile.photometric import PhotometricLUT, calibrate_lut, net_path
+from thintact_sdk.tactile.poisson import integrate_gradients
+
+MM = 0.1
+
+
+def _cap(shape=(90, 120), centre=(45.0, 60.0), press=0.8, radius=2.0):
+    d, gx, gy, a_px = ball_cap(shape, centre, press, radius, MM)
+    return d, gx, gy, a_px
+
+
+def test_press_circle_on_one_channel_image():
+    yy, xx = np.mgrid[0:60, 0:80]
+    img = np.where((yy - 30) ** 2 + (xx - 41) ** 2 < 100, 0.3, 0.0).astype(np.float32)
+    (r, c), radius = find_press_circle(img)
+    assert abs(r - 30) < 0.5 and abs(c - 41) < 0.5 and abs(radius - 10) < 1
+    assert find_press_circle(img[..., None]) == ((r, c), radius)
+
+
+def test_press_circle_refuses_a_vector():
+    with pytest.raises(CalibrationError, match="N × M"):
+        find_press_circle(np.zeros(10, np.float32))
+
+
+@pytest.mark.parametrize("centre", [(45.0, 60.0), (45.0, 3.0), (2.0, 118.0)])
+def test_free_boundary_keeps_presses_at_the_edge(centre):
+    d, _, _, _ = _cap(centre=centre)
+    gy, gx = np.gradient(d, MM)
+    free = integrate_gradients(gx, gy, MM)
+    assert abs(float(free.max()) - float(d.max())) < 0.05 * float(d.max())
+    assert float(np.sqrt(np.mean((free - d) ** 2))) < 0.02
+    if centre[1] < 10:  # the pinned border loses most of an edge press
+        zero = integrate_gradients(gx, gy, MM, boundary="zero")
+        assert float(zero.max()) < 0.7 * float(d.max())
+
+
+def test_free_boundary_removes_a_constant_slope_bias():
+    d, _, _, _ = _cap()
+    gy, gx = np.gradient(d, MM)
+    rec = integrate_gradients(gx + 0.01, gy - 0.02, MM)
+    far = d == 0
+    assert float(np.abs(rec[far]).max()) < 0.03
+    with pytest.raises(ValueError, match="boundary"):
+        integrate_gradients(gx, gy, MM, boundary="mirror")  # type: ignore[arg-type]
+
+
+def test_sphere_fit_and_press_figures_on_an_exact_cap():
+    d, gx, gy, a_px = _cap(press=0.8)
+    radius, (r, c) = fit_sphere(d, MM)
+    assert abs(radius - 2.0) < 1e-6 and abs(r - 45) < 1e-6 and abs(c - 60) < 1e-6
+    f = press_figures(d, gx, gy, 2.0, MM, contact_threshold_mm=0.0)
+    assert abs(f.press_mm - 0.8) < 1e-4 and f.depth_rms_mm < 1e-4 and f.slope_rms < 1e-3
+    assert abs(f.contact_radius_mm / f.contact_radius_expected_mm - 1) < 0.03
+    assert not f.edge
+    flat = press_figures(d * 0.5, gx * 0.5, gy * 0.5, 2.0, MM)
+    assert flat.sphere_radius_mm > 3.0  # a cap too flat reads as a larger ball
+
+
+def _network(tmp_path, steps=200):
+    rng = np.random.default_rng(0)
+    d, gx, gy, _ = _cap(shape=(40, 50), centre=(20.0, 25.0), press=0.5)
+    change = np.stack([gx, gy, -gx - gy], -1).astype(np.float32) * 0.2
+    image = 0.5 + change
+    valid = rng.random(gx.shape) < 0.8
+    return train_mlp([change], [image], [gx], [gy], [valid], hidden=8, steps=steps), change, image
+
+
+def test_network_round_trip_and_flat_reference(tmp_path):
+    net, change, image = _network(tmp_path)
+    gx, gy = net.predict(change, image)
+    assert gx.shape == change.shape[:2] and gx.dtype == np.float32
+    zx, zy = net.predict(np.zeros_like(change), image - change)
+    assert float(np.abs(zx).max()) == 0.0 and float(np.abs(zy).max()) == 0.0
+    p = net.save(tmp_path / "net.npz")
+    back = MLPGradient.load(p)
+    bx, by = back.predict(change, image)
+    np.testing.assert_array_equal(bx, gx)
+    np.testing.assert_array_equal(by, gy)
+    with pytest.raises(CalibrationError, match="working grid"):
+        back.predict(change[:-1], image[:-1])
+
+
+def test_network_file_with_an_object_array_is_refused(tmp_path):
+    p = tmp_path / "bad.npz"
+    np.savez(p, w0=np.array([object()], dtype=object), b0=np.zeros(2), w1=np.zeros((2, 2)),
+             b1=np.zeros(2), w2=np.zeros((2, 2)), b2=np.zeros(2), shape=np.array([2, 2]))
+    with pytest.raises(CalibrationError, match="w0"):
+        MLPGradient.load(p)
+    np.savez(p, w0=np.zeros((8, 4), np.float32), b0=np.zeros(3, np.float32),
+             w1=np.zeros((4, 4), np.float32), b1=np.zeros(4, np.float32),
+             w2=np.zeros((4, 2), np.float32), b2=np.zeros(2, np.float32), shape=np.array([2, 2]))
+    with pytest.raises(CalibrationError, match="b0"):
+        MLPGradient.load(p)
+
+
+def test_lut_stores_the_chosen_network_beside_it(tmp_path):
+    net, change, image = _network(tmp_path, steps=50)
+    lut = calibrate_lut([change], [change[..., 0]], [change[..., 1]],
+                        [np.ones(change.shape[:2], bool)], bins=8)
+    lut.net = net
+    p = lut.save(tmp_path / "lut.npz")
+    meta = json.loads(p.with_suffix(".json").read_text())
+    assert meta["gradient_model"] == "mlp" and meta["mlp_file"] == "lut.mlp.npz"
+    back = PhotometricLUT.load(p)
+    assert back.net is not None
+    np.testing.assert_array_equal(back.lookup(change, image)[0], lut.lookup(change, image)[0])
+    np.testing.assert_array_equal(back.lookup(change)[0], lut.lookup(change)[0])  # the table
+    net_path(p).unlink()
+    with pytest.raises(CalibrationError, match="lut.mlp.npz"):
+        PhotometricLUT.load(p)
+    meta["mlp_file"] = "../elsewhere.npz"
+    p.with_suffix(".json").write_text(json.dumps(meta))
+    with pytest.raises(CalibrationError, match="beside"):
+        PhotometricLUT.load(p)
+    meta["gradient_model"] = "pickle"
+    p.with_suffix(".json").write_text(json.dumps(meta))
+    with pytest.raises(CalibrationError, match="gradient_model"):
+        PhotometricLUT.load(p)

@@ -1,0 +1,205 @@
+"""Figures of reconstructed ball presses of known radius (shape consistency and depth accuracy).
+
+Annotation-free figures, per press, from the reconstructed depth ``d`` (mm) and slopes:
+
+* **fitted sphere radius**: a sphere fitted (algebraically, all parameters free) to the
+  loaded core, the pixels deeper than half the peak (for a rigid ball cap exactly Hertz's
+  contact circle). A pipeline that gives back the shape it was calibrated on returns the
+  ball radius; caps read too flat return a larger radius.
+* **contact radius** ``√(area/π)`` of the region deeper than the contact threshold, against
+  the contact radius a ball of radius R pressed to the reconstructed peak depth p must have,
+  ``√(2Rp − p²)``.
+* **ball fit with the radius fixed**: the rigid cap of radius R whose centre and press depth
+  best fit the core (least squares); depth RMS inside its contact circle (``r < 0.9·a``, the
+  rim is smoothed by the elastomer) and slope RMS (vector magnitude) there.
+* **edge press**: the fitted contact circle reaches the frame's edge.
+
+With annotated circles (centre, contact radius a_ann), the same RMS figures against the cap of
+radius R whose contact circle is the annotated one (press depth ``R − √(R² − a_ann²)``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+from scipy.optimize import least_squares
+
+CORE_FRACTION = 0.5
+RIM_FRACTION = 0.9
+
+
+@dataclass
+class PressFigures:
+    """Figures of one reconstructed ball press (mm unless stated; module docstring)."""
+
+    peak_mm: float
+    sphere_radius_mm: float
+    contact_radius_mm: float
+    contact_radius_expected_mm: float
+    centre_rc: tuple[float, float]
+    press_mm: float
+    depth_rms_mm: float
+    slope_rms: float
+    slope_rms_flat: float
+    edge: bool
+    annotated_depth_rms_mm: float | None = None
+    annotated_slope_rms: float | None = None
+    annotated_press_mm: float | None = None
+
+    def as_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+def fit_sphere(depth_mm: np.ndarray, mm_per_px: float, fraction: float = CORE_FRACTION
+               ) -> tuple[float, tuple[float, float]]:
+    """``(radius_mm, (row, col))`` of the sphere fitted to the pixels deeper than
+    ``fraction`` of the peak (algebraic least squares; ``inf`` when they are too few or
+    coplanar)."""
+    d = np.asarray(depth_mm, np.float64)
+    peak = float(d.max())
+    rr, cc = np.nonzero(d > fraction * peak) if peak > 0 else (np.array([]), np.array([]))
+    if len(rr) < 6:
+        return float("inf"), (float("nan"), float("nan"))
+    x, y, z = cc * mm_per_px, rr * mm_per_px, d[rr, cc]
+    a = np.c_[2 * x, 2 * y, 2 * z, np.ones_like(x)]
+    sol, *_ = np.linalg.lstsq(a, x * x + y * y + z * z, rcond=None)
+    r2 = sol[3] + sol[0] ** 2 + sol[1] ** 2 + sol[2] ** 2
+    if not np.isfinite(r2) or r2 <= 0:
+        return float("inf"), (float("nan"), float("nan"))
+    return float(np.sqrt(r2)), (float(sol[1] / mm_per_px), float(sol[0] / mm_per_px))
+
+
+def ball_cap(shape: tuple[int, int], centre_rc: tuple[float, float], press_mm: float,
+             radius_mm: float, mm_per_px: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """Rigid ball cap: ``(depth, grad_x, grad_y, contact_radius_px)``; depth ``N × M`` mm,
+    slopes of the sphere (mm per mm; defined inside the contact circle, 0 outside)."""
+    rr, cc = np.mgrid[0 : shape[0], 0 : shape[1]].astype(np.float64)
+    x = (cc - centre_rc[1]) * mm_per_px
+    y = (rr - centre_rc[0]) * mm_per_px
+    r2 = x * x + y * y
+    root = np.sqrt(np.clip(radius_mm**2 - r2, 1e-9, None))
+    depth = np.clip(root - (radius_mm - press_mm), 0.0, None)
+    inside = depth > 0
+    gx = np.where(inside, -x / root, 0.0)
+    gy = np.where(inside, -y / root, 0.0)
+    p = min(press_mm, radius_mm)
+    return depth, gx, gy, float(np.sqrt(max(2 * radius_mm * p - p * p, 0.0))) / mm_per_px
+
+
+def fit_ball_fixed_radius(depth_mm: np.ndarray, radius_mm: float, mm_per_px: float
+                          ) -> tuple[tuple[float, float], float]:
+    """``((row, col), press_mm)`` of the rigid cap of radius ``radius_mm`` that best fits the
+    pixels deeper than half the peak (least squares on depth)."""
+    d = np.asarray(depth_mm, np.float64)
+    peak = float(d.max())
+    rr, cc = np.nonzero(d > CORE_FRACTION * peak)
+    if peak <= 0 or len(rr) < 3:
+        r0, c0 = np.unravel_index(int(np.argmax(d)), d.shape)
+        return (float(r0), float(c0)), max(peak, 0.0)
+    w = d[rr, cc]
+    start = np.array([np.average(rr, weights=w), np.average(cc, weights=w),
+                      min(peak, 0.99 * radius_mm)])
+
+    def resid(p: np.ndarray) -> np.ndarray:
+        r2 = ((rr - p[0]) ** 2 + (cc - p[1]) ** 2) * mm_per_px**2
+        cap = np.sqrt(np.clip(radius_mm**2 - r2, 0.0, None)) - (radius_mm - p[2])
+        return cap - w
+
+    sol = least_squares(resid, start, bounds=([-np.inf, -np.inf, 0.0],
+                                               [np.inf, np.inf, radius_mm]))
+    return (float(sol.x[0]), float(sol.x[1])), float(sol.x[2])
+
+
+def press_figures(
+    depth_mm: np.ndarray,
+    grad_x: np.ndarray,
+    grad_y: np.ndarray,
+    radius_mm: float,
+    mm_per_px: float,
+    contact_threshold_mm: float = 0.1,
+    annotated: tuple[tuple[float, float], float] | None = None,
+) -> PressFigures:
+    """The figures of one press (module docstring).
+
+    Parameters
+    ----------
+    depth_mm, grad_x, grad_y
+        ``N × M`` reconstructed depth (mm) and the slopes it was integrated from.
+    radius_mm
+        Ball radius.
+    annotated
+        ``((row, col), contact_radius_px)`` of an annotated contact circle, or None.
+    """
+    d = np.asarray(depth_mm, np.float64)
+    peak = float(d.max())
+    sphere, _ = fit_sphere(d, mm_per_px)
+    area = float((d > contact_threshold_mm).sum()) * mm_per_px**2
+    p = min(max(peak, 0.0), radius_mm)
+    expected = float(np.sqrt(max(2 * radius_mm * p - p * p, 0.0)))
+    centre, press = fit_ball_fixed_radius(d, radius_mm, mm_per_px)
+
+    def against(c: tuple[float, float], pr: float) -> tuple[float, float, float, bool]:
+        cap, tx, ty, a_px = ball_cap(d.shape, c, pr, radius_mm, mm_per_px)
+        rr, cc = np.mgrid[0 : d.shape[0], 0 : d.shape[1]]
+        inside = np.hypot(rr - c[0], cc - c[1]) < RIM_FRACTION * a_px
+        if not inside.any():
+            return float("nan"), float("nan"), float("nan"), False
+        drms = float(np.sqrt(np.mean((d - cap)[inside] ** 2)))
+        srms = float(np.sqrt(np.mean(np.hypot(grad_x - tx, grad_y - ty)[inside] ** 2)))
+        flat = float(np.sqrt(np.mean(np.hypot(tx, ty)[inside] ** 2)))
+        edge = bool(c[0] - a_px <= 0 or c[1] - a_px <= 0 or c[0] + a_px >= d.shape[0] - 1
+                    or c[1] + a_px >= d.shape[1] - 1)
+        return drms, srms, flat, edge
+
+    drms, srms, flat, edge = against(centre, press)
+    out = PressFigures(peak, sphere, float(np.sqrt(area / np.pi)), expected, centre, press,
+                       drms, srms, flat, edge)
+    if annotated is not None:
+        (ar, ac), a_px = annotated
+        a_mm = min(a_px * mm_per_px, radius_mm)
+        ann_press = radius_mm - float(np.sqrt(radius_mm**2 - a_mm**2))
+        out.annotated_depth_rms_mm, out.annotated_slope_rms, _, _ = against((ar, ac), ann_press)
+        out.annotated_press_mm = ann_press
+    return out
+
+
+def summarise(figures: list[PressFigures], radius_mm: float) -> dict[str, Any]:
+    """Pack-level figures: median fitted sphere radius and its middle half (and relative to
+    ``radius_mm``), median contact-radius ratio (measured / expected), depth and slope RMS
+    over the presses (root of the mean of squares), edge against interior presses."""
+    def rms(vals: list[float | None]) -> float | None:
+        v = np.array([x for x in vals if x is not None and np.isfinite(x)], np.float64)
+        return float(np.sqrt(np.mean(v**2))) if len(v) else None
+
+    radii = np.array([f.sphere_radius_mm for f in figures])
+    ratio = np.array([f.contact_radius_mm / f.contact_radius_expected_mm
+                      for f in figures if f.contact_radius_expected_mm > 0])
+    out: dict[str, Any] = {
+        "presses": len(figures),
+        "ball_radius_mm": radius_mm,
+        "sphere_radius_median_mm": float(np.median(radii)),
+        "sphere_radius_q25_mm": float(np.percentile(radii, 25)),
+        "sphere_radius_q75_mm": float(np.percentile(radii, 75)),
+        "contact_ratio_median": float(np.median(ratio)) if len(ratio) else None,
+        "depth_rms_mm": rms([f.depth_rms_mm for f in figures]),
+        "slope_rms": rms([f.slope_rms for f in figures]),
+        "slope_rms_flat": rms([f.slope_rms_flat for f in figures]),
+        "peak_mean_mm": float(np.mean([f.peak_mm for f in figures])),
+        "edge_presses": int(sum(f.edge for f in figures)),
+    }
+    if any(f.annotated_depth_rms_mm is not None for f in figures):
+        out["annotated_depth_rms_mm"] = rms([f.annotated_depth_rms_mm for f in figures])
+        out["annotated_slope_rms"] = rms([f.annotated_slope_rms for f in figures])
+        out["annotated_press_mean_mm"] = float(np.mean(
+            [f.annotated_press_mm for f in figures if f.annotated_press_mm is not None]))
+    edge = [f for f in figures if f.edge]
+    inner = [f for f in figures if not f.edge]
+    if edge and inner:
+        rel = []
+        for f in edge:  # the interior press of most similar fitted press depth
+            g = min(inner, key=lambda h: abs(h.press_mm - f.press_mm))
+            rel.append(f.sphere_radius_mm / g.sphere_radius_mm - 1.0)
+        out["edge_radius_vs_interior_median"] = float(np.median(rel))
+    return out
