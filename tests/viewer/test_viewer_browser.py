@@ -109,15 +109,57 @@ def test_page_buttons_work_in_chromium_and_a_foreign_page_cannot_reset(tmp_path)
                       f" fetch('{server.url}reset', {{method: 'POST', headers: {{'X-ThinTact-Token': 'x'}}}})"
                       "]).then(() => 'sent')")
             assert browser.evaluate(f"http://127.0.0.1:{evil.server_address[1]}/", attack) == "sent"
-            assert live.resets == 0
-            clicked = browser.evaluate(server.url, "document.getElementById('reset').click(), 'clicked'")
+            assert live.changes == 0
+            clicked = browser.evaluate(server.url, "document.getElementById('reset-0').click(), 'clicked'")
             assert clicked == "clicked"
             deadline = time.monotonic() + 30  # a timeout only: the click's fetch is asynchronous
-            while live.resets == 0 and time.monotonic() < deadline:
+            while live.changes == 0 and time.monotonic() < deadline:
                 time.sleep(0.05)
-            assert live.resets == 1
+            assert live.changes == 1
         finally:
             browser.close()
             evil.shutdown()
             evil.server_close()
+    assert not server.internal_errors
+
+
+@pytest.mark.skipif(BROWSER is None, reason="chromium is not installed")
+def test_snapshot_and_record_buttons_work_in_chromium(tmp_path):
+    """Issue 33: the page's snapshot button writes the PNG and depth; record starts and, on a
+    second click, stops a recording of the live frames; the page says where they went."""
+    import time
+
+    from viewer_kit import FramesSensor, HeadlessChromium
+
+    from thintact_sdk.recording import Recording
+
+    def until(check, what):
+        deadline = time.monotonic() + 30  # a bound on a hang: the clicks' fetches are asynchronous
+        while not check():
+            assert time.monotonic() < deadline, what
+            time.sleep(0.05)
+
+    live = LiveView(FramesSensor(), out=tmp_path / "out", label="finger")
+    with ViewerServer(port=0) as server:
+        server.start(live)
+        until(lambda: live.latest() is not None, "no frame")
+        browser = HeadlessChromium(BROWSER, str(tmp_path / "chromium"))
+        try:
+            click = ("new Promise(ok => {{ document.getElementById('{0}').click(); "
+                     "setTimeout(() => ok(document.getElementById('msg-0').textContent), 1500); }})")
+            said = browser.evaluate(server.url, click.format("snapshot-0"))
+            until(lambda: len(list((tmp_path / "out").glob("snapshot-finger-*"))) == 2, "no snapshot")
+            assert said.startswith("saved ") and "-image.png" in said
+            said = browser.evaluate(server.url, click.format("record-0") + ".then(m => m + ' | ' + "
+                                    "document.getElementById('record-0').className)")
+            assert said.startswith("recording into ") and said.endswith("| on")
+            until(lambda: (live.recording() or {}).get("frames", 0) >= 3, "no frames recorded")
+            said = browser.evaluate(
+                server.url, "new Promise(ok => setTimeout(ok, 800)).then(() => " + click.format("record-0") + ")")
+            until(lambda: not live.recording()["active"], "recording not stopped")
+            assert said.startswith("saved ") and "frames in" in said
+        finally:
+            browser.close()
+    rec = live.recording()
+    assert len(Recording(rec["path"])) == rec["frames"] >= 3
     assert not server.internal_errors

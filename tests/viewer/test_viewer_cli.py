@@ -110,3 +110,54 @@ def test_view_refuses_a_bad_duration_in_one_line(value, capsys):
 def test_view_refuses_a_bad_reference_frame_count(capsys):
     assert main(["view", "virtual-finger", "--port", "0", "--reference-frames", "0"]) == 2
     assert "--reference-frames" in capsys.readouterr().err
+
+
+def test_view_shows_two_sensors_and_their_buttons_write_under_out(tmp_path):
+    """Issue 33: ``thintact view P1 P2 --out DIR``: one panel group per sensor; snapshot and
+    record (with the page's token) write under DIR; Ctrl-C reports each sensor."""
+    out_dir = tmp_path / "viewer-out"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "thintact_sdk.cli.main", "view", "virtual-finger", "virtual-finger",
+         "--port", "0", "--set", "fps=0", "--out", str(out_dir)],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path)
+    try:
+        line = proc.stdout.readline()
+        match = re.search(r"viewing virtual-finger, virtual-finger at (http://127\.0\.0\.1:\d+/)", line)
+        assert match, line + proc.stderr.read()
+        url = match.group(1)
+        with urllib.request.urlopen(url, timeout=30) as r:
+            page = r.read().decode()
+        token = re.search(r'<meta name="thintact-token" content="([^"]+)">', page).group(1)
+        assert 'id="live-1"' in page and "thintact view virtual-finger-1" in page
+
+        def stats(k):
+            with urllib.request.urlopen(f"{url}stats.json?sensor={k}", timeout=30) as r:
+                return json.loads(r.read())
+
+        def post(path):
+            req = urllib.request.Request(url + path, data=b"", headers={"X-ThinTact-Token": token})
+            with urllib.request.urlopen(req, timeout=30) as r:
+                return json.loads(r.read())
+
+        deadline = time.monotonic() + 120  # a bound on a hang while the decoders load
+        while time.monotonic() < deadline and not all(stats(k)["frame_id"] for k in (0, 1)):
+            time.sleep(0.2)
+        assert all(stats(k)["frame_id"] for k in (0, 1)), [stats(k) for k in (0, 1)]
+        files = post("snapshot?sensor=1")["files"]
+        started = post("record/start?sensor=0")["path"]
+        while time.monotonic() < deadline and stats(0)["recording"]["frames"] < 2:
+            time.sleep(0.2)
+        stopped = post("record/stop?sensor=0")
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=90)
+    finally:
+        proc.kill()
+    assert proc.returncode == 0, err
+    assert all(f.startswith(str(out_dir / "snapshot-virtual-finger-1-")) for f in files) and len(files) == 2
+    assert stopped["path"] == started and stopped["frames"] >= 2
+    assert started.startswith(str(out_dir / "recording-virtual-finger-0-"))
+    assert "stopped virtual-finger-0:" in out and "stopped virtual-finger-1:" in out
+    assert "Traceback" not in err
+    from thintact_sdk.recording import Recording
+
+    assert len(Recording(started)) == stopped["frames"]

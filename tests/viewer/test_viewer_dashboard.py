@@ -85,7 +85,7 @@ def test_server_serves_page_frames_and_stats_on_loopback(finger):
         server.start(LiveView(finger))
         assert server.url.startswith("http://127.0.0.1:")
         status, _, page = _get(server.url)
-        assert status == 200 and b'<img id="live" src="/frame.jpg"' in page
+        assert status == 200 and b'id="live-0" src="/frame.jpg?sensor=0"' in page
         status, headers, jpeg = _get(server.url + "frame.jpg")
         first = int(headers["X-Frame-Seq"])
         image = cv2.imdecode(np.frombuffer(jpeg, np.uint8), cv2.IMREAD_COLOR)

@@ -57,54 +57,69 @@ def test_own_loopback_hosts_are_served(served, host):
 def test_foreign_host_is_forbidden(served, host, path):
     """DNS rebinding: a page from evil.example resolved to 127.0.0.1 sends its own Host."""
     server, live = served
-    before = live.resets
+    before = live.changes
     if host is not None:
         host = host.format(port=server.port, other=server.port + 1)
     status, reply = http(server.port, "GET", path, host=host)
     assert status == 403 and b"thintact-token" not in reply and server.token.encode() not in reply
     status, _ = http(server.port, "POST", "/reset", {TOKEN_HEADER: server.token}, host=host)
-    assert status == 403 and live.resets == before
+    assert status == 403 and live.changes == before
 
 
 def test_post_needs_the_token(served):
     server, live = served
-    before = live.resets
+    before = live.changes
     for headers in ({}, {TOKEN_HEADER: ""}, {TOKEN_HEADER: "x" * len(server.token)},
                     {TOKEN_HEADER: server.token[:-1]}, {TOKEN_HEADER: server.token + "x"},
                     {TOKEN_HEADER.lower() + "s": server.token}):
         status, reply = http(server.port, "POST", "/reset", headers)
         assert status == 403 and TOKEN_HEADER.encode() in reply, headers
-    assert live.resets == before
+    assert live.changes == before
     status, _ = http(server.port, "POST", "/reset", {TOKEN_HEADER: server.token})
-    assert status == 200 and live.resets == before + 1
+    assert status == 200 and live.changes == before + 1
+
+
+@pytest.mark.parametrize("path", ["/reset", "/snapshot", "/record/start", "/record/stop"])
+def test_every_state_change_needs_the_token_and_the_origin(served, path):
+    server, live = served
+    before = live.changes
+    assert http(server.port, "POST", path)[0] == 403
+    assert http(server.port, "POST", path, {"Origin": "http://evil.example",
+                                            TOKEN_HEADER: server.token})[0] == 403
+    assert http(server.port, "POST", path, host=f"evil.example:{server.port}",
+                headers={TOKEN_HEADER: server.token})[0] == 403
+    assert http(server.port, "GET", path, {TOKEN_HEADER: server.token})[0] == 404  # only POST acts
+    assert live.changes == before
+    assert http(server.port, "POST", path, {TOKEN_HEADER: server.token})[0] == 200
+    assert live.changes == before + 1
 
 
 @pytest.mark.parametrize("origin", ["http://evil.example", "null", "https://127.0.0.1:{port}",
                                     "http://127.0.0.1:{other}", "http://127.0.0.1:{port}.evil"])
 def test_cross_origin_post_is_forbidden_even_with_the_token(served, origin):
     server, live = served
-    before = live.resets
+    before = live.changes
     origin = origin.format(port=server.port, other=server.port + 1)
     status, reply = http(server.port, "POST", "/reset", {TOKEN_HEADER: server.token, "Origin": origin})
-    assert status == 403 and b"cross-origin" in reply and live.resets == before
+    assert status == 403 and b"cross-origin" in reply and live.changes == before
     status, _ = http(server.port, "POST", "/reset",
                      {TOKEN_HEADER: server.token, "Sec-Fetch-Site": "cross-site"})
-    assert status == 403 and live.resets == before
+    assert status == 403 and live.changes == before
 
 
 def test_same_origin_post_with_the_token_resets(served):
     server, live = served
-    before = live.resets
+    before = live.changes
     for origin in (f"http://127.0.0.1:{server.port}", f"http://localhost:{server.port}"):
         status, _ = http(server.port, "POST", "/reset", {TOKEN_HEADER: server.token, "Origin": origin,
                                                           "Sec-Fetch-Site": "same-origin"})
         assert status == 200
-    assert live.resets == before + 2
+    assert live.changes == before + 2
 
 
 def test_other_methods_and_bad_bodies_change_nothing(served):
     server, live = served
-    before = live.resets
+    before = live.changes
     token = {TOKEN_HEADER: server.token}
     for method in ("PUT", "DELETE", "PATCH", "OPTIONS"):
         assert http(server.port, method, "/reset", token)[0] == 405
@@ -116,9 +131,9 @@ def test_other_methods_and_bad_bodies_change_nothing(served):
                                      + "".join(f"{k}: {v}\r\n" for k, v in big.items())
                                      + "\r\n").encode())[0] == 413
     assert http(server.port, "POST", "/nothing", token)[0] == 404
-    assert live.resets == before
+    assert live.changes == before
     assert http(server.port, "POST", "/reset", token, body=b"x" * 1000)[0] == 200  # body ignored
-    assert live.resets == before + 1
+    assert live.changes == before + 1
 
 
 def test_two_servers_have_different_tokens():
@@ -146,6 +161,8 @@ requests = st.fixed_dictionaries({
                         st.text(st.characters(min_codepoint=33, max_codepoint=126), min_size=1,
                                 max_size=12)),
     "path": st.one_of(st.sampled_from(["/", "/reset", "/frame.jpg?after=-5", "/stats.json",
+                                       "/snapshot", "/record/start?sensor=0", "/record/stop",
+                                       "/reset?sensor=1", "/stats.json?sensor=%FF",
                                        "/reset?x=1", "//[bad", "/frame.jpg?after=99999999999999999999",
                                        "*", "http://evil/reset", "/%00", "/../../etc/passwd"]),
                       st.text(st.characters(min_codepoint=33, max_codepoint=255), max_size=80)),
@@ -168,7 +185,7 @@ requests = st.fixed_dictionaries({
 def test_fuzzed_requests_never_crash_500_or_change_state_without_the_token(served, req):
     server, live = served
     port = server.port
-    before = live.resets
+    before = live.changes
     lines = [f"{req['method']} {req['path']} {req['version']}".rstrip()]
     if req["host"] is not None:
         lines.append(f"Host: {f'127.0.0.1:{port}' if req['host'] is _HOST else req['host']}")
@@ -185,7 +202,7 @@ def test_fuzzed_requests_never_crash_500_or_change_state_without_the_token(serve
     assert status != 500
     assert status is None or 200 <= status < 600
     token_sent = req["token"] is _TOKEN and req["host"] is _HOST
-    assert live.resets - before <= (1 if token_sent else 0)
+    assert live.changes - before <= (1 if token_sent else 0)
     assert not server.internal_errors
     # still serving
     assert http(port, "GET", "/stats.json")[0] == 200

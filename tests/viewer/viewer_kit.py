@@ -22,16 +22,32 @@ class _EndedSensor:
 
 
 class CountingLive(LiveView):
-    """A LiveView without a sensor that counts :meth:`reset_reference` calls."""
+    """A LiveView without a sensor that counts state-changing calls (reset, snapshot, record
+    start and stop) in :attr:`changes` instead of acting on them."""
 
     def __init__(self) -> None:
-        super().__init__(_EndedSensor(), title="fake viewer")  # type: ignore[arg-type]
-        self.resets = 0
+        super().__init__(_EndedSensor(), title="fake viewer", out="/nonexistent/never-written")  # type: ignore[arg-type]
+        self.changes = 0
         self._count_lock = threading.Lock()
 
-    def reset_reference(self) -> None:
+    def _count(self) -> None:
         with self._count_lock:
-            self.resets += 1
+            self.changes += 1
+
+    def reset_reference(self) -> None:
+        self._count()
+
+    def snapshot(self) -> Any:
+        self._count()
+        return []
+
+    def start_recording(self) -> Any:
+        self._count()
+        return "/nonexistent/never-written"
+
+    def stop_recording(self) -> Any:
+        self._count()
+        return None
 
 
 def raw_request(port: int, request: bytes, timeout_s: float = 20.0) -> tuple[int | None, bytes]:
@@ -186,3 +202,52 @@ class HeadlessChromium:
             self.proc.wait(timeout=10)
         os.close(self._to_child)
         os.close(self._from_child)
+
+
+class FramesSensor:
+    """A sensor with the virtual finger's profile whose frames are synthetic (no decoding):
+    raw 512 × 640 Bayer mosaics and tactile frames with a pressed square, paced at about
+    ``fps``. Fast enough for server tests."""
+
+    def __init__(self, fps: float = 30.0) -> None:
+        import numpy as np
+
+        from thintact_sdk.profile import load_profile
+
+        self.profile = load_profile("virtual-finger")
+        self._rng = np.random.default_rng(0)
+        self._period = 1.0 / fps
+        self._n = 0
+        self.resets = 0
+
+    def read_raw(self) -> Any:
+        import time
+
+        import numpy as np
+
+        from thintact_sdk.frames import RawFrame
+
+        time.sleep(self._period)
+        self._n += 1
+        data = self._rng.integers(64, 4000, (512, 640), dtype=np.uint16)
+        return RawFrame(data, time.monotonic_ns(), self._n, exposure_us=1000.0)
+
+    def process(self, raw: Any) -> Any:
+        import numpy as np
+
+        from thintact_sdk.frames import TactileFrame
+
+        depth = np.zeros((100, 128), np.float32)
+        depth[40:60, 50:70] = 0.5
+        yy, xx = np.mgrid[-2:2:5j, -3:3:5j]
+        pos = np.stack([xx.ravel(), yy.ravel()], 1).astype(np.float32)
+        image = np.full((100, 128, 3), 0.25, np.float32)
+        image[40:60, 50:70] = 0.75
+        return TactileFrame(
+            image=image, depth_mm=depth, marker_positions_mm=pos,
+            marker_displacements_mm=np.zeros_like(pos), contact=True, contact_area_mm2=4.0,
+            timestamp_ns=raw.timestamp_ns, frame_id=raw.frame_id, shear_direction_rad=float("nan"),
+            latency_ms=1.0)
+
+    def reset_reference(self) -> None:
+        self.resets += 1

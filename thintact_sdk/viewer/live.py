@@ -5,6 +5,10 @@ renders the dashboard (:mod:`thintact_sdk.viewer.panels`) and publishes it as JP
 clients wait for the next published frame (:meth:`LiveView.wait_frame`) and report when
 they have sent it (:meth:`LiveView.note_served`), which gives the served rate and the
 latency from the camera timestamp to the frame leaving the server.
+
+The record and snapshot buttons act here: :meth:`LiveView.snapshot` writes the newest
+tactile frame, :meth:`LiveView.start_recording` makes the loop append every raw frame it
+reads to a recording until :meth:`LiveView.stop_recording` (:mod:`thintact_sdk.viewer.capture`).
 """
 
 from __future__ import annotations
@@ -14,11 +18,13 @@ import threading
 import time
 from collections import deque
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
-from thintact_sdk.errors import EndOfStreamError
+from thintact_sdk.errors import EndOfStreamError, OutputError
 from thintact_sdk.frames import TactileFrame
 from thintact_sdk.sensor import Sensor
+from thintact_sdk.viewer.capture import DEFAULT_OUT, LiveRecorder, write_snapshot
 from thintact_sdk.viewer.panels import Rates, encode_jpeg, render_dashboard
 
 WINDOW = 30
@@ -56,12 +62,24 @@ class LiveView:
         reference: keep the membrane free when the viewer starts).
     title
         Shown under the panels (default: the profile's name).
+    out
+        Where snapshots and recordings go (default :data:`~thintact_sdk.viewer.capture.DEFAULT_OUT`
+        under the working directory); created on the first one.
+    label
+        The sensor's name in file names (default: the profile's name).
     """
 
-    def __init__(self, sensor: Sensor, title: str | None = None) -> None:
+    def __init__(self, sensor: Sensor, title: str | None = None, out: str | Path | None = None,
+                 label: str | None = None) -> None:
         self.sensor = sensor
         self.title = title or f"thintact view {sensor.profile.name}"
+        self.out = Path(out if out is not None else DEFAULT_OUT)
+        self.label = label or sensor.profile.name
         self.error: str | None = None
+        self._frame: TactileFrame | None = None
+        self._recorder: LiveRecorder | None = None
+        self._last_recording: LiveRecorder | None = None
+        self._record_lock = threading.Lock()
         self._cond = threading.Condition()
         self._latest: Published | None = None
         self._stop = threading.Event()
@@ -82,12 +100,13 @@ class LiveView:
         return self
 
     def stop(self) -> None:
-        """Stop the frame loop and wait for it."""
+        """Stop the frame loop and wait for it; a running recording is closed."""
         self._stop.set()
         with self._cond:
             self._cond.notify_all()
         if self._thread is not None:
             self._thread.join(timeout=10.0)
+        self.stop_recording()
 
     def reset_reference(self) -> None:
         """Make the next frames the no-contact reference (the membrane must be free)."""
@@ -102,7 +121,11 @@ class LiveView:
                     self._reset.clear()
                     self.sensor.reset_reference()
                 raw = self.sensor.read_raw()
+                recorder = self._recorder
+                if recorder is not None:
+                    recorder.write(raw)
                 frame = self.sensor.process(raw)
+                self._frame = frame
                 self._note_made(frame)
                 image = render_dashboard(raw, frame, self.sensor.profile, self.rates(), self.title)
                 published = Published(seq, encode_jpeg(image), frame.timestamp_ns,
@@ -158,6 +181,52 @@ class LiveView:
             self._served.append(now_ns / 1e9)
             self._latency_ms.append((now_ns - published.camera_stamp_ns) / 1e6)
 
+    # -- record and snapshot ------------------------------------------------------------
+    def snapshot(self) -> list[Path]:
+        """Write the newest tactile frame's reconstruction (PNG) and depth (``.npy``).
+
+        Raises
+        ------
+        OutputError
+            No frame yet, or the output directory cannot be written.
+        """
+        frame = self._frame
+        if frame is None:
+            raise OutputError("no frame yet to take a snapshot of")
+        return write_snapshot(self.out, self.label, frame)
+
+    def start_recording(self) -> Path:
+        """Start appending every raw frame to a new recording; returns its directory.
+
+        Raises
+        ------
+        OutputError
+            A recording is already running, or the output directory cannot be written.
+        """
+        with self._record_lock:
+            if self._recorder is not None and self._recorder.active:
+                raise OutputError(f"already recording into {self._recorder.path}")
+            self._recorder = LiveRecorder(self.out, self.label, self.sensor.profile)
+            return self._recorder.path
+
+    def stop_recording(self) -> tuple[Path, int] | None:
+        """Stop the running recording; its directory and frame count, or None when none ran."""
+        with self._record_lock:
+            recorder, self._recorder = self._recorder, None
+        if recorder is None:
+            return None
+        recorder.close()
+        self._last_recording = recorder
+        return recorder.path, recorder.frames
+
+    def recording(self) -> dict[str, Any] | None:
+        """The running (else the last) recording: path, frames, active, error; None if none."""
+        recorder = self._recorder or self._last_recording
+        if recorder is None:
+            return None
+        return {"path": str(recorder.path), "frames": recorder.frames, "active": recorder.active,
+                "error": recorder.error}
+
     def rates(self) -> Rates:
         """Current rates and median latencies (over the last :data:`WINDOW` frames)."""
         with self._lock:
@@ -183,4 +252,5 @@ class LiveView:
             "latency_ms": num(rates.latency_ms),
             "processing_ms": num(rates.processing_ms),
             "error": self.error,
+            "recording": self.recording(),
         }

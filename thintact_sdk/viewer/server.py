@@ -1,10 +1,15 @@
 """The viewer's web server: a page on 127.0.0.1 that shows the live dashboard.
 
-Routes: ``/`` the page; ``/frame.jpg?after=SEQ`` the newest dashboard newer than SEQ
-(waits for it: the page asks for the next frame as soon as one has arrived, so frames
-are pushed at the sensor's rate without polling); ``/stats.json`` rates, latency and
-errors; ``POST /reset`` makes the next frames the no-contact reference. The server only
-listens on the loopback interface.
+One server shows one or several sensors (one panel group each); ``sensor=K`` (default 0)
+picks one. Routes: ``/`` the page; ``/frame.jpg?sensor=K&after=SEQ`` the newest dashboard
+newer than SEQ (waits for it: the page asks for the next frame as soon as one has arrived,
+so frames are pushed at the sensor's rate without polling); ``/stats.json?sensor=K``
+rates, latency, errors and the recording; ``POST /reset?sensor=K`` makes the next frames
+the no-contact reference; ``POST /snapshot?sensor=K`` writes the newest frame's
+reconstruction PNG and depth ``.npy``; ``POST /record/start?sensor=K`` and
+``POST /record/stop?sensor=K`` record the live frames (:mod:`thintact_sdk.viewer.capture`;
+the paths written are in the JSON reply). The server only listens on the loopback
+interface.
 
 Security model (docs/viewer.md#security)
 -----------------------------------------
@@ -32,6 +37,7 @@ import hmac
 import json
 import secrets
 import threading
+from collections.abc import Sequence
 from http import HTTPStatus
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from urllib.parse import parse_qs
@@ -172,17 +178,32 @@ class _Handler(BaseHTTPRequestHandler):
         path, _, query = target.partition("?")
         return path, parse_qs(query)
 
+    def _live(self, query: dict[str, list[str]]) -> LiveView | None:
+        """The sensor named by ``sensor=K`` (default 0), or None (after a 404) when none is."""
+        lives = self.server.lives
+        text = query.get("sensor", ["0"])[0]
+        if text.isascii() and text.isdigit() and len(text) <= 4 and int(text) < len(lives):
+            return lives[int(text)]
+        self._text(HTTPStatus.NOT_FOUND, f"no sensor {text[:20]!r}; sensors 0..{len(lives) - 1}")
+        return None
+
+    def _json(self, status: int, value: object) -> None:
+        self._send(status, json.dumps(value).encode(), "application/json")
+
     def _get(self) -> None:
-        live = self.server.live
         path, query = self._route()
         if path in ("/", "/index.html"):
             nonce = secrets.token_urlsafe(16)
             csp = (f"default-src 'none'; script-src 'nonce-{nonce}'; style-src 'nonce-{nonce}'; "
                    "img-src 'self' blob:; connect-src 'self'; base-uri 'none'; form-action 'none'; "
                    "frame-ancestors 'none'")
-            self._send(HTTPStatus.OK, page_html(live.title, self.server.token, nonce).encode(),
+            titles = [live.title for live in self.server.lives]
+            self._send(HTTPStatus.OK, page_html(titles, self.server.token, nonce).encode(),
                        "text/html; charset=utf-8", {"Content-Security-Policy": csp})
         elif path == "/frame.jpg":
+            live = self._live(query)
+            if live is None:
+                return
             try:
                 after = int(query.get("after", ["-1"])[0])
             except ValueError:
@@ -196,21 +217,40 @@ class _Handler(BaseHTTPRequestHandler):
                        {"X-Frame-Seq": str(published.seq)})
             live.note_served(published)
         elif path == "/stats.json":
-            self._send(HTTPStatus.OK, json.dumps(live.stats()).encode(), "application/json")
+            live = self._live(query)
+            if live is not None:
+                self._json(HTTPStatus.OK, live.stats())
         else:
             self._text(HTTPStatus.NOT_FOUND, "not found")
 
     def _post(self) -> None:
-        if self._route()[0] == "/reset":
-            self.server.live.reset_reference()
-            self._text(HTTPStatus.OK, "reference reset")
-        else:
+        path, query = self._route()
+        if path not in ("/reset", "/snapshot", "/record/start", "/record/stop"):
             self._text(HTTPStatus.NOT_FOUND, "not found")
+            return
+        live = self._live(query)
+        if live is None:
+            return
+        try:
+            if path == "/reset":
+                live.reset_reference()
+                self._text(HTTPStatus.OK, "reference reset")
+            elif path == "/snapshot":
+                files = live.snapshot()
+                self._json(HTTPStatus.OK, {"files": [str(f) for f in files]})
+            elif path == "/record/start":
+                self._json(HTTPStatus.OK, {"path": str(live.start_recording()), "active": True})
+            else:
+                done = live.stop_recording()
+                self._json(HTTPStatus.OK, {"path": str(done[0]) if done else None,
+                                           "frames": done[1] if done else 0, "active": False})
+        except ThinTactError as err:  # no frame yet, already recording, output not writable
+            self._json(HTTPStatus.CONFLICT, {"error": str(err)})
 
 
 class _Server(ThreadingHTTPServer):
     daemon_threads = True
-    live: LiveView
+    lives: list[LiveView]
 
     def __init__(self, port: int) -> None:
         super().__init__((LOOPBACK, port), _Handler)
@@ -222,7 +262,7 @@ class _Server(ThreadingHTTPServer):
 
 
 class ViewerServer:
-    """Serves a :class:`LiveView` on ``http://127.0.0.1:PORT/``.
+    """Serves one or several :class:`LiveView` on ``http://127.0.0.1:PORT/``.
 
     The port is bound when the server is made (so a busy port fails before the sensor is
     opened); :meth:`start` starts the frame loop and the serving thread. Requests must be
@@ -250,7 +290,12 @@ class ViewerServer:
             ) from None
         self._thread = threading.Thread(target=self._httpd.serve_forever, name="thintact-view-http",
                                         kwargs={"poll_interval": 0.1}, daemon=True)
-        self.live: LiveView | None = None
+        self.lives: list[LiveView] = []
+
+    @property
+    def live(self) -> LiveView | None:
+        """The first (or only) sensor's view, None before :meth:`start`."""
+        return self.lives[0] if self.lives else None
 
     @property
     def port(self) -> int:
@@ -272,20 +317,25 @@ class ViewerServer:
         """Requests that hit a bug (answered 500); empty in a healthy server."""
         return list(self._httpd.internal_errors)
 
-    def start(self, live: LiveView) -> ViewerServer:
-        """Start ``live``'s frame loop and serve it."""
-        self.live = self._httpd.live = live
-        live.start()
+    def start(self, lives: LiveView | Sequence[LiveView]) -> ViewerServer:
+        """Start the frame loop of each view and serve them, in that order on the page."""
+        views = [lives] if isinstance(lives, LiveView) else list(lives)
+        if not views:
+            raise ThinTactError("the viewer needs at least one sensor")
+        self.lives = self._httpd.lives = views
+        for live in views:
+            live.start()
         self._thread.start()
         return self
 
     def stop(self) -> None:
-        """Stop serving and stop the frame loop. Safe to call twice."""
+        """Stop serving, then stop every frame loop (closing running recordings). Safe to
+        call twice."""
         if self._thread.is_alive():
             self._httpd.shutdown()
         self._httpd.server_close()
-        if self.live is not None:
-            self.live.stop()
+        for live in self.lives:
+            live.stop()
 
     def __enter__(self) -> ViewerServer:
         return self
