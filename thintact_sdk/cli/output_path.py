@@ -5,6 +5,11 @@
   directory that is not empty (``--force`` writes into it, replacing files of the same
   name; it never deletes anything else).
 * A file output must not name a directory, a directory output must not name a file.
+* An output never overlaps one of the command's inputs, ``--force`` or not: it may not be
+  an input, lie inside an input directory, or contain an input (paths compared after
+  resolving symlinks and ``..``; the same file reached through a hard link counts too).
+* Writers that create their output over a long time (``record``) hold an exclusive
+  :func:`write_lock` on it, so of two runs racing for the same ``--out`` exactly one wins.
 
 Commands call :func:`claim_output` before any work, so a bad ``--out`` costs nothing.
 Documented resumes (``record --append``, the calibration wizard's unfinished capture) are
@@ -14,7 +19,10 @@ decided by the command before it calls this.
 from __future__ import annotations
 
 import argparse
+import contextlib
+import errno
 import os
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import Literal
 
@@ -30,12 +38,71 @@ def add_force_argument(parser: argparse.ArgumentParser, what: str = "over an exi
                         "nothing else is deleted)")
 
 
+InputPath = str | os.PathLike[str] | None
+
+
+def file_input(name: str | os.PathLike[str] | None) -> Path | None:
+    """``name`` as an input path when it names an existing file, else None (options such as
+    ``--profile`` take a built-in name or a file; only a file can be overwritten)."""
+    if name is None or not str(name).strip():
+        return None
+    p = Path(name).expanduser()
+    return p if p.is_file() else None
+
+
+def _resolved(path: str | os.PathLike[str]) -> Path:
+    """``path`` made absolute with every symlink and ``..`` resolved (non-existing tails kept)."""
+    return Path(os.path.realpath(Path(path).expanduser()))
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return False
+
+
+def check_not_an_input(
+    path: str | os.PathLike[str],
+    inputs: Iterable[InputPath],
+    *,
+    option: str = "--out",
+) -> None:
+    """Refuse an output that equals, lies inside or contains one of ``inputs``.
+
+    ``inputs`` are the command's input files and directories (None entries are skipped).
+    Paths are compared after resolving symlinks and ``..`` (:func:`os.path.realpath`), and
+    an existing output that is the same file as an input (a hard link) is refused too.
+
+    Raises
+    ------
+    OutputError
+        Naming the option, the output and the input it would overwrite.
+    """
+    out = _resolved(path)
+    for given in inputs:
+        if given is None or not str(given).strip():
+            continue
+        src = _resolved(given)
+        if out == src or _same_file(out, src):
+            why = "is"
+        elif out.is_relative_to(src):
+            why = "lies inside"
+        elif src.is_relative_to(out):
+            why = "contains"
+        else:
+            continue
+        raise OutputError(f"{option} {path} {why} the input {given}; writing there would destroy "
+                          "the input (--force does not allow it): choose another output path")
+
+
 def claim_output(
     path: str | os.PathLike[str] | None,
     kind: OutputKind,
     *,
     force: bool = False,
     option: str = "--out",
+    inputs: Iterable[InputPath] = (),
 ) -> Path:
     """Check an output path the user named and return it as a :class:`Path`.
 
@@ -49,16 +116,21 @@ def claim_output(
         Whether the user allowed an existing output to be overwritten.
     option
         The option's name, used in the messages.
+    inputs
+        The command's input files and directories: the output may not overlap any of them
+        (:func:`check_not_an_input`), whatever ``force`` says.
 
     Raises
     ------
     OutputError
-        When the path is empty, of the wrong kind, or exists (non-empty) without ``force``.
+        When the path is empty, of the wrong kind, overlaps an input, or exists (non-empty)
+        without ``force``.
     """
     text = "" if path is None else os.fspath(path)
     if not str(text).strip():
         raise OutputError(f"{option} is empty: name the {kind} to write")
     p = Path(text).expanduser()
+    check_not_an_input(p, inputs, option=option)
     if kind == "file":
         if p.is_dir():
             raise OutputError(f"{option} {p} is a directory; name the file to write")
@@ -68,7 +140,83 @@ def claim_output(
         return p
     if p.exists() and not p.is_dir():
         raise OutputError(f"{option} {p} is a file; name a directory to write into")
-    if p.is_dir() and not force and any(p.iterdir()):
+    if p.is_dir() and not force and any(q.name != LOCK_NAME for q in p.iterdir()):
         raise OutputError(f"{option} {p} already exists and is not empty; pass --force to write "
                           "into it (files of the same name are replaced) or choose a new directory")
     return p
+
+
+LOCK_NAME = ".thintact-write.lock"
+"""The lock file :func:`write_lock` keeps inside a directory output while it is written."""
+
+
+@contextlib.contextmanager
+def write_lock(path: str | os.PathLike[str], kind: OutputKind, *, option: str = "--out") -> Iterator[Path]:
+    """Hold an exclusive claim on the output ``path`` while it is written.
+
+    A directory output is created if needed and locked through ``path/.thintact-write.lock``;
+    a file output through the hidden sibling ``.<name>.lock``. The lock is an advisory
+    :func:`fcntl.flock` (released by the kernel if the process dies, so a killed writer
+    leaves no stale claim; where there is no ``flock`` an ``O_CREAT | O_EXCL`` file is the
+    claim). The lock file is removed when the block ends. Decide whether the output may be
+    written (it already holds a recording, ...) inside the block: only then is the answer
+    free of races.
+
+    Raises
+    ------
+    OutputError
+        When another process (or thread) holds the claim.
+    """
+    p = Path(path).expanduser()
+    if kind == "directory":
+        try:
+            p.mkdir(parents=True, exist_ok=True)
+        except OSError as err:
+            raise OutputError(f"{option} {p}: cannot create the directory ({err.strerror or err})") from None
+        lock = p / LOCK_NAME
+    else:
+        try:
+            p.parent.mkdir(parents=True, exist_ok=True)
+        except OSError as err:
+            raise OutputError(f"{option} {p}: cannot create its directory ({err.strerror or err})") from None
+        lock = p.with_name(f".{p.name}.lock")
+    busy = OutputError(f"{option} {p} is being written by another process (lock {lock}); wait for "
+                       "it to finish or choose another path")
+    fd = _acquire(lock, busy, option)
+    try:
+        yield p
+    finally:
+        with contextlib.suppress(OSError):
+            lock.unlink()
+        os.close(fd)  # closing the descriptor releases the flock
+
+
+def _acquire(lock: Path, busy: OutputError, option: str) -> int:
+    """Open and exclusively lock ``lock``; the descriptor is returned, the lock held."""
+    try:
+        import fcntl
+    except ImportError:  # no flock: the exclusive creation of the file is the claim
+        try:
+            return os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
+        except FileExistsError:
+            raise busy from None
+        except OSError as err:
+            raise OutputError(f"{option}: cannot create the lock {lock} ({err.strerror or err})") from None
+    while True:
+        try:
+            fd = os.open(lock, os.O_CREAT | os.O_RDWR, 0o644)
+        except OSError as err:
+            raise OutputError(f"{option}: cannot create the lock {lock} ({err.strerror or err})") from None
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError as err:
+            os.close(fd)
+            if err.errno in (errno.EAGAIN, errno.EWOULDBLOCK, errno.EACCES):
+                raise busy from None
+            raise OutputError(f"{option}: cannot lock {lock} ({err.strerror or err})") from None
+        try:  # the holder before us may have removed the file we opened: lock the one in place
+            if os.fstat(fd).st_ino == os.stat(lock).st_ino:
+                return fd
+        except FileNotFoundError:
+            pass
+        os.close(fd)

@@ -28,7 +28,12 @@ from thintact_sdk.cli.argtypes import (
     positive_float,
     positive_int,
 )
-from thintact_sdk.cli.output_path import add_force_argument, claim_output
+from thintact_sdk.cli.output_path import (
+    add_force_argument,
+    check_not_an_input,
+    claim_output,
+    file_input,
+)
 from thintact_sdk.errors import ThinTactError
 
 REFERENCE_EXPOSURE_US = 10_000.0
@@ -126,7 +131,7 @@ def _offline(args: argparse.Namespace, options: Any, console: Console) -> Any:
 
     if args.out is None:
         raise CalibrationError("--from-recording needs --out DIR (the bundle directory to write)")
-    out = claim_output(args.out, "directory", force=args.force)
+    out = claim_output(args.out, "directory", force=args.force, inputs=(args.from_recording,))
     rec = Recording(args.from_recording)
     rec.check_frames()  # a NaN, negative or unreadable frame is named before any work
     with _progress(args.no_progress, console) as prog:
@@ -165,11 +170,13 @@ def _wizard_out(args: argparse.Namespace) -> Path:
 
     if not args.out.strip():
         return claim_output(args.out, "directory")  # refuses the empty path
+    inputs = (file_input(args.profile),)
     out = Path(args.out)
     unfinished = (out / CAPTURE_DIR / "manifest.json").is_file() and not (out / META_FILE).is_file()
     if unfinished and not args.restart:
+        check_not_an_input(out, inputs)
         return out
-    return claim_output(args.out, "directory", force=args.force)
+    return claim_output(args.out, "directory", force=args.force, inputs=inputs)
 
 
 def _wizard(args: argparse.Namespace, options: Any, console: Console) -> Any:

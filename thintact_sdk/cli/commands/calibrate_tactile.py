@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from thintact_sdk.cli.argtypes import int_range, positive_float, positive_int
-from thintact_sdk.cli.output_path import add_force_argument, claim_output
+from thintact_sdk.cli.output_path import add_force_argument, claim_output, file_input
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -46,14 +46,16 @@ def run(args: argparse.Namespace) -> int:
     from thintact_sdk.tactile.store import device_lut_path, user_calibrations_root
 
     profile = load_profile(args.profile)
+    inputs = (args.recording, file_input(args.profile))
     if args.out is not None:
-        target = claim_output(args.out, "file", force=args.force)
+        target = claim_output(args.out, "file", force=args.force, inputs=inputs)
         if target.suffix != ".npz":
             raise OutputError(f"--out {target} must name a .npz file (its .json goes beside it)")
     else:
         target = claim_output(device_lut_path(profile, user_calibrations_root()), "file",
-                              force=args.force, option="the device LUT")
-    claim_output(target.with_suffix(".json"), "file", force=args.force, option="the LUT's metadata")
+                              force=args.force, option="the device LUT", inputs=inputs)
+    claim_output(target.with_suffix(".json"), "file", force=args.force, option="the LUT's metadata",
+                 inputs=inputs)
     virtual = camera_is_simulated(profile)
     with Progress(transient=True) as bar:
         task = bar.add_task("ball presses", total=args.presses)

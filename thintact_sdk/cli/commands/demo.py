@@ -19,7 +19,7 @@ import numpy as np
 
 from thintact_sdk.capture import camera_is_simulated
 from thintact_sdk.cli.argtypes import finite_float, positive_float
-from thintact_sdk.cli.output_path import add_force_argument, claim_output
+from thintact_sdk.cli.output_path import add_force_argument, claim_output, file_input
 from thintact_sdk.errors import ThinTactError
 from thintact_sdk.profile import Profile, load_profile
 from thintact_sdk.virtual_bench import get_scene_slot
@@ -61,7 +61,7 @@ def run(args: argparse.Namespace) -> int:
     from thintact_sdk.tactile.evaluation import depth_rms as depth_rms_in_contact
     from thintact_sdk.tactile.evaluation import marker_errors
 
-    out = claim_output(args.out, "directory", force=args.force)
+    out = claim_output(args.out, "directory", force=args.force, inputs=(file_input(args.profile),))
     profile = load_profile(args.profile)
     if not camera_is_simulated(profile):
         raise ThinTactError(

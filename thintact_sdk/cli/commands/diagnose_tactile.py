@@ -52,7 +52,7 @@ def run(args: argparse.Namespace) -> int:
     from thintact_sdk.tactile.sim_diagnosis.report import write_tactile_outputs
     from thintact_sdk.tactile.sim_diagnosis.run import TactileDiagnosisOptions, diagnose_tactile
 
-    out = claim_output(args.out, "directory", force=args.force)
+    out = claim_output(args.out, "directory", force=args.force, inputs=(args.pack,))
     con = Console(stderr=True, quiet=args.quiet)
     t0 = time.perf_counter()
     real = load_presses(args.pack)
@@ -63,10 +63,12 @@ def run(args: argparse.Namespace) -> int:
     if idx is not None and (len(idx) < 2 or min(idx) < 0 or max(idx) >= n):
         raise ThinTactError(f"--presses: at least 2 indices in 0..{n - 1}")
     con.print(f"{n} presses of {real.reference.shape[1]}×{real.reference.shape[0]} px from {real.source}")
-    with con.status("diagnosing...") as status:
+    from thintact_sdk.tactile.progress import stage_reporter
+
+    with stage_reporter(args.quiet) as say:  # lines also when stderr is a file or a pipe
         d = diagnose_tactile(real, args.ball_radius_mm, args.mm_per_px, idx,
                              TactileDiagnosisOptions(max_effects=args.max_effects),
-                             progress=lambda m: status.update(m))
+                             progress=say)
     rep = d.report
     for part in ("baseline", "final"):
         if not math.isfinite(rep[part]["chi2_per_dof"]):

@@ -63,7 +63,7 @@ def run(args: argparse.Namespace) -> int:
     from thintact_sdk.recording import Recording
 
     console = Console(stderr=True)
-    out = claim_output(args.out, "directory", force=args.force)
+    out = claim_output(args.out, "directory", force=args.force, inputs=(args.recording, args.calibration))
     rec = Recording(args.recording)
     _check_unique_outputs(rec)
     rec.check_frames()

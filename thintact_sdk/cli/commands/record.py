@@ -31,8 +31,14 @@ from thintact_sdk.cli.argtypes import (
     positive_float,
     positive_int,
 )
-from thintact_sdk.cli.output_path import add_force_argument, claim_output
-from thintact_sdk.errors import DeviceError, RecordingError, ThinTactError
+from thintact_sdk.cli.output_path import (
+    add_force_argument,
+    check_not_an_input,
+    claim_output,
+    file_input,
+    write_lock,
+)
+from thintact_sdk.errors import DeviceError, OutputError, RecordingError, ThinTactError
 from thintact_sdk.frames import RawFrame
 from thintact_sdk.profile import Profile, load_profile
 from thintact_sdk.recording import RecordingWriter, check_appendable
@@ -143,24 +149,31 @@ def record(
     when the queue is full the capture thread waits and the camera drops frames, which the
     frame-id gaps then report (:func:`thintact_sdk.capture_run.capture_frames`).
 
+    The directory is held with :func:`~thintact_sdk.cli.output_path.write_lock` for the
+    whole recording, and whether it already holds a recording is decided under that lock:
+    of several runs racing for the same ``out`` exactly one records, the others fail.
+
     Raises
     ------
     RecordingError
         When ``out`` already holds a recording and ``append`` is false.
+    OutputError
+        When another process is recording into ``out``.
     DeviceError
         When the camera fails; every frame written before the fault stays in the recording.
     """
     if frames <= 0:
         raise ThinTactError("--frames must be at least 1")
-    if (out / "manifest.json").is_file():
-        if not append:
-            raise RecordingError(f"{out} already holds a recording; choose a new --out or pass --append")
-        check_appendable(out, profile)  # before the camera is opened
-    save_raw = save_raw_frame if keep_raw else None
-    camera = create_camera(profile, settings=settings)
-    sink = _RecordingSink(out, profile, save_raw=save_raw, scenes=scenes)
-    return capture_frames(camera, profile, frames, sink, saved_in=out, timeout_s=timeout_s,
-                          buffer_mb=buffer_mb, progress=progress)
+    with write_lock(out, "directory"):
+        if (out / "manifest.json").is_file():
+            if not append:
+                raise RecordingError(f"{out} already holds a recording; choose a new --out or pass --append")
+            check_appendable(out, profile)  # before the camera is opened
+        save_raw = save_raw_frame if keep_raw else None
+        camera = create_camera(profile, settings=settings)
+        sink = _RecordingSink(out, profile, save_raw=save_raw, scenes=scenes)
+        return capture_frames(camera, profile, frames, sink, saved_in=out, timeout_s=timeout_s,
+                              buffer_mb=buffer_mb, progress=progress)
 
 
 class _RecordingSink:
@@ -205,30 +218,38 @@ def _record_mcap(args: argparse.Namespace, profile: Profile, out: Path) -> Recor
         if given:
             raise ThinTactError(f"{flag} applies to --format recording only; an MCAP log "
                                 "always holds the raw frames and is never appended to")
-    out.unlink(missing_ok=True)  # only there when claim_output was given --force
-    return record_mcap(
-        profile, args.frames, out, tactile=not args.no_tactile, timeout_s=args.timeout,
-        settings=key_values(args.set), compression=args.compression,
-        image_encoding=args.image_encoding, progress=not args.quiet, buffer_mb=args.buffer_mb,
-    )
+    with write_lock(out, "file"):  # exactly one of several runs racing for the same --out
+        if out.exists():
+            if not args.force:
+                raise OutputError(f"--out {out} already exists; pass --force to overwrite it "
+                                  "or choose another path")
+            out.unlink()
+        return record_mcap(
+            profile, args.frames, out, tactile=not args.no_tactile, timeout_s=args.timeout,
+            settings=key_values(args.set), compression=args.compression,
+            image_encoding=args.image_encoding, progress=not args.quiet, buffer_mb=args.buffer_mb,
+        )
 
 
-def claim_recording_dir(path: str, append: bool, force: bool) -> Path:
+def claim_recording_dir(path: str, append: bool, force: bool, inputs: tuple[Path | None, ...] = ()) -> Path:
     """``record``'s ``--out``: a recording there is resumed with ``--append`` and refused
-    without it (``--force`` never discards recorded frames); otherwise the shared policy."""
+    without it (``--force`` never discards recorded frames); otherwise the shared policy.
+    It never overlaps one of ``inputs`` (the profile file)."""
     if str(path).strip() and (Path(path) / "manifest.json").is_file():
+        check_not_an_input(path, inputs)
         if not append:
             raise RecordingError(f"{path} already holds a recording; choose a new --out or pass "
                                  "--append to add frames to it")
         return Path(path)
-    return claim_output(path, "directory", force=force)
+    return claim_output(path, "directory", force=force, inputs=inputs)
 
 
 def run(args: argparse.Namespace) -> int:
+    inputs = (file_input(args.profile),)
     if args.format == "mcap":
-        out = claim_output(args.out, "file", force=args.force)
+        out = claim_output(args.out, "file", force=args.force, inputs=inputs)
     else:
-        out = claim_recording_dir(args.out, args.append, args.force)
+        out = claim_recording_dir(args.out, args.append, args.force, inputs)
     profile = load_profile(args.profile)
     if args.format == "mcap":
         summary = _record_mcap(args, profile, out)

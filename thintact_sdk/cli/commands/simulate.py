@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from thintact_sdk.cli.argtypes import positive_float, seed
-from thintact_sdk.cli.output_path import add_force_argument, claim_output
+from thintact_sdk.cli.output_path import add_force_argument, claim_output, file_input
 from thintact_sdk.errors import ThinTactError
 from thintact_sdk.recording import SCENE_TOLERANCE
 
@@ -67,7 +67,8 @@ def run(args: argparse.Namespace) -> int:
     from thintact_sdk.imaging.simulator import Simulator
     from thintact_sdk.profile import load_profile
 
-    out_path = claim_output(args.out, "file", force=args.force)
+    out_path = claim_output(args.out, "file", force=args.force,
+                            inputs=(args.scenes, file_input(args.profile)))
     profile = load_profile(args.profile)
     scenes = _load_scenes(args.scenes)
     want = (profile.scene.rows, profile.scene.cols, len(profile.sensor.channels))
