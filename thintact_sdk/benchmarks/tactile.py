@@ -20,6 +20,8 @@ from typing import Any
 
 import numpy as np
 
+from thintact_sdk.cli.argtypes import positive_float, positive_int, seed
+
 DEPTH_GOAL_MM = 0.05
 MARKER_GOAL_MM = 0.02
 LATENCY_GOAL_MS = 60.0
@@ -31,24 +33,24 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--profile", default="virtual-finger", help="device for the accuracy tests")
     p.add_argument("--latency-profile", default="thintact-paper",
                    help="device for the latency test (default: the paper's)")
-    p.add_argument("--presses", type=int, default=3,
+    p.add_argument("--presses", type=positive_int, default=3,
                    help="random presses per indenter and depth (default 3)")
-    p.add_argument("--calibration-presses", type=int, default=12,
+    p.add_argument("--calibration-presses", type=positive_int, default=12,
                    help="ball presses for the LUT calibration through the path")
-    p.add_argument("--marker-presses", type=int, default=6)
-    p.add_argument("--latency-frames", type=int, default=20)
+    p.add_argument("--marker-presses", type=positive_int, default=6)
+    p.add_argument("--latency-frames", type=positive_int, default=20)
     p.add_argument("--decoder", help="decoder plugin (default: each profile's decoder.plugin)")
-    p.add_argument("--tau", type=float,
+    p.add_argument("--tau", type=positive_float,
                    help="Tikhonov tau (DN²) for the accuracy decoder instead of the bundle's")
     p.add_argument("--latency-bundle", type=Path,
                    help="calibration bundle directory for the latency test's device (default: the "
                         "profile's; without one, --decoder or flatcam on an in-memory bundle of the "
                         "directly generated matrices)")
     p.add_argument("--skip-latency", action="store_true")
-    p.add_argument("--force-presses", type=int, default=12,
+    p.add_argument("--force-presses", type=positive_int, default=12,
                    help="simulated presses to fit and (as many again) to test force/slip")
     p.add_argument("--skip-force", action="store_true", help="skip the force/slip rows")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=seed, default=0)
     p.add_argument("--json", type=Path, help="also write the figures to this JSON file")
 
 

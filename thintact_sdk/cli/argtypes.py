@@ -81,6 +81,14 @@ def float_range(low: float, high: float) -> Callable[[str], float]:
     return convert
 
 
+def fraction(text: str) -> float:
+    """A finite number in ``(0, 1]`` (a scale factor, a share of something)."""
+    value = _float(text)
+    if not 0 < value <= 1:
+        raise argparse.ArgumentTypeError(f"must be > 0 and <= 1, got {text!r}")
+    return value
+
+
 positive_int = int_range(1)
 """An integer ≥ 1 (frame counts, iterations)."""
 

@@ -37,11 +37,13 @@ ORACLE = "thintact-noniterative, oracle filter (true open term removed)"
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """Command-line options of ``thintact bench reconstruct``."""
+    from thintact_sdk.cli.argtypes import positive_int
+
     p.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
     p.add_argument("--profile", default="thintact-paper", help="device profile (default thintact-paper)")
-    p.add_argument("--repeats", type=int, default=12, help="timed frames per decoder (median reported)")
-    p.add_argument("--train-scenes", type=int, default=16, help="filter training scenes")
-    p.add_argument("--iterative-probe", type=int, default=3,
+    p.add_argument("--repeats", type=positive_int, default=12, help="timed frames per decoder (median reported)")
+    p.add_argument("--train-scenes", type=positive_int, default=16, help="filter training scenes")
+    p.add_argument("--iterative-probe", type=positive_int, default=3,
                    help="iterations of the plain iterative decoder actually timed (then extrapolated)")
     p.add_argument("--no-mask-compare", action="store_true", help="skip the MLS vs GA comparison")
 

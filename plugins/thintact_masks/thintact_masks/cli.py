@@ -12,8 +12,24 @@ import json
 from pathlib import Path
 from typing import Any
 
-from thintact_sdk.cli.output_path import add_force_argument, claim_output
+from thintact_sdk.cli.argtypes import (
+    fraction,
+    int_range,
+    non_negative_int,
+    positive_float,
+    positive_int,
+    seed,
+)
+from thintact_sdk.cli.output_path import (
+    add_force_argument,
+    check_not_an_input,
+    claim_output,
+    file_input,
+)
 from thintact_sdk.errors import ThinTactError
+
+MAX_PNG_SIDE_PX = 16384
+"""Largest side of the image ``mask show`` renders (K × cell px), checked before allocating."""
 
 
 def _plugin() -> Any:
@@ -32,26 +48,26 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "settings resumes. Writes DIR/design.json and DIR/fitness.png.")
     o.add_argument("--profile", required=True, help="device profile name or file")
     o.add_argument("--out", required=True, metavar="DIR", help="output and checkpoint directory")
-    o.add_argument("--population", type=int, default=200, help="individuals (paper 200)")
-    o.add_argument("--generations", type=int, default=2000, help="generations (paper 2000)")
-    o.add_argument("--K", type=int, default=None, help="mask length (default: the profile's)")
-    o.add_argument("--seed", type=int, default=0)
-    o.add_argument("--scale", type=float, default=1.0,
+    o.add_argument("--population", type=int_range(2), default=200, help="individuals, >= 2 (paper 200)")
+    o.add_argument("--generations", type=non_negative_int, default=2000, help="generations (paper 2000)")
+    o.add_argument("--K", type=int_range(2), default=None, help="mask length, >= 2 (default: the profile's)")
+    o.add_argument("--seed", type=seed, default=0, help="random seed, 0..2**63-1")
+    o.add_argument("--scale", type=fraction, default=1.0,
                    help="optimise on a self-similar scaled-down device (0 < scale <= 1)")
-    o.add_argument("--frames", type=int, default=100,
+    o.add_argument("--frames", type=positive_int, default=100,
                    help="frames averaged per simulated measurement (noise; paper 100)")
     o.add_argument("--noise-free", action="store_true", help="simulate without sensor noise")
-    o.add_argument("--tau", type=float, default=None,
+    o.add_argument("--tau", type=positive_float, default=None,
                    help="Tikhonov weight in relative-irradiance units (default: Wiener value)")
     o.add_argument("--float32", action="store_true", help="single precision eigen-decompositions")
-    o.add_argument("--workers", type=int, default=None,
+    o.add_argument("--workers", type=positive_int, default=None,
                    help="individuals evaluated at once, one BLAS thread each (default 1; with "
                    "--ray auto: CPUs of the local cluster, default all); result unchanged")
     o.add_argument("--ray", nargs="?", const="auto", default=None, metavar="ADDRESS",
                    help="evaluate each generation's individuals as Ray tasks: on a private "
                    "local cluster (--ray or --ray auto) or on the cluster at ADDRESS "
                    "(HOST:6379 or ray://HOST:10001); result unchanged")
-    o.add_argument("--ray-batch", type=int, default=None, metavar="N",
+    o.add_argument("--ray-batch", type=positive_int, default=None, metavar="N",
                    help="individuals per Ray task (default: about two tasks per worker)")
     o.add_argument("--device", choices=("auto", "cpu", "cuda"), default="auto",
                    help="fitness on torch CUDA (cuda), numpy (cpu) or CUDA when present (auto)")
@@ -62,7 +78,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     s = msub.add_parser("show", help="render a design's K x K pattern as a PNG")
     s.add_argument("design", metavar="DESIGN.json")
     s.add_argument("--out", required=True, metavar="PNG")
-    s.add_argument("--cell-px", type=int, default=1, help="image pixels per mask cell")
+    s.add_argument("--cell-px", type=int_range(1, MAX_PNG_SIDE_PX), default=1,
+                   help=f"image pixels per mask cell (the image is at most {MAX_PNG_SIDE_PX} px a side)")
     add_force_argument(s, "over an existing --out file")
     s.set_defaults(func=run_show)
 
@@ -70,9 +87,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "vs the MLS and random baselines on a device")
     c.add_argument("designs", nargs="*", metavar="DESIGN.json")
     c.add_argument("--profile", required=True)
-    c.add_argument("--K", type=int, default=None, help="baseline mask length (default: profile's)")
-    c.add_argument("--scale", type=float, default=1.0, help="compare on a scaled-down device")
-    c.add_argument("--frames", type=int, default=100)
+    c.add_argument("--K", type=int_range(2), default=None,
+                   help="baseline mask length, >= 2 (default: profile's)")
+    c.add_argument("--scale", type=fraction, default=1.0,
+                   help="compare on a scaled-down device (0 < scale <= 1)")
+    c.add_argument("--frames", type=positive_int, default=100, help="frames averaged (noise), >= 1")
     c.add_argument("--exact", action="store_true",
                    help="also score with the exact simulator's coding matrices")
     c.add_argument("--json", action="store_true", help="machine-readable output")
@@ -80,9 +99,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
     d = msub.add_parser("design", help="write a design file from the mls or random designer")
     d.add_argument("--kind", default="mls", help="mask plugin component (mls, random)")
-    d.add_argument("--K", type=int, required=True)
-    d.add_argument("--feature-um", type=float, required=True)
-    d.add_argument("--seed", type=int, default=0)
+    d.add_argument("--K", type=positive_int, required=True, help="mask length, >= 1")
+    d.add_argument("--feature-um", type=positive_float, required=True, help="feature size, um, > 0")
+    d.add_argument("--seed", type=seed, default=0, help="random seed, 0..2**63-1")
     d.add_argument("--out", required=True, metavar="DESIGN.json")
     add_force_argument(d, "over an existing --out file")
     d.set_defaults(func=run_design)
@@ -121,8 +140,11 @@ def run_optimize(args: argparse.Namespace) -> int:
     from thintact_masks.optimize import DESIGN_NAME, PLOT_NAME, optimize_mask
     from thintact_sdk.profile import load_profile
 
+    inputs = (file_input(args.profile),)
     if not (Path(args.out) / CHECKPOINT_NAME).is_file() or not str(args.out).strip():
-        claim_output(args.out, "directory", force=args.force)  # else: the documented resume
+        claim_output(args.out, "directory", force=args.force, inputs=inputs)
+    else:  # the documented resume
+        check_not_an_input(args.out, inputs)
     profile = load_profile(args.profile)
     if args.K is not None and args.K < 2:
         raise ThinTactError(f"--K must be at least 2, got {args.K}")
@@ -159,8 +181,13 @@ def run_show(args: argparse.Namespace) -> int:
     _plugin()
     from thintact_masks.design_io import load_design, render_mask_png
 
-    out = claim_output(args.out, "file", force=args.force)
+    out = claim_output(args.out, "file", force=args.force, inputs=(args.design,))
     mask, _ = load_design(args.design)
+    side = mask.K * args.cell_px
+    if side > MAX_PNG_SIDE_PX:
+        raise ThinTactError(f"--cell-px {args.cell_px}: the {mask.K}x{mask.K} mask would render a "
+                            f"{side}x{side} px image; the limit is {MAX_PNG_SIDE_PX} px a side "
+                            f"(--cell-px <= {max(MAX_PNG_SIDE_PX // mask.K, 1)})")
     path = render_mask_png(mask, out, args.cell_px)
     print(f"{path}: {mask.K}x{mask.K} cells ({mask.design}), open fraction "
           f"{float(mask.pattern().mean()):.3f}")
@@ -233,7 +260,8 @@ def run_apply(args: argparse.Namespace) -> int:
     from thintact_masks.design_io import load_design
     from thintact_sdk.profile import load_profile, profile_from_dict, write_profile
 
-    out = claim_output(args.out, "file", force=args.force)
+    out = claim_output(args.out, "file", force=args.force,
+                       inputs=(args.design, file_input(args.profile)))
     mask, rec = load_design(args.design)
     profile = load_profile(args.profile)
     d = profile.contract_dict()

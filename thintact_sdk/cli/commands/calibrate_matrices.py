@@ -9,6 +9,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from thintact_sdk.cli.argtypes import non_negative_int, positive_float
+from thintact_sdk.cli.output_path import add_force_argument, claim_output, file_input
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
@@ -22,12 +25,15 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--profile", required=True, help="profile name or file")
     p.add_argument("--out", required=True, type=Path, help="bundle directory to write")
     p.add_argument("--recording", type=Path, help="recording whose validation scenes choose tau")
-    p.add_argument("--tau", type=float, help="Tikhonov tau in DN² (no selection)")
-    p.add_argument("--filter-steps", type=int, default=100, help="Adam steps of the filter training")
+    p.add_argument("--tau", type=positive_float, help="Tikhonov tau in DN², > 0 (no selection)")
+    p.add_argument("--filter-steps", type=non_negative_int, default=100,
+                   help="Adam steps of the filter training, >= 0")
+    add_force_argument(p, "the bundle into an existing non-empty --out")
     p.set_defaults(func=run_import)
     e = sub.add_parser("calibrate-export", help="write a bundle's Po, Qo, Pc, Qc as .npz or MATLAB .mat")
     e.add_argument("calibration", type=Path, metavar="CAL", help="calibration bundle directory")
     e.add_argument("--out", required=True, type=Path, help="file to write (.npz or .mat)")
+    add_force_argument(e, "over an existing --out file")
     e.set_defaults(func=run_export)
 
 
@@ -37,6 +43,8 @@ def run_import(args: argparse.Namespace) -> int:
     from thintact_sdk.profile import load_profile
     from thintact_sdk.recording import Recording
 
+    claim_output(args.out, "directory", force=args.force,
+                 inputs=(args.matrices, args.recording, file_input(args.profile)))
     profile = load_profile(args.profile)
     sm = import_matrices(args.matrices, profile)
     rec = Recording(args.recording) if args.recording else None
@@ -53,6 +61,7 @@ def run_export(args: argparse.Namespace) -> int:
     from thintact_sdk.calibration.matrices_io import export_matrices
     from thintact_sdk.imaging.calibration_bundle import CalibrationBundle
 
+    claim_output(args.out, "file", force=args.force, inputs=(args.calibration,))
     bundle = CalibrationBundle.load(args.calibration)
     print(f"written: {export_matrices(bundle.system_matrices, args.out)}")
     return 0

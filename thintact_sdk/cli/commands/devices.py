@@ -27,6 +27,7 @@ import os
 from pathlib import Path
 from typing import Any
 
+from thintact_sdk.cli.argtypes import positive_float
 from thintact_sdk.errors import PluginError, ThinTactError
 from thintact_sdk.plugin_manager import get_registry
 from thintact_sdk.profile import available_profiles, read_profile_file
@@ -52,7 +53,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="do not load the producers named by profiles")
     p.add_argument("--usb-backend", metavar="MODULE:ATTR",
                    help="pyusb backend to use (an IBackend, or a callable returning one)")
-    p.add_argument("--timeout", type=float, default=10.0, metavar="S",
+    p.add_argument("--timeout", type=positive_float, default=10.0, metavar="S",
                    help="longest wait for one GenTL producer's enumeration (default 10)")
     p.add_argument("--json", action="store_true", help="machine-readable output")
     p.set_defaults(func=run)
