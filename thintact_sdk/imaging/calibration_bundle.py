@@ -170,6 +170,7 @@ class CalibrationBundle:
             raise CalibrationError(f"{meta_path}: format {got!r}, expected {CALIBRATION_FORMAT!r}")
         _check_meta(meta, meta_path)
         sm = SystemMatrices.load(d / MATRICES_FILE)
+        check_conditioning(sm, d / MATRICES_FILE)
         jf = JointFilter.load(d / FILTER_FILE) if (d / FILTER_FILE).is_file() else None
         if jf is not None and (jf.sensor_shape != sm.sensor_shape or jf.channels != sm.channels):
             raise CalibrationError(
@@ -177,6 +178,48 @@ class CalibrationBundle:
                 f"{sm.channels}×{sm.sensor_shape}"
             )
         return cls(sm, jf, meta, d)
+
+
+CODING_RCOND = 1e-9
+"""Smallest accepted ratio of a coding matrix's smallest to largest singular value: below it
+the matrix is (numerically) rank-deficient and scenes it maps alike cannot be told apart.
+Matrices stored in single precision are judged at their own rounding level instead when that
+is higher (``4·sqrt(max(rows, cols))·eps`` of the stored type)."""
+
+
+def check_conditioning(sm: SystemMatrices, where: str | os.PathLike[str]) -> None:
+    """Refuse system matrices no decoder can invert, naming ``where``, the matrix and channel.
+
+    The coding matrices ``Pc`` (``R × N``) and ``Qc`` (``S × M``) of every channel must be
+    non-zero and of full rank ``min(rows, cols)``: their smallest singular value at least
+    :data:`CODING_RCOND` (or the stored type's rounding level) times their largest. The open matrices ``Po``, ``Qo`` may be zero
+    (FlatCam's one-term model) or smooth and low-rank (the open term of T2S) and are not judged.
+
+    Raises
+    ------
+    CalibrationError
+        For an all-zero or rank-deficient coding matrix.
+    """
+    import numpy as np
+
+    for name in ("Pc", "Qc"):
+        stack = getattr(sm, name)
+        for c in range(stack.shape[0]):
+            stored = np.asarray(stack[c])
+            a = stored.astype(np.float64)
+            rtol = max(CODING_RCOND, 4.0 * math.sqrt(max(a.shape)) * float(np.finfo(stored.dtype).eps))
+            what = f"{where}: system matrix {name} (channel {c}, {a.shape[0]}×{a.shape[1]})"
+            if a.size == 0 or not np.any(a):
+                raise CalibrationError(f"{what} is all zero: the calibration records no signal "
+                                       "(a failed or empty calibration); recalibrate")
+            sv = np.linalg.svd(a, compute_uv=False)
+            ratio = float(sv[-1] / sv[0])
+            if not ratio >= rtol:
+                rank = int(np.count_nonzero(sv > sv[0] * rtol))
+                raise CalibrationError(
+                    f"{what} is rank-deficient: rank {rank} of {len(sv)}, smallest relative "
+                    f"singular value {ratio:.2g} (< {rtol:.2g}); scenes it maps alike "
+                    "cannot be told apart; recalibrate")
 
 
 POSITIVE_META_FIELDS = ("tau", "tau_t2s_closed_form", "exposure_us")
