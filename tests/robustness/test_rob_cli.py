@@ -210,15 +210,28 @@ def test_simulate_on_an_empty_scenes_file(content: Any, tiny: dict[str, Any], tm
     assert not (tmp_path / "y.npy").exists()
 
 
-@pytest.mark.parametrize(("value", "needle"), [(0, "reads 0 DN at every pixel"), (500, "reads 500 DN"),
-                                               (4095, "every pixel is saturated")])
-def test_diagnose_refuses_dead_and_saturated_frames(value: int, needle: str, tiny: dict[str, Any],
+@pytest.mark.parametrize(("value", "needle"), [(0, "reads 0 DN at every pixel, at the black level"),
+                                               (64, "a dead frame (no light"),
+                                               (500, "reads 500 DN at every pixel although its scene is lit, "
+                                                     "neither the black level")])
+def test_diagnose_refuses_dead_and_stuck_frames(value: int, needle: str, tiny: dict[str, Any],
                                                     rec_copy: Path, tmp_path: Path, capfd: Any) -> None:
     np.save(rec_copy / "measurements" / "001.npy", np.full((24, 30, 3), value, np.uint16))
     assert main(["diagnose", str(rec_copy), "--out", str(tmp_path / "o"), "--quiet"]) == 2
     line = one_error(capfd, "frame 1 (f1)", needle)
     assert "no structure" not in line.lower()
     assert not (tmp_path / "o").exists()
+
+
+def test_diagnose_keeps_a_saturated_frame_as_data(tiny: dict[str, Any], rec_copy: Path, tmp_path: Path,
+                                                  capfd: Any) -> None:
+    """Saturated is not dead: a frame at saturation_dn everywhere is flagged and diagnosed."""
+    np.save(rec_copy / "measurements" / "001.npy", np.full((24, 30, 3), 4095, np.uint16))
+    assert main(["diagnose", str(rec_copy), "--out", str(tmp_path / "o"), "--quiet"]) == 0
+    err = capfd.readouterr().err
+    assert "1 frame(s) saturated at every pixel: f1 (4095 DN)" in err and "dead" not in err
+    report = json.loads((tmp_path / "o" / "report.json").read_text())
+    assert report["saturated_frames"] == {"f1": 4095.0}
 
 
 def test_diagnose_never_writes_a_report_with_nan_figures() -> None:

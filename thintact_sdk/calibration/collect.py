@@ -207,7 +207,7 @@ def collect_slits(
         for c in range(min(n_ch, len(r))):
             role = r[c]
             if role.kind in ("hslit", "vslit") and role.profile is not None:
-                _check_alive(raw, c, i, recording)
+                _check_alive(raw, c, i, recording, saturation)
             if role.kind == "hslit" and role.profile is not None:
                 target = h[c]
                 image = compress(signal[..., c], rank, seed=i)
@@ -241,13 +241,14 @@ def collect_slits(
     return out
 
 
-def _check_alive(raw: np.ndarray, c: int, i: int, recording: Recording) -> None:
-    """Refuse a slit frame whose channel ``c`` is constant (all zero, or one value): a dead
-    frame (camera not exposing, display off, lens cap) carries no slit and would corrupt
-    the solve."""
+def _check_alive(raw: np.ndarray, c: int, i: int, recording: Recording, saturation_dn: float) -> None:
+    """Refuse a slit frame whose channel ``c`` is constant below ``saturation_dn`` (all zero,
+    or one value): a dead frame (camera not exposing, display off, lens cap) carries no slit
+    and would corrupt the solve. A channel saturated at every pixel is not dead: it is kept
+    and flagged in :attr:`SlitCollection.saturated` (the report's ``saturated_frames``)."""
     channel = raw[..., c] if raw.ndim == 3 else raw
     lo, hi = float(channel.min()), float(channel.max())
-    if hi <= lo:
+    if hi <= lo and lo < saturation_dn:
         fr = recording.frames[i]
         raise CalibrationError(
             f"recording {recording.root}: slit frame {i} ({fr.label or fr.measurement}) is dead in "

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -28,6 +28,10 @@ class DiagnosisData:
         ``F × R × S × C`` float64 raw digital numbers (black level not removed).
     skipped
         Number of frames of the recording without a scene (not diagnosable).
+    saturated_frames
+        ``{label: level_dn}`` of the lit frames that read one value at every pixel at the
+        recording's clip level (or at ``saturation_dn``): saturated, not dead. They are kept:
+        the ``saturation`` effect explains them.
     """
 
     profile: Profile
@@ -35,6 +39,7 @@ class DiagnosisData:
     scenes: np.ndarray
     measured_dn: np.ndarray
     skipped: int = 0
+    saturated_frames: dict[str, float] = field(default_factory=dict)
 
     @property
     def n_frames(self) -> int:
@@ -48,11 +53,15 @@ class DiagnosisData:
 def load_diagnosis_data(root: str | os.PathLike[str]) -> DiagnosisData:
     """Read every frame with a scene from a ``thintact-recording/1`` directory.
 
+    A lit frame whose measurement is one value at every pixel is judged by that value
+    (:func:`judge_constant_frame`): at the clip level it is saturated and kept (listed in
+    :attr:`DiagnosisData.saturated_frames`), near the black level it is dead and refused.
+
     Raises
     ------
     RecordingError
         When the directory is not a recording, a file is missing or malformed, channel
-        counts disagree, or no frame has a scene.
+        counts disagree, no frame has a scene, or a lit frame is dead (no light) or stuck.
     """
     rec = Recording(root)
     prof = rec.profile
@@ -79,7 +88,6 @@ def load_diagnosis_data(root: str | os.PathLike[str]) -> DiagnosisData:
                 f"frame {i} ({fr.label or fr.measurement}): {m.shape[2]} measurement / "
                 f"{sc.shape[2]} scene channels, the profile has {n_ch}"
             )
-        _check_alive(sc, m, i, fr.label or fr.measurement, prof)
         scenes.append(sc.astype(np.float64))
         meas.append(m.astype(np.float64))
         labels.append(fr.label or f"frame{i}")
@@ -89,30 +97,70 @@ def load_diagnosis_data(root: str | os.PathLike[str]) -> DiagnosisData:
             "with simulated scenes"
         )
     measured = np.stack(meas)
+    clip_dn = float(measured.max())
+    saturated: dict[str, float] = {}
+    frames_with_scene = [i for i, fr in enumerate(rec.frames) if fr.scene is not None]
+    for k, i in enumerate(frames_with_scene):
+        fr = rec.frames[i]
+        level = judge_constant_frame(scenes[k], measured[k], clip_dn, prof,
+                                     f"frame {i} ({fr.label or fr.measurement})")
+        if level is not None:
+            saturated[labels[k]] = level
     if not np.any(measured < prof.noise.saturation_dn):
         raise RecordingError(
             f"recording {root}: every pixel of every frame is at or above saturation_dn "
             f"{prof.noise.saturation_dn:g}; nothing can be compared with the simulation"
         )
-    return DiagnosisData(prof, labels, np.stack(scenes), measured, skipped)
+    return DiagnosisData(prof, labels, np.stack(scenes), measured, skipped, saturated)
 
 
-def _check_alive(scene: np.ndarray, meas: np.ndarray, i: int, name: str, prof: Profile) -> None:
-    """Refuse a frame that shows a lit scene but whose measurement is one constant value (a
-    dead camera, a lens cap, a frame of zeros): it would be diagnosed as a missing effect."""
+CLIP_TOLERANCE_DN = 0.5
+"""How far below the recording's highest value a constant frame may read and still be at
+its clip level (values are integers, or averages of them)."""
+
+
+def judge_constant_frame(scene: np.ndarray, meas: np.ndarray, clip_dn: float, prof: Profile,
+                         name: str) -> float | None:
+    """Judge a lit frame whose measurement (``R × S × C`` DN) is one value at every pixel.
+
+    Returns None for a frame that is not constant (or shows a dark scene: a noiseless
+    camera's dark frame may be constant), and the value for a *saturated* frame: one at the
+    recording's clip level ``clip_dn`` (its highest value; the sensor's own clip may lie
+    below the declared ``saturation_dn``, the ``saturation`` effect) or at ``saturation_dn``.
+    Saturated frames are data, the diagnosis explains them.
+
+    Raises
+    ------
+    RecordingError
+        For a *dead* frame, one constant value near the black level (no light reached the
+        sensor: camera not exposing, lens cap), or a *stuck* one, a constant value between
+        the black level and the clip level: neither can be diagnosed as physics.
+    """
     if float(scene.max()) <= 0.0:
-        return  # a dark frame of a noiseless camera may be constant
+        return None
     lo, hi = float(meas.min()), float(meas.max())
-    if hi <= lo and lo >= prof.noise.saturation_dn:
+    if hi > lo:
+        return None
+    noise = prof.noise
+    if lo >= noise.saturation_dn or lo >= clip_dn - CLIP_TOLERANCE_DN and lo > _dark_ceiling(prof):
+        return lo
+    if lo <= _dark_ceiling(prof):
         raise RecordingError(
-            f"frame {i} ({name}): every pixel is saturated ({lo:g} DN >= saturation_dn "
-            f"{prof.noise.saturation_dn:g}); lower the exposure or the display brightness"
+            f"{name}: the measurement reads {lo:g} DN at every pixel, at the black level "
+            f"({noise.black_level_dn:g} DN), although its scene is lit; a dead frame (no light: "
+            "camera not exposing, lens cap?) cannot be diagnosed"
         )
-    if hi <= lo:
-        raise RecordingError(
-            f"frame {i} ({name}): the measurement reads {lo:g} DN at every pixel although its "
-            f"scene is lit; a dead frame (camera not exposing, lens cap?) cannot be diagnosed"
-        )
+    raise RecordingError(
+        f"{name}: the measurement reads {lo:g} DN at every pixel although its scene is lit, "
+        f"neither the black level ({noise.black_level_dn:g} DN) nor the recording's clip level "
+        f"({clip_dn:g} DN); a stuck frame (camera fault?) cannot be diagnosed"
+    )
+
+
+def _dark_ceiling(prof: Profile) -> float:
+    """Highest value a frame without light reads: the black level plus five read-noise
+    standard deviations (at least one DN)."""
+    return prof.noise.black_level_dn + max(5.0 * prof.noise.read_noise_dn, 1.0)
 
 
 def subset_frames(data: DiagnosisData, n: int) -> DiagnosisData:

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 import time
 from typing import Any
 
@@ -74,7 +75,7 @@ def run(args: argparse.Namespace) -> int:
     from thintact_sdk.diagnose.unbinned import UnbinnedInput
     from thintact_sdk.diagnose.window_check import window_check
 
-    out = claim_output(args.out, "directory", force=args.force)
+    out = claim_output(args.out, "directory", force=args.force, inputs=(args.recording,))
     con = Console(stderr=True, quiet=args.quiet)
     t0 = time.perf_counter()
     data = load_diagnosis_data(args.recording)
@@ -82,6 +83,11 @@ def run(args: argparse.Namespace) -> int:
         f"{data.n_frames} frames with scenes ({data.skipped} without), "
         f"{data.profile.sensor.rows}×{data.profile.sensor.cols} sensor"
     )
+    if data.saturated_frames:
+        listed = ", ".join(f"{k} ({v:g} DN)" for k, v in list(data.saturated_frames.items())[:5])
+        more = f" and {len(data.saturated_frames) - 5} more" if len(data.saturated_frames) > 5 else ""
+        print(f"warning: {len(data.saturated_frames)} frame(s) saturated at every pixel: {listed}{more}; "
+              "diagnosed as data (report.json saturated_frames)", file=sys.stderr)
     full_data, full_profile = data, data.profile
     b = args.bin or auto_bin_factor(full_profile.sensor.rows, full_profile.sensor.cols)
     if b > 1:
@@ -133,6 +139,8 @@ def run(args: argparse.Namespace) -> int:
                 rep["full_size"] = {"final": full_size_check(full_data, d.selection.values, args.sys_frac)}
                 if stage is not None and stage.check:
                     rep["full_size"]["before_unbinned_stage"] = dict(stage.check)
+    if full_data.saturated_frames:  # CONTRACTS §6 keys otherwise: only present when there are any
+        rep["saturated_frames"] = dict(full_data.saturated_frames)
     _check_finite(rep)
     paths = write_outputs(d, out, png=args.png)
     print(f"baseline: rms {rep['baseline']['rms_dn']:.2f} DN, chi2/dof {rep['baseline']['chi2_per_dof']:.3f} "
