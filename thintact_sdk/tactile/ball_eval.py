@@ -6,7 +6,8 @@ Annotation-free figures, per press, from the reconstructed depth ``d`` (mm) and 
   loaded core, the pixels deeper than half the peak (for a rigid ball cap exactly Hertz's
   contact circle). A pipeline that gives back the shape it was calibrated on returns the
   ball radius; caps read too flat return a larger radius.
-* **contact radius** ``√(area/π)`` of the region deeper than the contact threshold, against
+* **contact radius** ``√(area/π)`` of the region deeper than the contact threshold that
+  holds the peak, against
   the contact radius a ball of radius R pressed to the reconstructed peak depth p must have,
   ``√(2Rp − p²)``.
 * **ball fit with the radius fixed**: the rigid cap of radius R whose centre and press depth
@@ -24,6 +25,7 @@ from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
+from scipy.ndimage import label
 from scipy.optimize import least_squares
 
 CORE_FRACTION = 0.5
@@ -135,7 +137,11 @@ def press_figures(
     d = np.asarray(depth_mm, np.float64)
     peak = float(d.max())
     sphere, _ = fit_sphere(d, mm_per_px)
-    area = float((d > contact_threshold_mm).sum()) * mm_per_px**2
+    above = d > contact_threshold_mm
+    if above.any():  # the contact region holding the peak (not noise elsewhere)
+        labels, _ = label(above)
+        above = labels == labels[np.unravel_index(int(np.argmax(d)), d.shape)]
+    area = float(above.sum()) * mm_per_px**2
     p = min(max(peak, 0.0), radius_mm)
     expected = float(np.sqrt(max(2 * radius_mm * p - p * p, 0.0)))
     centre, press = fit_ball_fixed_radius(d, radius_mm, mm_per_px)

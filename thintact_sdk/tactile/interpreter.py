@@ -150,16 +150,34 @@ class TactileInterpreter:
         img = bin_image(full, self.factor)
         return img if self.translator is None else self.translator(img)
 
-    def _work_depth(self, img: np.ndarray, marker_mask: np.ndarray | None) -> np.ndarray:
-        """Depth (mm, ≥ 0) on the working grid from a working-grid image."""
+    def _work_slopes(
+        self, img: np.ndarray, marker_mask: np.ndarray | None
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(grad_x, grad_y, depth)`` on the working grid from a working-grid image (depth
+        in mm, ≥ 0)."""
         if self.background is None:
             raise RuntimeError("set_reference() before asking for depth")
         if self.lut is None:
-            return np.zeros(img.shape[:2], np.float32)
+            zero = np.zeros(img.shape[:2], np.float32)
+            return zero, zero, zero
         change = colour_change(img, self.background, marker_mask, self._sigma_px, self.smooth_px)
-        gx, gy = self.lut.lookup(change, img)
+        # the network sees the colour with the markers filled in (background + change), never
+        # the raw marker pixels
+        colour = self.background + change if self.lut.net is not None else None
+        gx, gy = self.lut.lookup(change, colour)
         depth = integrate_gradients(gx, gy, self.work.mm_per_px, self.boundary)
-        return np.clip(depth, 0.0, None)
+        return gx, gy, np.clip(depth, 0.0, None)
+
+    def _work_depth(self, img: np.ndarray, marker_mask: np.ndarray | None) -> np.ndarray:
+        """Depth (mm, ≥ 0) on the working grid from a working-grid image."""
+        return self._work_slopes(img, marker_mask)[2]
+
+    def work_slopes(self, image: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(grad_x, grad_y, depth)`` of one full-grid image on the working grid
+        (:attr:`work`: slopes mm per mm, depth mm ≥ 0), for evaluation."""
+        img = self._work_image(self._check(image))
+        det = detect_markers(img, self.work, self.marker_threshold)
+        return self._work_slopes(img, det.mask)
 
     def depth_from_image(self, image: np.ndarray) -> np.ndarray:
         """Depth map (``N × M`` float32 mm, ≥ 0) of one image against the reference."""

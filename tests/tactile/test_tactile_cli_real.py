@@ -1,0 +1,121 @@
+"""`thintact tactile import | depth | evaluate` on a folder of JPEGs written from the vendored
+real GelSight presses (Taxim, MIT), and the progress lines when stderr is not a terminal."""
+
+from __future__ import annotations
+
+import io
+import json
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from thintact_sdk.cli.main import main
+from thintact_sdk.tactile.press_pack import import_folder, load_press_pack
+from thintact_sdk.tactile.progress import stage_reporter
+
+VENDORED = Path(__file__).resolve().parents[2] / "thintact_sdk" / "data" / "gelsight" / \
+    "gelsight_ball_presses.npz"
+
+
+def _folder(tmp_path: Path, bgr_files: bool = False, border: int = 0) -> Path:
+    with np.load(VENDORED, allow_pickle=False) as z:
+        f0, imgs = z["f0"], z["imgs"]
+    d = tmp_path / "gel"
+    d.mkdir(parents=True)
+
+    def write(name: str, rgb: np.ndarray) -> None:
+        rgb = np.pad(rgb, ((border, border), (border, border), (0, 0)), constant_values=7)
+        arr = rgb if bgr_files else rgb[..., ::-1]  # OpenCV writes B, G, R
+        assert cv2.imwrite(str(d / name), np.ascontiguousarray(arr),
+                           [cv2.IMWRITE_JPEG_QUALITY, 95])
+
+    write("ref.jpg", f0)
+    for i, img in enumerate(imgs):
+        write(f"sample_{i + 1}.jpg", img)
+    return d
+
+
+def test_import_declares_colour_order_and_crop(tmp_path):
+    with np.load(VENDORED, allow_pickle=False) as z:
+        f0 = z["f0"].astype(np.float64)
+    plain = import_folder(_folder(tmp_path / "a"))
+    swapped = import_folder(_folder(tmp_path / "b", bgr_files=True, border=3),
+                            colour_order="bgr", crop=(3, 3, 3, 3))
+    for pack in (plain, swapped):
+        assert pack.images.shape == (8, 120, 160, 3) and pack.reference.shape == (120, 160, 3)
+        assert pack.names[:3] == ["sample_1.jpg", "sample_2.jpg", "sample_3.jpg"]
+        assert float(np.abs(pack.reference - f0).mean()) < 3.0  # JPEG loss only
+    wrong = import_folder(_folder(tmp_path / "c"), colour_order="bgr")
+    assert float(np.abs(wrong.reference - f0).mean()) > 3 * float(
+        np.abs(plain.reference - f0).mean())
+
+
+def test_cli_import_evaluate_depth(tmp_path, capsys):
+    folder = _folder(tmp_path)
+    pack = tmp_path / "pack.npz"
+    assert main(["tactile", "import", str(folder), "--out", str(pack), "--mm-per-px", "0.1245",
+                 "--ball-radius-mm", "2"]) == 0
+    loaded = load_press_pack(pack)
+    assert loaded.mm_per_px == 0.1245 and loaded.ball_radius_mm == 2.0
+    out = tmp_path / "ev.json"
+    assert main(["tactile", "evaluate", str(pack), "--model", "lut", "--json", str(out)]) == 0
+    text = capsys.readouterr()
+    assert "fitted sphere radius" in text.out and "[" in text.err  # progress lines on stderr
+    res = json.loads(out.read_text())
+    assert res["train"] == [0, 2, 4, 6] and res["test"] == [1, 3, 5, 7]
+    assert res["gradient_model"] == "lut" and len(res["presses"]) == 4
+    lut = tmp_path / "lut.npz"
+    from thintact_sdk.tactile.press_pack import evaluate_pack
+
+    evaluate_pack(loaded, 2.0, 0.1245, model="lut")["lut"].save(lut)
+    depth = tmp_path / "depth"
+    assert main(["tactile", "depth", "--pack", str(pack), "--lut", str(lut), "--out",
+                 str(depth), "--quiet"]) == 0
+    frames = json.loads((depth / "frames.json").read_text())["frames"]
+    assert len(frames) == 8 and all(f["contact"] for f in frames)
+    d0 = np.load(depth / "depth_0000.npy")
+    assert d0.shape == (120, 160) and abs(float(d0.max()) - frames[0]["peak_depth_mm"]) < 1e-3
+    png = cv2.imread(str(depth / "depth_0000.png"), cv2.IMREAD_UNCHANGED)
+    assert png.dtype == np.uint16 and abs(int(png.max()) - round(float(d0.max()) * 1000)) <= 1
+
+
+@pytest.mark.parametrize("argv, needle", [
+    (["tactile", "import", "/no/such/folder", "--out", "{tmp}/p.npz"], "not a folder"),
+    (["tactile", "import", "{folder}", "--out", "{tmp}/p.npz", "--crop", "1,2"], "--crop"),
+    (["tactile", "import", "{folder}", "--out", "{tmp}/p.npz", "--reference", "nope*"],
+     "matches 0 images"),
+    (["tactile", "evaluate", "{tmp}/pack.npz", "--train", "0,99"], "not in the pack"),
+    (["tactile", "depth", "--pack", "{tmp}/pack.npz", "--out", "{tmp}/d"], "needs --lut"),
+])
+def test_cli_errors_are_one_line(tmp_path, capsys, argv, needle):
+    folder = _folder(tmp_path)
+    assert main(["tactile", "import", str(folder), "--out", str(tmp_path / "pack.npz"),
+                 "--mm-per-px", "0.1245", "--ball-radius-mm", "2"]) == 0
+    capsys.readouterr()
+    args = [a.format(tmp=tmp_path, folder=folder) for a in argv]
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and needle in err[0]
+
+
+def test_pack_with_pickled_member_is_refused(tmp_path, capsys):
+    p = tmp_path / "bad.npz"
+    np.savez(p, imgs=np.array([object()], dtype=object), f0=np.zeros((10, 10, 3), np.uint8))
+    assert main(["tactile", "evaluate", str(p), "--ball-radius-mm", "2", "--mm-per-px",
+                 "0.1"]) == 2
+    assert "imgs" in capsys.readouterr().err
+
+
+def test_progress_lines_when_not_a_terminal():
+    buf = io.StringIO()
+    with stage_reporter(stream=buf) as say:
+        say("first")
+        say("second")
+    lines = buf.getvalue().splitlines()
+    assert len(lines) == 2 and lines[0].endswith("] first") and lines[0].startswith("[")
+    quiet = io.StringIO()
+    with stage_reporter(quiet=True, stream=quiet) as say:
+        say("nothing")
+    assert quiet.getvalue() == ""
