@@ -111,8 +111,12 @@ def calibrate_recording(
     ball_radius_mm: float = CALIBRATION_BALL_RADIUS_MM,
     bins: int = 32,
     progress: Progress | None = None,
+    model: str = "lut",
+    stage: Callable[[str], None] | None = None,
 ) -> PhotometricLUT:
-    """Calibrate from a recording of ball presses (reference frame + press frames)."""
+    """Calibrate from a recording of ball presses (reference frame + press frames);
+    ``model`` and ``stage`` as in
+    :func:`~thintact_sdk.tactile.calibration.calibrate_from_presses`."""
     from thintact_sdk.recording import Recording
 
     rec = Recording(recording_dir, sensor.profile)
@@ -138,7 +142,7 @@ def calibrate_recording(
             progress(k + 1, len(others))
     return calibrate_from_presses(
         sensor.profile, reference, items, ball_radius_mm, bins,
-        meta={"source": "recording", "recording": str(recording_dir)},
+        meta={"source": "recording", "recording": str(recording_dir)}, model=model, stage=stage,
     )
 
 
@@ -151,6 +155,8 @@ def calibrate_live(
     prompt: Callable[[str], object] = input,
     progress: Progress | None = None,
     reference_frames: int = 4,
+    model: str = "lut",
+    stage: Callable[[str], None] | None = None,
 ) -> PhotometricLUT:
     """Calibrate a live sensor: the user keeps the membrane free, then presses the ball
     (press images are single frames, like the frames the LUT will see)."""
@@ -168,5 +174,6 @@ def calibrate_live(
         if progress is not None:
             progress(i + 1, presses)
     return calibrate_from_presses(
-        sensor.profile, reference, items, ball_radius_mm, bins, meta={"source": "live"}
+        sensor.profile, reference, items, ball_radius_mm, bins, meta={"source": "live"},
+        model=model, stage=stage,
     )

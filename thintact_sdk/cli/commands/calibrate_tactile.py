@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import Any
 
 from thintact_sdk.cli.argtypes import int_range, positive_float, positive_int
 from thintact_sdk.cli.output_path import add_force_argument, claim_output, file_input
@@ -29,6 +30,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--ball-radius-mm", type=positive_float, default=1.5,
                    help="calibration ball radius in mm (paper: 3 mm ball → 1.5)")
     p.add_argument("--bins", type=int_range(4, 256), default=32, help="LUT nodes per colour axis (4..256)")
+    p.add_argument("--model", choices=("auto", "lut", "mlp"), default="auto",
+                   help="gradient model for ball-model presses (recording, live): auto (the "
+                   "table or the colour + position network, whichever predicts held-out "
+                   "validation presses better; default), lut, mlp. Virtual sensors: lut")
+    p.add_argument("--quiet", action="store_true", help="no progress lines")
     p.add_argument("--out", help="LUT file (default: the device's folder under "
                    "$THINTACT_CALIBRATION_PATH or ./calibrations, never the checkout's)")
     add_force_argument(p, "over an existing LUT")
@@ -57,25 +63,48 @@ def run(args: argparse.Namespace) -> int:
     claim_output(target.with_suffix(".json"), "file", force=args.force, option="the LUT's metadata",
                  inputs=inputs)
     virtual = camera_is_simulated(profile)
-    with Progress(transient=True) as bar:
+    from thintact_sdk.tactile.progress import stage_reporter
+
+    if args.recording is not None:  # no prompts: plain progress lines, terminal or not
+        sensor = Sensor(profile)
+        with stage_reporter(args.quiet) as say:
+            lut = dc.calibrate_recording(
+                sensor, args.recording, args.ball_radius_mm, args.bins,
+                progress=lambda done, total: say(f"press image {done}/{total} reconstructed"),
+                model=args.model, stage=say)
+        return _report(lut, profile, target)
+    with Progress(transient=True, disable=args.quiet) as bar:
         task = bar.add_task("ball presses", total=args.presses)
 
         def progress(done: int, total: int) -> None:
             bar.update(task, completed=done, total=total)
 
-        if args.recording is not None:
-            sensor = Sensor(profile)
-            lut = dc.calibrate_recording(sensor, args.recording, args.ball_radius_mm, args.bins,
-                                         progress=progress)
-        else:
-            with Sensor(profile) as sensor:
-                if virtual:
-                    lut = dc.calibrate_virtual(sensor, args.presses, args.ball_radius_mm,
-                                               bins=args.bins, progress=progress)
-                else:
-                    bar.stop()
-                    lut = dc.calibrate_live(sensor, args.presses, args.ball_radius_mm,
-                                            bins=args.bins, progress=progress)
+        with Sensor(profile) as sensor:
+            if virtual:
+                lut = dc.calibrate_virtual(sensor, args.presses, args.ball_radius_mm,
+                                           bins=args.bins, progress=progress)
+            else:
+                bar.stop()
+                lut = dc.calibrate_live(sensor, args.presses, args.ball_radius_mm,
+                                        bins=args.bins, progress=progress,
+                                        model=args.model, stage=print)
+    return _report(lut, profile, target)
+
+
+def _report(lut: Any, profile: Any, target: Path) -> int:
+    """Save the LUT, print the per-press report (warnings first) and the summary."""
+    for entry in lut.meta.get("press_report", []):
+        print(f"press {entry['press']}: circle at (row {entry['centre_rc'][0]:.1f}, col "
+              f"{entry['centre_rc'][1]:.1f}) px, radius {entry['circle_radius_mm']:.2f} mm; "
+              f"fitted press {entry['press_mm']:.2f} mm, contact radius "
+              f"{entry['contact_radius_mm']:.2f} mm")
+        for w in entry["warnings"]:
+            print(f"  warning: {w}")
+    val = lut.meta.get("validation")
+    if val:
+        print(f"gradient model {lut.meta.get('gradient_model')}: validation presses "
+              f"{val['presses']}, slope RMS table {val['slope_rms_lut']:.3f}, network "
+              f"{val['slope_rms_mlp']:.3f}")
     path = lut.save(target)
     filled = int((lut.counts > 1e-3).sum())
     print(f"tactile LUT for {profile.name!r}: {lut.meta.get('presses')} presses, "
