@@ -149,6 +149,11 @@ def test_a_hard_link_to_an_input_is_the_input(tmp_path: Path) -> None:
         claim_output(tmp_path / "t.npy", "file", force=True, inputs=[tmp_path / "s.npy"])
 
 
+def test_a_missing_input_is_no_overlap(tmp_path: Path) -> None:
+    """Nothing that does not exist can be destroyed; the command names the missing input."""
+    assert claim_output(tmp_path, "directory", force=True, inputs=[tmp_path / "nope"]) == tmp_path
+
+
 # -- 2. concurrent writers: exactly one wins ----------------------------------------------
 
 @pytest.fixture(scope="module")

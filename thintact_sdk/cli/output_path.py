@@ -70,7 +70,9 @@ def check_not_an_input(
 ) -> None:
     """Refuse an output that equals, lies inside or contains one of ``inputs``.
 
-    ``inputs`` are the command's input files and directories (None entries are skipped).
+    ``inputs`` are the command's input files and directories (None entries are skipped, and
+    so are paths that do not exist: nothing there can be destroyed, and the command names the
+    missing input itself).
     Paths are compared after resolving symlinks and ``..`` (:func:`os.path.realpath`), and
     an existing output that is the same file as an input (a hard link) is refused too.
 
@@ -81,7 +83,7 @@ def check_not_an_input(
     """
     out = _resolved(path)
     for given in inputs:
-        if given is None or not str(given).strip():
+        if given is None or not str(given).strip() or not os.path.exists(Path(given).expanduser()):
             continue
         src = _resolved(given)
         if out == src or _same_file(out, src):
