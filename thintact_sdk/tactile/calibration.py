@@ -32,6 +32,8 @@ from thintact_sdk.tactile.poisson import integrate_gradients
 from thintact_sdk.tactile.simulate import TactileScene, TactileSimulator
 
 CALIBRATION_BALL_RADIUS_MM = 1.5
+MIN_PRESSES_TO_CHOOSE = 12
+"""``model="auto"`` compares the table and the network only from this many presses on."""
 
 
 @dataclass
@@ -264,7 +266,9 @@ def calibrate_from_presses(
         (validation presses) and the one with the lower slope RMS error on the validation
         presses' trusted pixels is refitted on all presses and stored
         (``meta["gradient_model"]``, figures in ``meta["validation"]``). ``"auto"`` with
-        fewer than 4 presses keeps the table.
+        fewer than :data:`MIN_PRESSES_TO_CHOOSE` presses keeps the table (one or two
+        validation presses do not tell the models apart; the network, which also sees the
+        position, needs presses all over the gel).
     mlp_steps
         Training steps of the network.
     stage
@@ -353,7 +357,7 @@ def calibrate_from_presses(
             gxs[k], gys[k], valids[k] = mx, my, trusted
         lut = calibrate_lut(feats, gxs, gys, valids, bins=bins, meta=info)
         lut.meta["refine_rounds"] = refine_rounds
-    if model == "lut" or (model == "auto" and len(presses) < 4):
+    if model == "lut" or (model == "auto" and len(presses) < MIN_PRESSES_TO_CHOOSE):
         lut.meta["gradient_model"] = "lut"
         return lut
     return _attach_network(lut, model, feats, images, gxs, gys, valids, bins, mlp_steps, say)
