@@ -22,11 +22,15 @@ Forces are those the object applies to the membrane, in newtons, in the scene fr
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from numpy.typing import ArrayLike
 
+from thintact_sdk import safe_json
+from thintact_sdk.errors import CalibrationError
 from thintact_sdk.profile import Profile
 from thintact_sdk.tactile.elastic import Elastomer
 
@@ -127,8 +131,6 @@ class ForceModel:
                  "force_shear_gain": SHEAR_GAIN}
         stored = find_force_calibration(profile)
         if stored is not None:
-            from thintact_sdk.tactile.force_calibration import read_gains
-
             gains.update(read_gains(stored, profile))
         gains.update({k: float(extra[k]) for k in gains if k in extra})
         return cls(
@@ -192,8 +194,6 @@ def fit_gains(features: ArrayLike, truth: ArrayLike) -> np.ndarray:
     f = f.reshape(len(t), -1)
     ok = np.isfinite(f).all(axis=1) & np.isfinite(t)
     if ok.sum() < f.shape[1]:
-        from thintact_sdk.errors import CalibrationError
-
         raise CalibrationError(
             f"{int(ok.sum())} presses with contact for {f.shape[1]} force gains; press more")
     return np.linalg.lstsq(f[ok], t[ok], rcond=None)[0]
@@ -206,7 +206,42 @@ def fit_gain(features: ArrayLike, truth: ArrayLike) -> float:
     ok = np.isfinite(f) & np.isfinite(t)
     denom = float(np.sum(f[ok] ** 2))
     if denom <= 0:
-        from thintact_sdk.errors import CalibrationError
-
         raise CalibrationError("no press with contact to fit a force gain on")
     return float(np.sum(f[ok] * t[ok]) / denom)
+
+
+FORMAT = "thintact-force-calibration/1"
+"""The ``format`` of a stored force calibration (``<device>/tactile/force.json``)."""
+GAIN_KEYS = ("force_normal_gain", "force_normal_fill_gain", "force_shear_gain")
+
+
+def read_gains(path: Path, profile: Profile) -> dict[str, float]:
+    """The gains stored in ``path`` (a ``force.json``), checked against ``profile``'s gel.
+
+    Raises
+    ------
+    CalibrationError
+        Naming the file and field: not JSON, another format, a gain missing or not a finite
+        number, or fitted for another E or ν than the profile's (the gains include E*).
+    """
+    try:
+        data = safe_json.loads(path.read_text(), f"force calibration {path}", CalibrationError)
+    except (OSError, UnicodeDecodeError) as err:
+        raise CalibrationError(f"force calibration {path}: not readable JSON ({err})") from None
+    if not isinstance(data, dict) or data.get("format") != FORMAT:
+        raise CalibrationError(f"force calibration {path}: format is not {FORMAT!r}")
+    out: dict[str, float] = {}
+    for key in (*GAIN_KEYS, "elastomer_youngs_mpa", "elastomer_poisson"):
+        value = data.get(key)
+        if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+            raise CalibrationError(f"force calibration {path}: {key} must be a finite number, "
+                                   f"got {value!r}")
+        out[key] = float(value)
+    el = Elastomer.from_profile(profile)
+    for key, mine in (("elastomer_youngs_mpa", el.youngs_mpa), ("elastomer_poisson", el.poisson)):
+        if abs(out[key] - mine) > 1e-3 * max(abs(mine), 1e-9):
+            raise CalibrationError(
+                f"force calibration {path} was fitted with {key} {out[key]:g} but profile "
+                f"{profile.name!r} has {mine:g}; run `thintact calibrate-force --profile "
+                f"{profile.name}` again")
+    return {k: out[k] for k in GAIN_KEYS}

@@ -37,6 +37,7 @@ from thintact_sdk.profile import Profile
 from thintact_sdk.safe_arrays import read_npz
 from thintact_sdk.tactile.elastic import Elastomer
 from thintact_sdk.tactile.force import (
+    FORMAT,
     NORMAL_FILL_GAIN,
     NORMAL_GAIN,
     SHEAR_GAIN,
@@ -47,7 +48,6 @@ from thintact_sdk.tactile.force import (
 )
 from thintact_sdk.tactile.photometric import PhotometricLUT
 
-FORMAT = "thintact-force-calibration/1"
 FILL_SPREAD = 0.1
 """Spread (max − min) of fill ratios above which c_0 and c_1 are fitted separately."""
 SHEARED_SHARE = 0.1
@@ -110,41 +110,6 @@ class ForceCalibration:
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(json.dumps(self.to_json(), indent=1, allow_nan=False) + "\n")
         return path
-
-
-GAIN_KEYS = ("force_normal_gain", "force_normal_fill_gain", "force_shear_gain")
-
-
-def read_gains(path: Path, profile: Profile) -> dict[str, float]:
-    """The gains stored in ``path`` (a ``force.json``), checked against ``profile``'s gel.
-
-    Raises
-    ------
-    CalibrationError
-        Naming the file and field: not JSON, another format, a gain missing or not a finite
-        number, or fitted for another E or ν than the profile's (the gains include E*).
-    """
-    try:
-        data = safe_json.loads(path.read_text(), f"force calibration {path}", CalibrationError)
-    except (OSError, UnicodeDecodeError) as err:
-        raise CalibrationError(f"force calibration {path}: not readable JSON ({err})") from None
-    if not isinstance(data, dict) or data.get("format") != FORMAT:
-        raise CalibrationError(f"force calibration {path}: format is not {FORMAT!r}")
-    out: dict[str, float] = {}
-    for key in (*GAIN_KEYS, "elastomer_youngs_mpa", "elastomer_poisson"):
-        value = data.get(key)
-        if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
-            raise CalibrationError(f"force calibration {path}: {key} must be a finite number, "
-                                   f"got {value!r}")
-        out[key] = float(value)
-    el = Elastomer.from_profile(profile)
-    for key, mine in (("elastomer_youngs_mpa", el.youngs_mpa), ("elastomer_poisson", el.poisson)):
-        if abs(out[key] - mine) > 1e-3 * max(abs(mine), 1e-9):
-            raise CalibrationError(
-                f"force calibration {path} was fitted with {key} {out[key]:g} but profile "
-                f"{profile.name!r} has {mine:g}; run `thintact calibrate-force --profile "
-                f"{profile.name}` again")
-    return {k: out[k] for k in GAIN_KEYS}
 
 
 def load_press_pack(path: Path, profile: Profile) -> tuple[np.ndarray, np.ndarray]:
