@@ -119,3 +119,19 @@ def test_progress_lines_when_not_a_terminal():
     with stage_reporter(quiet=True, stream=quiet) as say:
         say("nothing")
     assert quiet.getvalue() == ""
+
+
+@pytest.mark.parametrize("argv", [
+    ["tactile", "import", "{folder}", "--out", ""],
+    ["tactile", "depth", "--pack", "{vendored}", "--lut", "x.npz", "--out", " "],
+    ["tactile", "evaluate", "{vendored}", "--ball-radius-mm", "2", "--mm-per-px", "0.1245",
+     "--json", ""],
+])
+def test_empty_outputs_are_refused_before_any_work(tmp_path, capsys, monkeypatch, argv):
+    folder = _folder(tmp_path)
+    monkeypatch.chdir(tmp_path)
+    before = sorted(p.name for p in tmp_path.iterdir())
+    assert main([a.format(folder=folder, vendored=VENDORED) for a in argv]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "empty" in err[0]
+    assert sorted(p.name for p in tmp_path.iterdir()) == before

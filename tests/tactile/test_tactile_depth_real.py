@@ -177,3 +177,15 @@ def test_edge_press_reads_as_deep_as_an_interior_one():
     # the ball's centre on the frame's edge (half the cap outside): measured 0.86 and 0.61
     assert peaks["free"] > 0.85
     assert peaks["zero"] < 0.65
+
+
+def test_network_on_another_grid_is_refused_when_the_interpreter_is_built(tmp_path):
+    from thintact_sdk.profile import load_profile
+    from thintact_sdk.tactile.interpreter import TactileInterpreter
+
+    net, change, _ = _network(tmp_path, steps=5)
+    lut = calibrate_lut([change], [change[..., 0]], [change[..., 1]],
+                        [np.ones(change.shape[:2], bool)], bins=4)
+    lut.net = net
+    with pytest.raises(CalibrationError, match="calibrate-tactile"):
+        TactileInterpreter(load_profile("virtual-finger"), lut)

@@ -84,6 +84,14 @@ class TactileInterpreter:
         self.factor = working_factor(self.params, max_work_mm)
         self.work = binned_params(self.params, self.factor)
         self.lut = lut
+        if lut is not None and lut.net is not None and lut.net.shape != (self.work.rows,
+                                                                         self.work.cols):
+            from thintact_sdk.errors import CalibrationError
+
+            raise CalibrationError(
+                f"the tactile calibration's gradient network works on a {lut.net.shape[0]}×"
+                f"{lut.net.shape[1]} grid, profile {profile.name!r} on {self.work.rows}×"
+                f"{self.work.cols}: run `thintact calibrate-tactile --profile {profile.name}`")
         self.smooth_px = smooth_px
         self.marker_threshold = marker_threshold
         self.min_contact_area_mm2 = min_contact_area_mm2

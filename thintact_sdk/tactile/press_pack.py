@@ -291,9 +291,12 @@ def evaluate_pack(
     say = stage or (lambda _m: None)
     train, test = split(len(pack.images), train)
     profile = pack_profile(pack.reference.shape[:2], mm_per_px, elastomer_sigma_mm)
-    lut = calibrate_from_presses(profile, pack.reference_image(),
-                                 [BallPress(pack.image(i)) for i in train], ball_radius_mm,
-                                 bins, model=model, mlp_steps=mlp_steps, stage=say)
+    try:
+        lut = calibrate_from_presses(profile, pack.reference_image(),
+                                     [BallPress(pack.image(i)) for i in train], ball_radius_mm,
+                                     bins, model=model, mlp_steps=mlp_steps, stage=say)
+    except CalibrationError as err:  # "press k" counts the training presses
+        raise CalibrationError(f"{err} (training presses, in order: {train})") from None
     interp = TactileInterpreter(profile, lut, boundary=boundary)  # type: ignore[arg-type]
     interp.set_reference(pack.reference_image())
     figs = []
