@@ -8,8 +8,8 @@ model is a multi-layer perceptron applied to every pixel separately:
     inputs (8): colour change I − I₀ (3, ×4), colour I (3, 2I − 1), column and row (−1..1)
     → tanh(W₀x + b₀) → tanh(W₁h + b₁) → W₂h + b₂ → (∂d/∂x, ∂d/∂y) (mm per mm)
 
-Hidden width 32 by default: ~1.4 k weights, trained in seconds on a CPU with torch (Adam,
-mini-batches of calibration pixels) and applied with numpy (no torch at run time).
+Hidden width 32 by default: ~1.4 k weights, trained in seconds on one CPU thread with torch
+(Adam, mini-batches of calibration pixels) and applied with numpy (no torch at run time).
 
 File (``thintact-tactile-mlp/1``): an ``.npz`` of plain float32 arrays ``w0 b0 w1 b1 w2 b2``
 and ``shape`` (the working grid the positions refer to), written without pickle and read
@@ -138,9 +138,9 @@ def train_mlp(
     valid: list[np.ndarray],
     hidden: int = 32,
     steps: int = 2000,
-    batch: int = 4096,
+    batch: int = 2048,
     seed: int = 0,
-    threads: int = 2,
+    threads: int = 1,
 ) -> MLPGradient:
     """Train the network on calibration pixels with known slopes.
 
@@ -157,7 +157,9 @@ def train_mlp(
         Initialisation and sampling seed (the result is deterministic for a seed and thread
         count).
     threads
-        torch CPU threads used during training (restored afterwards).
+        torch CPU threads used during training (restored afterwards). One by default: a
+        network this small gains nothing from more, and on a busy host threads that wait
+        for each other made training many times slower.
     """
     import torch
 
