@@ -135,3 +135,37 @@ def test_fuzzed_hook_results_never_escape_the_registry(result):
     assert reg.create("camera", "good-cam") == "good camera"
     if info.error is None:
         assert result is None or isinstance(result, list | tuple)
+
+
+def _command_plugin(factory: Callable[..., Any]) -> types.ModuleType:
+    mod = types.ModuleType("fake_cli_plugin")
+
+    @hookimpl
+    def thintact_cli_commands() -> Any:
+        return [Component("boom", factory)]
+
+    @hookimpl
+    def thintact_benchmarks() -> Any:
+        return [Component("boom-bench", factory)]
+
+    mod.thintact_cli_commands = thintact_cli_commands  # type: ignore[attr-defined]
+    mod.thintact_benchmarks = thintact_benchmarks  # type: ignore[attr-defined]
+    return mod
+
+
+def test_a_cli_command_plugin_whose_factory_raises_leaves_every_command_working(monkeypatch, capfd):
+    """The CLI builds plugin commands through the registry: a factory raising ZeroDivisionError
+    is recorded on its plugin, the other commands still run, and the broken benchmark is one
+    clean error when asked for."""
+    import thintact_sdk.plugin_manager as pm
+    from thintact_sdk.cli.main import main
+
+    monkeypatch.setattr(pm, "_REGISTRY", None)  # a registry of this test's own, restored after
+    reg = pm.get_registry()
+    reg.register(_command_plugin(lambda *a: 1 / 0), "fake-cli")
+    capfd.readouterr()
+    assert main(["profile", "list"]) == 0
+    assert any("ZeroDivisionError" in f for f in reg.plugins["fake-cli"].failures)
+    assert main(["bench", "boom-bench"]) == 2
+    err = capfd.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "boom-bench" in err[0] and "Traceback" not in err[0]

@@ -286,12 +286,8 @@ def _numeric_options(parser: argparse.ArgumentParser, path: str = "thintact") ->
     return found
 
 
-OTHER_OWNERS = {"thintact view --port", "thintact live --port"}
-"""Options validated by the work on their own commands (not this file's)."""
-
-
 def test_every_numeric_option_has_a_validating_type() -> None:
-    bare = [(name, t.__name__) for name, t in _numeric_options(build_parser()) if name not in OTHER_OWNERS]
+    bare = [(name, t.__name__) for name, t in _numeric_options(build_parser())]
     assert bare == []
 
 

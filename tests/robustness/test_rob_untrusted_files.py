@@ -553,3 +553,12 @@ def test_force_calibration_pack_and_loads_are_read_strictly(tmp_path: Path) -> N
     with pytest.raises(CalibrationError, match="loads.json: JSON nested too deeply"):
         load_loads(loads, 3)
     assert not marker.exists()
+
+
+def test_bundle_metadata_nested_100000_deep_is_one_calibration_error(tmp_path: Path) -> None:
+    from thintact_sdk.errors import CalibrationError
+    from thintact_sdk.imaging.calibration_bundle import META_FILE, CalibrationBundle
+
+    (tmp_path / META_FILE).write_text("[" * 100_000 + "]" * 100_000)
+    with pytest.raises(CalibrationError, match="not a calibration bundle.*nested"):
+        CalibrationBundle.load(tmp_path)

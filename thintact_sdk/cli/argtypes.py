@@ -92,6 +92,9 @@ def fraction(text: str) -> float:
 positive_int = int_range(1)
 """An integer ≥ 1 (frame counts, iterations)."""
 
+port = int_range(0, 65535)
+"""A TCP port: 1-65535, or 0 for one the system picks."""
+
 non_negative_int = int_range(0)
 """An integer ≥ 0."""
 

@@ -65,8 +65,12 @@ def build_parser() -> argparse.ArgumentParser:
     try:
         from thintact_sdk.plugin_manager import get_registry
 
-        for comp in get_registry().components("cli_command").values():
-            comp.factory(sub)
+        registry = get_registry()
+        for name in registry.components("cli_command"):
+            try:
+                registry.create("cli_command", name, sub)
+            except ThinTactError:  # recorded on its plugin (`thintact plugins` shows it)
+                continue
     except ThinTactError:
         pass
     parser.command_names = list(sub.choices or ())

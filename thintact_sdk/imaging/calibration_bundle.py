@@ -29,6 +29,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from thintact_sdk import safe_json
 from thintact_sdk.errors import CalibrationError
 from thintact_sdk.imaging.recon_filter import JointFilter
 from thintact_sdk.imaging.scene_prior import ScenePrior
@@ -162,8 +163,10 @@ class CalibrationBundle:
         if not meta_path.is_file():
             raise CalibrationError(f"{d} is not a calibration bundle: no {META_FILE}")
         try:
-            meta = json.loads(meta_path.read_text(encoding="utf-8"))
-        except (OSError, json.JSONDecodeError, UnicodeDecodeError) as err:
+            meta = safe_json.loads(meta_path.read_text(encoding="utf-8"),
+                                   f"{meta_path} is not a calibration bundle: cannot read it;",
+                                   CalibrationError)
+        except (OSError, UnicodeDecodeError) as err:
             raise CalibrationError(f"{meta_path} is not a calibration bundle: cannot read it ({err})") from None
         if not isinstance(meta, dict) or meta.get("format") != CALIBRATION_FORMAT:
             got = meta.get("format") if isinstance(meta, dict) else type(meta).__name__

@@ -18,6 +18,7 @@ from thintact_sdk.cli.argtypes import (
     key_value,
     key_values,
     non_negative_float,
+    port,
     positive_int,
 )
 from thintact_sdk.errors import ThinTactError
@@ -32,7 +33,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("profile", metavar="PROFILE", help="profile name or file")
-    p.add_argument("--port", type=int, default=DEFAULT_PORT,
+    p.add_argument("--port", type=port, default=DEFAULT_PORT,
                    help=f"TCP port (default {DEFAULT_PORT}; 0 picks a free one)")
     p.add_argument("--host", default=DEFAULT_HOST,
                    help=f"address to bind (default {DEFAULT_HOST}: this machine only; "

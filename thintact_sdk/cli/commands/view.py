@@ -26,6 +26,7 @@ from thintact_sdk.cli.argtypes import (
     key_value,
     key_values,
     non_negative_float,
+    port,
     positive_int,
 )
 from thintact_sdk.errors import ThinTactError
@@ -47,7 +48,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("profiles", nargs="+", metavar="PROFILE",
                    help="profile name or file; several show one panel group each")
-    p.add_argument("--port", type=int, default=DEFAULT_PORT,
+    p.add_argument("--port", type=port, default=DEFAULT_PORT,
                    help=f"TCP port on 127.0.0.1 (default {DEFAULT_PORT}; 0 picks a free one)")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", type=key_value,
                    help="override a camera setting, e.g. --set fps=10 (" + KEY_VALUE_HELP + ")")
