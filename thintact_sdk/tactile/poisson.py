@@ -26,6 +26,7 @@ Boundary = Literal["free", "zero"]
 FLAT_SLOPE = 0.05
 """Slope magnitude (mm per mm) under which a pixel counts as flat for the reference level."""
 _MIN_FLAT_SHARE = 0.05
+_ROUND_OFF_MM = 1e-9
 
 
 @lru_cache(maxsize=8)
@@ -69,7 +70,9 @@ def _free(gx: np.ndarray, gy: np.ndarray, mm_per_px: float, flat_slope: float) -
     coef, *_ = np.linalg.lstsq(a, depth[rr, cc], rcond=None)
     r = np.arange(gx.shape[0])[:, None] - gx.shape[0] / 2
     c = np.arange(gx.shape[1])[None, :] - gx.shape[1] / 2
-    return depth - (coef[0] + coef[1] * r + coef[2] * c)
+    depth -= coef[0] + coef[1] * r + coef[2] * c
+    depth[np.abs(depth) < _ROUND_OFF_MM] = 0.0  # an unpressed membrane reads exactly 0
+    return depth
 
 
 def integrate_gradients(
