@@ -7,6 +7,7 @@ import base64
 import html
 import io
 import json
+import math
 from pathlib import Path
 from typing import Any
 
@@ -160,6 +161,105 @@ def write_pngs(d: Diagnosis, out_dir: Path) -> list[Path]:
     return paths
 
 
+def _excess_threshold() -> float:
+    """σ above its noise-only expectation beyond which a check's χ² is "in excess" (the
+    unbinned stage's own threshold)."""
+    from thintact_sdk.diagnose.unbinned import EXCESS_Z
+
+    return float(EXCESS_Z)
+
+
+def _z_of(chi2_per_dof: float, n_values: int) -> float:
+    """σ of ``chi2_per_dof`` over ``n_values`` values from the noise-only expectation 1."""
+    return (chi2_per_dof - 1.0) * math.sqrt(max(n_values, 1) / 2.0)
+
+
+def check_rows(rep: dict[str, Any], n_unbinned_values: int | None = None) -> list[dict[str, Any]]:
+    """The full-size and window checks of ``report.json`` (``full_size``,
+    ``binned.unbinned_stage.before``) as table rows ``{"check", "chi2_per_dof", "rms_dn",
+    "z", "z_approx", "values", "where", "verdict"}``.
+
+    ``z`` is the χ² excess in standard deviations ``√(2n)`` over ``n`` values: as reported
+    (windows, the unbinned stage) or, for the whole sensor's check, from
+    ``n_unbinned_values`` (frames × pixels × channels of the unbinned recording, an upper
+    bound when pixels saturate: ``z_approx`` True); None when neither is known. The verdict:
+    "not evaluated" (with the reason), "consistent with the noise" (|z| within the unbinned
+    stage's threshold), "in excess" or, without a ``z``, the χ²/dof alone.
+    """
+    thr = _excess_threshold()
+    rows: list[dict[str, Any]] = []
+
+    def verdict(chi: float, z: float | None) -> str:
+        if z is None:
+            return f"χ²/dof {chi:.4f} (value count unknown: no σ)"
+        if z > thr:
+            return f"in excess: {z:.1f} σ above the noise (threshold {thr:g} σ)"
+        return f"consistent with the noise ({z:+.1f} σ, threshold {thr:g} σ)"
+
+    def add(name: str, entry: Any, z: float | None, approx: bool, values: int | None, where: str) -> None:
+        if not isinstance(entry, dict):
+            return
+        if "not_evaluated" in entry and "chi2_per_dof" not in entry:
+            rows.append({"check": name, "chi2_per_dof": None, "rms_dn": None, "z": None, "z_approx": False,
+                         "values": None, "where": where, "verdict": f"not evaluated: {entry['not_evaluated']}"})
+            return
+        chi, rms = float(entry["chi2_per_dof"]), float(entry["rms_dn"])
+        rows.append({"check": name, "chi2_per_dof": chi, "rms_dn": rms, "z": z, "z_approx": approx,
+                     "values": values, "where": where, "verdict": verdict(chi, z)})
+
+    stage = rep.get("binned", {}).get("unbinned_stage") or {}
+    full = rep.get("full_size") or {}
+    if stage.get("before"):
+        add("whole unbinned sensor, binned model (before the unbinned stage)", stage["before"],
+            float(stage["excess_z"]), False, n_unbinned_values, "every unbinned frame")
+    if "final" in full:
+        fin = full["final"]
+        z = None if n_unbinned_values is None else _z_of(float(fin["chi2_per_dof"]), n_unbinned_values)
+        add("whole unbinned sensor, final model", fin, z, z is not None, n_unbinned_values,
+            "every unbinned frame")
+    elif "not_evaluated" in full:
+        add("whole unbinned sensor, final model", {"not_evaluated": full["not_evaluated"]}, None, False, None, "")
+    win = full.get("windows")
+    if isinstance(win, dict):
+        if "not_evaluated" in win:
+            add("windows of the unbinned sensor", win, None, False, None, "")
+        else:
+            add("windows of the unbinned sensor", win, float(win["excess_z"]), False,
+                int(win["n_values"]), str(win.get("where", "")))
+    return rows
+
+
+def checks_html(rep: dict[str, Any], n_unbinned_values: int | None = None) -> str:
+    """The "Full-size and window checks" section (empty when ``report.json`` has none)."""
+    rows = check_rows(rep, n_unbinned_values)
+    if not rows:
+        return ""
+    e = html.escape
+
+    def num(v: float | None, fmt: str) -> str:
+        return "-" if v is None else format(v, fmt)
+
+    body = "".join(
+        f"<tr><td>{e(r['check'])}</td><td>{num(r['chi2_per_dof'], '.4f')}</td><td>{num(r['rms_dn'], '.2f')}</td>"
+        f"<td>{'-' if r['z'] is None else ('≈' if r['z_approx'] else '') + format(r['z'], '+.1f')}</td>"
+        f"<td>{'-' if r['values'] is None else ('≤ ' if r['z_approx'] else '') + format(r['values'], ',d')}</td>"
+        f"<td>{e(r['where']) or '-'}</td><td>{e(r['verdict'])}</td></tr>"
+        for r in rows
+    )
+    return ("<h2>Full-size and window checks</h2><p>The fit was made on binned data; these checks evaluate "
+            "it on the unbinned recording (σ: the χ² excess over its noise-only expectation, in standard "
+            "deviations √(2n) over n values).</p><table><tr><th>check</th><th>χ²/dof</th><th>rms (DN)</th>"
+            f"<th>σ</th><th>values</th><th>where</th><th>verdict</th></tr>{body}</table>")
+
+
+def _unbinned_values(d: Diagnosis) -> int | None:
+    """Frames × pixels × channels of the unbinned recording of a binned diagnosis (None unbinned)."""
+    if not d.report.get("binned", {}).get("factor"):
+        return None
+    full = d.fitted_profile.sensor  # the CLI gives a binned diagnosis the unbinned device's profile
+    return int(d.data.n_frames * full.rows * full.cols * len(full.channels))
+
+
 def render_html(d: Diagnosis) -> str:
     """The whole ``report.html`` as a string."""
     import matplotlib
@@ -190,6 +290,7 @@ padding:4px;vertical-align:top}}table{{border-collapse:collapse}}img{{max-width:
 <h2>Findings</h2><table><tr><th>effect</th><th>parameters</th><th>rms after (DN)</th>
 <th>χ²/dof after</th><th>alternatives</th><th>evidence</th></tr>{rows}</table>
 <h2>Unexplained</h2><p><b>{'significant' if un['significant'] else 'none'}</b>: {e(un['summary'])}</p>
+{checks_html(rep, _unbinned_values(d))}
 {imgs}
 <p><small>timing (s): {e(timing)}</small></p></body></html>
 """
