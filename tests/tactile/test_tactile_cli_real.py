@@ -135,3 +135,47 @@ def test_empty_outputs_are_refused_before_any_work(tmp_path, capsys, monkeypatch
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "empty" in err[0]
     assert sorted(p.name for p in tmp_path.iterdir()) == before
+
+
+def _gelsight_recording(tmp_path: Path, presses: int) -> Path:
+    from thintact_sdk.profile import load_profile
+    from thintact_sdk.recording import RecordingWriter
+
+    prof = load_profile("gelsight-mini")
+    with np.load(VENDORED, allow_pickle=False) as z:
+        f0, imgs = z["f0"], z["imgs"]
+
+    def raw(a: np.ndarray) -> np.ndarray:
+        return cv2.resize(a, (prof.sensor.cols, prof.sensor.rows),
+                          interpolation=cv2.INTER_LINEAR).astype(np.uint16)
+
+    rec = RecordingWriter(tmp_path / "rec", prof)
+    rec.add(raw(f0), label="reference")
+    for im in imgs[:presses]:
+        rec.add(raw(im), label="press")
+    return tmp_path / "rec"
+
+
+def test_cli_depth_of_a_recording(tmp_path, capsys):
+    rec = _gelsight_recording(tmp_path, 3)
+    out = tmp_path / "out"
+    assert main(["tactile", "depth", "--recording", str(rec), "--profile", "gelsight-mini",
+                 "--out", str(out)]) == 0
+    assert "frame 4/4" in capsys.readouterr().err  # progress lines, stderr not a terminal
+    frames = json.loads((out / "frames.json").read_text())["frames"]
+    assert [f["contact"] for f in frames] == [False, True, True, True]
+    assert frames[0]["peak_depth_mm"] == 0.0 and frames[0]["force_n"] == [0.0, 0.0, 0.0]
+    assert all(0.5 < f["peak_depth_mm"] < 2.0 and f["force_n"][2] > 0 for f in frames[1:])
+    assert sorted(p.name for p in out.glob("depth_*.npy")) == [f"depth_{k:04d}.npy" for k in range(4)]
+
+
+def test_calibrate_tactile_prints_the_press_report(tmp_path, capsys):
+    rec = _gelsight_recording(tmp_path, 4)
+    out = tmp_path / "lut.npz"
+    assert main(["calibrate-tactile", "--profile", "gelsight-mini", "--recording", str(rec),
+                 "--ball-radius-mm", "2", "--model", "auto", "--out", str(out)]) == 0
+    text = capsys.readouterr()
+    assert text.out.count("warning: circle radius") == 4  # every press wider than the ball
+    assert "press 3: circle at" in text.out and "reconstructed" in text.err
+    meta = json.loads(out.with_suffix(".json").read_text())
+    assert meta["gradient_model"] == "lut" and len(meta["press_report"]) == 4
