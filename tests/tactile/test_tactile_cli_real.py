@@ -10,6 +10,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from thintact_sdk.cli.main import main
 from thintact_sdk.tactile.press_pack import import_folder, load_press_pack
@@ -179,3 +181,30 @@ def test_calibrate_tactile_prints_the_press_report(tmp_path, capsys):
     assert "press 3: circle at" in text.out and "reconstructed" in text.err
     meta = json.loads(out.with_suffix(".json").read_text())
     assert meta["gradient_model"] == "lut" and len(meta["press_report"]) == 4
+
+
+@settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(cut=st.integers(min_value=0, max_value=4000), junk=st.binary(min_size=0, max_size=64))
+def test_damaged_pack_is_one_line_exit_2(tmp_path, capsys, cut, junk):
+    good = VENDORED.read_bytes()
+    p = tmp_path / "damaged.npz"
+    p.write_bytes(good[:cut] + junk)
+    rc = main(["tactile", "evaluate", str(p), "--ball-radius-mm", "2", "--mm-per-px", "0.1245",
+               "--model", "lut", "--quiet"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1 and "damaged.npz" in err[0]
+
+
+@settings(max_examples=40, deadline=None)
+@given(text=st.text(alphabet="0123456789,-x ", max_size=12))
+def test_crop_option_is_parsed_or_refused(text):
+    from thintact_sdk.errors import CalibrationError
+    from thintact_sdk.tactile.press_pack import parse_crop
+
+    try:
+        crop = parse_crop(text)
+    except CalibrationError as err:
+        assert "--crop" in str(err)
+    else:
+        assert len(crop) == 4 and min(crop) >= 0
+        assert crop == tuple(int(v) for v in text.split(","))
