@@ -7,7 +7,10 @@ as current Foxglove and Lichtblick do; foxglove-sdk selects ``foxglove.sdk.v1``.
 from __future__ import annotations
 
 import json
+import signal
 import struct
+import subprocess
+import sys
 import threading
 import time
 
@@ -162,4 +165,25 @@ def test_live_command_streams_a_virtual_sensor_and_refuses_bad_options(capsys):
     assert "streaming virtual-finger on ws://127.0.0.1:" in out
     assert "stopped after 2 frame(s)" in out
     assert main(["live", "virtual-finger", "--port", "70000"]) == 2
-    assert "--port must be 0..65535" in capsys.readouterr().err
+    assert "--port: must be an integer between 0 and 65535" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_live_stops_on_a_signal_even_where_sigint_was_ignored(sig):
+    """Like the viewer: started with SIGINT ignored (a script's background job), `thintact
+    live` still stops on Ctrl-C or SIGTERM, closes the sensor and exits 0."""
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "thintact_sdk.cli.main", "live", "virtual-finger", "--port", "0",
+         "--set", "fps=0"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
+    try:
+        line = proc.stdout.readline()
+        assert "streaming virtual-finger on ws://127.0.0.1:" in line, line + proc.stderr.read()
+        proc.send_signal(sig)
+        out, err = proc.communicate(timeout=90)  # a bound on a hang, not a performance figure
+    finally:
+        proc.kill()
+    assert proc.returncode == 0, err
+    assert "stopped after" in out and "Traceback" not in err
+

@@ -45,7 +45,7 @@ def test_view_bad_input_is_a_one_line_error(capsys):
     assert main(["view", "no-such-profile", "--port", "0"]) == 2
     assert "no-such-profile" in capsys.readouterr().err
     assert main(["view", "virtual-finger", "--port", "70000"]) == 2
-    assert "--port must be 0..65535" in capsys.readouterr().err
+    assert "--port: must be an integer between 0 and 65535" in capsys.readouterr().err
     with socket.socket() as busy:
         busy.bind(("127.0.0.1", 0))
         busy.listen()

@@ -21,7 +21,7 @@ from thintact_sdk.cli.argtypes import (
     port,
     positive_int,
 )
-from thintact_sdk.errors import ThinTactError
+from thintact_sdk.cli.stop_signals import stop_signals
 from thintact_sdk.mcaplog.live import DEFAULT_HOST, DEFAULT_PORT, LiveServer
 
 
@@ -52,23 +52,24 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     import thintact_sdk as thintact
 
-    if not 0 <= args.port <= 65535:
-        raise ThinTactError(f"--port must be 0..65535, not {args.port}")
     settings = key_values(args.set)
     sent = 0
-    try:
-        with thintact.open(args.profile, camera_settings=settings) as sensor, LiveServer(
-                sensor.profile, host=args.host, port=args.port,
-                image_encoding=args.image_encoding) as server:
-            print(f"streaming {sensor.profile.name} on {server.url} "
-                  "(Foxglove: Open connection -> Foxglove WebSocket; Ctrl-C stops)", flush=True)
-            deadline = None if args.duration is None else time.monotonic() + args.duration
-            while (args.frames is None or sent < args.frames) and (
-                    deadline is None or time.monotonic() < deadline):
-                raw = sensor.read_raw()
-                server.publish(raw, sensor.process(raw))
-                sent += 1
-    except KeyboardInterrupt:
-        pass
+    with stop_signals() as stop:
+        try:
+            with thintact.open(args.profile, camera_settings=settings) as sensor, LiveServer(
+                    sensor.profile, host=args.host, port=args.port,
+                    image_encoding=args.image_encoding) as server:
+                print(f"streaming {sensor.profile.name} on {server.url} "
+                      "(Foxglove: Open connection -> Foxglove WebSocket; Ctrl-C stops)", flush=True)
+                stop.serving = True
+                deadline = None if args.duration is None else time.monotonic() + args.duration
+                while not stop.event.is_set() and (args.frames is None or sent < args.frames) and (
+                        deadline is None or time.monotonic() < deadline):
+                    raw = sensor.read_raw()
+                    server.publish(raw, sensor.process(raw))
+                    sent += 1
+        except KeyboardInterrupt:
+            if not stop.event.is_set():
+                raise
     print(f"stopped after {sent} frame(s)")
     return 0

@@ -12,13 +12,9 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import signal
 import sys
 import threading
 import time
-from collections.abc import Iterator
-from contextlib import contextmanager
-from types import FrameType
 from typing import TYPE_CHECKING
 
 from thintact_sdk.cli.argtypes import (
@@ -29,6 +25,7 @@ from thintact_sdk.cli.argtypes import (
     port,
     positive_int,
 )
+from thintact_sdk.cli.stop_signals import stop_signals
 from thintact_sdk.errors import ThinTactError
 from thintact_sdk.viewer import LiveView, ViewerServer
 from thintact_sdk.viewer.capture import DEFAULT_OUT
@@ -65,12 +62,10 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     import thintact_sdk as thintact
 
-    if not 0 <= args.port <= 65535:
-        raise ThinTactError(f"--port must be 0..65535, not {args.port}")
     settings = key_values(args.set)
     if not args.out.strip():
         raise ThinTactError("--out must name a directory")
-    with _stop_signals() as stop:
+    with stop_signals() as stop:
         try:
             with ViewerServer(args.port) as server, contextlib.ExitStack() as sensors:
                 opened = [sensors.enter_context(thintact.open(
@@ -113,43 +108,6 @@ def _names(sensors: list[Sensor]) -> list[tuple[str, str]]:
         label = name if counts[name] == 1 else f"{name}-{k}"
         out.append((f"thintact view {label}", label))
     return out
-
-
-class _Stop:
-    """What SIGINT and SIGTERM do to a running viewer.
-
-    While the sensor opens (``serving`` false) a signal raises KeyboardInterrupt, which cuts
-    the open short; once the viewer serves, the first signal sets ``event`` (the main loop
-    then stops the server, the frame loop and the sensor in that order) and a second one
-    raises KeyboardInterrupt for a user who will not wait.
-    """
-
-    def __init__(self) -> None:
-        self.event = threading.Event()
-        self.serving = False
-
-    def __call__(self, signum: int, frame: FrameType | None) -> None:
-        first = not self.event.is_set()
-        self.event.set()
-        if not self.serving or not first:
-            raise KeyboardInterrupt
-
-
-@contextmanager
-def _stop_signals() -> Iterator[_Stop]:
-    """Route SIGINT and SIGTERM to a :class:`_Stop` while the viewer runs (main thread only;
-    the previous handlers come back afterwards). SIGINT is taken even where the parent
-    started the command with it ignored (a background job of a script)."""
-    stop = _Stop()
-    if threading.current_thread() is not threading.main_thread():
-        yield stop
-        return
-    previous = {sig: signal.signal(sig, stop) for sig in (signal.SIGINT, signal.SIGTERM)}
-    try:
-        yield stop
-    finally:
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
 
 
 def _serve(lives: list[LiveView], duration_s: float | None, stop: threading.Event) -> None:
