@@ -22,6 +22,7 @@ from thintact_sdk.calibration.slits import ChannelSlits, SlitStack
 from thintact_sdk.calibration.solver import Method, solve_channel
 from thintact_sdk.calibration.tau import cross_validate, tau_grid
 from thintact_sdk.calibration.validation import averaged_noise, make_decoder, score
+from thintact_sdk.errors import ThinTactError
 from thintact_sdk.imaging.calibration_bundle import CalibrationBundle
 from thintact_sdk.imaging.filter_training import (
     scene_for_channels,
@@ -58,6 +59,49 @@ def design_gains(profile: Profile, calibrated: SystemMatrices, sim: Simulator) -
                      for c in range(calibrated.channels)])
 
 
+def slit_factors(sim: Simulator, channels: int) -> list[tuple[np.ndarray, np.ndarray]] | None:
+    """Per channel ``(P, Q)``: the simulator's own separable expansion stacked, ``P`` of
+    shape ``K × R × N`` and ``Q`` ``K × S × M`` (linear signal = ``Σ_k P_k X Q_kᵀ``), so that
+    horizontal slit ``i`` (scene row ``i`` at 1) images as ``Σ_k P_k[:, i] (Q_k·1)ᵀ`` and
+    vertical slit ``j`` as ``Σ_k (P_k·1) Q_k[:, j]ᵀ``: the same linear signal as
+    :meth:`Simulator.linear_batch` of the slit scene (the expansion is the kernel), at
+    ``R·S·K`` operations per slit instead of a forward pass of the whole scene.
+
+    Returns None when the physics is not separable per channel or has DN-defined effects
+    (then slits go through the simulator).
+    """
+    if sim.has_dn_effects:
+        return None
+    try:
+        terms = [sim.separable_terms(c) for c in range(channels)]
+    except ThinTactError:
+        return None
+    out = []
+    for t in terms:
+        p = np.stack([np.asarray(a, np.float64) for a, _ in t])  # K × R × N
+        q = np.stack([np.asarray(b, np.float64) for _, b in t])  # K × S × M
+        out.append((p, q))
+    return out
+
+
+def _slit_signal_dn(factors: list[tuple[np.ndarray, np.ndarray]], gains: np.ndarray, idx: range,
+                    n: int) -> np.ndarray:
+    """Expected signal (DN above black) of the slits ``idx`` (``< n``: row slits, else
+    column ``i − n``) from :func:`slit_factors`: ``len(idx) × R × S × C``."""
+    c = len(factors)
+    r, s = factors[0][0].shape[1], factors[0][1].shape[1]
+    out = np.empty((len(idx), r, s, c))
+    for ch, (p, q) in enumerate(factors):
+        p1, q1 = p.sum(axis=2), q.sum(axis=2)  # K × R, K × S: the terms times the all-ones vector
+        for b, i in enumerate(idx):
+            if i < n:
+                out[b, ..., ch] = p[:, :, i].T @ q1
+            else:
+                out[b, ..., ch] = p1.T @ q[:, :, i - n]
+        out[..., ch] *= gains[ch]
+    return out
+
+
 def simulated_calibration(profile: Profile, gains: np.ndarray, noise: NoiseSpec, method: Method,
                           max_iter: int, tol: float, rank: int, rng: np.random.Generator,
                           dark_dn: np.ndarray) -> SystemMatrices:
@@ -69,17 +113,22 @@ def simulated_calibration(profile: Profile, gains: np.ndarray, noise: NoiseSpec,
     sim = Simulator(profile)
     n, m = profile.scene.rows, profile.scene.cols
     c = len(gains)
+    factors = slit_factors(sim, c)
     h: list[tuple[list[int], list[np.ndarray], list[LowRankImage]]] = [([], [], []) for _ in range(c)]
     v: list[tuple[list[int], list[np.ndarray], list[LowRankImage]]] = [([], [], []) for _ in range(c)]
     for start in range(0, n + m, SLIT_BATCH):
         idx = range(start, min(start + SLIT_BATCH, n + m))
-        x = np.zeros((len(idx), n, m, c))
-        for b, i in enumerate(idx):
-            if i < n:
-                x[b, i] = 1.0
-            else:
-                x[b, :, i - n] = 1.0
-        ys = signal_to_dn(sim.predict_signal_dn(x, gains), noise, rng) - dark_dn
+        if factors is None:
+            x = np.zeros((len(idx), n, m, c))
+            for b, i in enumerate(idx):
+                if i < n:
+                    x[b, i] = 1.0
+                else:
+                    x[b, :, i - n] = 1.0
+            expected = sim.predict_signal_dn(x, gains)
+        else:
+            expected = _slit_signal_dn(factors, np.asarray(gains, float), idx, n)
+        ys = signal_to_dn(expected, noise, rng) - dark_dn
         for y, i in zip(ys, idx, strict=True):
             for ch in range(c):
                 if i < n:
