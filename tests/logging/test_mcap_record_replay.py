@@ -110,3 +110,19 @@ def test_replay_recorded_rate_speed_and_loop(tmp_path):
         cam.read(timeout_s=1.0)
         with pytest.raises(DeviceTimeoutError, match="beyond the read timeout"):
             cam.read(timeout_s=0.05)
+
+
+def test_record_mcap_writes_the_raw_preview_unless_told_not_to(tmp_path):
+    """The virtual camera's 16-bit Bayer frames get an rgb8 preview beside the raw (viewers
+    without a 16-bit Bayer decoder show it); --no-raw-preview leaves it out, raw unchanged."""
+    from thintact_sdk.mcaplog import McapLog, schemas
+
+    counts = {}
+    for name, extra in (("with", []), ("without", ["--no-raw-preview"])):
+        out = tmp_path / f"{name}.mcap"
+        assert main(["record", "--profile", "virtual-mini", "--frames", "2", "--format", "mcap",
+                     "--no-tactile", "--quiet", "--out", str(out), *extra]) == 0
+        counts[name] = McapLog(out).message_counts()
+    assert counts["with"][schemas.RAW_PREVIEW.name] == 2 == counts["with"][schemas.RAW.name]
+    assert schemas.RAW_PREVIEW.name not in counts["without"]
+    assert counts["without"][schemas.RAW.name] == 2

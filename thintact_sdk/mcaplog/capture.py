@@ -31,11 +31,15 @@ def record_mcap(
     settings: dict[str, Any] | None = None,
     compression: str = "none",
     image_encoding: str = "rgb8",
+    raw_preview: bool | None = None,
     chunk_bytes: int = DEFAULT_CHUNK_BYTES,
     progress: bool = True,
     buffer_mb: float = 512.0,
 ) -> RecordSummary:
     """Record ``frames`` camera frames (and their tactile frames) into the MCAP file ``out``.
+
+    ``raw_preview``: write ``/thintact/raw_preview`` beside raw frames viewers cannot decode
+    (``None``: where the raw encoding needs it; ``False``: never, for the highest frame rate).
 
     Raises
     ------
@@ -52,7 +56,7 @@ def record_mcap(
     sensor = Sensor(profile, camera_settings=settings) if tactile else None
     camera = create_camera(profile, settings=settings)
     sink = _McapSink(out, profile, sensor, compression=compression, chunk_bytes=chunk_bytes,
-                     image_encoding=image_encoding)
+                     image_encoding=image_encoding, raw_preview=raw_preview)
     return capture_frames(camera, profile, frames, sink, saved_in=out, timeout_s=timeout_s,
                           buffer_mb=buffer_mb, progress=progress)
 
@@ -61,12 +65,13 @@ class _McapSink:
     """Writes each raw frame (and, with a sensor, its tactile frame) to an MCAP log."""
 
     def __init__(self, out: Path, profile: Profile, sensor: Sensor | None, *, compression: str,
-                 chunk_bytes: int, image_encoding: str) -> None:
+                 chunk_bytes: int, image_encoding: str, raw_preview: bool | None) -> None:
         self.out = out
         self.profile = profile
         self.sensor = sensor
         self.options: dict[str, Any] = {"compression": compression, "chunk_bytes": chunk_bytes,
-                                        "image_encoding": image_encoding}
+                                        "image_encoding": image_encoding,
+                                        "raw_preview": raw_preview}
         self._log: McapLogWriter | None = None
 
     def start(self) -> None:

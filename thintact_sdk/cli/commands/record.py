@@ -96,6 +96,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                       help="MCAP chunk compression (default none: raw frames barely compress)")
     mcap.add_argument("--image-encoding", choices=("rgb8", "32FC3"), default="rgb8",
                       help="MCAP reconstruction encoding (default rgb8; 32FC3 is exact)")
+    mcap.add_argument("--no-raw-preview", action="store_true",
+                      help="no rgb8 /thintact/raw_preview beside 16-bit raw frames (viewers then "
+                           "show the raw topic only where they decode it; saves a pass per frame)")
     add_force_argument(p, "a new recording into an existing non-empty directory that is not "
                        "a recording (an existing recording needs --append)")
     p.set_defaults(func=run)
@@ -227,7 +230,8 @@ def _record_mcap(args: argparse.Namespace, profile: Profile, out: Path) -> Recor
         return record_mcap(
             profile, args.frames, out, tactile=not args.no_tactile, timeout_s=args.timeout,
             settings=key_values(args.set), compression=args.compression,
-            image_encoding=args.image_encoding, progress=not args.quiet, buffer_mb=args.buffer_mb,
+            image_encoding=args.image_encoding, raw_preview=False if args.no_raw_preview else None,
+            progress=not args.quiet, buffer_mb=args.buffer_mb,
         )
 
 
