@@ -32,6 +32,7 @@ import numpy as np
 from scipy import ndimage
 
 from thintact_sdk.blas import blas_threads
+from thintact_sdk.calibration.blemish import find_blemishes, ratio_map
 from thintact_sdk.calibration.classify import classify_scene, is_dark, is_slit
 from thintact_sdk.calibration.collect import SlitCollection, signal_of
 from thintact_sdk.calibration.ghost import GhostScan, find_ghosts
@@ -100,14 +101,15 @@ class Defect:
     ----------
     kind
         ``dust speck``, ``dim column``, ``bright column``, ``dim row``, ``bright row``,
-        ``column defect``, ``row defect``, ``ghost``.
+        ``column defect``, ``row defect``, ``ghost``, ``shading blemish``.
     row0, row1, col0, col1
         Sensor pixel bounds (inclusive-exclusive) of the affected area.
     centre
         ``(row, col)`` of its centre (sensor pixels).
     strength
-        χ² excess over the noise (hotspots), relative gain change (lines, e.g. −0.15) or the
-        ghost's brightness relative to the image (e.g. 0.08).
+        χ² excess over the noise (hotspots), relative gain change (lines, e.g. −0.15), the
+        ghost's brightness relative to the image (e.g. 0.08) or a shading blemish's depth
+        (fraction of the light it takes at its centre, e.g. 0.12).
     channels
         Channel names where it shows.
     offset_px
@@ -135,6 +137,8 @@ class Defect:
                     f"{self.note} at {100 * self.strength:.1f} % of its brightness")
         where = (f"sensor rows {self.row0}-{self.row1 - 1}, columns {self.col0}-{self.col1 - 1} "
                  f"(centre row {self.centre[0]:.0f}, column {self.centre[1]:.0f})")
+        if self.kind == "shading blemish":
+            return f"shading blemish at {where}: {100 * self.strength:.1f} % darker at its centre {self.note}"
         if self.kind.endswith(("column", "row")) and not self.kind.endswith("defect"):
             line = f"column {self.col0}" if self.kind.endswith("column") else f"row {self.row0}"
             return (f"{self.kind} at sensor {line}: {100 * self.strength:+.1f} % response "
@@ -244,6 +248,25 @@ def _hotspots(chi2_map: np.ndarray) -> list[Defect]:
         else:
             kind = "dust speck"
         out.append(Defect(kind, r0, r1, c0, c1, (sl[0].start + cy, sl[1].start + cx), peak))
+    return out
+
+
+def _blemishes(recording: Recording, collection: SlitCollection, sm: SystemMatrices, saturation: float,
+               noise: NoiseEstimate, defects: list[Defect], names: list[str]) -> list[Defect]:
+    """Soft shadows found in the flat and validation frames (:mod:`~thintact_sdk.calibration.blemish`)
+    as defects; one where a located dust speck already is adds its depth and width to it."""
+    frames = (_residual(recording, i, collection, sm, saturation)[1:] for i in collection.validation)
+    found = find_blemishes(ratio_map(frames, noise.variance, sm.sensor_shape))
+    out = []
+    for b in found:
+        note = f"(σ {b.sigma_px:.1f} px, {b.z:.0f} standard deviations; threshold {b.threshold_z:.1f})"
+        speck = next((d for d in defects if d.kind == "dust speck"
+                      and (d.centre[0] - b.row) ** 2 + (d.centre[1] - b.col) ** 2 <= (1.5 * b.sigma_px) ** 2), None)
+        if speck is not None:
+            speck.note = f"its shadow {100 * b.depth:.1f} % deep, σ {b.sigma_px:.1f} px"
+            continue
+        r0, r1, c0, c1 = b.bounds(sm.sensor_shape)
+        out.append(Defect("shading blemish", r0, r1, c0, c1, (b.row, b.col), b.depth, list(names), note=note))
     return out
 
 
@@ -465,4 +488,5 @@ def _assess(recording: Recording, collection: SlitCollection, sm: SystemMatrices
         defects.append(Defect("ghost", 0, shape[0], 0, shape[1], (shape[0] / 2, shape[1] / 2), g.strength,
                               names[:c], (g.rows, g.cols),
                               f"({g.rows * pitch:+.0f}, {g.cols * pitch:+.0f} um; {how})"))
+    defects += _blemishes(recording, collection, sm, saturation, noise, defects, names[:c])
     return HealthReport(slit_chi2, chi2_map, noise, defects, col_dev, row_dev, scans)

@@ -307,7 +307,7 @@ def _health_section(outcome: CalibrationOutcome, profile: Profile) -> list[str]:
             f"<li>{html.escape(d.describe())}</li>" for d in h.defects) + "</ul>")
     else:
         out.append("<p>No defect located: no structure beyond noise in the slit residuals, no dim or "
-                   "bright sensor line, no ghost.</p>")
+                   "bright sensor line, no ghost, no shading blemish in the flat and validation frames.</p>")
     if h.ghost_scans:
         out.append("<p>Ghost search: a faint displaced copy of the image is looked for in the slit frames "
                    "(not separable: the copy widens the slits' column/row space) and as an echo of the "

@@ -34,6 +34,8 @@ _DEFECT_FIX = {
     "bright column": "a sensor column responds too strongly: check for a hot column or stray light",
     "dim row": "a sensor row responds weakly: check for a shadow or a sensor row defect",
     "bright row": "a sensor row responds too strongly: check for a hot row or stray light",
+    "shading blemish": "a soft shadow (dust on the sensor's cover glass or on the mask): clean them at "
+                       "that spot, then calibrate again",
     "ghost": "a reflection doubles the image: check the mask-to-cover-glass gap for a reflective "
              "surface (add an anti-reflection coating or an absorbing spacer), then calibrate again",
 }
