@@ -17,10 +17,11 @@ from thintact_sdk.calibration.gauge import operator_error, term_errors
 from thintact_sdk.calibration.health import NoiseEstimate, assess
 from thintact_sdk.calibration.lowrank import DEFAULT_RANK
 from thintact_sdk.calibration.outcome import CalibrationOutcome
-from thintact_sdk.calibration.prediction import predict_validation
+from thintact_sdk.calibration.prediction import Prediction, predict_validation
 from thintact_sdk.calibration.registration import RegistrationResult
 from thintact_sdk.calibration.selection import select, validation_frames
 from thintact_sdk.calibration.solver import ChannelMatrices, Method, SolveReport, solve_channel
+from thintact_sdk.calibration.stages import STAGE_DIR, Checkpoints, StageLog, fingerprint
 from thintact_sdk.calibration.tau import TauCurve
 from thintact_sdk.calibration.validation import (
     DEFAULT_DECODER,
@@ -286,33 +287,64 @@ def calibrate_recording(
     """
     opts = options or CalibrationOptions()
     profile = recording.profile
-    if status:
-        status("reading slit frames")
-    collection = collect_slits(recording, rank=opts.rank, progress=progress, frame_gains=opts.frame_gains)
-    if status:
-        status("solving the system matrices (Algorithms 2-3)")
-    sm, reports = solve_matrices(collection, opts, profile)
+    out = Path(out_dir)
+    checkpoints = Checkpoints(out / STAGE_DIR, fingerprint(
+        Path(recording.root), profile.content_hash(),
+        {k: v for k, v in opts.__dict__.items()} | {"frames_averaged_resolved": _frames_averaged(recording, opts)}))
+    stage_names = ["slit frames and solve", "joint filter", "health", "decoder and tau"]
+    if opts.predict:
+        stage_names.append("prediction")
+    stage_names.append("bundle and report")
+    log = StageLog(stage_names, status)
     k = _frames_averaged(recording, opts)
-    bundle, tau_table = build_bundle(profile, sm, opts, k, source, collection.exposure_us, status)
-    if status:
-        status("checking the unit's health (slit residuals, noise, defects)")
-    health = assess(recording, collection, sm, k)
-    if status:
-        status("choosing the decoder and tau on the validation frames")
-    frames = validation_frames(recording, collection, profile.noise.saturation_dn)
-    selection = select(profile, bundle, frames, health.noise, decoder=opts.decoder, tau=opts.tau,
-                       simulated=_simulated_curve(tau_table))
-    selection.write_taus(bundle.meta)
-    bundle.meta["decoder"] = selection.decoder
+    with log.stage("slit frames and solve", "reading slit frames and solving the system matrices "
+                   "(Algorithms 2-3)") as st:
+        solved = checkpoints.load_solve()
+        if solved is not None:
+            collection, sm, reports = solved
+            st["resumed"] = True
+        else:
+            collection = collect_slits(recording, rank=opts.rank, progress=progress,
+                                       frame_gains=opts.frame_gains)
+            sm, reports = solve_matrices(collection, opts, profile)
+            checkpoints.save_solve(collection, sm, reports)
+    with log.stage("joint filter", "training the joint filter") as st:
+        trained = checkpoints.load_filter()
+        if trained is not None:
+            jf, tau_table, tau0 = trained
+            bundle = CalibrationBundle.create(profile, sm, jf, tau=tau0, source=source,
+                                              exposure_us=collection.exposure_us)
+            st["resumed"] = True
+        else:
+            bundle, tau_table = build_bundle(profile, sm, opts, k, source, collection.exposure_us)
+            checkpoints.save_filter(bundle.filter, tau_table, float(bundle.meta["tau"]))
+    with log.stage("health", "checking the unit's health (slit residuals, noise, defects)"):
+        health = assess(recording, collection, sm, k)
+    with log.stage("decoder and tau", "choosing the decoder and tau on the validation frames"):
+        frames = validation_frames(recording, collection, profile.noise.saturation_dn)
+        selection = select(profile, bundle, frames, health.noise, decoder=opts.decoder, tau=opts.tau,
+                           simulated=_simulated_curve(tau_table))
+        selection.write_taus(bundle.meta)
+        bundle.meta["decoder"] = selection.decoder
     val = selection.validation
     prediction = None
-    if opts.predict and frames.labels:
-        if status:
-            status("predicting what this design should reach")
-        prediction = predict_validation(
-            profile, sm, frames.labels, frames.truths, selection.decoder, k,
-            filter_steps=opts.filter_steps, filter_scenes=opts.filter_scenes, method=opts.method,
-            max_iter=opts.max_iter, tol=opts.tol, rank=opts.rank)
+    if opts.predict:
+        with log.stage("prediction", "predicting what this design should reach") as st:
+            if frames.labels:
+                stored = checkpoints.load_json("prediction")
+                if stored is not None and stored.get("decoder") == selection.decoder:
+                    prediction = Prediction(dict(stored["psnr_db"]), list(stored["gains_dn_per_unit"]),
+                                            float(stored["tau"]), dict(stored["notes"]))
+                    st["resumed"] = True
+                else:
+                    prediction = predict_validation(
+                        profile, sm, frames.labels, frames.truths, selection.decoder, k,
+                        filter_steps=opts.filter_steps, filter_scenes=opts.filter_scenes,
+                        method=opts.method, max_iter=opts.max_iter, tol=opts.tol, rank=opts.rank)
+                    checkpoints.save_json("prediction", {
+                        "decoder": selection.decoder, "psnr_db": prediction.psnr_db,
+                        "gains_dn_per_unit": prediction.gains_dn_per_unit, "tau": prediction.tau,
+                        "notes": prediction.notes})
     lim = limits_of(profile)
     # the unit against its design, both with plain Tikhonov (``TauSelection.verdict_validation``)
     verdict = judge(selection.verdict_validation, prediction, health, lim, registration)
@@ -369,19 +401,23 @@ def calibrate_recording(
         metrics["reference"] = ref_info
     if not val:
         metrics["warning"] = "the recording has no validation frames (scenes that are neither dark nor slits)"
-    bundle.meta["metrics"] = metrics
     bundle.meta["recording"] = str(recording.root)
-    out = Path(out_dir)
+    with log.stage("bundle and report", "writing the bundle and its report"):
+        metrics["stages"] = log.to_json()  # this stage's own entry is added below
+        bundle.meta["metrics"] = metrics
+        outcome = CalibrationOutcome(bundle, out, reports, collection, val, passed, registration, ref_info,
+                                     tau_table, selection, health, prediction, verdict)
+        if report:
+            from thintact_sdk.calibration.report import write_report
+
+            out.mkdir(parents=True, exist_ok=True)
+            write_report(outcome, profile, out / "report.html")
+    metrics["stages"] = log.to_json()
     try:
-        bundle.save(out)
+        bundle.save(out)  # calibration.json last: its presence marks the bundle finished
     except OSError as err:
         raise CalibrationError(f"cannot write the calibration bundle to {out}: {err}") from None
-    outcome = CalibrationOutcome(bundle, out, reports, collection, val, passed, registration, ref_info,
-                                 tau_table, selection, health, prediction, verdict)
-    if report:
-        from thintact_sdk.calibration.report import write_report
-
-        write_report(outcome, profile, out / "report.html")
+    checkpoints.remove()
     return outcome
 
 
