@@ -394,6 +394,14 @@ def write_report(outcome: CalibrationOutcome, profile: Profile, path: str | Path
         parts.append("<h2>Saturation</h2>")
         parts.append(_table([[k, f"{100 * v:.3f} %"] for k, v in metrics["saturated_frames"].items()],
                             ["frame", "saturated pixels"]))
+    if metrics.get("stages"):
+        parts.append("<h2>Stages: time and memory</h2>")
+        parts.append("<p>Wall time of each stage after the capture and the process's peak resident "
+                     "memory at its end (the bundle's own writing, this report included, is in "
+                     "calibration.json). A resumed stage was loaded from its checkpoint.</p>")
+        parts.append(_table([[s_["stage"], f"{s_['seconds']:.1f}", f"{s_['peak_rss_mib']:.0f}",
+                              "yes" if s_.get("resumed") else ""] for s_ in metrics["stages"]],
+                            ["stage", "wall time (s)", "peak memory (MiB)", "resumed"]))
     parts.append("</body></html>")
     p = Path(path)
     p.write_text("\n".join(parts), encoding="utf-8")
