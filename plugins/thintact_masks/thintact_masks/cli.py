@@ -106,6 +106,19 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_force_argument(d, "over an existing --out file")
     d.set_defaults(func=run_design)
 
+    im = msub.add_parser("import", help="read a mask drawn elsewhere (PNG, CSV, NPY) into a design file",
+                         description="A K x K pattern (open cells bright unless --open-dark; a drawing "
+                         "with several pixels per cell needs --K) or two +-1 vectors (phi, phi_rows) "
+                         "become phi and phi_rows, checked against the SDK's convention (open where "
+                         "phi_rows[i]*phi[j] = +1); a pattern that is not separable is refused.")
+    im.add_argument("pattern", type=Path, metavar="PATTERN.(png|csv|npy)")
+    im.add_argument("--feature-um", type=positive_float, required=True, help="mask cell side, um, > 0")
+    im.add_argument("--K", type=positive_int, help="cells per side of a drawing with several pixels per cell")
+    im.add_argument("--open-dark", action="store_true", help="open (transparent) cells are the dark ones")
+    im.add_argument("--out", required=True, metavar="DESIGN.json")
+    add_force_argument(im, "over an existing --out file")
+    im.set_defaults(func=run_import)
+
     a = msub.add_parser("apply", help="write a copy of a profile that uses a design's phi")
     a.add_argument("design", metavar="DESIGN.json")
     a.add_argument("--profile", required=True)
@@ -252,6 +265,25 @@ def run_design(args: argparse.Namespace) -> int:
     mask = designer.design(args.K, args.feature_um, seed=args.seed)
     path = write_json_atomic(out, design_record(mask))
     print(f"{path}: {args.kind} design, K={mask.K}, feature {mask.feature_um} um")
+    return 0
+
+
+def run_import(args: argparse.Namespace) -> int:
+    _plugin()
+    import numpy as np
+
+    from thintact_masks.design_io import design_record, write_json_atomic
+    from thintact_masks.mask_import import import_pattern
+    from thintact_sdk.interfaces import Mask
+
+    out = claim_output(args.out, "file", force=args.force, inputs=(args.pattern,))
+    phi, phi_rows = import_pattern(args.pattern, args.K, args.open_dark)
+    mask = Mask(phi=phi, feature_um=float(args.feature_um), phi_rows=phi_rows, design="imported",
+                provenance={"source": args.pattern.name})
+    path = write_json_atomic(out, design_record(mask))
+    shared = " (rows and columns share one sequence: see docs/calibration.md, pose ambiguities)" \
+        if np.array_equal(phi, phi_rows) or np.array_equal(phi, phi_rows[::-1]) else ""
+    print(f"{path}: imported design, K={mask.K}, feature {mask.feature_um} um{shared}")
     return 0
 
 
