@@ -1,0 +1,171 @@
+#!/usr/bin/env python
+"""Time and memory of each calibration stage on the paper's design, at the paper's size or a
+fraction of it (issue 36).
+
+Renders a slit-scan recording of ``thintact-paper`` (its mask and geometry; virtual camera
+and display; one frame per pattern, the profile's noise) with the sensor and the scene both
+divided by ``--scale`` per axis (1: the paper's 1024 × 1280 sensor and 400 × 512 scene, every
+pattern of the wizard's plan), then runs ``calibrate_recording`` on it in a child process and
+reads the per-stage wall time and peak memory the calibration writes (``metrics.stages``) and
+the child's own peak resident memory (``VmHWM``). ``--baseline`` runs a second child with the
+design prediction's slits imaged by a forward pass of the simulator per slit (the code before
+issue 36), in the same invocation, so the two are compared on the same host load.
+
+Usage::
+
+    python tools/bench_calibration_paper.py --out /tmp/bench --scale 4 --baseline
+    python tools/bench_calibration_paper.py --out /tmp/bench --scale 2 --docs docs/calibration.md
+
+With ``--docs`` the table replaces the text between the markers
+``<!-- bench_calibration_paper -->`` and ``<!-- /bench_calibration_paper -->`` of that file
+(appended when absent). Prints the table; exit status 0.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+MARK_OPEN, MARK_CLOSE = "<!-- bench_calibration_paper -->", "<!-- /bench_calibration_paper -->"
+
+
+def _profile(scale: int) -> Any:
+    from thintact_sdk.profile import Profile, load_profile
+
+    d = load_profile("thintact-paper").contract_dict()
+    d["name"] = f"thintact-paper-div{scale}"
+    d["sensor"]["rows"], d["sensor"]["cols"] = 1024 // scale, 1280 // scale
+    d["scene"] = {"rows": 400 // scale, "cols": 512 // scale, "pixel_pitch_um": 31.5}
+    d["display"] = {"plugin": "virtual", "pixel_pitch_um": 31.5, "settle_s": 0.0}
+    d["camera"] = {"plugin": "virtual", "settings": {}}
+    return Profile.model_validate(d)
+
+
+def render(out: Path, scale: int) -> float:
+    """Write the recording (every pattern of the wizard's plan) into ``out``; seconds taken."""
+    from thintact_sdk.calibration.plan import build_plan
+    from thintact_sdk.imaging.noise import signal_to_dn
+    from thintact_sdk.imaging.simulator import Simulator
+    from thintact_sdk.recording import RecordingWriter
+
+    prof = _profile(scale)
+    sim = Simulator(prof)
+    g = sim.reference_gain()
+    gains = [g, 0.93 * g, 0.82 * g]
+    rng = np.random.default_rng(0)
+    writer = RecordingWriter(out, prof)
+    plan = build_plan(prof)
+    t = time.monotonic()
+    for k, step in enumerate(plan, start=1):
+        x = step.make()
+        x3 = x if x.ndim == 3 else np.repeat(x[..., None], 3, axis=-1)
+        dn = signal_to_dn(sim.predict_signal_dn(x3.astype(np.float64), gains), prof.noise, rng)
+        writer.add(dn.astype(np.float32), x, label=step.label, kind=step.kind, frames=1, exposure_us=10000.0)
+        if k % 50 == 0 or k == len(plan):
+            print(f"  rendered {k}/{len(plan)} patterns ({time.monotonic() - t:.0f} s)", file=sys.stderr, flush=True)
+    return time.monotonic() - t
+
+
+def child(rec: Path, out: Path, baseline: bool, result: Path) -> None:
+    """Calibrate ``rec`` into ``out`` and write the stages and figures to ``result`` (JSON)."""
+    from thintact_sdk.calibration import prediction
+    from thintact_sdk.calibration.pipeline import CalibrationOptions, calibrate_recording
+    from thintact_sdk.recording import Recording
+
+    if baseline:
+        prediction.slit_factors = lambda sim, channels: None  # type: ignore[assignment]
+    t = time.monotonic()
+    o = calibrate_recording(Recording(rec), out, CalibrationOptions(),
+                            status=lambda s: print("  " + s, file=sys.stderr, flush=True))
+    m = o.bundle.meta["metrics"]
+    with open("/proc/self/status") as f:
+        peak = next(int(line.split()[1]) for line in f if line.startswith("VmHWM:")) / 2**20
+    result.write_text(json.dumps({
+        "seconds": time.monotonic() - t, "peak_gib": peak, "stages": m["stages"],
+        "psnr_db": m["psnr_db"], "predicted_psnr_db": m["predicted_psnr_db"]}))
+
+
+def _run_child(rec: Path, out: Path, baseline: bool) -> dict[str, Any]:
+    result = out.with_suffix(".json")
+    cmd = [sys.executable, __file__, "--child", str(rec), str(out), str(result)] + (["--baseline"] if baseline else [])
+    subprocess.run(cmd, check=True)
+    return dict(json.loads(result.read_text()))
+
+
+def _host() -> str:
+    name = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                name = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return f"{name}, {os.cpu_count()} cores"
+
+
+def table(scale: int, runs: dict[str, dict[str, Any]], render_s: float, load: tuple[float, float]) -> str:
+    names = list(next(iter(runs.values()))["stages"][i]["stage"] for i in range(len(next(iter(runs.values()))["stages"])))
+    head = "| stage | " + " | ".join(f"{k}: s (peak MiB)" for k in runs) + " |\n|---|" + "---|" * len(runs) + "\n"
+    rows = []
+    for i, name in enumerate(names):
+        cells = [f"{r['stages'][i]['seconds']:.1f} ({r['stages'][i]['peak_rss_mib']:.0f})" for r in runs.values()]
+        rows.append(f"| {name} | " + " | ".join(cells) + " |")
+    rows.append("| **total** | " + " | ".join(f"**{r['seconds']:.1f}** ({1024 * r['peak_gib']:.0f})" for r in runs.values()) + " |")
+    figures = []
+    for k, r in runs.items():
+        pred = r["predicted_psnr_db"] or {}
+        figures.append(f"{k}: held-out mean {np.mean(list(r['psnr_db'].values())):.3f} dB, "
+                       f"predicted mean {np.mean(list(pred.values())) if pred else float('nan'):.3f} dB")
+    return (f"Sensor {1024 // scale} × {1280 // scale}, scene {400 // scale} × {512 // scale} "
+            f"(the paper's divided by {scale} per axis), {400 // scale + 512 // scale} slits, one frame per "
+            f"pattern; recording rendered in {render_s:.0f} s. Host: {_host()}; load average "
+            f"{load[0]:.1f} before, {load[1]:.1f} after.\n\n" + head + "\n".join(rows) + "\n\n"
+            + "; ".join(figures) + ".\n")
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--out", type=Path, help="working directory (recording and bundles)")
+    ap.add_argument("--scale", type=int, default=4, help="divide the paper's sensor and scene by this per axis")
+    ap.add_argument("--baseline", action="store_true", help="also run the pre-issue-36 prediction slits")
+    ap.add_argument("--docs", type=Path, help="write the table into this markdown file between the markers")
+    ap.add_argument("--child", nargs=3, metavar=("REC", "OUT", "RESULT"), help=argparse.SUPPRESS)
+    a = ap.parse_args()
+    if a.child:
+        child(Path(a.child[0]), Path(a.child[1]), a.baseline, Path(a.child[2]))
+        return 0
+    if a.out is None or a.scale < 1 or 400 % a.scale or 512 % a.scale or 1024 % a.scale or 1280 % a.scale:
+        print("--out is needed, and --scale must divide 400, 512, 1024 and 1280", file=sys.stderr)
+        return 2
+    a.out.mkdir(parents=True, exist_ok=True)
+    rec = a.out / f"rec_div{a.scale}"
+    render_s = 0.0 if (rec / "manifest.json").is_file() else render(rec, a.scale)
+    load0 = os.getloadavg()[0]
+    runs = {"this code": _run_child(rec, a.out / f"cal_div{a.scale}", False)}
+    if a.baseline:
+        runs["baseline prediction"] = _run_child(rec, a.out / f"cal_div{a.scale}_base", True)
+    text = table(a.scale, runs, render_s, (load0, os.getloadavg()[0]))
+    print(text)
+    if a.docs is not None:
+        doc = a.docs.read_text(encoding="utf-8")
+        block = f"{MARK_OPEN}\n{text}{MARK_CLOSE}"
+        if MARK_OPEN in doc and MARK_CLOSE in doc:
+            doc = doc[: doc.index(MARK_OPEN)] + block + doc[doc.index(MARK_CLOSE) + len(MARK_CLOSE):]
+        else:
+            doc = doc.rstrip("\n") + "\n\n" + block + "\n"
+        a.docs.write_text(doc, encoding="utf-8")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
