@@ -54,6 +54,26 @@ def test_pattern_that_is_not_on_the_mask_is_unsure() -> None:
     assert not est.confident and any("not clearly found" in p for p in est.problems)
 
 
+def test_cli_unsure_pose_exits_3_unless_accepted(tmp_path, capsys) -> None:  # type: ignore[no-untyped-def]
+    from thintact_sdk.cli.main import main
+    from thintact_sdk.profile import write_profile
+
+    nominal = nominal_profile(96, 120)
+    write_profile(nominal, tmp_path / "nominal.json")
+    d = nominal.contract_dict()
+    d["mask"]["phi"] = list(reversed(d["mask"]["phi"]))[::2] + d["mask"]["phi"][1::2]  # another pattern
+    foreign = type(nominal).model_validate(d)
+    flat = flat_field(truth_profile(foreign, ConcealedCase(Orientation(), 0.0, 0.0, 0.0, 1.0)), None)
+    np.save(tmp_path / "flat.npy", flat + nominal.noise.black_level_dn)
+    args = ["calibrate-pose", str(tmp_path / "flat.npy"), "--profile", str(tmp_path / "nominal.json"),
+            "--out", str(tmp_path / "posed.json"), "--unknown", "none", "--quiet"]
+    assert main(args) == 3 and not (tmp_path / "posed.json").exists()
+    captured = capsys.readouterr()
+    assert "runner-up:" in captured.out and "UNSURE" in captured.err
+    assert main([*args, "--accept-ambiguous", "--report", str(tmp_path / "r.json")]) == 0
+    assert (tmp_path / "posed.json").is_file() and (tmp_path / "r.json").is_file()
+
+
 def test_shared_sequence_names_the_design_ambiguity() -> None:
     case = ConcealedCase(Orientation.turned(2), 0.4, 150.0, 90.0, 1.0)
     est, verdict, _ = _run(case, seed=2, shared=True, rows=96, cols=120)
