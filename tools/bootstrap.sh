@@ -22,7 +22,9 @@ if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
   echo "[bootstrap] installing the SDK, its plugins and dev tools (pinned by constraints.txt)"
   args=(-e ".[genicam,display,dev,ray,live]")
   for d in plugins/*/; do
-    [ -f "$d/pyproject.toml" ] && args+=(-e "$d")
+    extra=""
+    grep -q '^dxf = ' "$d/pyproject.toml" 2>/dev/null && extra="[dxf]"  # thintact_masks: DXF import
+    [ -f "$d/pyproject.toml" ] && args+=(-e "${d%/}$extra")
   done
   .venv/bin/python -m pip install --disable-pip-version-check -q -c constraints.txt "${args[@]}"
   echo "$want" > "$stamp"

@@ -106,15 +106,19 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_force_argument(d, "over an existing --out file")
     d.set_defaults(func=run_design)
 
-    im = msub.add_parser("import", help="read a mask drawn elsewhere (PNG, CSV, NPY) into a design file",
+    im = msub.add_parser("import", help="read a mask drawn elsewhere (PNG, DXF, CSV, NPY) into a design file",
                          description="A K x K pattern (open cells bright unless --open-dark; a drawing "
-                         "with several pixels per cell needs --K) or two +-1 vectors (phi, phi_rows) "
+                         "with several pixels per cell needs --K), a DXF drawing (closed polylines, "
+                         "solids or hatches are the open cells unless --open-dark; K from --K or the "
+                         "drawing's units and --feature-um) or two +-1 vectors (phi, phi_rows) "
                          "become phi and phi_rows, checked against the SDK's convention (open where "
                          "phi_rows[i]*phi[j] = +1); a pattern that is not separable is refused.")
-    im.add_argument("pattern", type=Path, metavar="PATTERN.(png|csv|npy)")
+    im.add_argument("pattern", type=Path, metavar="PATTERN.(png|dxf|csv|npy)")
     im.add_argument("--feature-um", type=positive_float, required=True, help="mask cell side, um, > 0")
     im.add_argument("--K", type=positive_int, help="cells per side of a drawing with several pixels per cell")
-    im.add_argument("--open-dark", action="store_true", help="open (transparent) cells are the dark ones")
+    im.add_argument("--open-dark", action="store_true", help="open (transparent) cells are the dark ones "
+                    "(DXF: the drawn shapes are the closed cells)")
+    im.add_argument("--layer", help="DXF: read this layer only (default: every layer)")
     im.add_argument("--out", required=True, metavar="DESIGN.json")
     add_force_argument(im, "over an existing --out file")
     im.set_defaults(func=run_import)
@@ -277,7 +281,7 @@ def run_import(args: argparse.Namespace) -> int:
     from thintact_sdk.interfaces import Mask
 
     out = claim_output(args.out, "file", force=args.force, inputs=(args.pattern,))
-    phi, phi_rows = import_pattern(args.pattern, args.K, args.open_dark)
+    phi, phi_rows = import_pattern(args.pattern, args.K, args.open_dark, args.feature_um, args.layer)
     mask = Mask(phi=phi, feature_um=float(args.feature_um), phi_rows=phi_rows, design="imported",
                 provenance={"source": args.pattern.name})
     path = write_json_atomic(out, design_record(mask))
@@ -285,6 +289,41 @@ def run_import(args: argparse.Namespace) -> int:
         if np.array_equal(phi, phi_rows) or np.array_equal(phi, phi_rows[::-1]) else ""
     print(f"{path}: imported design, K={mask.K}, feature {mask.feature_um} um{shared}")
     return 0
+
+
+def _profile_source(name_or_path: str) -> Path | None:
+    """The YAML file a profile argument names (a path, or a profile on the search path)."""
+    from thintact_sdk.profile import available_profiles
+
+    p = Path(name_or_path)
+    src = p if p.is_file() else available_profiles().get(str(name_or_path))
+    return src if src is not None and src.suffix.lower() in (".yaml", ".yml") else None
+
+
+def _write_keeping_text(name_or_path: str, new: Any, mask: dict[str, Any], out: Path) -> Path | None:
+    """Write ``new`` as the source YAML with only its mask section replaced (comments and
+    layout kept, phi in flow style); None when the source or ``out`` is not YAML or the
+    edit does not give back ``new`` (the caller then writes the profile afresh)."""
+    from thintact_masks.profile_text import replace_mask_section
+    from thintact_sdk import yaml_safe
+    from thintact_sdk.profile import profile_from_dict
+
+    src = _profile_source(name_or_path)
+    if src is None or Path(out).suffix.lower() == ".json":
+        return None
+    text = replace_mask_section(src.read_text(encoding="utf-8"), mask)
+    if text is None:
+        return None
+    try:
+        check = profile_from_dict(yaml_safe.load(text), where=str(out))
+    except Exception:  # noqa: BLE001 - any failure: fall back to a fresh, validated write
+        return None
+    if check.contract_dict() != new.contract_dict():
+        return None
+    path = Path(out)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(text, encoding="utf-8")
+    return path
 
 
 def run_apply(args: argparse.Namespace) -> int:
@@ -303,7 +342,7 @@ def run_apply(args: argparse.Namespace) -> int:
     if mask.phi_rows is not None:
         d["mask"]["phi_rows"] = [int(v) for v in mask.phi_rows]
     new = profile_from_dict(d, where=str(out))
-    path = write_profile(new, out)
+    path = _write_keeping_text(args.profile, new, d["mask"], out) or write_profile(new, out)
     if rec.get("scale", 1.0) != 1.0:
         print(f"warning: {args.design} was optimised on a device scaled by {rec['scale']}")
     print(f"{path}: profile {new.name!r} with the {mask.design} mask (K={mask.K})")
