@@ -298,3 +298,19 @@ def test_screened_refraction_is_never_named_as_an_unscreened_stand_in(concealed_
     report = diagnose(data, options=DiagnoseOptions(candidates=["geometry", "refraction"], max_effects=1)).report
     assert report["findings"][0]["effect"] == "refraction"
     assert all("was not screened on this device" not in f["evidence"] for f in report["findings"])
+
+
+def test_refraction_is_screened_on_the_wide_device():
+    """The wide device (128×160 at 40 um → 50×64 at 126 um, z 4.8, d 1 mm; air angles to 77°):
+    refraction's one-axis family is far above the screening limit, but its kernel is built
+    block by block in bounded memory, so refraction is screened, not held."""
+    from tests.masks.mask_profiles import make_profile
+    from thintact_sdk.imaging import sim_refracted
+    from thintact_sdk.imaging.sim_params import kernel_params
+    from thintact_sdk.physics import resolve_physics
+
+    wide = make_profile(rows=128, cols=160, n=50, m=64, K=127)
+    kp = kernel_params(wide, resolve_physics({"refraction": {"n_scene_side": 1.41}}))
+    assert sim_refracted.refracted_family_bytes(kp) > 256 * 1024**2
+    lim = screening_limits(wide)
+    assert "refraction" not in lim.held and "refraction" not in lim.dropped

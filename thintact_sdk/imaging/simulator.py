@@ -40,7 +40,7 @@ from typing import Any, TypeAlias, TypeVar, overload
 import numpy as np
 
 from thintact_sdk.errors import ThinTactError
-from thintact_sdk.imaging import sim_refracted, sim_rotated, sim_tiled
+from thintact_sdk.imaging import sim_refracted, sim_refracted_blocked, sim_rotated, sim_tiled
 from thintact_sdk.imaging.build_threads import per_channel_by_wavelength
 from thintact_sdk.imaging.sim_axis import mask_cell_edges_mm
 from thintact_sdk.imaging.sim_direct import DirectKernel, build_direct_kernel
@@ -278,13 +278,17 @@ def get_kernel(kp: KernelParams) -> ImagingKernel:
     return _cache_put(kp, build_direct_kernel(kp))
 
 
-def _separable_kernel(kp: KernelParams) -> SeparableKernel | TiledKernel:
+def _separable_kernel(kp: KernelParams) -> ImagingKernel:
     hit = _cache_get(kp)
-    if isinstance(hit, SeparableKernel | TiledKernel):
+    if isinstance(hit, SeparableKernel | TiledKernel) or (isinstance(hit, DirectKernel) and kp.n_scene_side != 1.0):
         return hit
+    if sim_refracted_blocked.blocked_wanted(kp):  # a wide refracting device: filled block by block
+        return _cache_put(kp, sim_refracted_blocked.build_blocked_refracted_kernel(kp))
     if kp.wavelengths_nm is None and kp.leakage != 0.0:
         # geometric leakage only rescales the open and coding halves: reuse the t = 0 kernel
-        kern = _rescaled_for_leakage(_separable_kernel(replace(kp, leakage=0.0)), kp.leakage)
+        base = _separable_kernel(replace(kp, leakage=0.0))
+        assert not isinstance(base, DirectKernel)  # the blocked refracted kernel carries its leakage
+        kern = _rescaled_for_leakage(base, kp.leakage)
     else:
         kern = build_separable_kernel(kp)
     return _cache_put(kp, kern)
