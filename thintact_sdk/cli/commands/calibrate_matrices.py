@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import Any
 
 from thintact_sdk.cli.argtypes import non_negative_int, positive_float
 from thintact_sdk.cli.output_path import add_force_argument, claim_output, file_input
@@ -39,7 +40,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run_import(args: argparse.Namespace) -> int:
     from thintact_sdk.calibration.matrices_io import import_matrices
-    from thintact_sdk.calibration.pipeline import CalibrationOptions, bundle_from_matrices
     from thintact_sdk.profile import load_profile
     from thintact_sdk.recording import Recording
 
@@ -48,13 +48,22 @@ def run_import(args: argparse.Namespace) -> int:
     profile = load_profile(args.profile)
     sm = import_matrices(args.matrices, profile)
     rec = Recording(args.recording) if args.recording else None
+    print(f"imported {sm.meta['model']} matrices from {args.matrices}")
+    write_bundle(profile, sm, args, rec)
+    return 0
+
+
+def write_bundle(profile: Any, sm: Any, args: argparse.Namespace, rec: Any) -> Any:
+    """Filter training, τ and decoder choice and the bundle at ``args.out`` around matrices
+    made elsewhere (``calibrate-import``, ``calibrate-direct``); prints where it went."""
+    from thintact_sdk.calibration.pipeline import CalibrationOptions, bundle_from_matrices
+
     bundle = bundle_from_matrices(profile, sm, args.out,
                                   CalibrationOptions(tau=args.tau, filter_steps=args.filter_steps), rec)
     sel = bundle.meta["metrics"].get("tau_selection", {})
-    print(f"imported {sm.meta['model']} matrices from {args.matrices}")
     print(f"calibration bundle: {args.out} (decoder {bundle.meta.get('decoder', 'thintact-noniterative')}, "
           f"tau {bundle.tau:.4g} DN², {sel.get('criterion')})")
-    return 0
+    return bundle
 
 
 def run_export(args: argparse.Namespace) -> int:
