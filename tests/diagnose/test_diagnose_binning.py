@@ -300,17 +300,40 @@ def test_screened_refraction_is_never_named_as_an_unscreened_stand_in(concealed_
     assert all("was not screened on this device" not in f["evidence"] for f in report["findings"])
 
 
-def test_refraction_is_screened_on_the_wide_device():
+
+def test_refraction_is_held_on_the_wide_device_where_a_fit_would_rebuild_it():
     """The wide device (128×160 at 40 um → 50×64 at 126 um, z 4.8, d 1 mm; air angles to 77°):
-    refraction's one-axis family is far above the screening limit, but its kernel is built
-    block by block in bounded memory, so refraction is screened, not held."""
+    refraction's one-axis family is far above the screening limit. The simulator can build it
+    block by block for ``simulate``, but a fit rebuilds the kernel at every step, so the
+    diagnosis drops it and names it beside a geometry finding it could stand behind."""
     from tests.masks.mask_profiles import make_profile
-    from thintact_sdk.imaging import sim_refracted
-    from thintact_sdk.imaging.sim_params import kernel_params
-    from thintact_sdk.physics import resolve_physics
 
     wide = make_profile(rows=128, cols=160, n=50, m=64, K=127)
     kp = kernel_params(wide, resolve_physics({"refraction": {"n_scene_side": 1.41}}))
+    from thintact_sdk.imaging import sim_refracted
+
     assert sim_refracted.refracted_family_bytes(kp) > 256 * 1024**2
     lim = screening_limits(wide)
-    assert "refraction" not in lim.held and "refraction" not in lim.dropped
+    assert "refraction" in lim.dropped and "refraction" in lim.not_screened
+
+
+def test_cli_names_unscreened_refraction_at_every_size(tmp_path: Path,
+                                                        monkeypatch: pytest.MonkeyPatch) -> None:
+    """Issue 34: without binning too (a wide field of view), an effect out of reach is not
+    screened, report.json says so (``not_screened``), and a geometry finding that shortens the
+    scene gap enough to imply n ≥ 1.1 names refraction among its alternatives with that index."""
+    from thintact_sdk.cli.main import main
+    from thintact_sdk.diagnose import binning
+
+    monkeypatch.setattr(binning, "DIAGNOSIS_FAMILY_BYTES", 1024.0)  # out of reach, as on a wide device
+    prof = _device(32, 48)
+    _write_recording(prof, {"geometry": {"scene_to_mask_mm": 1.2 / 1.41}}, tmp_path / "rec")
+    rc = main(["diagnose", str(tmp_path / "rec"), "--out", str(tmp_path / "o"), "--quiet",
+               "--bin", "1", "--max-effects", "1"])
+    assert rc == 0
+    rep = json.loads((tmp_path / "o" / "report.json").read_text())
+    assert "binned" not in rep and "refraction" in rep["not_screened"]
+    f = rep["findings"][0]
+    assert f["effect"] == "geometry" and "refraction" in f["alternatives"]
+    said = re.search(r"refraction \{'n_scene_side': ([0-9.]+)\} would look the same", f["evidence"])
+    assert said is not None and 1.3 < float(said.group(1)) < 1.5

@@ -156,11 +156,13 @@ class ScreeningLimits:
 def screening_limits(profile: Profile, limit_bytes: float | None = None) -> ScreeningLimits:
     """The fit parameters whose kernels need tabulated families above ``limit_bytes`` on
     this device: the rotated mask's displacement family and refraction's ``D²`` family grow
-    with the sensor's and the scene's extent, not with binning alone. Their parameters are
+    with the sensor's and the scene's extent, not with binning alone. (The simulator can still
+    build a wide device's refraction block by block for ``simulate``, but a fit rebuilds the
+    kernel at every step, so the diagnosis holds it instead.) Their parameters are
     held at the null value; the rest of the effect (a mask shift) is still screened
     (``limit_bytes`` default: :data:`DIAGNOSIS_FAMILY_BYTES`)."""
     from thintact_sdk.diagnose.candidates import CANDIDATES
-    from thintact_sdk.imaging import sim_refracted, sim_refracted_blocked, sim_rotated
+    from thintact_sdk.imaging import sim_refracted, sim_rotated
     from thintact_sdk.imaging.sim_params import kernel_params
     from thintact_sdk.imaging.simulator import _expansion
     from thintact_sdk.physics import resolve_physics
@@ -178,9 +180,6 @@ def screening_limits(profile: Profile, limit_bytes: float | None = None) -> Scre
             size = sim_rotated.rotated_family_bytes(kp, _expansion(kp).rank)
         else:
             size = sim_refracted.refracted_family_bytes(kp)
-            if size > limit and sim_refracted_blocked.blocked_wanted(kp) \
-                    and sim_refracted_blocked.dense_bytes(kp) <= sim_refracted_blocked.DENSE_MAX_BYTES:
-                continue  # built block by block, in bounded memory: screened
         if size <= limit:
             continue
         reason = (f"its kernel family at {probe[name]} would be {size / 1024**2:.0f} MiB "

@@ -406,7 +406,7 @@ def _diagnose(
 def _name_unscreened_stand_ins(finding: dict[str, Any], rnd: Round, held: dict[str, tuple[int, ...]],
                                device: Profile) -> None:
     """Name, among ``finding``'s alternatives, each effect the diagnosis could not screen on
-    this device (every fit parameter held: ``binned.not_screened``) for which this finding
+    this device (every fit parameter held: ``not_screened`` in report.json, under ``binned`` when binned) for which this finding
     is a plausible stand-in (its :class:`~thintact_sdk.physics.Proxy` points at it from here,
     e.g. a much shorter scene gap at the paper's size, where refraction is out of reach: near
     the axis the two look alike). The recording was never compared with it, so the evidence
@@ -423,7 +423,7 @@ def _name_unscreened_stand_ins(finding: dict[str, Any], rnd: Round, held: dict[s
         params = cand.to_params(start, device)
         finding["evidence"] += (
             f" {name} was not screened on this device (its kernel is out of reach at this size, "
-            f"report.json binned.not_screened), and near the axis {name} {params} would look the "
+            f"report.json not_screened), and near the axis {name} {params} would look the "
             "same as this finding: the recording cannot tell them apart here. "
             + tell_apart(rnd.name, name, f"on this device only a measured gap would, {name} being out of reach here."))
 

@@ -95,21 +95,23 @@ def run(args: argparse.Namespace) -> int:
         con.print(f"diagnosing the sensor binned {b}×{b}: {data.profile.sensor.rows}×"
                   f"{data.profile.sensor.cols} pixels of {data.profile.sensor.pixel_pitch_um:g} um")
     opts = DiagnoseOptions(sys_frac=args.sys_frac, time_budget_s=args.time_budget, max_effects=args.max_effects)
-    skipped: dict[str, str] = {}
-    if b > 1:
-        limits = screening_limits(data.profile)
-        skipped = limits.not_screened
+    # at every size: an effect whose kernel family is out of reach is held or dropped, and a
+    # finding it could stand behind names it (a wide field of view needs this unbinned too)
+    limits = screening_limits(data.profile)
+    skipped: dict[str, str] = limits.not_screened
+    if skipped:
         opts.candidates = [c for c in known_candidates(data.profile) if c not in limits.dropped]
         opts.held_params = limits.held
+    if b > 1:
         opts.fine_amplitude = unbinned_amplitude_fn(full_data, sys_frac=args.sys_frac)
         if args.unbinned_check:
             opts.unbinned = UnbinnedInput(full_data, b, simulate=simulate_float32)
         if args.coarse_angle and "angle_deg" in limits.held.get("mask_misalignment", ()):
             opts.coarse_angle = CoarseAngleInput(full_data, b, simulate=simulate_float32)
-        for name, why in skipped.items():
-            later = " (fitted on coarser blocks after the selection)" if opts.coarse_angle is not None \
-                and name == "mask_misalignment.angle_deg" else ""
-            con.print(f"not screened here: {name} ({why}){later}")
+    for name, why in skipped.items():
+        later = " (fitted on coarser blocks after the selection)" if opts.coarse_angle is not None \
+            and name == "mask_misalignment.angle_deg" else ""
+        con.print(f"not screened here: {name} ({why}){later}")
     with con.status("diagnosing...") as status:
         d = diagnose(data, variance_fn=binned_variance_fn(b) if b > 1 else None, options=opts,
                      progress=lambda m: status.update(m))
@@ -139,6 +141,8 @@ def run(args: argparse.Namespace) -> int:
                 rep["full_size"] = {"final": full_size_check(full_data, d.selection.values, args.sys_frac)}
                 if stage is not None and stage.check:
                     rep["full_size"]["before_unbinned_stage"] = dict(stage.check)
+    if b == 1 and skipped:  # beyond CONTRACTS §6, only when there is something to say
+        rep["not_screened"] = skipped
     if full_data.saturated_frames:  # CONTRACTS §6 keys otherwise: only present when there are any
         rep["saturated_frames"] = dict(full_data.saturated_frames)
     _check_finite(rep)
