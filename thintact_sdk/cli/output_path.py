@@ -160,7 +160,8 @@ def write_lock(path: str | os.PathLike[str], kind: OutputKind, *, option: str = 
     a file output through the hidden sibling ``.<name>.lock``. The lock is an advisory
     :func:`fcntl.flock` (released by the kernel if the process dies, so a killed writer
     leaves no stale claim; where there is no ``flock`` an ``O_CREAT | O_EXCL`` file is the
-    claim). The lock file is removed when the block ends. Decide whether the output may be
+    claim). The lock file is removed when the block ends, and a directory the lock created is
+    removed again if nothing was written into it. Decide whether the output may be
     written (it already holds a recording, ...) inside the block: only then is the answer
     free of races.
 
@@ -170,6 +171,7 @@ def write_lock(path: str | os.PathLike[str], kind: OutputKind, *, option: str = 
         When another process (or thread) holds the claim.
     """
     p = Path(path).expanduser()
+    created = kind == "directory" and not p.exists()
     if kind == "directory":
         try:
             p.mkdir(parents=True, exist_ok=True)
@@ -191,6 +193,9 @@ def write_lock(path: str | os.PathLike[str], kind: OutputKind, *, option: str = 
         with contextlib.suppress(OSError):
             lock.unlink()
         os.close(fd)  # closing the descriptor releases the flock
+        if created:  # a writer that failed before writing anything leaves nothing behind
+            with contextlib.suppress(OSError):
+                p.rmdir()  # only if empty
 
 
 def _acquire(lock: Path, busy: OutputError, option: str) -> int:

@@ -65,8 +65,8 @@ def check_dense_size(kp: KernelParams, limit_bytes: float = DENSE_MAX_BYTES) -> 
     size = dense_bytes(kp)
     if size > limit_bytes:
         raise ThinTactError(
-            f"physics: refraction on this device ({kp.rows}×{kp.cols} → {kp.scene_rows}×"
-            f"{kp.scene_cols}) needs a dense kernel of {size / 1024**3:.1f} GiB (float32, limit "
+            f"physics: refraction on this device needs a dense kernel of {size / 1024**3:.1f} GiB "
+            f"({kp.rows}×{kp.cols} → {kp.scene_rows}×{kp.scene_cols}; float32, limit "
             f"{limit_bytes / 1024**3:.0f} GiB): at this field of view the refracted kernel has no "
             "compact separable form (the crossing slides by many mask cells across the scene, "
             "docs/simulator.md 'refraction'); bin the sensor or crop the scene")

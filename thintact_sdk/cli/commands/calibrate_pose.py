@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from thintact_sdk.cli.argtypes import positive_float
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
@@ -30,7 +32,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="which of the scene-to-mask distance z and the sensor pixel pitch is not known "
                    "and is fitted from the shadow's scale delta*H/(z*p) (default z; 'none': both as the "
                    "profile says)")
-    p.add_argument("--bounds", type=float, nargs=2, metavar=("LOW", "HIGH"),
+    p.add_argument("--bounds", type=positive_float, nargs=2, metavar=("LOW", "HIGH"),
                    help="bounds of the unknown (mm for z, um for the pitch); default z*(1 +- 0.1), "
                    "pitch*(0.8 .. 1.25)")
     p.add_argument("--accept-ambiguous", action="store_true",
@@ -86,8 +88,8 @@ def run(args: argparse.Namespace) -> int:
 
     if args.bounds is not None and not 0 < args.bounds[0] <= args.bounds[1]:
         raise CalibrationError(f"--bounds: need 0 < LOW <= HIGH, got {args.bounds[0]} {args.bounds[1]}")
-    progress(f"reading the flat field {args.flat}")
     signal, source = _flat_signal(args.flat, profile)
+    progress(f"read the flat field {args.flat}")
     est = estimate_pose(signal, profile, unknown=args.unknown,  # type: ignore[arg-type]
                         bounds=tuple(args.bounds) if args.bounds else None, progress=progress)
     print(f"flat field: {source}")
