@@ -125,6 +125,20 @@ def dark_level(recording: Recording, use_dark_frames: bool = True) -> tuple[np.n
     return _dark(recording, frames)
 
 
+def white_frame_signal(recording: Recording) -> tuple[np.ndarray, int, str] | None:
+    """The first all-white frame of ``recording`` minus its :func:`dark_level`: ``(signal
+    R × S × C DN as float64, frame index, "frame LABEL minus SOURCE")``, or None when the
+    recording has no frame whose scene is white everywhere (≥ 0.999)."""
+    for i in range(len(recording)):
+        scene = recording.scene(i)
+        if scene is not None and scene.size and float(np.min(scene)) >= 0.999:
+            dark, source = dark_level(recording)
+            raw = np.asarray(recording.measurement(i), np.float64)
+            raw = raw if raw.ndim == 3 else raw[..., None]
+            return raw - dark[..., : raw.shape[2]], i, f"frame {recording.frames[i].label or i} minus {source}"
+    return None
+
+
 def collect_slits(
     recording: Recording,
     rank: int = DEFAULT_RANK,

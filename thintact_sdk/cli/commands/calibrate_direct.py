@@ -67,22 +67,20 @@ def white_scale_dn(unit: Any, rec: Any) -> tuple[float, str]:
     unit scale) on a white scene."""
     import numpy as np
 
-    from thintact_sdk.calibration.collect import dark_level
+    from thintact_sdk.calibration.collect import white_frame_signal
     from thintact_sdk.errors import CalibrationError
-    for i in range(len(rec)):
-        scene = rec.scene(i)
-        if scene is not None and scene.size and float(np.min(scene)) >= 0.999:
-            dark, source = dark_level(rec)
-            raw = np.asarray(rec.measurement(i), np.float64)
-            raw = raw if raw.ndim == 3 else raw[..., None]
-            signal = float(np.mean(raw - dark[..., : raw.shape[2]]))
-            model = float(np.mean(unit.forward(np.ones((*unit.scene_shape, unit.channels)))))
-            if not (signal > 0 and model > 0):
-                raise CalibrationError(f"{rec.root}: white frame {rec.frames[i].label or i} minus {source} "
-                                       f"has mean {signal:.4g} DN; no scale can be taken from it")
-            return signal / model, f"white frame {rec.frames[i].label or i} minus {source}"
-    raise CalibrationError(f"recording {rec.root} has no white (flat) frame to scale the matrices; "
-                           "give --scale-dn")
+
+    white = white_frame_signal(rec)
+    if white is None:
+        raise CalibrationError(f"recording {rec.root} has no white (flat) frame to scale the matrices; "
+                               "give --scale-dn")
+    raw, _, source = white
+    signal = float(np.mean(raw))
+    model = float(np.mean(unit.forward(np.ones((*unit.scene_shape, unit.channels)))))
+    if not (signal > 0 and model > 0):
+        raise CalibrationError(f"{rec.root}: white {source} has mean {signal:.4g} DN; "
+                               "no scale can be taken from it")
+    return signal / model, f"white {source}"
 
 
 def run(args: argparse.Namespace) -> int:

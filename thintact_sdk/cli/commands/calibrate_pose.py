@@ -48,20 +48,15 @@ def register(sub: argparse._SubParsersAction) -> None:
 def _flat_signal(path: Path, profile: object) -> tuple[object, str]:
     import numpy as np
 
-    from thintact_sdk.calibration.collect import dark_level
+    from thintact_sdk.calibration.collect import white_frame_signal
     from thintact_sdk.errors import CalibrationError
     from thintact_sdk.recording import Recording
 
     if path.is_dir():
-        rec = Recording(path)
-        for i in range(len(rec)):
-            scene = rec.scene(i)
-            if scene is not None and scene.size and float(np.min(scene)) >= 0.999:
-                dark, source = dark_level(rec)
-                raw = np.asarray(rec.measurement(i), np.float64)
-                raw = raw if raw.ndim == 3 else raw[..., None]
-                return raw - dark[..., : raw.shape[2]], f"frame {rec.frames[i].label or i} minus {source}"
-        raise CalibrationError(f"recording {path} has no all-white frame to use as a flat field")
+        white = white_frame_signal(Recording(path))
+        if white is None:
+            raise CalibrationError(f"recording {path} has no all-white frame to use as a flat field")
+        return white[0], white[2]
     if path.suffix != ".npy" or not path.is_file():
         raise CalibrationError(f"flat field {path}: expected a recording directory or an existing .npy file")
     from thintact_sdk.safe_arrays import read_npy  # header first: no pickle, no huge allocation
