@@ -34,16 +34,16 @@ _tune_openblas()
 from typing import TYPE_CHECKING, Any  # noqa: E402
 
 from thintact_sdk.errors import ThinTactError  # noqa: E402
+from thintact_sdk.formats.profiles import Profile, load_profile  # noqa: E402
 from thintact_sdk.hookspecs import Component, hookimpl  # noqa: E402
-from thintact_sdk.profile import Profile, load_profile  # noqa: E402
 
 __version__ = "0.1.0"
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
 
-    from thintact_sdk.group import SensorGroup
-    from thintact_sdk.sensor import Sensor
+    from thintact_sdk.device.group import SensorGroup
+    from thintact_sdk.device.sensor import Sensor
 
 __all__ = ["Component", "Profile", "ThinTactError", "__version__", "hookimpl", "load_profile", "open",
            "open_group"]
@@ -52,9 +52,9 @@ __all__ = ["Component", "Profile", "ThinTactError", "__version__", "hookimpl", "
 def open(profile: str | Profile, **options: Any) -> Sensor:  # noqa: A001 - the public verb
     """Open a sensor by profile name, profile file or :class:`Profile`.
 
-    Returns an opened :class:`thintact_sdk.sensor.Sensor`; use it as a context manager.
+    Returns an opened :class:`thintact_sdk.device.sensor.Sensor`; use it as a context manager.
     """
-    from thintact_sdk.sensor import Sensor
+    from thintact_sdk.device.sensor import Sensor
 
     sensor = Sensor(load_profile(profile), **options)
     sensor.open()
@@ -64,9 +64,9 @@ def open(profile: str | Profile, **options: Any) -> Sensor:  # noqa: A001 - the 
 def open_group(sensors: Sequence[str | Profile | Sensor], **options: Any) -> SensorGroup:
     """Open several sensors whose frames are paired by time (two fingers).
 
-    Returns an opened :class:`thintact_sdk.group.SensorGroup`; see
-    :func:`thintact_sdk.group.open_group` for the options and guarantees.
+    Returns an opened :class:`thintact_sdk.device.group.SensorGroup`; see
+    :func:`thintact_sdk.device.group.open_group` for the options and guarantees.
     """
-    from thintact_sdk.group import open_group as _open_group
+    from thintact_sdk.device.group import open_group as _open_group
 
     return _open_group(sensors, **options)

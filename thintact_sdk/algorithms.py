@@ -4,8 +4,8 @@ Plugins (decoders, masks, cameras) build on the core's imaging and tactile algor
 import them from here, never from the modules that implement them, so the core can move code
 between its private modules without breaking a plugin. Everything listed in :data:`__all__` is
 stable within a major version; ``lint-imports`` (pyproject ``[tool.importlinter]``) refuses a
-plugin import of ``thintact_sdk.imaging``, ``.tactile``, ``.calibration``, ``.physics`` or
-``.diagnose`` directly.
+plugin import of ``thintact_sdk.simulation``, ``.reconstruction``, ``.tactile``,
+``.calibration`` or ``.diagnosis`` directly.
 
 The names are loaded on first use (importing this module costs nothing), and typed for mypy.
 
@@ -49,36 +49,71 @@ import importlib
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:  # the names, for type checkers; at run time they load on first use
-    pass
+    from thintact_sdk.calibration.gauge import canonical_gauge  # noqa: F401
+    from thintact_sdk.reconstruction.bundle import CalibrationBundle, find_latest  # noqa: F401
+    from thintact_sdk.reconstruction.dct import SeparableDCT, dct_matrix  # noqa: F401
+    from thintact_sdk.reconstruction.direct_generation import (  # noqa: F401
+        AxisGeometry,
+        DirectGenerator,
+        direct_system_matrices,
+    )
+    from thintact_sdk.reconstruction.filter_training import (  # noqa: F401
+        make_training_data,
+        scene_for_channels,
+        train_joint_filter,
+        training_scenes,
+    )
+    from thintact_sdk.reconstruction.first_order import largest_eigenvalue, nesterov  # noqa: F401
+    from thintact_sdk.reconstruction.joint_filter import JointFilter, joint_filter_open  # noqa: F401
+    from thintact_sdk.reconstruction.metrics import psnr, ssim  # noqa: F401
+    from thintact_sdk.reconstruction.scene_prior import ScenePrior  # noqa: F401
+    from thintact_sdk.reconstruction.t2s import SystemMatrices, kron_sum_norm2  # noqa: F401
+    from thintact_sdk.reconstruction.tau_sweep import tune_decoder_tau  # noqa: F401
+    from thintact_sdk.reconstruction.tikhonov import TikhonovSolver  # noqa: F401
+    from thintact_sdk.reconstruction.virtual_bundle import coding_power, simulate_measurements  # noqa: F401
+    from thintact_sdk.simulation.noise import (  # noqa: F401
+        default_white_level_dn,
+        signal_to_dn,
+        signal_variance_dn,
+    )
+    from thintact_sdk.simulation.scenes import LIBRARY as SCENE_LIBRARY  # noqa: F401
+    from thintact_sdk.simulation.scenes import gelsight_count, make_scene, usaf, white  # noqa: F401
+    from thintact_sdk.simulation.simulator import Simulator  # noqa: F401
+    from thintact_sdk.tactile.calibration.ball_press import ball_radius_for_field  # noqa: F401
+    from thintact_sdk.tactile.calibration.store import calibration_roots  # noqa: F401
+    from thintact_sdk.tactile.simulation.elastic import Elastomer  # noqa: F401
+    from thintact_sdk.tactile.simulation.indenters import Sphere  # noqa: F401
+    from thintact_sdk.tactile.simulation.loaded_press import simulate_loaded_press  # noqa: F401
+    from thintact_sdk.tactile.simulation.membrane import TactileSimulator  # noqa: F401
 
 _WHERE = {
     "canonical_gauge": "calibration.gauge",
-    "CalibrationBundle": "imaging.calibration_bundle", "find_latest": "imaging.calibration_bundle",
-    "SeparableDCT": "imaging.dct", "dct_matrix": "imaging.dct",
-    "AxisGeometry": "imaging.direct_generation", "DirectGenerator": "imaging.direct_generation",
-    "direct_system_matrices": "imaging.direct_generation",
-    "make_training_data": "imaging.filter_training", "train_joint_filter": "imaging.filter_training",
-    "training_scenes": "imaging.filter_training", "scene_for_channels": "imaging.filter_training",
-    "largest_eigenvalue": "imaging.first_order", "nesterov": "imaging.first_order",
-    "psnr": "imaging.metrics", "ssim": "imaging.metrics",
-    "default_white_level_dn": "imaging.noise", "signal_to_dn": "imaging.noise",
-    "signal_variance_dn": "imaging.noise",
-    "JointFilter": "imaging.recon_filter", "joint_filter_open": "imaging.recon_filter",
-    "coding_power": "imaging.recon_virtual", "simulate_measurements": "imaging.recon_virtual",
-    "gelsight_count": "imaging.scenes", "make_scene": "imaging.scenes", "usaf": "imaging.scenes",
-    "white": "imaging.scenes",
-    "Simulator": "imaging.simulator",
-    "ScenePrior": "imaging.scene_prior",
-    "SystemMatrices": "imaging.t2s", "kron_sum_norm2": "imaging.t2s",
-    "tune_decoder_tau": "imaging.tau_sweep",
-    "TikhonovSolver": "imaging.tikhonov",
-    "ball_radius_for_field": "tactile.calibration",
-    "Sphere": "tactile.indenters",
-    "TactileSimulator": "tactile.simulate",
-    "simulate_loaded_press": "tactile.loaded_press", "Elastomer": "tactile.elastic",
-    "calibration_roots": "tactile.store",
+    "CalibrationBundle": "reconstruction.bundle", "find_latest": "reconstruction.bundle",
+    "SeparableDCT": "reconstruction.dct", "dct_matrix": "reconstruction.dct",
+    "AxisGeometry": "reconstruction.direct_generation", "DirectGenerator": "reconstruction.direct_generation",
+    "direct_system_matrices": "reconstruction.direct_generation",
+    "make_training_data": "reconstruction.filter_training", "train_joint_filter": "reconstruction.filter_training",
+    "training_scenes": "reconstruction.filter_training", "scene_for_channels": "reconstruction.filter_training",
+    "largest_eigenvalue": "reconstruction.first_order", "nesterov": "reconstruction.first_order",
+    "psnr": "reconstruction.metrics", "ssim": "reconstruction.metrics",
+    "default_white_level_dn": "simulation.noise", "signal_to_dn": "simulation.noise",
+    "signal_variance_dn": "simulation.noise",
+    "JointFilter": "reconstruction.joint_filter", "joint_filter_open": "reconstruction.joint_filter",
+    "coding_power": "reconstruction.virtual_bundle", "simulate_measurements": "reconstruction.virtual_bundle",
+    "gelsight_count": "simulation.scenes", "make_scene": "simulation.scenes", "usaf": "simulation.scenes",
+    "white": "simulation.scenes",
+    "Simulator": "simulation.simulator",
+    "ScenePrior": "reconstruction.scene_prior",
+    "SystemMatrices": "reconstruction.t2s", "kron_sum_norm2": "reconstruction.t2s",
+    "tune_decoder_tau": "reconstruction.tau_sweep",
+    "TikhonovSolver": "reconstruction.tikhonov",
+    "ball_radius_for_field": "tactile.calibration.ball_press",
+    "Sphere": "tactile.simulation.indenters",
+    "TactileSimulator": "tactile.simulation.membrane",
+    "simulate_loaded_press": "tactile.simulation.loaded_press", "Elastomer": "tactile.simulation.elastic",
+    "calibration_roots": "tactile.calibration.store",
 }
-_RENAMED = {"SCENE_LIBRARY": ("imaging.scenes", "LIBRARY")}
+_RENAMED = {"SCENE_LIBRARY": ("simulation.scenes", "LIBRARY")}
 
 __all__ = sorted([*_WHERE, *_RENAMED])
 

@@ -60,7 +60,7 @@ class Measurement:
     sensor_bin
         ``b``: ``data`` holds the ``b × b`` block means of the profile's ``R × S`` measurement,
         ``R/b × S/b × C`` (made for a :class:`~thintact_sdk.interfaces.BinnedInputDecoder`,
-        see :func:`thintact_sdk.capture.to_measurement`); 1 for the measurement itself.
+        see :func:`thintact_sdk.device.cameras.to_measurement`); 1 for the measurement itself.
     """
 
     data: np.ndarray
@@ -104,11 +104,11 @@ class TactileFrame:
     force_n
         ``(3,)`` float64 force the object applies to the membrane, newtons [F_x, F_y, F_z]
         (x with columns, y with rows, z into the elastomer), from the linear elastic model
-        of :mod:`thintact_sdk.tactile.force`; zeros without contact, F_x/F_y NaN when no
+        of :mod:`thintact_sdk.tactile.interpretation.force`; zeros without contact, F_x/F_y NaN when no
         marker is in the contact. None where not computed.
     slip_ratio
         Share of the loaded contact that slips, in [0, 1] (0 stuck, 1 sliding;
-        :mod:`thintact_sdk.tactile.slip`); None without contact or where not computed.
+        :mod:`thintact_sdk.tactile.interpretation.slip`); None without contact or where not computed.
     """
 
     image: np.ndarray

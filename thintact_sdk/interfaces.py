@@ -7,7 +7,7 @@
 ``Decoder``          measurement → scene (reconstruction algorithms).
 ``Display``          shows calibration patterns on an LCD (real or virtual).
 
-Concrete classes come from plugins (see :mod:`thintact_sdk.plugin_manager`).
+Concrete classes come from plugins (see :mod:`thintact_sdk.device.registry`).
 """
 
 from __future__ import annotations
@@ -193,7 +193,7 @@ class Decoder(abc.ABC):
 @runtime_checkable
 class RawDecoder(Protocol):
     """A decoder that also takes raw binned DN and folds the black level into the solve
-    (no per-frame subtraction); :meth:`thintact_sdk.sensor.Sensor.reconstruct` prefers it."""
+    (no per-frame subtraction); :meth:`thintact_sdk.device.sensor.Sensor.reconstruct` prefers it."""
 
     def decode_raw(self, raw: np.ndarray, black_level_dn: float) -> np.ndarray:
         """``R × S × C`` DN with the black level included → ``N × M × C`` float32."""
@@ -205,9 +205,9 @@ class BinnedInputDecoder(Protocol):
     """A decoder that solves on the sensor binned ``b × b`` (``sensor_bin`` = b > 1) and so
     takes the binned frame directly.
 
-    :meth:`thintact_sdk.sensor.Sensor.process` and :meth:`~thintact_sdk.sensor.Sensor.stream`
+    :meth:`thintact_sdk.device.sensor.Sensor.process` and :meth:`~thintact_sdk.device.sensor.Sensor.stream`
     then bin the camera's Bayer mosaic ``2b × 2b`` per colour site in one pass
-    (:func:`thintact_sdk.bayer.bin_bayer` with ``block=b``) instead of ``2 × 2`` and then
+    (:func:`thintact_sdk.pixels.bayer.bin_bayer` with ``block=b``) instead of ``2 × 2`` and then
     ``b × b`` again in the decoder, and hand the result, a :class:`~thintact_sdk.frames.Measurement`
     with ``sensor_bin = b``, to :meth:`decode_binned`. ``decode`` and ``decode_raw`` still take
     the profile's full ``R × S × C`` measurement; a decoder without this capability (or with

@@ -39,7 +39,7 @@ MARK_OPEN, MARK_CLOSE = "<!-- bench_calibration_paper -->", "<!-- /bench_calibra
 
 
 def _profile(scale: int) -> Any:
-    from thintact_sdk.profile import Profile, load_profile
+    from thintact_sdk.formats.profiles import Profile, load_profile
 
     d = load_profile("thintact-paper").contract_dict()
     d["name"] = f"thintact-paper-div{scale}"
@@ -53,9 +53,9 @@ def _profile(scale: int) -> Any:
 def render(out: Path, scale: int) -> float:
     """Write the recording (every pattern of the wizard's plan) into ``out``; seconds taken."""
     from thintact_sdk.calibration.plan import build_plan
-    from thintact_sdk.imaging.noise import signal_to_dn
-    from thintact_sdk.imaging.simulator import Simulator
-    from thintact_sdk.recording import RecordingWriter
+    from thintact_sdk.formats.recording import RecordingWriter
+    from thintact_sdk.simulation.noise import signal_to_dn
+    from thintact_sdk.simulation.simulator import Simulator
 
     prof = _profile(scale)
     sim = Simulator(prof)
@@ -79,7 +79,7 @@ def child(rec: Path, out: Path, baseline: bool, result: Path) -> None:
     """Calibrate ``rec`` into ``out`` and write the stages and figures to ``result`` (JSON)."""
     from thintact_sdk.calibration import prediction
     from thintact_sdk.calibration.pipeline import CalibrationOptions, calibrate_recording
-    from thintact_sdk.recording import Recording
+    from thintact_sdk.formats.recording import Recording
 
     if baseline:
         prediction.slit_factors = lambda sim, channels: None  # type: ignore[assignment]

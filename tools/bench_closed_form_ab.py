@@ -29,11 +29,11 @@ import numpy as np
 from thintact_decoders import ArrayBackend, T2SClosedFormDecoder
 from thintact_decoders.sensor_binning import SensorBinnedDecoder, bin_frame, bin_system_matrices
 from thintact_sdk.algorithms import SystemMatrices, coding_power
-from thintact_sdk.bayer import planar_frame
-from thintact_sdk.compute_threads import single_threaded_kernels
-from thintact_sdk.imaging.direct_generation import direct_system_matrices
-from thintact_sdk.profile import load_profile
-from thintact_sdk.roofline import measure_sgemm_gflops
+from thintact_sdk.pixels.bayer import planar_frame
+from thintact_sdk.host.compute_threads import single_threaded_kernels
+from thintact_sdk.reconstruction.direct_generation import direct_system_matrices
+from thintact_sdk.formats.profiles import load_profile
+from thintact_sdk.host.roofline import measure_sgemm_gflops
 
 frames = int(sys.argv[1])
 profile = load_profile("thintact-paper")

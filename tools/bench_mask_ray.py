@@ -33,8 +33,8 @@ from thintact_masks.fitness import FitnessEvaluator  # noqa: E402
 from thintact_masks.ga import evaluate_population  # noqa: E402
 from thintact_masks.ray_pool import RayFitnessPool, connect  # noqa: E402
 
-from thintact_sdk.machine import machine_summary  # noqa: E402
-from thintact_sdk.profile import load_profile  # noqa: E402
+from thintact_sdk.formats.profiles import load_profile  # noqa: E402
+from thintact_sdk.host.machine import machine_summary  # noqa: E402
 
 PAPER_K = 770
 PAPER_GENERATIONS = 2000

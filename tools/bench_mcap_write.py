@@ -4,7 +4,7 @@ Frames are the virtual camera's simulation of the paper device (``thintact-paper
 ``virtual`` camera: 2048 × 2560 uint16 BayerRG12 mosaics, GelSight scenes, sensor noise),
 a few distinct ones cycled. Each writer gets the same frames in the same run:
 
-- ``mcap-<compression>``: :class:`thintact_sdk.mcaplog.McapLogWriter` raw frames only
+- ``mcap-<compression>``: :class:`thintact_sdk.formats.mcap.McapLogWriter` raw frames only
   (``record --format mcap --no-tactile``), and with a paper-size tactile frame's topics
   (random content: an upper bound on their size);
 - ``recording --raw``: what ``thintact record --raw`` writes per frame (binned measurement
@@ -28,13 +28,13 @@ from pathlib import Path
 
 import numpy as np
 
-from thintact_sdk.capture import create_camera, to_measurement
-from thintact_sdk.cli.commands.record import storage_array
+from thintact_sdk.apps.cli.commands.record import storage_array
+from thintact_sdk.device.cameras import create_camera, to_measurement
+from thintact_sdk.formats.mcap import McapLogWriter
+from thintact_sdk.formats.profiles import load_profile
+from thintact_sdk.formats.raw_frames import save_raw_frame
+from thintact_sdk.formats.recording import RecordingWriter
 from thintact_sdk.frames import RawFrame, TactileFrame
-from thintact_sdk.mcaplog import McapLogWriter
-from thintact_sdk.profile import load_profile
-from thintact_sdk.recording import RecordingWriter
-from thintact_sdk.recording_raw import save_raw_frame
 
 
 def paper_frames(n: int) -> tuple[object, list[RawFrame]]:

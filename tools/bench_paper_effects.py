@@ -33,8 +33,8 @@ from peak_memory import own_peak_gib
 import thintact_sdk  # noqa: F401  (tunes OpenBLAS before numpy loads)
 import numpy as np
 from thintact_sdk.errors import ThinTactError
-from thintact_sdk.imaging.simulator import Simulator
-from thintact_sdk.profile import load_profile
+from thintact_sdk.simulation.simulator import Simulator
+from thintact_sdk.formats.profiles import load_profile
 physics, frames = json.loads(sys.argv[1]), int(sys.argv[2])
 prof = load_profile("thintact-paper").with_physics(physics)
 out = {}

@@ -29,14 +29,14 @@ from thintact_decoders import ArrayBackend, T2SClosedFormDecoder
 from thintact_decoders.sensor_binning import SensorBinnedDecoder, bin_frame, bin_system_matrices
 
 from thintact_sdk.algorithms import SystemMatrices, coding_power
-from thintact_sdk.bayer import mosaic_from_rgb, planar_frame
-from thintact_sdk.capture import to_measurement
-from thintact_sdk.compute_threads import single_threaded_kernels
+from thintact_sdk.device.cameras import to_measurement
+from thintact_sdk.formats.profiles import load_profile
 from thintact_sdk.frames import RawFrame
-from thintact_sdk.imaging.direct_generation import direct_system_matrices
-from thintact_sdk.machine import machine_summary
-from thintact_sdk.profile import load_profile
-from thintact_sdk.roofline import measure_sgemm_gflops
+from thintact_sdk.host.compute_threads import single_threaded_kernels
+from thintact_sdk.host.machine import machine_summary
+from thintact_sdk.host.roofline import measure_sgemm_gflops
+from thintact_sdk.pixels.bayer import mosaic_from_rgb, planar_frame
+from thintact_sdk.reconstruction.direct_generation import direct_system_matrices
 
 
 def main() -> int:

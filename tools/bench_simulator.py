@@ -14,10 +14,10 @@ from pathlib import Path
 import thintact_sdk  # noqa: F401  (first: tunes OpenBLAS before numpy loads)
 import numpy as np
 
-from thintact_sdk.imaging.sim_reference import reference_forward
-from thintact_sdk.imaging.simulator import Simulator, clear_kernel_cache
-from thintact_sdk.machine import machine_summary
-from thintact_sdk.profile import Profile, load_profile, profile_from_dict, read_profile_file
+from thintact_sdk.simulation.reference import reference_forward
+from thintact_sdk.simulation.simulator import Simulator, clear_kernel_cache
+from thintact_sdk.host.machine import machine_summary
+from thintact_sdk.formats.profiles import Profile, load_profile, profile_from_dict, read_profile_file
 
 
 def _rel_rms(a: np.ndarray, b: np.ndarray) -> float:

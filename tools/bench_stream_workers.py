@@ -36,8 +36,8 @@ def main() -> None:
 
     import thintact_decoders
 
-    from thintact_sdk.benchmarks.tactile import latency
-    from thintact_sdk.machine import host_capabilities, machine_summary
+    from thintact_sdk.apps.benchmarks.tactile_accuracy import latency
+    from thintact_sdk.host.machine import host_capabilities, machine_summary
 
     if args.float32:
         thintact_decoders.host_capabilities = lambda: replace(host_capabilities(), native_bf16=False)

@@ -21,10 +21,10 @@ import uuid
 import numpy as np
 
 import thintact_sdk as thintact
+from thintact_sdk.apps.viewer import LiveView, ViewerServer
+from thintact_sdk.apps.viewer.panels import encode_jpeg, render_dashboard
 from thintact_sdk.tactile import Sphere, TactileSimulator
-from thintact_sdk.tactile.device_calibration import scene_slot
-from thintact_sdk.viewer import LiveView, ViewerServer
-from thintact_sdk.viewer.panels import encode_jpeg, render_dashboard
+from thintact_sdk.tactile.calibration.device import scene_slot
 
 
 def main() -> None:

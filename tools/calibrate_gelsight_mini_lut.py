@@ -14,9 +14,9 @@ from pathlib import Path
 
 import numpy as np
 
-from thintact_sdk.profile import load_profile
-from thintact_sdk.tactile.calibration import BallPress, calibrate_from_presses
-from thintact_sdk.tactile.gelsight_eval import GELSIGHT_BALL_RADIUS_MM
+from thintact_sdk.formats.profiles import load_profile
+from thintact_sdk.tactile.calibration.ball_press import BallPress, calibrate_from_presses
+from thintact_sdk.tactile.calibration.gelsight_eval import GELSIGHT_BALL_RADIUS_MM
 
 DATA = Path(__file__).resolve().parents[1] / "thintact_sdk" / "data" / "gelsight"
 

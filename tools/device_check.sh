@@ -35,16 +35,16 @@ fi
 "$PY" -m pip install -q --no-index --no-deps --no-build-isolation --no-compile --no-cache-dir --upgrade \
   --target "$SITE" . plugins/thintact_* || exit 1
 export PYTHONPATH="$SITE${PYTHONPATH:+:$PYTHONPATH}"
-"$PY" -m thintact_sdk.cli.main plugins | head -n 20
+"$PY" -m thintact_sdk.apps.cli.main plugins | head -n 20
 
 step "GPU tests (tests/reconstruction/test_rec_gpu.py: decoders on CUDA agree with numpy, CUDA is measured)"
 "$PY" -m pytest -q -p no:cacheprovider --rootdir . tests/reconstruction/test_rec_gpu.py 2>&1 | tee "$OUT/gpu_tests.log"
 
 step "thintact doctor (host, GPU, the backend the selection chooses for thintact-paper)"
-"$PY" -m thintact_sdk.cli.main doctor --profile thintact-paper 2>&1 | tee "$OUT/doctor.txt"
+"$PY" -m thintact_sdk.apps.cli.main doctor --profile thintact-paper 2>&1 | tee "$OUT/doctor.txt"
 
 step "thintact bench reconstruct (paper size, every backend real here)"
-"$PY" -m thintact_sdk.cli.main bench reconstruct --json --no-mask-compare --iterative-probe 1 --repeats 30 \
+"$PY" -m thintact_sdk.apps.cli.main bench reconstruct --json --no-mask-compare --iterative-probe 1 --repeats 30 \
   > "$OUT/bench_reconstruct.json" || echo "bench reconstruct failed"
 "$PY" - "$OUT/bench_reconstruct.json" <<'EOF'
 import json, sys

@@ -128,7 +128,7 @@ refraction is not (its kernel refuses this size, and the diagnosis does not scre
 
 def frame_scenes(n: int, m: int) -> tuple[list[str], np.ndarray]:
     """The 12 frames: ``(labels, F × N × M × 3 float32 display values)``."""
-    from thintact_sdk.imaging import scenes as lib
+    from thintact_sdk.simulation import scenes as lib
 
     frames: list[tuple[str, np.ndarray]] = [
         ("white", lib.white(n, m)),
@@ -149,10 +149,10 @@ def frame_scenes(n: int, m: int) -> tuple[list[str], np.ndarray]:
 
 def make_recording(case: str, out: Path, seed: int = 0) -> tuple[Path, dict[str, Any], float]:
     """Render ``case`` into ``out/recording``; returns (recording, truth, seconds)."""
-    from thintact_sdk.imaging.noise import signal_to_dn
-    from thintact_sdk.imaging.simulator import Simulator, clear_kernel_cache
-    from thintact_sdk.profile import load_profile
-    from thintact_sdk.recording import RecordingWriter
+    from thintact_sdk.formats.profiles import load_profile
+    from thintact_sdk.formats.recording import RecordingWriter
+    from thintact_sdk.simulation.noise import signal_to_dn
+    from thintact_sdk.simulation.simulator import Simulator, clear_kernel_cache
 
     t0 = time.perf_counter()
     prof = load_profile("thintact-paper").with_physics({})
@@ -181,7 +181,7 @@ def run_diagnose(rec: Path, out: Path, time_budget_s: float) -> tuple[int, float
     diag = out / "diagnosis"
     args = ["diagnose", str(rec), "--out", str(diag), "--force", "--quiet", "--time-budget", str(time_budget_s)]
     t0 = time.perf_counter()
-    proc, rss_gib = run_module_with_peak("thintact_sdk.cli.main", args)
+    proc, rss_gib = run_module_with_peak("thintact_sdk.apps.cli.main", args)
     wall = time.perf_counter() - t0
     return proc.returncode, wall, rss_gib, proc.stdout + proc.stderr
 

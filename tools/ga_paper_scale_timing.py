@@ -36,9 +36,9 @@ def main(argv: list[str] | None = None) -> int:
     from thintact_masks.fitness import FitnessEvaluator, FitnessSettings
     from thintact_masks.ga import GAConfig, GAState, run_ga
 
-    from thintact_sdk.blas import blas_threads
-    from thintact_sdk.machine import machine_summary
-    from thintact_sdk.profile import load_profile
+    from thintact_sdk.formats.profiles import load_profile
+    from thintact_sdk.host.blas import blas_threads
+    from thintact_sdk.host.machine import machine_summary
 
     print(f"machine: {machine_summary()}")
     print(f"load average before: {os.getloadavg()}")

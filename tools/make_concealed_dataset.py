@@ -114,7 +114,7 @@ CASES: dict[str, dict[str, Any]] = {
 
 def frame_scenes(n: int, m: int) -> tuple[list[str], np.ndarray]:
     """The 24 frames: ``(labels, F × N × M × 3 float32 display values)``."""
-    from thintact_sdk.imaging import scenes as lib
+    from thintact_sdk.simulation import scenes as lib
 
     labels: list[str] = []
     imgs: list[np.ndarray] = []
@@ -170,7 +170,7 @@ def defect_map(rows: int, cols: int, defects: list[dict[str, Any]]) -> np.ndarra
 
 def base_profile() -> Any:
     """The device: golden-mini optics (shared golden profile, else the shipped virtual-mini)."""
-    from thintact_sdk.profile import load_profile, read_profile_file
+    from thintact_sdk.formats.profiles import load_profile, read_profile_file
 
     gp = GOLDEN_MINI / "profile.json"
     prof = read_profile_file(gp) if gp.is_file() else load_profile("virtual-mini")
@@ -179,9 +179,9 @@ def base_profile() -> Any:
 
 def make_case(name: str, out_dir: Path, seed: int = 0) -> Path:
     """Render case ``name`` into ``out_dir/name``; returns that directory."""
-    from thintact_sdk.imaging.noise import signal_to_dn
-    from thintact_sdk.imaging.simulator import Simulator
-    from thintact_sdk.recording import RecordingWriter
+    from thintact_sdk.formats.recording import RecordingWriter
+    from thintact_sdk.simulation.noise import signal_to_dn
+    from thintact_sdk.simulation.simulator import Simulator
 
     spec = CASES[name]
     prof = base_profile()
@@ -218,7 +218,7 @@ def make_case(name: str, out_dir: Path, seed: int = 0) -> Path:
 
 
 def _effect_rms(prof: Any, scenes: np.ndarray, gains: list[float], signal: np.ndarray) -> float:
-    from thintact_sdk.imaging.simulator import Simulator
+    from thintact_sdk.simulation.simulator import Simulator
 
     base = Simulator(prof).predict_signal_dn(scenes, gains)
     return float(np.sqrt(np.mean((signal - base) ** 2)))

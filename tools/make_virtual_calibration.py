@@ -20,9 +20,12 @@ from rich.console import Console
 from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
 
 from thintact_sdk.errors import ThinTactError
-from thintact_sdk.imaging.calibration_bundle import timestamp_name
-from thintact_sdk.imaging.recon_virtual import VirtualCalibrationOptions, make_virtual_bundle
-from thintact_sdk.profile import load_profile
+from thintact_sdk.formats.profiles import load_profile
+from thintact_sdk.reconstruction.bundle import timestamp_name
+from thintact_sdk.reconstruction.virtual_bundle import (
+    VirtualCalibrationOptions,
+    make_virtual_bundle,
+)
 
 MAX_FILE_BYTES = 2 * 1024 * 1024
 

@@ -1,5 +1,5 @@
 """The simulator's diffraction paths against the converged brute-force Fresnel reference
-(issue 17; :mod:`thintact_sdk.imaging.sim_reference_fresnel`). Prints Markdown tables.
+(issue 17; :mod:`thintact_sdk.simulation.reference_fresnel`). Prints Markdown tables.
 
 Device "16×20": 16×20 sensor pixels of 20 µm, 6×8 scene pixels of 60 µm, 24×24 cells of
 20 µm, z = 1.0 mm, d = 0.3 mm (tests/simulator/test_sim_diffraction_bruteforce.py's
@@ -27,12 +27,12 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from tests.simulator.sim_helpers import rel_rms, tiny_profile  # noqa: E402
-from thintact_sdk.imaging.sim_reference_fresnel import (  # noqa: E402
+from thintact_sdk.simulation.reference_fresnel import (  # noqa: E402
     crossing_grid_reference_kernel,
     ray_offset_reference_kernel,
     subsampled_reference_kernel,
 )
-from thintact_sdk.imaging.simulator import Simulator  # noqa: E402
+from thintact_sdk.simulation.simulator import Simulator  # noqa: E402
 
 BIG: dict[str, Any] = dict(rows=16, cols=20, pitch_um=20.0, scene_rows=6, scene_cols=8,
                            scene_pitch_um=60.0, feature_um=20.0, k=24, z_mm=1.0, d_mm=0.3)

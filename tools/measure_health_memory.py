@@ -32,11 +32,11 @@ def _make(out: Path, rows: int, cols: int, n: int, m: int, random: bool) -> None
     from independent_device import small_profile, write_recording
     from sim_cli_device import calibration_scenes
 
-    from thintact_sdk.blas import blas_threads
     from thintact_sdk.calibration.collect import collect_slits
     from thintact_sdk.calibration.pipeline import CalibrationOptions, solve_matrices
-    from thintact_sdk.imaging.t2s import SystemMatrices
-    from thintact_sdk.recording import Recording, RecordingWriter
+    from thintact_sdk.formats.recording import Recording, RecordingWriter
+    from thintact_sdk.host.blas import blas_threads
+    from thintact_sdk.reconstruction.t2s import SystemMatrices
 
     profile = small_profile(("R", "G", "B"), rows=rows, cols=cols, scene=(n, m), k=max(96, 96 * cols // 80))
     t = time.time()
@@ -73,7 +73,7 @@ def _make(out: Path, rows: int, cols: int, n: int, m: int, random: bool) -> None
 
 def _assess(out: Path) -> None:
     from thintact_sdk.calibration.health import assess
-    from thintact_sdk.recording import Recording
+    from thintact_sdk.formats.recording import Recording
 
     rec = Recording(out / "rec")
     with open(out / "collection_matrices.pkl", "rb") as f:

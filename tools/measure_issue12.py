@@ -48,16 +48,16 @@ from independent_device import (  # noqa: E402
     write_recording,
 )
 
+from thintact_sdk.apps.cli.main import main  # noqa: E402
 from thintact_sdk.calibration.collect import collect_slits, signal_of  # noqa: E402
 from thintact_sdk.calibration.pipeline import CalibrationOptions, solve_matrices  # noqa: E402
 from thintact_sdk.calibration.validation import make_decoder  # noqa: E402
-from thintact_sdk.cli.main import main  # noqa: E402
-from thintact_sdk.imaging.calibration_bundle import CalibrationBundle  # noqa: E402
-from thintact_sdk.imaging.noise import signal_to_dn  # noqa: E402
-from thintact_sdk.imaging.scenes import checker, gelsight, random_pixels, usaf, white  # noqa: E402
-from thintact_sdk.imaging.simulator import Simulator  # noqa: E402
-from thintact_sdk.profile import Profile  # noqa: E402
-from thintact_sdk.recording import Recording, RecordingWriter  # noqa: E402
+from thintact_sdk.formats.profiles import Profile  # noqa: E402
+from thintact_sdk.formats.recording import Recording, RecordingWriter  # noqa: E402
+from thintact_sdk.reconstruction.bundle import CalibrationBundle  # noqa: E402
+from thintact_sdk.simulation.noise import signal_to_dn  # noqa: E402
+from thintact_sdk.simulation.scenes import checker, gelsight, random_pixels, usaf, white  # noqa: E402
+from thintact_sdk.simulation.simulator import Simulator  # noqa: E402
 
 DEFECTS: dict[str, list[Dust | DimColumn | Ghost]] = {
     "dust": [Dust(row=40, col=100)],

@@ -26,9 +26,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "calibrat
 from independent_device import mounted_profile, small_profile  # noqa: E402
 
 from thintact_sdk.calibration.pose import estimate_pose  # noqa: E402
-from thintact_sdk.imaging.mask_orientation import ORIENTATIONS, Orientation  # noqa: E402
-from thintact_sdk.imaging.simulator import Simulator  # noqa: E402
-from thintact_sdk.profile import Profile  # noqa: E402
+from thintact_sdk.formats.profiles import Profile  # noqa: E402
+from thintact_sdk.reconstruction.mask_orientation import ORIENTATIONS, Orientation  # noqa: E402
+from thintact_sdk.simulation.simulator import Simulator  # noqa: E402
 
 DX, DY, Z = -7.3, 4.1, 4.9
 WHITE_DN = 2000.0
@@ -101,7 +101,7 @@ def large_frame(rows: int = 2160, cols: int = 3840) -> None:
     flat = noisy(flat, nominal, rng)
     del halves
     if len(sys.argv) > 2:  # --large DIR: write the frame and the profile for a CLI run instead
-        from thintact_sdk.profile import write_profile
+        from thintact_sdk.formats.profiles import write_profile
 
         out = Path(sys.argv[2])
         out.mkdir(parents=True, exist_ok=True)

@@ -147,7 +147,7 @@ def test_the_public_algorithm_api_resolves_every_name_it_lists() -> None:
     for name in api.__all__:
         value = getattr(api, name)
         assert value is not None, name
-    from thintact_sdk.imaging.t2s import SystemMatrices
+    from thintact_sdk.reconstruction.t2s import SystemMatrices
 
     assert api.SystemMatrices is SystemMatrices
     with pytest.raises(AttributeError, match="no attribute 'nope'"):

@@ -7,15 +7,15 @@ from typing import Any
 
 import numpy as np
 
-from thintact_sdk.bayer import mosaic_from_rgb
 from thintact_sdk.calibration import synthetic
 from thintact_sdk.calibration.solver import ChannelMatrices
 from thintact_sdk.errors import DeviceTimeoutError
+from thintact_sdk.formats.profiles import Profile, load_profile
+from thintact_sdk.formats.recording import RecordingWriter
 from thintact_sdk.frames import RawFrame
-from thintact_sdk.imaging.t2s import SystemMatrices
 from thintact_sdk.interfaces import Camera, CameraCapabilities, Display, Range
-from thintact_sdk.profile import Profile, load_profile
-from thintact_sdk.recording import RecordingWriter
+from thintact_sdk.pixels.bayer import mosaic_from_rgb
+from thintact_sdk.reconstruction.t2s import SystemMatrices
 
 REFERENCE_EXPOSURE_US = 10000.0
 

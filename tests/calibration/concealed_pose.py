@@ -17,9 +17,9 @@ import numpy as np
 from independent_device import mounted_profile, small_profile
 
 from thintact_sdk.calibration.pose import PoseEstimate
-from thintact_sdk.imaging.mask_orientation import ORIENTATIONS, Orientation
-from thintact_sdk.imaging.simulator import Simulator
-from thintact_sdk.profile import Profile
+from thintact_sdk.formats.profiles import Profile
+from thintact_sdk.reconstruction.mask_orientation import ORIENTATIONS, Orientation
+from thintact_sdk.simulation.simulator import Simulator
 
 WHITE_DN = 2000.0
 

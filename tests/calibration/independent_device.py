@@ -18,14 +18,14 @@ from typing import Any
 
 import numpy as np
 
-from thintact_sdk.imaging.filter_training import scene_for_channels
-from thintact_sdk.imaging.mask_orientation import Orientation
-from thintact_sdk.imaging.metrics import psnr
-from thintact_sdk.imaging.noise import signal_to_dn
-from thintact_sdk.imaging.scenes import gelsight, make_scene
-from thintact_sdk.imaging.simulator import Simulator
-from thintact_sdk.profile import Profile, load_profile
-from thintact_sdk.recording import Recording, RecordingWriter
+from thintact_sdk.formats.profiles import Profile, load_profile
+from thintact_sdk.formats.recording import Recording, RecordingWriter
+from thintact_sdk.reconstruction.filter_training import scene_for_channels
+from thintact_sdk.reconstruction.mask_orientation import Orientation
+from thintact_sdk.reconstruction.metrics import psnr
+from thintact_sdk.simulation.noise import signal_to_dn
+from thintact_sdk.simulation.scenes import gelsight, make_scene
+from thintact_sdk.simulation.simulator import Simulator
 
 TRUE_PHYSICS: dict[str, dict[str, Any]] = {
     "geometry": {"scene_to_mask_mm": 4.86, "mask_to_sensor_mm": 0.99},

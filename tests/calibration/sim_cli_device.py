@@ -16,10 +16,10 @@ from typing import Literal
 import numpy as np
 from independent_device import TRUE_PHYSICS, validation_scenes
 
-from thintact_sdk.cli.main import main
-from thintact_sdk.imaging.filter_training import scene_for_channels
-from thintact_sdk.profile import Profile, write_profile
-from thintact_sdk.recording import Recording, RecordingWriter
+from thintact_sdk.apps.cli.main import main
+from thintact_sdk.formats.profiles import Profile, write_profile
+from thintact_sdk.formats.recording import Recording, RecordingWriter
+from thintact_sdk.reconstruction.filter_training import scene_for_channels
 
 
 def calibration_scenes(n: int, m: int) -> list[tuple[str, np.ndarray]]:

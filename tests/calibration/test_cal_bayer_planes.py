@@ -12,15 +12,15 @@ import pytest
 from independent_device import small_profile
 from sim_cli_device import simulate_recording
 
-from thintact_sdk.bayer import PLANES, mosaic_from_planes, planes_to_rgb, split_bayer
+from thintact_sdk.apps.cli.main import main
 from thintact_sdk.calibration.validation import make_decoder, score
-from thintact_sdk.capture import to_measurement
-from thintact_sdk.cli.main import main
+from thintact_sdk.device.cameras import to_measurement
 from thintact_sdk.errors import DeviceError, ProfileError
+from thintact_sdk.formats.profiles import Profile, profile_from_dict
+from thintact_sdk.formats.recording import Recording
 from thintact_sdk.frames import RawFrame
-from thintact_sdk.imaging.calibration_bundle import CalibrationBundle
-from thintact_sdk.profile import Profile, profile_from_dict
-from thintact_sdk.recording import Recording
+from thintact_sdk.pixels.bayer import PLANES, mosaic_from_planes, planes_to_rgb, split_bayer
+from thintact_sdk.reconstruction.bundle import CalibrationBundle
 
 SITE_GAIN = np.array([1.0, 1.0, 0.8, 1.0])
 """Relative sensitivity of R, Gr, Gb, B (Gb 20 % less: e.g. crosstalk from the blue row)."""
@@ -118,7 +118,7 @@ def test_every_decoder_reconstructs_the_planes(planes_calibrated: tuple[Path, Pa
 
 
 def test_the_tactile_path_gets_rgb(planes_calibrated: tuple[Path, Path]) -> None:
-    from thintact_sdk.sensor import Sensor
+    from thintact_sdk.device.sensor import Sensor
     from thintact_sdk.tactile import scene_level_lut
 
     _, cal = planes_calibrated
@@ -142,8 +142,8 @@ def test_the_wizard_calibrates_mono_and_plane_devices(tmp_path: Path, channels: 
     frame for mono, a mosaic with per-site values for the planes)."""
     from thintact_sdk.calibration.pipeline import CalibrationOptions
     from thintact_sdk.calibration.wizard import WizardSettings, run_wizard
-    from thintact_sdk.capture import create_camera
-    from thintact_sdk.plugin_manager import get_registry
+    from thintact_sdk.device.cameras import create_camera
+    from thintact_sdk.device.registry import get_registry
 
     d = small_profile(channels).contract_dict()
     d["camera"] = {"plugin": "virtual", "settings": {"fps": 0, "seed": 3}}

@@ -15,7 +15,7 @@ from thintact_sdk.calibration.collect import collect_slits
 from thintact_sdk.calibration.health import assess
 from thintact_sdk.calibration.pipeline import CalibrationOptions, solve_matrices
 from thintact_sdk.calibration.verdict import judge
-from thintact_sdk.profile import CalibrationLimits
+from thintact_sdk.formats.profiles import CalibrationLimits
 
 
 def _health(root: Path, seed: int, defects: list[Dust], channels: tuple[str, ...] = ("R", "G", "B")):  # noqa: ANN202

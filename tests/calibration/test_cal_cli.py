@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 from cal_testkit import synthetic_matrices, synthetic_profile, write_slit_recording
 
-from thintact_sdk.cli.main import main
-from thintact_sdk.imaging.scenes import make_scene
-from thintact_sdk.recording import Recording
+from thintact_sdk.apps.cli.main import main
+from thintact_sdk.formats.recording import Recording
+from thintact_sdk.simulation.scenes import make_scene
 
 
 @pytest.fixture(scope="module")

@@ -14,10 +14,10 @@ import numpy as np
 import pytest
 from thintact_displays.layout import panel_layout, scene_to_rgb8
 
+from thintact_sdk.device.registry import get_registry
 from thintact_sdk.errors import DeviceError, ProfileError
+from thintact_sdk.formats.profiles import Profile, load_profile
 from thintact_sdk.frames import RawFrame
-from thintact_sdk.plugin_manager import get_registry
-from thintact_sdk.profile import Profile, load_profile
 
 PANEL = (320, 200)
 

@@ -23,8 +23,8 @@ from thintact_sdk.calibration.ghost import (
 )
 from thintact_sdk.calibration.health import HealthReport, assess
 from thintact_sdk.calibration.pipeline import CalibrationOptions, solve_matrices
-from thintact_sdk.imaging.direct_generation import AxisGeometry, DirectGenerator
-from thintact_sdk.profile import Profile
+from thintact_sdk.formats.profiles import Profile
+from thintact_sdk.reconstruction.direct_generation import AxisGeometry, DirectGenerator
 
 
 def _health(root: Path, channels: tuple[str, ...], ghost: Ghost | None, seed: int) -> HealthReport:

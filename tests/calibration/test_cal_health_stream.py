@@ -17,9 +17,9 @@ from thintact_sdk.calibration.classify import classify_scene, is_dark, is_slit
 from thintact_sdk.calibration.collect import SlitCollection, collect_slits, signal_of
 from thintact_sdk.calibration.health import assess
 from thintact_sdk.calibration.pipeline import CalibrationOptions, solve_matrices
-from thintact_sdk.imaging.filter_training import scene_for_channels
-from thintact_sdk.imaging.t2s import SystemMatrices
-from thintact_sdk.recording import Recording, RecordingWriter
+from thintact_sdk.formats.recording import Recording, RecordingWriter
+from thintact_sdk.reconstruction.filter_training import scene_for_channels
+from thintact_sdk.reconstruction.t2s import SystemMatrices
 
 
 def _unit(root: Path, channels: tuple[str, ...], ghost: Ghost | None, seed: int

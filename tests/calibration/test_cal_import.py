@@ -9,18 +9,18 @@ import numpy as np
 import pytest
 from independent_device import small_profile, write_recording
 
+from thintact_sdk.apps.cli.main import main
 from thintact_sdk.calibration.collect import collect_slits
-from thintact_sdk.calibration.matrices_io import export_matrices, import_matrices
 from thintact_sdk.calibration.pipeline import (
     CalibrationOptions,
     bundle_from_matrices,
     solve_matrices,
 )
-from thintact_sdk.cli.main import main
 from thintact_sdk.errors import CalibrationError
-from thintact_sdk.imaging.calibration_bundle import CalibrationBundle
-from thintact_sdk.imaging.metrics import psnr
-from thintact_sdk.recording import Recording
+from thintact_sdk.formats.matrices import export_matrices, import_matrices
+from thintact_sdk.formats.recording import Recording
+from thintact_sdk.reconstruction.bundle import CalibrationBundle
+from thintact_sdk.reconstruction.metrics import psnr
 
 
 @pytest.fixture(scope="module")
@@ -81,7 +81,7 @@ def test_imported_bundle_chooses_tau_and_reconstructs(unit, tmp_path: Path, mode
 
 
 def test_import_and_export_through_the_cli(unit, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:  # type: ignore[no-untyped-def]
-    from thintact_sdk.profile import write_profile
+    from thintact_sdk.formats.profiles import write_profile
 
     profile, rec, sm = unit
     write_profile(profile, tmp_path / "p.json")

@@ -14,12 +14,12 @@ import pytest
 from independent_device import small_profile
 from sim_cli_device import simulate_recording
 
+from thintact_sdk.apps.cli.main import main
 from thintact_sdk.calibration.validation import score
-from thintact_sdk.cli.main import main
 from thintact_sdk.errors import RecordingError
-from thintact_sdk.profile import Profile, profile_from_dict
-from thintact_sdk.recording import Recording
-from thintact_sdk.tone_curve import encode
+from thintact_sdk.formats.profiles import Profile, profile_from_dict
+from thintact_sdk.formats.recording import Recording
+from thintact_sdk.pixels.tone_curve import encode
 
 
 def jpeg_camera_profile() -> Profile:

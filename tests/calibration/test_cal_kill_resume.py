@@ -16,9 +16,9 @@ import numpy as np
 import pytest
 
 from thintact_sdk.calibration.plan import build_plan
-from thintact_sdk.imaging.calibration_bundle import CalibrationBundle
-from thintact_sdk.profile import Profile, load_profile, write_profile
-from thintact_sdk.recording import Recording
+from thintact_sdk.formats.profiles import Profile, load_profile, write_profile
+from thintact_sdk.formats.recording import Recording
+from thintact_sdk.reconstruction.bundle import CalibrationBundle
 
 pytest.importorskip("thintact_virtual.bench", reason="virtual sensor plugin not installed")
 
@@ -33,7 +33,7 @@ def _profile(tmp_path: Path) -> Path:
 
 def _cmd(out: Path) -> list[str]:
     return [
-        sys.executable, "-m", "thintact_sdk.cli.main", "calibrate", "--profile", "virtual-mini-coarse.json",
+        sys.executable, "-m", "thintact_sdk.apps.cli.main", "calibrate", "--profile", "virtual-mini-coarse.json",
         "--out", str(out), "--frames", "1", "--flush", "0", "--camera-set", "fps=0",
         "--camera-set", "noise=false", "--filter-steps", "0", "--no-progress",
     ]

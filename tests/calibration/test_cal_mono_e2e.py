@@ -12,8 +12,8 @@ import pytest
 from independent_device import small_profile
 from sim_cli_device import simulate_recording
 
+from thintact_sdk.apps.cli.main import main
 from thintact_sdk.calibration.validation import score
-from thintact_sdk.cli.main import main
 
 # every decoder for a mask device (``identity`` is the lens-based sensors' camera image);
 # PSNR floors ~2 dB under what each reaches on the gel scenes here (23.3-23.8, 34.5-35.5,
@@ -32,7 +32,7 @@ def mono_calibrated(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Pat
 
 
 def test_monochrome_bundle_is_one_channel(mono_calibrated: tuple[Path, Path]) -> None:
-    from thintact_sdk.imaging.calibration_bundle import CalibrationBundle
+    from thintact_sdk.reconstruction.bundle import CalibrationBundle
 
     _, cal = mono_calibrated
     bundle = CalibrationBundle.load(cal)
@@ -44,7 +44,7 @@ def test_monochrome_bundle_is_one_channel(mono_calibrated: tuple[Path, Path]) ->
 @pytest.mark.parametrize("decoder", sorted(DECODERS))
 def test_every_decoder_reconstructs_the_monochrome_recording(
         mono_calibrated: tuple[Path, Path], tmp_path: Path, decoder: str) -> None:
-    from thintact_sdk.recording import Recording
+    from thintact_sdk.formats.recording import Recording
 
     rec_dir, cal = mono_calibrated
     args = ["reconstruct", str(rec_dir), "--calibration", str(cal), "--out", str(tmp_path / "est"),
@@ -63,10 +63,10 @@ def test_every_decoder_reconstructs_the_monochrome_recording(
 
 
 def test_the_capture_path_passes_monochrome_frames_through() -> None:
-    from thintact_sdk.capture import open_camera, to_measurement
+    from thintact_sdk.device.cameras import open_camera, to_measurement
     from thintact_sdk.errors import DeviceError
+    from thintact_sdk.formats.profiles import profile_from_dict
     from thintact_sdk.frames import RawFrame
-    from thintact_sdk.profile import profile_from_dict
 
     d = small_profile(("mono",)).contract_dict()
     d["camera"] = {"plugin": "virtual", "settings": {"noise": False}}

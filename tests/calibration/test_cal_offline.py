@@ -18,9 +18,9 @@ from thintact_sdk.calibration.pipeline import (
     solve_matrices,
 )
 from thintact_sdk.errors import CalibrationError
-from thintact_sdk.imaging.calibration_bundle import CalibrationBundle
-from thintact_sdk.imaging.scenes import make_scene
-from thintact_sdk.recording import Recording, RecordingWriter
+from thintact_sdk.formats.recording import Recording, RecordingWriter
+from thintact_sdk.reconstruction.bundle import CalibrationBundle
+from thintact_sdk.simulation.scenes import make_scene
 
 FAST = CalibrationOptions(filter_steps=0, filter_scenes=8)
 

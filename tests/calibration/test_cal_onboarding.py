@@ -13,10 +13,10 @@ from independent_device import small_profile, write_recording
 from thintact_sdk.calibration.collect import signal_of
 from thintact_sdk.calibration.pipeline import CalibrationOptions, calibrate_recording
 from thintact_sdk.calibration.validation import make_decoder, score
-from thintact_sdk.imaging.calibration_bundle import CalibrationBundle
-from thintact_sdk.imaging.simulator import Simulator
-from thintact_sdk.imaging.t2s import SystemMatrices
-from thintact_sdk.imaging.tikhonov import TikhonovSolver
+from thintact_sdk.reconstruction.bundle import CalibrationBundle
+from thintact_sdk.reconstruction.t2s import SystemMatrices
+from thintact_sdk.reconstruction.tikhonov import TikhonovSolver
+from thintact_sdk.simulation.simulator import Simulator
 
 
 def _coding_similarity(a: SystemMatrices, b: SystemMatrices) -> float:
@@ -104,7 +104,7 @@ def _flat_field(truth) -> np.ndarray:  # type: ignore[no-untyped-def]
 @pytest.mark.parametrize("flipped", [False, True])
 def test_mask_pose_is_recovered_from_a_flat_field(flipped: bool) -> None:
     from thintact_sdk.calibration.pose import estimate_pose
-    from thintact_sdk.profile import Profile
+    from thintact_sdk.formats.profiles import Profile
 
     nominal = small_profile(("G",))
     data = nominal.contract_dict()
@@ -126,8 +126,8 @@ def test_mask_pose_is_recovered_from_a_flat_field(flipped: bool) -> None:
 
 
 def test_calibrate_pose_cli_writes_the_pose_into_the_profile(tmp_path: Path) -> None:
-    from thintact_sdk.cli.main import main
-    from thintact_sdk.profile import Profile, load_profile, write_profile
+    from thintact_sdk.apps.cli.main import main
+    from thintact_sdk.formats.profiles import Profile, load_profile, write_profile
 
     nominal = small_profile(("G",))
     write_profile(nominal, tmp_path / "nominal.json")

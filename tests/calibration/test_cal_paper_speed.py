@@ -10,8 +10,8 @@ from __future__ import annotations
 import numpy as np
 
 from thintact_sdk.calibration.prediction import _slit_signal_dn, slit_factors
-from thintact_sdk.imaging.simulator import Simulator
-from thintact_sdk.profile import Profile, load_profile
+from thintact_sdk.formats.profiles import Profile, load_profile
+from thintact_sdk.simulation.simulator import Simulator
 
 
 def _slit_scenes(idx: list[int], n: int, m: int, c: int) -> np.ndarray:
@@ -55,8 +55,8 @@ def test_a_crash_after_the_solve_resumes_without_recomputing_it(tmp_path, monkey
 
     from thintact_sdk.calibration import pipeline
     from thintact_sdk.calibration.pipeline import CalibrationOptions, calibrate_recording
-    from thintact_sdk.imaging.scenes import make_scene
-    from thintact_sdk.recording import Recording
+    from thintact_sdk.formats.recording import Recording
+    from thintact_sdk.simulation.scenes import make_scene
 
     opts = CalibrationOptions(filter_steps=0, filter_scenes=8)
     write_slit_recording(tmp_path / "rec", synthetic_profile(), synthetic_matrices(), np.random.default_rng(0),

@@ -13,10 +13,10 @@ from scipy import ndimage
 
 from thintact_sdk.calibration.pose import PoseEstimate, estimate_pose
 from thintact_sdk.errors import CalibrationError
-from thintact_sdk.imaging.mask_orientation import ORIENTATIONS, Orientation, split_angle
-from thintact_sdk.imaging.simulator import Simulator
-from thintact_sdk.imaging.t2s import SystemMatrices
-from thintact_sdk.profile import Profile
+from thintact_sdk.formats.profiles import Profile
+from thintact_sdk.reconstruction.mask_orientation import ORIENTATIONS, Orientation, split_angle
+from thintact_sdk.reconstruction.t2s import SystemMatrices
+from thintact_sdk.simulation.simulator import Simulator
 
 DX, DY, Z = -7.3, 4.1, 4.9  # um, um, mm (nominal z 4.8): a sub-cell offset of a 20 um cell
 NAMES = {o.name: o for o in ORIENTATIONS}
@@ -77,7 +77,7 @@ def test_uniform_scene_profiles_match_the_direct_matrices(nominal: Profile) -> N
     """The flat-field model's profiles are direct generation's ``P·1`` at each shift."""
     from dataclasses import replace
 
-    from thintact_sdk.imaging.direct_generation import AxisGeometry, DirectGenerator
+    from thintact_sdk.reconstruction.direct_generation import AxisGeometry, DirectGenerator
 
     axis = AxisGeometry.cols_of(nominal)
     phi = np.asarray(nominal.mask.phi, float)
@@ -150,8 +150,8 @@ def test_a_turn_far_from_every_mounting_is_refused(nominal: Profile) -> None:
 
 
 def test_calibrate_pose_cli_turned_by_90_and_refusal(nominal: Profile, tmp_path, capsys) -> None:  # type: ignore[no-untyped-def]
-    from thintact_sdk.cli.main import main
-    from thintact_sdk.profile import load_profile, write_profile
+    from thintact_sdk.apps.cli.main import main
+    from thintact_sdk.formats.profiles import load_profile, write_profile
 
     write_profile(nominal, tmp_path / "nominal.json")
     truth = _mounted(nominal, Orientation.turned(1), 0.0)

@@ -17,7 +17,7 @@ from concealed_pose import (
 )
 
 from thintact_sdk.calibration.pose import estimate_pose
-from thintact_sdk.imaging.mask_orientation import Orientation
+from thintact_sdk.reconstruction.mask_orientation import Orientation
 
 
 def _run(case: ConcealedCase, seed: int, shared: bool = False, rows: int = 128, cols: int = 160):  # type: ignore[no-untyped-def]
@@ -55,8 +55,8 @@ def test_pattern_that_is_not_on_the_mask_is_unsure() -> None:
 
 
 def test_cli_unsure_pose_exits_3_unless_accepted(tmp_path, capsys) -> None:  # type: ignore[no-untyped-def]
-    from thintact_sdk.cli.main import main
-    from thintact_sdk.profile import write_profile
+    from thintact_sdk.apps.cli.main import main
+    from thintact_sdk.formats.profiles import write_profile
 
     nominal = nominal_profile(96, 120)
     write_profile(nominal, tmp_path / "nominal.json")

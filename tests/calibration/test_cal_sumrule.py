@@ -10,8 +10,8 @@ from cal_testkit import channel, synthetic_matrices, synthetic_profile, write_sl
 from thintact_sdk.calibration.collect import collect_slits
 from thintact_sdk.calibration.gauge import operator_error
 from thintact_sdk.calibration.pipeline import CalibrationOptions, solve_matrices
-from thintact_sdk.imaging.scenes import make_scene
-from thintact_sdk.recording import Recording
+from thintact_sdk.formats.recording import Recording
+from thintact_sdk.simulation.scenes import make_scene
 
 
 def _errors(rec: Recording, sm_true, gains: str = "auto") -> tuple[list[float], object]:  # type: ignore[no-untyped-def]

@@ -19,6 +19,7 @@ from independent_device import (
     write_recording,
 )
 
+from thintact_sdk.apps.cli.main import main
 from thintact_sdk.calibration.collect import collect_slits, signal_of
 from thintact_sdk.calibration.pipeline import CalibrationOptions, solve_matrices
 from thintact_sdk.calibration.tau import (
@@ -28,14 +29,13 @@ from thintact_sdk.calibration.tau import (
     cross_validate_prior,
 )
 from thintact_sdk.calibration.validation import make_decoder
-from thintact_sdk.cli.main import main
-from thintact_sdk.imaging.calibration_bundle import CalibrationBundle
-from thintact_sdk.imaging.metrics import psnr
-from thintact_sdk.imaging.scene_prior import ScenePrior
-from thintact_sdk.imaging.scenes import gelsight
-from thintact_sdk.imaging.t2s import SystemMatrices
-from thintact_sdk.profile import Profile
-from thintact_sdk.recording import Recording, RecordingWriter
+from thintact_sdk.formats.profiles import Profile
+from thintact_sdk.formats.recording import Recording, RecordingWriter
+from thintact_sdk.reconstruction.bundle import CalibrationBundle
+from thintact_sdk.reconstruction.metrics import psnr
+from thintact_sdk.reconstruction.scene_prior import ScenePrior
+from thintact_sdk.reconstruction.t2s import SystemMatrices
+from thintact_sdk.simulation.scenes import gelsight
 
 
 class _ScaledDecoder:
@@ -180,8 +180,8 @@ def healthy(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path, Path]
     # the same unit (same true physics), new scenes, one capture each
     from independent_device import TRUE_PHYSICS
 
-    from thintact_sdk.imaging.noise import signal_to_dn
-    from thintact_sdk.imaging.simulator import Simulator
+    from thintact_sdk.simulation.noise import signal_to_dn
+    from thintact_sdk.simulation.simulator import Simulator
 
     sim = Simulator(profile.with_physics(TRUE_PHYSICS))
     nz = profile.noise

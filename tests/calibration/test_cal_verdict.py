@@ -9,7 +9,7 @@ import pytest
 from thintact_sdk.calibration.prediction import Prediction
 from thintact_sdk.calibration.validation import ValidationResult
 from thintact_sdk.calibration.verdict import judge
-from thintact_sdk.profile import CalibrationLimits
+from thintact_sdk.formats.profiles import CalibrationLimits
 
 
 def _result(label: str, psnr_db: float, saturated: float = 0.0) -> ValidationResult:

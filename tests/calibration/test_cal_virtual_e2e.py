@@ -10,17 +10,17 @@ import pytest
 
 from thintact_sdk.calibration.pipeline import CalibrationOptions
 from thintact_sdk.calibration.wizard import WizardSettings, run_wizard
-from thintact_sdk.capture import create_camera
-from thintact_sdk.imaging.calibration_bundle import CalibrationBundle
-from thintact_sdk.imaging.t2s import SystemMatrices
-from thintact_sdk.plugin_manager import get_registry
-from thintact_sdk.profile import load_profile
+from thintact_sdk.device.cameras import create_camera
+from thintact_sdk.device.registry import get_registry
+from thintact_sdk.formats.profiles import load_profile
+from thintact_sdk.reconstruction.bundle import CalibrationBundle
+from thintact_sdk.reconstruction.t2s import SystemMatrices
 
 bench = pytest.importorskip("thintact_virtual.bench", reason="virtual sensor plugin not installed")
 
 
 def test_wizard_calibrates_virtual_mini(tmp_path: Path) -> None:
-    from thintact_sdk.imaging.simulator import Simulator
+    from thintact_sdk.simulation.simulator import Simulator
 
     prof = load_profile("virtual-mini")
     cam_settings = {"fps": 0, "seed": 3}

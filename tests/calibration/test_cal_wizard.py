@@ -19,7 +19,7 @@ from thintact_sdk.calibration.pipeline import CalibrationOptions, channel_matric
 from thintact_sdk.calibration.plan import build_plan
 from thintact_sdk.calibration.wizard import WizardSettings, find_unfinished, run_wizard
 from thintact_sdk.errors import CalibrationError, DeviceTimeoutError
-from thintact_sdk.recording import Recording
+from thintact_sdk.formats.recording import Recording
 
 FAST = CalibrationOptions(filter_steps=0, filter_scenes=8)
 SETTINGS = WizardSettings(frames=2, validation=("gelsight:1", "smooth_color"))

@@ -8,11 +8,11 @@ from pathlib import Path
 import numpy as np
 from independent_device import small_profile, write_recording
 
-from thintact_sdk.cli.main import main
-from thintact_sdk.imaging.calibration_bundle import CalibrationBundle
-from thintact_sdk.imaging.t2s import SystemMatrices
-from thintact_sdk.profile import write_profile
-from thintact_sdk.recording import RecordingWriter
+from thintact_sdk.apps.cli.main import main
+from thintact_sdk.formats.profiles import write_profile
+from thintact_sdk.formats.recording import RecordingWriter
+from thintact_sdk.reconstruction.bundle import CalibrationBundle
+from thintact_sdk.reconstruction.t2s import SystemMatrices
 
 
 def test_too_few_validation_scenes_fall_back_with_a_warning(tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]

@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 from independent_device import small_profile
 
-from thintact_sdk.cli.main import main
-from thintact_sdk.profile import Profile, write_profile
-from thintact_sdk.recording import Recording
+from thintact_sdk.apps.cli.main import main
+from thintact_sdk.formats.profiles import Profile, write_profile
+from thintact_sdk.formats.recording import Recording
 
 
 def _profile(tmp_path: Path, channels: tuple[str, ...], black: float = 0.0, sat: float = 65535.0) -> Path:

@@ -8,16 +8,16 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from thintact_sdk.bayer import (
+from thintact_sdk.errors import RecordingError
+from thintact_sdk.formats.profiles import read_profile_file
+from thintact_sdk.formats.recording import Recording, RecordingWriter
+from thintact_sdk.pixels.bayer import (
     bin_bayer,
     block_mean,
     mosaic_from_rgb,
     pattern_from_pixel_format,
     split_bayer,
 )
-from thintact_sdk.errors import RecordingError
-from thintact_sdk.profile import read_profile_file
-from thintact_sdk.recording import Recording, RecordingWriter
 
 
 def test_bin_bayer_rggb_by_hand() -> None:

@@ -8,12 +8,12 @@ from pathlib import Path
 import pytest
 
 from thintact_sdk import __version__
-from thintact_sdk.cli.main import main
+from thintact_sdk.apps.cli.main import main
 
 
 def run_cli(*args: str) -> subprocess.CompletedProcess[str]:
     return subprocess.run(
-        [sys.executable, "-m", "thintact_sdk.cli.main", *args], capture_output=True, text=True, timeout=120
+        [sys.executable, "-m", "thintact_sdk.apps.cli.main", *args], capture_output=True, text=True, timeout=120
     )
 
 
@@ -73,7 +73,7 @@ def test_profile_show(capsys: pytest.CaptureFixture[str]) -> None:
 
 
 def test_two_word_commands_name_the_hyphenated_ones() -> None:
-    from thintact_sdk.cli.main import join_two_word_command
+    from thintact_sdk.apps.cli.main import join_two_word_command
 
     names = ["calibrate", "calibrate-pose", "calibrate-import", "diagnose"]
     assert join_two_word_command(["calibrate", "pose", "flat.npy"], names) == ["calibrate-pose", "flat.npy"]

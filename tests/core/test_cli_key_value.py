@@ -7,8 +7,8 @@ import argparse
 
 import pytest
 
-from thintact_sdk.cli.argtypes import key_value, key_values
-from thintact_sdk.cli.main import main
+from thintact_sdk.apps.cli.argtypes import key_value, key_values
+from thintact_sdk.apps.cli.main import main
 
 
 @pytest.mark.parametrize(("text", "expected"), [

@@ -10,14 +10,14 @@ import sys
 import pytest
 from pydantic import ValidationError
 
-import thintact_sdk.cli.commands.profile as profile_cmd
-from thintact_sdk.cli.main import main
+import thintact_sdk.apps.cli.commands.profile as profile_cmd
+from thintact_sdk.apps.cli.main import main
 from thintact_sdk.errors import CameraSettingsError
-from thintact_sdk.profile import SceneSpec, validation_error_line
+from thintact_sdk.formats.profiles import SceneSpec, validation_error_line
 
 
 def test_thintact_alone_says_why_in_one_line() -> None:
-    r = subprocess.run([sys.executable, "-m", "thintact_sdk.cli.main"], capture_output=True, text=True,
+    r = subprocess.run([sys.executable, "-m", "thintact_sdk.apps.cli.main"], capture_output=True, text=True,
                        timeout=120)
     assert r.returncode == 2
     assert r.stderr == "thintact: no command given; try 'thintact --help'\n"

@@ -6,8 +6,9 @@ import threading
 
 import pytest
 
-from thintact_sdk.blas import openblas_threads
-from thintact_sdk.compute_threads import (
+from thintact_sdk.errors import InvalidValueError, ThinTactError
+from thintact_sdk.host.blas import openblas_threads
+from thintact_sdk.host.compute_threads import (
     MAX_DECODE_WORKERS,
     decode_workers,
     kernel_threads_held,
@@ -15,7 +16,6 @@ from thintact_sdk.compute_threads import (
     suggested_decode_workers,
     usable_cores,
 )
-from thintact_sdk.errors import InvalidValueError, ThinTactError
 
 
 def test_decode_workers_are_chosen_from_the_measured_decode_and_the_camera_rate() -> None:
@@ -39,7 +39,7 @@ def test_a_bad_worker_count_is_a_clear_error(bad: str) -> None:
 def test_nested_holds_from_two_threads_restore_the_first_settings() -> None:
     import torch
 
-    from thintact_sdk.compute_threads import prepare_worker_thread
+    from thintact_sdk.host.compute_threads import prepare_worker_thread
 
     torch_before, blas_before = torch.get_num_threads(), openblas_threads()
     inner_started, release = threading.Event(), threading.Event()

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from thintact_sdk.cli.main import main
+from thintact_sdk.apps.cli.main import main
 
 
 @pytest.mark.timeout(300)

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from thintact_sdk.plugin_manager import get_registry
+from thintact_sdk.device.registry import get_registry
 
 THIRD_PARTY = {
     "pyproject.toml": """
@@ -60,9 +60,9 @@ THIRD_PARTY = {
 
 USE_IT = """
 import json, sys
-from thintact_sdk.plugin_manager import get_registry
-from thintact_sdk.profile import load_profile
-from thintact_sdk.bayer import bin_bayer
+from thintact_sdk.device.registry import get_registry
+from thintact_sdk.formats.profiles import load_profile
+from thintact_sdk.pixels.bayer import bin_bayer
 reg = get_registry()
 cam = reg.create("camera", "acme-cam", load_profile("virtual-mini"), {"level": 321})
 with cam:
@@ -97,7 +97,7 @@ def test_third_party_plugin_installed_with_pip_is_discovered_and_used(tmp_path: 
     )
     env = dict(os.environ, PYTHONPATH=str(target))
     listing = subprocess.run(
-        [sys.executable, "-m", "thintact_sdk.cli.main", "plugins", "--json"],
+        [sys.executable, "-m", "thintact_sdk.apps.cli.main", "plugins", "--json"],
         capture_output=True, text=True, env=env, timeout=120,
     )
     assert listing.returncode == 0, listing.stderr
@@ -116,7 +116,7 @@ def test_third_party_plugin_installed_with_pip_is_discovered_and_used(tmp_path: 
     assert "ImportError" in out["broken_error"]
 
     text = subprocess.run(
-        [sys.executable, "-m", "thintact_sdk.cli.main", "plugins"], capture_output=True, text=True, env=env,
+        [sys.executable, "-m", "thintact_sdk.apps.cli.main", "plugins"], capture_output=True, text=True, env=env,
         timeout=120,
     )
     assert "acme-cam" in text.stdout and "FAILED" in text.stdout and "libacme.so" in text.stdout
@@ -158,8 +158,8 @@ SHADOWING = {
 PICK_CAMERAS = """
 import json
 from thintact_sdk.errors import PluginError
-from thintact_sdk.plugin_manager import get_registry
-from thintact_sdk.profile import load_profile
+from thintact_sdk.device.registry import get_registry
+from thintact_sdk.formats.profiles import load_profile
 reg = get_registry()
 try:
     reg.get("camera", "virtual")
@@ -196,7 +196,7 @@ def test_third_party_cannot_shadow_a_builtin_camera_name(tmp_path: Path) -> None
     assert out["acme"] == "acme-zero" and out["sdk_plugin"] == "virtual"
 
     rec = subprocess.run(
-        [sys.executable, "-m", "thintact_sdk.cli.main", "record", "--profile", "virtual-mini",
+        [sys.executable, "-m", "thintact_sdk.apps.cli.main", "record", "--profile", "virtual-mini",
          "--frames", "1", "--out", str(tmp_path / "rec")],
         capture_output=True, text=True, env=env, timeout=120,
     )
@@ -211,8 +211,8 @@ def test_collision_in_process_names_both_plugins() -> None:
     import types
 
     from thintact_sdk import Component, hookimpl
+    from thintact_sdk.device.registry import PluginRegistry
     from thintact_sdk.errors import PluginError
-    from thintact_sdk.plugin_manager import PluginRegistry
 
     def _module(label: str) -> types.ModuleType:
         mod = types.ModuleType(f"fake_{label}")

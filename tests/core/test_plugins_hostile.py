@@ -13,8 +13,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from thintact_sdk import Component, hookimpl
+from thintact_sdk.device.registry import MAX_COMPONENTS_PER_HOOK, PluginRegistry
 from thintact_sdk.errors import CameraSettingsError, PluginError
-from thintact_sdk.plugin_manager import MAX_COMPONENTS_PER_HOOK, PluginRegistry
 
 
 def _plugin(label: str, cameras: Callable[[], Any]) -> types.ModuleType:
@@ -157,8 +157,8 @@ def test_a_cli_command_plugin_whose_factory_raises_leaves_every_command_working(
     """The CLI builds plugin commands through the registry: a factory raising ZeroDivisionError
     is recorded on its plugin, the other commands still run, and the broken benchmark is one
     clean error when asked for."""
-    import thintact_sdk.plugin_manager as pm
-    from thintact_sdk.cli.main import main
+    import thintact_sdk.device.registry as pm
+    from thintact_sdk.apps.cli.main import main
 
     monkeypatch.setattr(pm, "_REGISTRY", None)  # a registry of this test's own, restored after
     reg = pm.get_registry()

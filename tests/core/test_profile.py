@@ -7,7 +7,7 @@ import pytest
 import yaml
 
 from thintact_sdk.errors import ProfileError
-from thintact_sdk.profile import (
+from thintact_sdk.formats.profiles import (
     SHIPPED_PROFILE_DIR,
     available_profiles,
     load_profile,

@@ -21,9 +21,9 @@ import yaml
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
-from thintact_sdk.cli.main import main
+from thintact_sdk.apps.cli.main import main
 from thintact_sdk.errors import ProfileError
-from thintact_sdk.profile import SHIPPED_PROFILE_DIR, Profile, profile_from_dict
+from thintact_sdk.formats.profiles import SHIPPED_PROFILE_DIR, Profile, profile_from_dict
 
 settings.register_profile(
     "thintact-fuzz",
@@ -242,8 +242,8 @@ def _expanded_size(text: str) -> int:
 def test_yaml_structure_fuzz_valid_or_one_clean_line(tmp_path_factory: pytest.TempPathFactory,
                                                      capsys: pytest.CaptureFixture[str],
                                                      doc: tuple[str, bool], command: str) -> None:
-    from thintact_sdk import yaml_safe
-    from thintact_sdk.profile import load_profile
+    from thintact_sdk.formats import safe_yaml as yaml_safe
+    from thintact_sdk.formats.profiles import load_profile
 
     text, repeated = doc
     f = tmp_path_factory.mktemp("yfuzz") / "p.yaml"

@@ -10,10 +10,10 @@ from pathlib import Path
 import pytest
 import yaml
 
-from thintact_sdk.cli.main import main
+from thintact_sdk.apps.cli.main import main
 from thintact_sdk.errors import ProfileError
-from thintact_sdk.physics import EFFECTS
-from thintact_sdk.profile import SHIPPED_PROFILE_DIR, load_profile, profile_from_dict
+from thintact_sdk.formats.profiles import SHIPPED_PROFILE_DIR, load_profile, profile_from_dict
+from thintact_sdk.simulation.effects import EFFECTS
 
 
 @pytest.fixture(scope="module")
@@ -150,8 +150,8 @@ def test_tiny_tactile_pixel_refused_before_any_allocation(mini: dict) -> None:
 
 
 def test_elastomer_default_matches_the_simulator() -> None:
-    from thintact_sdk.profile import ELASTOMER_SIGMA_MM
-    from thintact_sdk.tactile.grid import TactileParams
+    from thintact_sdk.formats.profiles import ELASTOMER_SIGMA_MM
+    from thintact_sdk.tactile.interpretation.grid import TactileParams
 
     assert TactileParams(rows=1, cols=1, mm_per_px=1.0).elastomer_sigma_mm == ELASTOMER_SIGMA_MM
 
@@ -164,7 +164,7 @@ def test_elastomer_default_matches_the_simulator() -> None:
 ])
 def test_arrays_beyond_the_memory_limit_refused(mini: dict, monkeypatch: pytest.MonkeyPatch,
                                                 field: str, rows: int, cols: int, expect: str) -> None:
-    import thintact_sdk.profile as prof
+    import thintact_sdk.formats.profiles as prof
 
     monkeypatch.setattr(prof, "host_memory_bytes", lambda: 2**30)
     d = _set(_set(mini, f"{field}.rows", rows), f"{field}.cols", cols)
@@ -176,7 +176,7 @@ def test_arrays_beyond_the_memory_limit_refused(mini: dict, monkeypatch: pytest.
 
 
 def test_shipped_profiles_fit_a_small_host(monkeypatch: pytest.MonkeyPatch) -> None:
-    import thintact_sdk.profile as prof
+    import thintact_sdk.formats.profiles as prof
 
     monkeypatch.setattr(prof, "host_memory_bytes", lambda: 2 * 2**30)
     for f in sorted(SHIPPED_PROFILE_DIR.glob("*.yaml")):

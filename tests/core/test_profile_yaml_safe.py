@@ -13,11 +13,11 @@ from pathlib import Path
 import pytest
 import yaml
 
-from thintact_sdk import yaml_safe
-from thintact_sdk.cli.argtypes import key_value
-from thintact_sdk.cli.main import main
+from thintact_sdk.apps.cli.argtypes import key_value
+from thintact_sdk.apps.cli.main import main
 from thintact_sdk.errors import ProfileError
-from thintact_sdk.profile import SHIPPED_PROFILE_DIR, load_profile
+from thintact_sdk.formats import safe_yaml as yaml_safe
+from thintact_sdk.formats.profiles import SHIPPED_PROFILE_DIR, load_profile
 
 MINI_TEXT = (SHIPPED_PROFILE_DIR / "virtual-mini.yaml").read_text()
 
@@ -181,7 +181,7 @@ def test_duplicate_keys_in_profiles_refused(tmp_path: Path, capsys: pytest.Captu
 
 
 def test_oversized_profile_file_refused_before_reading(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    import thintact_sdk.profile as prof
+    import thintact_sdk.formats.profiles as prof
 
     f = tmp_path / "big.yaml"
     f.write_text(MINI_TEXT)

@@ -9,17 +9,17 @@ from typing import Any
 import numpy as np
 import pytest
 
-from thintact_sdk.capture import open_camera, to_measurement
+from thintact_sdk.device.cameras import open_camera, to_measurement
 from thintact_sdk.errors import DeviceError, ProfileError
-from thintact_sdk.frames import RawFrame
-from thintact_sdk.profile import (
+from thintact_sdk.formats.profiles import (
     Profile,
     load_profile,
     profile_from_dict,
     read_profile_file,
     write_profile,
 )
-from thintact_sdk.tone_curve import encode, linearize
+from thintact_sdk.frames import RawFrame
+from thintact_sdk.pixels.tone_curve import encode, linearize
 
 
 def _with_curve(curve: dict[str, Any] | None, **noise: float) -> Profile:
@@ -125,8 +125,8 @@ def test_the_capture_path_delivers_linear_dn(curve: dict[str, Any]) -> None:
 def test_a_gamma_curve_undoes_the_contract_sensor_gamma_effect() -> None:
     """``tone_curve: {kind: gamma, gamma: g}`` is the inverse of the ``sensor_gamma`` effect with
     the same g, so a ``thintact diagnose`` finding can be declared as it is reported."""
-    from thintact_sdk.imaging.scenes import make_scene
-    from thintact_sdk.imaging.simulator import Simulator
+    from thintact_sdk.simulation.scenes import make_scene
+    from thintact_sdk.simulation.simulator import Simulator
 
     linear_prof = load_profile("virtual-mini")
     g = 0.6

@@ -39,7 +39,7 @@ def concealed_case(repo_root: Path, tmp_path_factory: pytest.TempPathFactory) ->
 @pytest.fixture(scope="session")
 def concealed(concealed_case: Any) -> Any:
     """``make(case) -> (report, truth, diagnosis)``, each case diagnosed once."""
-    from thintact_sdk.diagnose import diagnose, load_diagnosis_data
+    from thintact_sdk.diagnosis.imaging import diagnose, load_diagnosis_data
 
     done: dict[str, Any] = {}
 

@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from thintact_sdk.diagnose.binning import (
+from thintact_sdk.diagnosis.imaging.binning import (
     ScreeningLimits,
     auto_bin_factor,
     bin_frames,
@@ -20,12 +20,12 @@ from thintact_sdk.diagnose.binning import (
     unbin_hotspots,
 )
 from thintact_sdk.errors import ThinTactError
-from thintact_sdk.imaging import sim_rotated
-from thintact_sdk.imaging.noise import noise_variance_dn
-from thintact_sdk.imaging.sim_params import kernel_params
-from thintact_sdk.imaging.simulator import Simulator
-from thintact_sdk.physics import resolve_physics
-from thintact_sdk.profile import Profile, load_profile, profile_from_dict
+from thintact_sdk.formats.profiles import Profile, load_profile, profile_from_dict
+from thintact_sdk.simulation import rotated as sim_rotated
+from thintact_sdk.simulation.effects import resolve_physics
+from thintact_sdk.simulation.noise import noise_variance_dn
+from thintact_sdk.simulation.params import kernel_params
+from thintact_sdk.simulation.simulator import Simulator
 
 
 def _device(rows: int = 24, cols: int = 32, physics: dict | None = None) -> Profile:
@@ -149,9 +149,9 @@ def test_cli_bins_and_checks_the_fit_unbinned(tmp_path: Path) -> None:
     """``thintact diagnose --bin 2`` on a small device with a hidden angular response:
     the effect is found on the binned data, the report says how it was binned, the hotspots
     are in sensor pixels and the fit, evaluated unbinned, reaches the noise."""
-    from thintact_sdk.cli.main import main
-    from thintact_sdk.imaging.noise import signal_to_dn
-    from thintact_sdk.recording import RecordingWriter
+    from thintact_sdk.apps.cli.main import main
+    from thintact_sdk.formats.recording import RecordingWriter
+    from thintact_sdk.simulation.noise import signal_to_dn
 
     prof = _device(32, 48)
     rng = np.random.default_rng(5)
@@ -177,8 +177,8 @@ def test_cli_bins_and_checks_the_fit_unbinned(tmp_path: Path) -> None:
 
 
 def _write_recording(prof: Profile, hidden: dict, path: Path, seed: int = 5) -> None:
-    from thintact_sdk.imaging.noise import signal_to_dn
-    from thintact_sdk.recording import RecordingWriter
+    from thintact_sdk.formats.recording import RecordingWriter
+    from thintact_sdk.simulation.noise import signal_to_dn
 
     rng = np.random.default_rng(seed)
     scenes = np.concatenate([np.ones((1, 12, 16, 3)), rng.random((3, 12, 16, 3))]).astype(np.float32)
@@ -196,8 +196,8 @@ def test_cli_screens_a_mask_shift_with_the_angle_held(tmp_path: Path,
     kernel and refraction count as too large (as at the paper's size), a hidden pure mask
     shift is still named with its parameters; the angle, held during the selection, is
     screened on coarser blocks afterwards and stays 0, and refraction is not tried."""
-    from thintact_sdk.cli.main import main
-    from thintact_sdk.diagnose import binning
+    from thintact_sdk.apps.cli.main import main
+    from thintact_sdk.diagnosis.imaging import binning
 
     monkeypatch.setattr(binning, "DIAGNOSIS_FAMILY_BYTES", 1024.0)
     prof = _device(32, 48)
@@ -225,8 +225,8 @@ def test_unbinned_amplitude_admits_an_effect_binning_hides(tmp_path: Path) -> No
     averages its fine structure away). With the amplitude floor between the two, the
     binned diagnosis rejects it on its own but names it when the change is measured on
     the unbinned recording (as the CLI does)."""
-    from thintact_sdk.diagnose import DiagnoseOptions, diagnose, load_diagnosis_data
-    from thintact_sdk.diagnose.binning import bin_data, unbinned_amplitude_fn
+    from thintact_sdk.diagnosis.imaging import DiagnoseOptions, diagnose, load_diagnosis_data
+    from thintact_sdk.diagnosis.imaging.binning import bin_data, unbinned_amplitude_fn
 
     prof = _device(32, 48)
     shift = {"angle_deg": 0.0, "dx_um": 7.0, "dy_um": -4.0}
@@ -253,7 +253,7 @@ def test_unbinned_amplitude_admits_an_effect_binning_hides(tmp_path: Path) -> No
 
 def test_held_params_name_fit_parameters() -> None:
     """Held parameters are named by the effect's fit labels; a wrong label is refused."""
-    from thintact_sdk.diagnose.run import held_indices
+    from thintact_sdk.diagnosis.imaging.engine import held_indices
 
     assert held_indices({"mask_misalignment": ("angle_deg",)}) == {"mask_misalignment": (0,)}
     with pytest.raises(ThinTactError, match="not fit parameters of mask_misalignment"):
@@ -269,7 +269,7 @@ def test_unscreened_refraction_is_named_beside_a_geometry_stand_in(concealed_cas
     implies, because the recording was never compared with it. A plain geometry error (4.95
     instead of 4.8 mm: n would be 1.008) is left alone. Shown on the concealed device with
     refraction held as the paper-size diagnosis holds it."""
-    from thintact_sdk.diagnose import DiagnoseOptions, diagnose, load_diagnosis_data
+    from thintact_sdk.diagnosis.imaging import DiagnoseOptions, diagnose, load_diagnosis_data
 
     data = load_diagnosis_data(concealed_case(case) / "recording")
     opts = DiagnoseOptions(candidates=["geometry", "refraction"], max_effects=1,
@@ -292,7 +292,7 @@ def test_unscreened_refraction_is_named_beside_a_geometry_stand_in(concealed_cas
 def test_screened_refraction_is_never_named_as_an_unscreened_stand_in(concealed_case: Any) -> None:
     """With refraction screened (nothing held) the same recording names refraction itself,
     and no finding carries the unscreened stand-in sentence."""
-    from thintact_sdk.diagnose import DiagnoseOptions, diagnose, load_diagnosis_data
+    from thintact_sdk.diagnosis.imaging import DiagnoseOptions, diagnose, load_diagnosis_data
 
     data = load_diagnosis_data(concealed_case("refraction") / "recording")
     report = diagnose(data, options=DiagnoseOptions(candidates=["geometry", "refraction"], max_effects=1)).report
@@ -310,7 +310,7 @@ def test_refraction_is_held_on_the_wide_device_where_a_fit_would_rebuild_it():
 
     wide = make_profile(rows=128, cols=160, n=50, m=64, K=127)
     kp = kernel_params(wide, resolve_physics({"refraction": {"n_scene_side": 1.41}}))
-    from thintact_sdk.imaging import sim_refracted
+    from thintact_sdk.simulation import refracted as sim_refracted
 
     assert sim_refracted.refracted_family_bytes(kp) > 256 * 1024**2
     lim = screening_limits(wide)
@@ -322,8 +322,8 @@ def test_cli_names_unscreened_refraction_at_every_size(tmp_path: Path,
     """Issue 34: without binning too (a wide field of view), an effect out of reach is not
     screened, report.json says so (``not_screened``), and a geometry finding that shortens the
     scene gap enough to imply n ≥ 1.1 names refraction among its alternatives with that index."""
-    from thintact_sdk.cli.main import main
-    from thintact_sdk.diagnose import binning
+    from thintact_sdk.apps.cli.main import main
+    from thintact_sdk.diagnosis.imaging import binning
 
     monkeypatch.setattr(binning, "DIAGNOSIS_FAMILY_BYTES", 1024.0)  # out of reach, as on a wide device
     prof = _device(32, 48)

@@ -8,7 +8,7 @@ from typing import Any
 
 import pytest
 
-from thintact_sdk.cli.main import main
+from thintact_sdk.apps.cli.main import main
 
 REPORT_KEYS = {"noise_rms_dn", "baseline", "located", "findings", "final", "unexplained"}
 
@@ -23,8 +23,8 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path: Path, capsys: pytest.Capture
 def test_recording_without_scenes_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     import numpy as np
 
-    from thintact_sdk.profile import load_profile
-    from thintact_sdk.recording import RecordingWriter
+    from thintact_sdk.formats.profiles import load_profile
+    from thintact_sdk.formats.recording import RecordingWriter
 
     prof = load_profile("virtual-mini")
     w = RecordingWriter(tmp_path / "rec", prof)

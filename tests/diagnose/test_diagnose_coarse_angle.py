@@ -1,4 +1,4 @@
-"""A held mask angle fitted on coarser blocks (:mod:`thintact_sdk.diagnose.coarse_angle`): on
+"""A held mask angle fitted on coarser blocks (:mod:`thintact_sdk.diagnosis.imaging.coarse_angle`): on
 the paper's device the 8×8-binned diagnosis cannot afford rotated kernels, so the angle is
 searched on blocks where they are cheap; effects that stood in for the rotation are dropped."""
 
@@ -11,11 +11,11 @@ import numpy as np
 import pytest
 
 from tests.diagnose.test_diagnose_binning import _device, _write_recording
-from thintact_sdk.diagnose import DiagnoseOptions, diagnose, load_diagnosis_data
-from thintact_sdk.diagnose.binning import bin_data, binned_variance_fn
-from thintact_sdk.diagnose.coarse_angle import CoarseAngleInput, coarse_factor, next_angle
-from thintact_sdk.diagnose.data import DiagnosisData
-from thintact_sdk.profile import load_profile
+from thintact_sdk.diagnosis.imaging import DiagnoseOptions, diagnose, load_diagnosis_data
+from thintact_sdk.diagnosis.imaging.binning import bin_data, binned_variance_fn
+from thintact_sdk.diagnosis.imaging.coarse_angle import CoarseAngleInput, coarse_factor, next_angle
+from thintact_sdk.diagnosis.imaging.recording_data import DiagnosisData
+from thintact_sdk.formats.profiles import load_profile
 
 HELD = {"mask_misalignment": ("angle_deg",)}
 
@@ -83,8 +83,8 @@ def test_cli_fits_the_held_angle_on_coarser_blocks(tmp_path, monkeypatch, capsys
     """As on the paper's device: with the family limit lowered the 2×2-binned diagnosis holds
     the angle, and the CLI fits it on coarser blocks; ``not_screened`` keeps only refraction,
     ``binned.coarse_angle`` says what was done, and the fitted profile has the angle."""
-    from thintact_sdk.cli.main import main
-    from thintact_sdk.diagnose import binning
+    from thintact_sdk.apps.cli.main import main
+    from thintact_sdk.diagnosis.imaging import binning
 
     monkeypatch.setattr(binning, "DIAGNOSIS_FAMILY_BYTES", 1024.0)
     _recording(tmp_path, -0.8)
@@ -109,11 +109,12 @@ def test_window_amplitude_is_the_whole_sensors_change(tmp_path, monkeypatch):
     """The change a rotation makes, measured on windows of the unbinned sensor: with every
     window of the plan it is the whole sensor's change (the windows' kernels are the whole
     kernel on their pixels); with a spread subset of them, an estimate of it."""
-    from thintact_sdk.diagnose.coarse_angle import window_amplitude
-    from thintact_sdk.imaging import sim_rotated, sim_tiled
-    from thintact_sdk.imaging.sim_params import kernel_params
-    from thintact_sdk.imaging.simulator import Simulator, _expansion, clear_kernel_cache
-    from thintact_sdk.physics import resolve_physics
+    from thintact_sdk.diagnosis.imaging.coarse_angle import window_amplitude
+    from thintact_sdk.simulation import rotated as sim_rotated
+    from thintact_sdk.simulation import tiled as sim_tiled
+    from thintact_sdk.simulation.effects import resolve_physics
+    from thintact_sdk.simulation.params import kernel_params
+    from thintact_sdk.simulation.simulator import Simulator, _expansion, clear_kernel_cache
 
     full = _recording(tmp_path, 0.0)
     after = {"mask_misalignment": {"angle_deg": 0.8, "dx_um": 0.0, "dy_um": 0.0}}

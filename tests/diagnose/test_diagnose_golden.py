@@ -10,10 +10,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from thintact_sdk.diagnose import diagnose, load_diagnosis_data
-from thintact_sdk.imaging.noise import signal_to_dn
-from thintact_sdk.profile import read_profile_file
-from thintact_sdk.recording import RecordingWriter
+from thintact_sdk.diagnosis.imaging import diagnose, load_diagnosis_data
+from thintact_sdk.formats.profiles import read_profile_file
+from thintact_sdk.formats.recording import RecordingWriter
+from thintact_sdk.simulation.noise import signal_to_dn
 
 
 @pytest.mark.parametrize("device", ["mini", pytest.param("wide", marks=pytest.mark.slow)])

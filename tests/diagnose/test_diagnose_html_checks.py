@@ -7,7 +7,7 @@ from typing import Any
 
 import pytest
 
-from thintact_sdk.diagnose.html import check_rows, checks_html, render_html
+from thintact_sdk.diagnosis.imaging.html import check_rows, checks_html, render_html
 
 
 def _binned_report() -> dict[str, Any]:
@@ -67,7 +67,7 @@ def test_no_checks_no_section() -> None:
 def test_the_page_carries_the_section() -> None:
     """The whole report.html of a (toy) diagnosis with window checks in its report."""
     from tests.diagnose.test_diagnose_toy import OPTS, _data, toy_simulate, toy_variance
-    from thintact_sdk.diagnose.run import diagnose
+    from thintact_sdk.diagnosis.imaging.engine import diagnose
 
     d = diagnose(_data({}), toy_simulate, toy_variance, OPTS)
     assert "Full-size and window checks" not in render_html(d)

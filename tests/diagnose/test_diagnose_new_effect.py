@@ -10,10 +10,9 @@ from typing import Any
 import numpy as np
 import pytest
 
-from thintact_sdk.diagnose import DiagnoseOptions, DiagnosisData, diagnose
-from thintact_sdk.imaging.noise import signal_to_dn
-from thintact_sdk.imaging.simulator import Simulator
-from thintact_sdk.physics import (
+from thintact_sdk.diagnosis.imaging import DiagnoseOptions, DiagnosisData, diagnose
+from thintact_sdk.formats.profiles import Profile, load_profile
+from thintact_sdk.simulation.effects import (
     EFFECTS,
     EffectSpec,
     ParamSpec,
@@ -21,8 +20,9 @@ from thintact_sdk.physics import (
     register_effect,
     unregister_effect,
 )
-from thintact_sdk.physics._spec import scalar_fit
-from thintact_sdk.profile import Profile, load_profile
+from thintact_sdk.simulation.effects._spec import scalar_fit
+from thintact_sdk.simulation.noise import signal_to_dn
+from thintact_sdk.simulation.simulator import Simulator
 
 NAME = "responsivity_tilt"
 

@@ -9,9 +9,11 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
-from thintact_sdk.diagnose import candidates, model, optimise, run, select, words
-from thintact_sdk.diagnose.candidates import CANDIDATES
-from thintact_sdk.diagnose.deadline import Deadline, DeadlineExpired
+from thintact_sdk.diagnosis.imaging import candidates, optimise, select, words
+from thintact_sdk.diagnosis.imaging import engine as run
+from thintact_sdk.diagnosis.imaging import forward_model as model
+from thintact_sdk.diagnosis.imaging.candidates import CANDIDATES
+from thintact_sdk.diagnosis.imaging.deadline import Deadline, DeadlineExpired
 
 
 class FakeClock:
@@ -106,7 +108,7 @@ def test_bounded_quadratic_keeps_one_sided_parameters_on_their_side() -> None:
 
 
 def test_diagnosis_modules_name_no_effect() -> None:
-    """What is particular to an effect lives in its declaration (thintact_sdk.physics)."""
+    """What is particular to an effect lives in its declaration (thintact_sdk.simulation.effects)."""
     for module in (optimise, select, model, candidates, words, run):
         src = inspect.getsource(module)
         named = [n for n in CANDIDATES if f'"{n}"' in src or f"'{n}'" in src]

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from thintact_sdk.diagnose.locate import excess_map, find_hotspots, locate
-from thintact_sdk.diagnose.structure import find_structure
+from thintact_sdk.diagnosis.imaging.locate import excess_map, find_hotspots, locate
+from thintact_sdk.diagnosis.imaging.structure import find_structure
 
 F, R, S, C = 6, 64, 80, 3
 

@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from thintact_sdk.diagnose.data import DiagnosisData
-from thintact_sdk.diagnose.run import DiagnoseOptions, diagnose
-from thintact_sdk.profile import load_profile
+from thintact_sdk.diagnosis.imaging.engine import DiagnoseOptions, diagnose
+from thintact_sdk.diagnosis.imaging.recording_data import DiagnosisData
+from thintact_sdk.formats.profiles import load_profile
 
 R, S, N, M = 48, 60, 12, 15
 

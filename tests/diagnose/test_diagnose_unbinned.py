@@ -1,4 +1,4 @@
-"""The unbinned stage of a binned diagnosis (:mod:`thintact_sdk.diagnose.unbinned`): effects
+"""The unbinned stage of a binned diagnosis (:mod:`thintact_sdk.diagnosis.imaging.unbinned`): effects
 finer than a block are refitted, or named, on the unbinned frames; a right model is left
 alone; an excess under the amplitude floor is reported, not named."""
 
@@ -11,10 +11,19 @@ import numpy as np
 import pytest
 
 from tests.diagnose.test_diagnose_binning import _device, _write_recording
-from thintact_sdk.diagnose import DiagnoseOptions, diagnose, load_diagnosis_data
-from thintact_sdk.diagnose.binning import bin_data, binned_variance_fn, unbinned_amplitude_fn
-from thintact_sdk.diagnose.data import DiagnosisData
-from thintact_sdk.diagnose.unbinned import EXCESS_Z, UnbinnedInput, excess_z, unbinned_candidates
+from thintact_sdk.diagnosis.imaging import DiagnoseOptions, diagnose, load_diagnosis_data
+from thintact_sdk.diagnosis.imaging.binning import (
+    bin_data,
+    binned_variance_fn,
+    unbinned_amplitude_fn,
+)
+from thintact_sdk.diagnosis.imaging.recording_data import DiagnosisData
+from thintact_sdk.diagnosis.imaging.unbinned import (
+    EXCESS_Z,
+    UnbinnedInput,
+    excess_z,
+    unbinned_candidates,
+)
 
 BIN = 4
 
@@ -106,7 +115,7 @@ def test_a_right_model_is_left_alone(tmp_path):
 
 
 def test_cli_reports_the_stage(tmp_path):
-    from thintact_sdk.cli.main import main
+    from thintact_sdk.apps.cli.main import main
 
     _write_recording(_device(32, 48), {"sensor_blur": {"sigma_um": 8.0}}, tmp_path / "rec")
     rc = main(["diagnose", str(tmp_path / "rec"), "--out", str(tmp_path / "o"), "--quiet", "--bin", str(BIN),
@@ -148,12 +157,12 @@ def test_a_rival_as_good_on_unbinned_frames_is_an_alternative(tmp_path, monkeypa
     not. (The rivals' fits are stubbed to land just inside and outside; on the paper's
     device a 10 um sensor blur and a 50.6 um scene blur are such a pair for real,
     ``tools/diagnose_paper_size.py --case sensor_blur``.)"""
-    from thintact_sdk.diagnose import select
-    from thintact_sdk.diagnose.deadline import Deadline
-    from thintact_sdk.diagnose.model import DiagnosisModel, default_simulate
-    from thintact_sdk.diagnose.select import CandidateResult
-    from thintact_sdk.diagnose.stats import default_variance_fn
-    from thintact_sdk.diagnose.unbinned import full_size_alternatives
+    from thintact_sdk.diagnosis.imaging import select
+    from thintact_sdk.diagnosis.imaging.deadline import Deadline
+    from thintact_sdk.diagnosis.imaging.forward_model import DiagnosisModel, default_simulate
+    from thintact_sdk.diagnosis.imaging.select import CandidateResult
+    from thintact_sdk.diagnosis.imaging.stats import default_variance_fn
+    from thintact_sdk.diagnosis.imaging.unbinned import full_size_alternatives
 
     full, _ = _recording(tmp_path, {"sensor_blur": {"sigma_um": 8.0}})
     model = DiagnosisModel(full, default_simulate, default_variance_fn(), sys_frac=1e-3)
@@ -180,8 +189,8 @@ def test_a_rival_as_good_on_unbinned_frames_is_an_alternative(tmp_path, monkeypa
 
 
 def test_full_size_alternatives_reach_the_finding(tmp_path, monkeypatch):
-    from thintact_sdk.diagnose import unbinned
-    from thintact_sdk.diagnose.unbinned import FullSizeAlternative
+    from thintact_sdk.diagnosis.imaging import unbinned
+    from thintact_sdk.diagnosis.imaging.unbinned import FullSizeAlternative
 
     full, data = _recording(tmp_path, {"sensor_blur": {"sigma_um": 8.0}})
     monkeypatch.setattr(unbinned, "full_size_alternatives", lambda *a, **k: {
@@ -199,8 +208,8 @@ def test_a_rival_better_on_unbinned_frames_takes_the_place(tmp_path, monkeypatch
     """A rival that beats the binned choice on unbinned frames by more than the tolerance
     replaces it (the paper device's 10 um sensor blur, which the binned data took for a
     50.6 um scene blur): the finding, the fitted profile and the evidence say so."""
-    from thintact_sdk.diagnose import unbinned
-    from thintact_sdk.diagnose.unbinned import FullSizeAlternative
+    from thintact_sdk.diagnosis.imaging import unbinned
+    from thintact_sdk.diagnosis.imaging.unbinned import FullSizeAlternative
 
     full, data = _recording(tmp_path, {"sensor_blur": {"sigma_um": 8.0}})
     monkeypatch.setattr(unbinned, "full_size_alternatives", lambda *a, **k: {

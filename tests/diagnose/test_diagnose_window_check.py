@@ -1,4 +1,4 @@
-"""The fitted model checked on windows of the unbinned sensor (:mod:`thintact_sdk.diagnose.window_check`),
+"""The fitted model checked on windows of the unbinned sensor (:mod:`thintact_sdk.diagnosis.imaging.window_check`),
 where the whole sensor's kernel is refused (a rotated mask at the paper's size)."""
 
 from __future__ import annotations
@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 
 from tests.diagnose.test_diagnose_binning import _device, _write_recording
-from thintact_sdk.diagnose import load_diagnosis_data
-from thintact_sdk.diagnose.binning import simulate_float32
-from thintact_sdk.diagnose.data import DiagnosisData
-from thintact_sdk.diagnose.model import full_size_stats
-from thintact_sdk.diagnose.window_check import window_check
+from thintact_sdk.diagnosis.imaging import load_diagnosis_data
+from thintact_sdk.diagnosis.imaging.binning import simulate_float32
+from thintact_sdk.diagnosis.imaging.forward_model import full_size_stats
+from thintact_sdk.diagnosis.imaging.recording_data import DiagnosisData
+from thintact_sdk.diagnosis.imaging.window_check import window_check
 from thintact_sdk.errors import ThinTactError
 
 ROTATED = {"mask_misalignment": np.array([1.0, 0.0, 0.0])}
@@ -71,8 +71,8 @@ def test_cli_checks_windows_when_the_whole_sensor_is_refused(tmp_path: Path, rot
                                                              monkeypatch: pytest.MonkeyPatch) -> None:
     """When the fitted model's full-size kernel is refused (the unbinned stage cannot run),
     ``full_size`` says why and gives the check on windows instead."""
-    from thintact_sdk.cli.main import main
-    from thintact_sdk.diagnose import run as run_mod
+    from thintact_sdk.apps.cli.main import main
+    from thintact_sdk.diagnosis.imaging import engine as run_mod
 
     def refused(*_a: object, **_k: object) -> None:
         raise ThinTactError("physics: a mask rotated by 1° on this device needs 48 sensor windows (test)")

@@ -10,12 +10,12 @@ from typing import Any
 import numpy as np
 
 import thintact_sdk
+from thintact_sdk.device.registry import PluginRegistry
+from thintact_sdk.device.sensor import Sensor
 from thintact_sdk.errors import DeviceLostError, DeviceTimeoutError, EndOfStreamError
+from thintact_sdk.formats.profiles import CameraConfig, Profile, load_profile
 from thintact_sdk.frames import RawFrame
 from thintact_sdk.interfaces import Camera, CameraCapabilities
-from thintact_sdk.plugin_manager import PluginRegistry
-from thintact_sdk.profile import CameraConfig, Profile, load_profile
-from thintact_sdk.sensor import Sensor
 
 
 class ScriptedCamera(Camera):

@@ -12,6 +12,8 @@ import pytest
 from grp_fakes import scripted_sensor
 
 import thintact_sdk as thintact
+from thintact_sdk.device.group import SensorGroup
+from thintact_sdk.device.sensor import Sensor
 from thintact_sdk.errors import (
     DeviceError,
     DeviceLostError,
@@ -19,10 +21,8 @@ from thintact_sdk.errors import (
     ThinTactError,
     UnsupportedFeatureError,
 )
+from thintact_sdk.formats.profiles import load_profile
 from thintact_sdk.frames import TactileFrame
-from thintact_sdk.group import SensorGroup
-from thintact_sdk.profile import load_profile
-from thintact_sdk.sensor import Sensor
 
 
 def _group(*sensors, **options):

@@ -10,10 +10,10 @@ import pytest
 from grp_fakes import REGISTRY
 
 import thintact_sdk as thintact
+from thintact_sdk.device.sensor import Sensor
 from thintact_sdk.errors import CalibrationError
+from thintact_sdk.formats.profiles import CameraConfig, load_profile
 from thintact_sdk.frames import RawFrame
-from thintact_sdk.profile import CameraConfig, load_profile
-from thintact_sdk.sensor import Sensor
 
 COLD_FIRST_FRAME_S = 0.8
 """What the first processed frame of a member that was not warmed up costs (the decoder build)."""
@@ -125,9 +125,9 @@ def test_a_slow_member_is_not_a_stalled_one() -> None:
 
 
 def test_the_virtual_camera_renders_its_cycle_ahead_and_then_shows_it_from_the_start() -> None:
-    from thintact_sdk.capture import create_camera
-    from thintact_sdk.group import WarmableCamera
-    from thintact_sdk.plugin_manager import get_registry
+    from thintact_sdk.device.cameras import create_camera
+    from thintact_sdk.device.group import WarmableCamera
+    from thintact_sdk.device.registry import get_registry
 
     profile = load_profile("virtual-mini")  # scenes: tactile, a cycle of 9
     cam = create_camera(profile, get_registry(), {"fps": 0})

@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import pytest
 
+from thintact_sdk.device.registry import get_registry
 from thintact_sdk.errors import CameraSettingsError, ProfileError
-from thintact_sdk.plugin_manager import get_registry
-from thintact_sdk.profile import load_profile
+from thintact_sdk.formats.profiles import load_profile
 
 GOOD = {
     "virtual": {},

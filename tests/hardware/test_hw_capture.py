@@ -7,8 +7,7 @@ import warnings
 import numpy as np
 import pytest
 
-from thintact_sdk.bayer import mosaic_from_rgb
-from thintact_sdk.capture import (
+from thintact_sdk.device.cameras import (
     DroppedFramesWarning,
     FrameGapCounter,
     bit_depth_problem,
@@ -17,8 +16,9 @@ from thintact_sdk.capture import (
     to_measurement,
 )
 from thintact_sdk.errors import DeviceError, PluginError, ProfileError
+from thintact_sdk.formats.profiles import load_profile
 from thintact_sdk.frames import RawFrame
-from thintact_sdk.profile import load_profile
+from thintact_sdk.pixels.bayer import mosaic_from_rgb
 
 
 @pytest.fixture()
@@ -103,8 +103,8 @@ def test_bit_depth_check(profile):
 
 
 def test_open_camera_and_read_measurement_through_a_real_plugin(tmp_path, profile):
-    from thintact_sdk.capture import open_camera, read_measurement
-    from thintact_sdk.recording import RecordingWriter
+    from thintact_sdk.device.cameras import open_camera, read_measurement
+    from thintact_sdk.formats.recording import RecordingWriter
 
     rgb = _rgb(profile, 9)
     RecordingWriter(tmp_path / "rec", profile).add(rgb, label="one")

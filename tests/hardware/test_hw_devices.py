@@ -11,9 +11,9 @@ import usb.backend
 import yaml
 from thintact_genicam.producers import viky_producer
 
-from thintact_sdk.cli.commands.devices import usb_devices
-from thintact_sdk.cli.main import main
-from thintact_sdk.profile import load_profile
+from thintact_sdk.apps.cli.commands.devices import usb_devices
+from thintact_sdk.apps.cli.main import main
+from thintact_sdk.formats.profiles import load_profile
 
 STRINGS = {1: "ACME Vision", 2: "USB3 camera", 3: "U500123"}
 
@@ -117,7 +117,7 @@ def test_bad_usb_backend_is_a_one_line_error(capsys):
 def test_a_hanging_producer_is_reported_not_waited_for():
     import time
 
-    from thintact_sdk.cli.commands.devices import _bounded
+    from thintact_sdk.apps.cli.commands.devices import _bounded
 
     t0 = time.monotonic()
     devices, error = _bounded(lambda cti: time.sleep(2.0) or [], "slow.cti", 0.2)

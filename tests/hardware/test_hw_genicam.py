@@ -11,7 +11,7 @@ import pytest
 from thintact_genicam import GenICamSettingWarning
 from thintact_genicam.producers import list_devices, viky_producer
 
-from thintact_sdk.capture import create_camera, to_measurement
+from thintact_sdk.device.cameras import create_camera, to_measurement
 from thintact_sdk.errors import (
     DeviceError,
     DeviceLostError,
@@ -20,7 +20,7 @@ from thintact_sdk.errors import (
     ProfileError,
     UnsupportedFeatureError,
 )
-from thintact_sdk.profile import load_profile
+from thintact_sdk.formats.profiles import load_profile
 
 VIKY = viky_producer()
 pytestmark = pytest.mark.skipif(VIKY is None, reason="genicam wheel without viky.cti")

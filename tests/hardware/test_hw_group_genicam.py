@@ -10,9 +10,9 @@ from thintact_genicam.producers import viky_producer
 from thintact_genicam.trigger import fire_software_trigger, set_trigger
 
 import thintact_sdk as thintact
+from thintact_sdk.device.sensor import Sensor
 from thintact_sdk.errors import UnsupportedFeatureError
-from thintact_sdk.profile import CameraConfig, load_profile
-from thintact_sdk.sensor import Sensor
+from thintact_sdk.formats.profiles import CameraConfig, load_profile
 
 VIKY = viky_producer()
 MONO = {"Width": 320, "Height": 256, "PixelFormat": "Mono8", "AcquisitionFrameRate": 100.0}

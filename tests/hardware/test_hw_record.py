@@ -9,11 +9,11 @@ import pytest
 import yaml
 from thintact_genicam.producers import viky_producer
 
-from thintact_sdk.capture import create_camera, to_measurement
-from thintact_sdk.cli.commands.record import storage_array
-from thintact_sdk.cli.main import main
-from thintact_sdk.profile import load_profile
-from thintact_sdk.recording import Recording, RecordingWriter
+from thintact_sdk.apps.cli.commands.record import storage_array
+from thintact_sdk.apps.cli.main import main
+from thintact_sdk.device.cameras import create_camera, to_measurement
+from thintact_sdk.formats.profiles import load_profile
+from thintact_sdk.formats.recording import Recording, RecordingWriter
 
 
 def _profile_file(tmp_path, name, camera, noise=None):
@@ -164,7 +164,7 @@ def test_capture_thread_keeps_up_with_the_camera(tmp_path, capsys):
 
 
 def test_record_from_the_virtual_camera_and_replay_it(tmp_path, capsys):
-    from thintact_sdk.plugin_manager import get_registry
+    from thintact_sdk.device.registry import get_registry
 
     if "virtual" not in get_registry().components("camera"):
         pytest.skip("virtual camera plugin not installed")

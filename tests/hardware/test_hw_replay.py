@@ -8,13 +8,13 @@ import numpy as np
 import pytest
 from thintact_replay import EndOfRecording
 
-from thintact_sdk.bayer import mosaic_from_rgb
-from thintact_sdk.capture import FrameGapCounter, create_camera, to_measurement
+from thintact_sdk.device.cameras import FrameGapCounter, create_camera, to_measurement
 from thintact_sdk.errors import DeviceTimeoutError, ProfileError, RecordingError
+from thintact_sdk.formats.profiles import load_profile
+from thintact_sdk.formats.raw_frames import save_raw_frame
+from thintact_sdk.formats.recording import RecordingWriter
 from thintact_sdk.frames import RawFrame
-from thintact_sdk.profile import load_profile
-from thintact_sdk.recording import RecordingWriter
-from thintact_sdk.recording_raw import save_raw_frame
+from thintact_sdk.pixels.bayer import mosaic_from_rgb
 
 
 def _profile(path, pattern="RGGB", **settings):

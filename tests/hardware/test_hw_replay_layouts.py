@@ -10,9 +10,9 @@ from typing import Any
 import numpy as np
 import pytest
 
-from thintact_sdk.capture import create_camera, to_measurement
-from thintact_sdk.profile import Profile, load_profile, profile_from_dict
-from thintact_sdk.recording import Recording, RecordingWriter
+from thintact_sdk.device.cameras import create_camera, to_measurement
+from thintact_sdk.formats.profiles import Profile, load_profile, profile_from_dict
+from thintact_sdk.formats.recording import Recording, RecordingWriter
 
 
 def _device(channels: list[str], curve: dict[str, Any] | None = None) -> Profile:

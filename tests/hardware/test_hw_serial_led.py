@@ -12,6 +12,7 @@ import serial
 from thintact_serial_led.emulator import LedFirmwareEmulator
 from thintact_serial_led.protocol import LineError, crc8, decode_line, encode_line
 
+from thintact_sdk.device.registry import get_registry
 from thintact_sdk.errors import (
     DeviceError,
     DeviceLostError,
@@ -19,7 +20,6 @@ from thintact_sdk.errors import (
     DeviceTimeoutError,
     ProtocolError,
 )
-from thintact_sdk.plugin_manager import get_registry
 
 FAST = {"timeout_s": 0.15, "retries": 2}
 

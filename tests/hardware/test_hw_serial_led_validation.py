@@ -12,8 +12,8 @@ from thintact_serial_led import SerialLedController
 from thintact_serial_led.emulator import LedFirmwareEmulator
 from thintact_serial_led.settings import SerialLedSettings
 
+from thintact_sdk.device.registry import get_registry
 from thintact_sdk.errors import InvalidShapeError, InvalidValueError, ThinTactError
-from thintact_sdk.plugin_manager import get_registry
 
 FAST = {"timeout_s": 0.15, "retries": 2}
 

@@ -12,8 +12,7 @@ import numpy as np
 import pytest
 from thintact_uvc import EndOfVideo, UvcSettingWarning
 
-from thintact_sdk.bayer import mosaic_from_rgb
-from thintact_sdk.capture import create_camera, to_measurement
+from thintact_sdk.device.cameras import create_camera, to_measurement
 from thintact_sdk.errors import (
     DeviceNotFoundError,
     DeviceTimeoutError,
@@ -21,7 +20,8 @@ from thintact_sdk.errors import (
     RecordingError,
     UnsupportedFeatureError,
 )
-from thintact_sdk.profile import load_profile
+from thintact_sdk.formats.profiles import load_profile
+from thintact_sdk.pixels.bayer import mosaic_from_rgb
 
 R, S = 128, 160
 

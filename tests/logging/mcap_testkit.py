@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from thintact_sdk.formats.profiles import Profile, load_profile
 from thintact_sdk.frames import RawFrame, TactileFrame
-from thintact_sdk.profile import Profile, load_profile
 
 PERIOD_NS = 33_000_000
 T0_NS = 5_000_000_000

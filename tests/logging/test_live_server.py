@@ -24,14 +24,14 @@ from mcap.records import Schema  # noqa: E402
 from mcap_ros2.decoder import DecoderFactory  # noqa: E402
 from mcap_testkit import PERIOD_NS, T0_NS, mini_profile, raw_frame, tactile_frame  # noqa: E402
 
-from thintact_sdk.cli.main import main  # noqa: E402
-from thintact_sdk.mcaplog import TOPICS, images, schemas  # noqa: E402
-from thintact_sdk.mcaplog.live import (  # noqa: E402
+from thintact_sdk.apps.cli.main import main  # noqa: E402
+from thintact_sdk.apps.foxglove_live import (  # noqa: E402
     LEGACY_SUBPROTOCOL,
     SUBPROTOCOL,
     LiveServer,
     LiveServerError,
 )
+from thintact_sdk.formats.mcap import TOPICS, images, schemas  # noqa: E402
 
 MESSAGE_DATA = 0x01
 
@@ -173,7 +173,7 @@ def test_live_stops_on_a_signal_even_where_sigint_was_ignored(sig):
     """Like the viewer: started with SIGINT ignored (a script's background job), `thintact
     live` still stops on Ctrl-C or SIGTERM, closes the sensor and exits 0."""
     proc = subprocess.Popen(
-        [sys.executable, "-m", "thintact_sdk.cli.main", "live", "virtual-finger", "--port", "0",
+        [sys.executable, "-m", "thintact_sdk.apps.cli.main", "live", "virtual-finger", "--port", "0",
          "--set", "fps=0"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))

@@ -19,9 +19,9 @@ import pytest
 from mcap.reader import make_reader
 from mcap_testkit import mini_profile, raw_frame, tactile_frame
 
-from thintact_sdk.cli.main import main
+from thintact_sdk.apps.cli.main import main
 from thintact_sdk.errors import RecordingError
-from thintact_sdk.mcaplog import McapLog, McapLogWriter
+from thintact_sdk.formats.mcap import McapLog, McapLogWriter
 
 HERE = Path(__file__).resolve().parent
 
@@ -68,7 +68,7 @@ WRITER_SCRIPT = """
 import sys
 sys.path.insert(0, {here!r})
 from mcap_testkit import mini_profile, raw_frame, tactile_frame
-from thintact_sdk.mcaplog import McapLogWriter
+from thintact_sdk.formats.mcap import McapLogWriter
 log = McapLogWriter({path!r}, mini_profile(), chunk_bytes=200_000, attach_calibration=False)
 i = 0
 while True:

@@ -12,7 +12,7 @@ from mcap_ros2.decoder import DecoderFactory
 from mcap_testkit import PERIOD_NS, T0_NS, mini_profile, raw_frame, tactile_frame
 
 from thintact_sdk.errors import RecordingError
-from thintact_sdk.mcaplog import McapLog, McapLogWriter
+from thintact_sdk.formats.mcap import McapLog, McapLogWriter
 
 N = 5
 

@@ -10,12 +10,12 @@ from mcap_testkit import PERIOD_NS, mini_profile, raw_frame, tactile_frame
 from thintact_replay import EndOfRecording
 
 import thintact_sdk as thintact
-from thintact_sdk.capture import create_camera
-from thintact_sdk.cli.main import main
+from thintact_sdk.apps.cli.main import main
+from thintact_sdk.device.cameras import create_camera
 from thintact_sdk.errors import DeviceTimeoutError
-from thintact_sdk.mcaplog import McapLog, McapLogWriter
-from thintact_sdk.mcaplog.attachments import calibration_bundle_dir
-from thintact_sdk.profile import load_profile
+from thintact_sdk.formats.mcap import McapLog, McapLogWriter
+from thintact_sdk.formats.mcap.attachments import calibration_bundle_dir
+from thintact_sdk.formats.profiles import load_profile
 
 
 def _replay_profile(path, base=None, **settings):
@@ -115,7 +115,7 @@ def test_replay_recorded_rate_speed_and_loop(tmp_path):
 def test_record_mcap_writes_the_raw_preview_unless_told_not_to(tmp_path):
     """The virtual camera's 16-bit Bayer frames get an rgb8 preview beside the raw (viewers
     without a 16-bit Bayer decoder show it); --no-raw-preview leaves it out, raw unchanged."""
-    from thintact_sdk.mcaplog import McapLog, schemas
+    from thintact_sdk.formats.mcap import McapLog, schemas
 
     counts = {}
     for name, extra in (("with", []), ("without", ["--no-raw-preview"])):

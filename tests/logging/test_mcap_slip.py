@@ -7,9 +7,9 @@ import pytest
 from mcap.reader import make_reader
 from mcap_testkit import mini_profile, tactile_frame
 
-from thintact_sdk.mcaplog import McapLog, McapLogWriter
-from thintact_sdk.profile import load_profile
-from thintact_sdk.tactile.slip import SLIPPING_RATIO
+from thintact_sdk.formats.mcap import McapLog, McapLogWriter
+from thintact_sdk.formats.profiles import load_profile
+from thintact_sdk.tactile.interpretation.slip import SLIPPING_RATIO
 
 
 def test_slip_topic_carries_ratio_and_flag_with_its_schema(tmp_path):

@@ -11,9 +11,9 @@ from mcap_ros2.writer import Writer
 from mcap_testkit import PERIOD_NS, T0_NS, mini_profile, raw_frame, tactile_frame
 
 from thintact_sdk.errors import RecordingError
+from thintact_sdk.formats.mcap import McapLog, McapLogWriter, images, schemas
+from thintact_sdk.formats.mcap.writer import raw_messages
 from thintact_sdk.frames import RawFrame
-from thintact_sdk.mcaplog import McapLog, McapLogWriter, images, schemas
-from thintact_sdk.mcaplog.writer import raw_messages
 
 N = 3
 

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
-from thintact_sdk.mcaplog import schemas
+from thintact_sdk.formats.mcap import schemas
 
 PKG = Path(__file__).resolve().parents[2] / "ros" / "thintact_msgs"
 SEPARATOR = "=" * 80

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 from mask_profiles import make_profile
 
-from thintact_sdk.profile import Profile
+from thintact_sdk.formats.profiles import Profile
 
 
 @pytest.fixture

@@ -3,7 +3,7 @@ so importing "conftest" by name picks whichever was imported first)."""
 
 from __future__ import annotations
 
-from thintact_sdk.profile import Profile, profile_from_dict
+from thintact_sdk.formats.profiles import Profile, profile_from_dict
 
 
 def make_profile(rows: int = 24, cols: int = 30, n: int = 10, m: int = 12, K: int = 40,  # noqa: N803

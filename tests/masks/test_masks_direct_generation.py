@@ -9,13 +9,13 @@ import numpy as np
 import pytest
 from mask_profiles import make_profile
 
-from thintact_sdk.imaging.direct_generation import (
+from thintact_sdk.formats.profiles import read_profile_file
+from thintact_sdk.reconstruction.direct_generation import (
     SIGMOID_SOFTNESS,
     AxisGeometry,
     DirectGenerator,
     direct_system_matrices,
 )
-from thintact_sdk.profile import read_profile_file
 
 
 def test_shapes_and_signs(tiny_profile) -> None:
@@ -29,7 +29,7 @@ def test_shapes_and_signs(tiny_profile) -> None:
 
 
 def test_stripe_parameters_follow_the_paper() -> None:
-    prof = read_profile_file(Path(__file__).parents[2] / "thintact_sdk/profiles/thintact-paper.yaml")
+    prof = read_profile_file(Path(__file__).parents[2] / "thintact_sdk/data/profiles/thintact-paper.yaml")
     sp = AxisGeometry.rows_of(prof).stripe_parameters()
     assert sp.k_c == pytest.approx(31.5 / 10.0)
     assert sp.k_stripe == pytest.approx(-1.0 * 31.5 / (4.8 * 10.0))
@@ -126,7 +126,7 @@ def test_matches_the_golden_baseline_physics(golden_dir, device: str, limit: flo
 @pytest.mark.parametrize("device,limit", [("mini", 0.025), ("wide", 0.045)])
 def test_close_to_the_simulators_two_term_fit(golden_dir, device: str, limit: float) -> None:
     """Operator-level relative difference from SIM's best two-term fit (after one scale)."""
-    pytest.importorskip("thintact_sdk.imaging.simulator")
+    pytest.importorskip("thintact_sdk.simulation.simulator")
     from thintact_masks.compare import direct_vs_simulator
 
     prof = read_profile_file(golden_dir / device / "profile.json")

@@ -13,7 +13,7 @@ from thintact_masks.fitness import (
     f_ssim,
 )
 
-from thintact_sdk.imaging.metrics import ssim
+from thintact_sdk.reconstruction.metrics import ssim
 
 
 def test_cached_ssim_equals_the_shared_metric() -> None:

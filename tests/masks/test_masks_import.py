@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from thintact_sdk.cli.main import main
+from thintact_sdk.apps.cli.main import main
 
 
 def _pattern(k: int = 12, seed: int = 3) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import yaml
 
-from thintact_sdk.cli.main import main
+from thintact_sdk.apps.cli.main import main
 
 ezdxf = pytest.importorskip("ezdxf")
 
@@ -95,7 +95,7 @@ def test_dxf_off_pitch_or_not_separable_is_refused(tmp_path: Path, capsys) -> No
 
 
 def test_apply_keeps_the_profiles_comments_and_writes_phi_in_flow_style(tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]
-    from thintact_sdk.profile import available_profiles, load_profile
+    from thintact_sdk.formats.profiles import available_profiles, load_profile
 
     src_text = available_profiles()["virtual-mini"].read_text()
     profile_file = tmp_path / "unit.yaml"

@@ -12,7 +12,7 @@ from thintact_masks.mls import (
     repeat_to_length,
 )
 
-from thintact_sdk.profile import load_profile
+from thintact_sdk.formats.profiles import load_profile
 
 
 def circular_autocorrelation(s: np.ndarray) -> np.ndarray:

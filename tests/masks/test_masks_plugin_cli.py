@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 from mask_profiles import make_profile
 
-from thintact_sdk.cli.main import main
+from thintact_sdk.apps.cli.main import main
+from thintact_sdk.device.registry import get_registry
+from thintact_sdk.formats.profiles import read_profile_file, write_profile
 from thintact_sdk.interfaces import MaskDesigner
-from thintact_sdk.plugin_manager import get_registry
-from thintact_sdk.profile import read_profile_file, write_profile
 
 
 def test_registry_provides_the_three_designers() -> None:

@@ -23,8 +23,8 @@ from thintact_masks.fitness import FitnessEvaluator
 from thintact_masks.ga import GAConfig, load_checkpoint, run_ga
 from thintact_masks.optimize import optimize_mask
 
-from thintact_sdk.blas import blas_threads
-from thintact_sdk.profile import load_profile
+from thintact_sdk.formats.profiles import load_profile
+from thintact_sdk.host.blas import blas_threads
 
 ray = pytest.importorskip("ray")
 from thintact_masks.ray_pool import RayFitnessPool, connect  # noqa: E402
@@ -162,7 +162,7 @@ def test_lost_tasks_are_one_line_errors(cluster_address, small_evaluator) -> Non
 
 
 def _driver(out: Path, ray_arg: str, generations: int) -> subprocess.Popen:
-    cmd = [sys.executable, "-m", "thintact_sdk.cli.main", "mask", "optimize",
+    cmd = [sys.executable, "-m", "thintact_sdk.apps.cli.main", "mask", "optimize",
            "--profile", "thintact-paper", "--scale", str(SMALL_SCALE), "--population", "8",
            "--generations", str(generations), "--seed", "3", "--out", str(out),
            "--no-progress", "--workers", "1", "--ray", ray_arg]
@@ -233,8 +233,8 @@ def test_cli_ray_run_equals_the_local_run(cluster_address, tmp_path) -> None:
     checkpoint-resumable output as the local path (the GA's randomness stays in the driver)."""
     import json
 
-    from thintact_sdk.cli.main import main
-    from thintact_sdk.profile import write_profile
+    from thintact_sdk.apps.cli.main import main
+    from thintact_sdk.formats.profiles import write_profile
 
     tiny_profile_file = write_profile(make_profile(), tmp_path / "tiny.yaml")
     common = ["mask", "optimize", "--profile", str(tiny_profile_file), "--population", "6",

@@ -6,9 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from thintact_sdk.diagnose.candidates import CANDIDATES
-from thintact_sdk.imaging.simulator import kernel_params
-from thintact_sdk.physics import (
+from thintact_sdk.diagnosis.imaging.candidates import CANDIDATES
+from thintact_sdk.formats.profiles import load_profile
+from thintact_sdk.simulation.effects import (
     EFFECTS,
     STAGES,
     EffectSpec,
@@ -17,7 +17,7 @@ from thintact_sdk.physics import (
     resolve_physics,
     unregister_effect,
 )
-from thintact_sdk.profile import load_profile
+from thintact_sdk.simulation.simulator import kernel_params
 
 
 @pytest.fixture(scope="module")
@@ -72,17 +72,20 @@ def test_kernel_stage_effect_reaches_the_kernel_through_its_declaration(mini) ->
 
 
 def test_physics_imports_no_higher_layer() -> None:
-    """``profile`` validates physics and ``imaging``/``diagnose`` apply it: physics imports
-    none of them (it reads profiles through the structural ``DeviceProfile``)."""
+    """``formats.profiles`` validates the effects and the simulator/diagnosis apply them: the
+    effects import none of them (it reads profiles through the structural ``DeviceProfile``)."""
     import ast
     from pathlib import Path
 
-    import thintact_sdk.physics as physics
+    import thintact_sdk.simulation.effects as physics
 
     for path in Path(physics.__file__).parent.glob("*.py"):
         for node in ast.walk(ast.parse(path.read_text())):
             mods = [node.module or ""] if isinstance(node, ast.ImportFrom) else \
                 [a.name for a in node.names] if isinstance(node, ast.Import) else []
             for m in mods:
-                assert not m.startswith(("thintact_sdk.profile", "thintact_sdk.imaging",
-                                         "thintact_sdk.diagnose")), f"{path.name} imports {m}"
+                outside = m.startswith("thintact_sdk.simulation.") and \
+                    not m.startswith("thintact_sdk.simulation.effects")
+                assert not outside and not m.startswith((
+                    "thintact_sdk.formats.profiles", "thintact_sdk.reconstruction",
+                    "thintact_sdk.diagnosis")), f"{path.name} imports {m}"

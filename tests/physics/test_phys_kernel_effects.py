@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 from tests.simulator.sim_helpers import rel_rms, tiny_profile
-from thintact_sdk.imaging.sim_reference import reference_forward
-from thintact_sdk.imaging.simulator import Simulator
-from thintact_sdk.physics import diffraction, refraction
-from thintact_sdk.profile import load_profile
+from thintact_sdk.formats.profiles import load_profile
+from thintact_sdk.simulation.effects import diffraction, refraction
+from thintact_sdk.simulation.reference import reference_forward
+from thintact_sdk.simulation.simulator import Simulator
 
 
 @pytest.fixture(scope="module")
@@ -331,7 +331,7 @@ def test_diffraction_with_rotated_mask_against_2d_fresnel_quadrature():
 def test_refraction_on_a_paper_size_device_is_refused_with_a_message():
     """At 1024×1280 the Snell family would need ~1.4 TiB: a ThinTactError, not a MemoryError."""
     from thintact_sdk.errors import ThinTactError
-    from thintact_sdk.profile import load_profile
+    from thintact_sdk.formats.profiles import load_profile
 
     paper = load_profile("thintact-paper").with_physics({"refraction": {"n_scene_side": 1.41}})
     with pytest.raises(ThinTactError, match="refraction on this device needs"):

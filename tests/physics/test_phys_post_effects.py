@@ -7,9 +7,9 @@ import pytest
 from scipy.ndimage import gaussian_filter
 
 from thintact_sdk.errors import ThinTactError
-from thintact_sdk.imaging.simulator import Simulator
-from thintact_sdk.physics import EFFECTS, resolve_physics, stray_light
-from thintact_sdk.profile import load_profile
+from thintact_sdk.formats.profiles import load_profile
+from thintact_sdk.simulation.effects import EFFECTS, resolve_physics, stray_light
+from thintact_sdk.simulation.simulator import Simulator
 
 CONTRACT_EFFECTS = {
     "diffraction": ["wavelength_nm"], "pixel_angular_response": ["exponent"],
@@ -84,7 +84,7 @@ def pixel_blur_brute_force(a, sigma_px, up=16):
 
 
 def test_pixel_blur_integrates_over_pixels():
-    from thintact_sdk.physics._blur import blur_pixels, pixel_gaussian_weights
+    from thintact_sdk.simulation.effects._blur import blur_pixels, pixel_gaussian_weights
 
     rng = np.random.default_rng(3)
     a = rng.random((1, 12, 14, 1))

@@ -19,10 +19,15 @@ from thintact_decoders.selection import (
     select_backend,
 )
 
-from thintact_sdk.imaging.recon_synthetic import frequency_split_matrices
-from thintact_sdk.machine import HostCapabilities, cpu_flags, has_native_bf16, host_capabilities
-from thintact_sdk.plugin_manager import get_registry
-from thintact_sdk.profile import load_profile
+from thintact_sdk.device.registry import get_registry
+from thintact_sdk.formats.profiles import load_profile
+from thintact_sdk.host.machine import (
+    HostCapabilities,
+    cpu_flags,
+    has_native_bf16,
+    host_capabilities,
+)
+from thintact_sdk.reconstruction.synthetic_matrices import frequency_split_matrices
 
 SENSOR, SCENE, BLOCK = (64, 72), (20, 24), (8, 9)
 HOST = HostCapabilities("Test CPU", 2, "AVX2", False, "openblas (2 threads)", "2.13.0+cpu, 2 threads", (),
@@ -208,9 +213,9 @@ def test_the_selection_is_cached_per_kernel_thread_count(monkeypatch, tmp_path) 
 
     import torch  # noqa: F401 - loaded before the counts are read (the key names its threads)
 
-    from thintact_sdk.blas import openblas_threads
-    from thintact_sdk.compute_threads import prepare_worker_thread, single_threaded_kernels
-    from thintact_sdk.machine import kernel_threads_now
+    from thintact_sdk.host.blas import openblas_threads
+    from thintact_sdk.host.compute_threads import prepare_worker_thread, single_threaded_kernels
+    from thintact_sdk.host.machine import kernel_threads_now
 
     monkeypatch.setenv("THINTACT_CACHE_DIR", str(tmp_path))
     profile = load_profile("virtual-mini")

@@ -8,7 +8,7 @@ import json
 from thintact_decoders import bench_reconstruct as reconstruct
 from thintact_decoders.sensor_binning import binning_possible
 
-from thintact_sdk.machine import host_capabilities
+from thintact_sdk.host.machine import host_capabilities
 
 
 def test_bench_reconstruct_runs_on_virtual_mini(capsys, monkeypatch) -> None:
@@ -71,7 +71,7 @@ def test_decoders_take_the_binned_planes_without_a_copy_and_decode_them_alike() 
     from thintact_decoders import ArrayBackend, T2SClosedFormDecoder
 
     from thintact_sdk.algorithms import SystemMatrices
-    from thintact_sdk.bayer import bin_bayer
+    from thintact_sdk.pixels.bayer import bin_bayer
 
     rng = np.random.default_rng(3)
     mosaic = rng.integers(60, 4000, size=(32, 40)).astype(np.uint16)

@@ -6,12 +6,12 @@ import numpy as np
 import pytest
 from thintact_decoders import ArrayBackend, FlatCamDecoder, NonIterativeDecoder, T2SIterativeDecoder
 
+from thintact_sdk.device.registry import get_registry
 from thintact_sdk.errors import CalibrationError
-from thintact_sdk.imaging.calibration_bundle import CalibrationBundle
-from thintact_sdk.imaging.recon_synthetic import frequency_split_matrices
-from thintact_sdk.imaging.t2s import SystemMatrices
-from thintact_sdk.plugin_manager import get_registry
-from thintact_sdk.profile import load_profile, profile_from_dict
+from thintact_sdk.formats.profiles import load_profile, profile_from_dict
+from thintact_sdk.reconstruction.bundle import CalibrationBundle
+from thintact_sdk.reconstruction.synthetic_matrices import frequency_split_matrices
+from thintact_sdk.reconstruction.t2s import SystemMatrices
 
 SENSOR, SCENE, BLOCK = (64, 72), (20, 24), (8, 9)
 

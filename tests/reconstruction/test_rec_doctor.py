@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 
-from thintact_sdk.cli.main import main
+from thintact_sdk.apps.cli.main import main
 
 
 def test_doctor_reports_host_and_chosen_backend(capsys) -> None:

@@ -5,15 +5,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from thintact_sdk.imaging.filter_training import (
+from thintact_sdk.formats.profiles import load_profile
+from thintact_sdk.reconstruction.filter_training import (
     make_training_data,
     train_joint_filter,
     training_scenes,
 )
-from thintact_sdk.imaging.recon_synthetic import frequency_split_matrices
-from thintact_sdk.imaging.scenes import make_scene
-from thintact_sdk.imaging.t2s import SystemMatrices
-from thintact_sdk.profile import load_profile
+from thintact_sdk.reconstruction.synthetic_matrices import frequency_split_matrices
+from thintact_sdk.reconstruction.t2s import SystemMatrices
+from thintact_sdk.simulation.scenes import make_scene
 
 
 def test_training_scenes_are_varied_and_in_range() -> None:

@@ -14,8 +14,8 @@ def test_cuda_is_a_candidate_and_decodes_like_numpy() -> None:
     from thintact_decoders import ArrayBackend, NonIterativeDecoder, T2SClosedFormDecoder
     from thintact_decoders.candidates import candidate_specs
 
-    from thintact_sdk.imaging.recon_synthetic import frequency_split_matrices
-    from thintact_sdk.machine import host_capabilities
+    from thintact_sdk.host.machine import host_capabilities
+    from thintact_sdk.reconstruction.synthetic_matrices import frequency_split_matrices
 
     assert "cuda-float32" in [s.key for s in candidate_specs(host_capabilities())]
     sm, jf = frequency_split_matrices((64, 72), (20, 24), (8, 9), seed=1)
@@ -28,8 +28,8 @@ def test_cuda_is_a_candidate_and_decodes_like_numpy() -> None:
 
 
 def test_registry_decoder_measures_cuda(monkeypatch, tmp_path) -> None:
-    from thintact_sdk.plugin_manager import get_registry
-    from thintact_sdk.profile import load_profile
+    from thintact_sdk.device.registry import get_registry
+    from thintact_sdk.formats.profiles import load_profile
 
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
     profile = load_profile("virtual-finger")

@@ -14,9 +14,9 @@ from thintact_decoders import (
 from thintact_decoders.backend import synthesis_macs
 from thintact_decoders.modes import kept_mode_counts
 
-from thintact_sdk.imaging.recon_synthetic import frequency_split_matrices
-from thintact_sdk.imaging.t2s import SystemMatrices
-from thintact_sdk.roofline import measure_sgemm_gflops, roofline_ratio
+from thintact_sdk.host.roofline import measure_sgemm_gflops, roofline_ratio
+from thintact_sdk.reconstruction.synthetic_matrices import frequency_split_matrices
+from thintact_sdk.reconstruction.t2s import SystemMatrices
 
 
 def _decaying(a: np.ndarray) -> np.ndarray:

@@ -19,12 +19,12 @@ from thintact_decoders.sensor_binning import (
 )
 
 from thintact_sdk.algorithms import SystemMatrices
-from thintact_sdk.bayer import planar_frame
+from thintact_sdk.device.sensor import Sensor
 from thintact_sdk.errors import InvalidShapeError
+from thintact_sdk.formats.profiles import load_profile
+from thintact_sdk.host.machine import HostCapabilities
 from thintact_sdk.interfaces import Decoder
-from thintact_sdk.machine import HostCapabilities
-from thintact_sdk.profile import load_profile
-from thintact_sdk.sensor import Sensor
+from thintact_sdk.pixels.bayer import planar_frame
 
 HOST = HostCapabilities("Test CPU", 2, "AVX2", False, "openblas (2 threads)", "2.13.0+cpu, 2 threads", (),
                         ("avx2", "fma"))
@@ -187,8 +187,8 @@ def test_binning_is_offered_by_default_only_where_the_products_are_heavy() -> No
 
 
 def test_the_registry_offers_the_binned_solve_when_the_setting_asks(tmp_path, monkeypatch) -> None:
+    from thintact_sdk.device.registry import get_registry
     from thintact_sdk.errors import CalibrationError
-    from thintact_sdk.plugin_manager import get_registry
 
     monkeypatch.setenv("THINTACT_CACHE_DIR", str(tmp_path))
     profile = load_profile("virtual-mini")
@@ -213,11 +213,11 @@ def test_sensor_bins_the_mosaic_once_for_a_binned_decoder(pixel_format: str) -> 
     2 × 2 into the measurement and letting the decoder bin it again; black level included."""
     from thintact_decoders.sensor_binning import binnable_build
 
-    from thintact_sdk.bayer import mosaic_from_rgb
-    from thintact_sdk.capture import to_measurement
+    from thintact_sdk.device.cameras import to_measurement
+    from thintact_sdk.device.sensor import _InFlight
     from thintact_sdk.frames import RawFrame
     from thintact_sdk.interfaces import BinnedInputDecoder, binned_input
-    from thintact_sdk.sensor import _InFlight
+    from thintact_sdk.pixels.bayer import mosaic_from_rgb
 
     profile = load_profile("virtual-mini")  # 128 × 160 sensor, 50 × 64 scene, black 64 DN
     sm = _operator(128, 160, 50, 64)
@@ -248,11 +248,11 @@ def test_sensor_bins_the_mosaic_once_for_a_binned_decoder(pixel_format: str) -> 
 
 
 def test_a_decoder_without_the_capability_gets_the_full_measurement() -> None:
-    from thintact_sdk.capture import to_measurement
+    from thintact_sdk.device.cameras import to_measurement
+    from thintact_sdk.device.sensor import _InFlight
     from thintact_sdk.errors import InvalidValueError
     from thintact_sdk.frames import RawFrame
     from thintact_sdk.interfaces import binned_input
-    from thintact_sdk.sensor import _InFlight
 
     profile = load_profile("virtual-mini")
     dec = T2SClosedFormDecoder(_operator(128, 160, 50, 64), 40.0, ArrayBackend("numpy", "float32"))

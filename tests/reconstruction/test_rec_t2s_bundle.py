@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 
 from thintact_sdk.errors import CalibrationError
-from thintact_sdk.imaging.calibration_bundle import CalibrationBundle, find_latest
-from thintact_sdk.imaging.recon_kron import nearest_kron
-from thintact_sdk.imaging.recon_synthetic import frequency_split_matrices
-from thintact_sdk.imaging.t2s import SystemMatrices, kron_sum_norm2
-from thintact_sdk.profile import load_profile
+from thintact_sdk.formats.profiles import load_profile
+from thintact_sdk.reconstruction.bundle import CalibrationBundle, find_latest
+from thintact_sdk.reconstruction.kron import nearest_kron
+from thintact_sdk.reconstruction.synthetic_matrices import frequency_split_matrices
+from thintact_sdk.reconstruction.t2s import SystemMatrices, kron_sum_norm2
 
 
 def _random_sm(seed: int = 0) -> SystemMatrices:

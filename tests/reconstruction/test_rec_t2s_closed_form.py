@@ -7,8 +7,8 @@ import pytest
 from thintact_decoders import ArrayBackend, T2SClosedFormDecoder, T2SIterativeDecoder
 
 from thintact_sdk.errors import CalibrationError, InvalidValueError
-from thintact_sdk.imaging.scene_prior import ScenePrior
-from thintact_sdk.imaging.t2s import SystemMatrices
+from thintact_sdk.reconstruction.scene_prior import ScenePrior
+from thintact_sdk.reconstruction.t2s import SystemMatrices
 
 
 def _low_rank_open_matrices(seed: int = 0) -> SystemMatrices:
@@ -135,7 +135,7 @@ def test_iterate_reproduces_the_iterative_decoder() -> None:
 def test_set_tau_equals_a_fresh_decoder() -> None:
     from thintact_decoders import NonIterativeDecoder
 
-    from thintact_sdk.imaging.recon_synthetic import frequency_split_matrices
+    from thintact_sdk.reconstruction.synthetic_matrices import frequency_split_matrices
 
     sm = _low_rank_open_matrices(8)
     y = sm.forward(np.random.default_rng(9).random((*sm.scene_shape, 2)))

@@ -7,10 +7,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from thintact_sdk.imaging.calibration_bundle import CalibrationBundle, find_latest
-from thintact_sdk.imaging.recon_virtual import VirtualCalibrationOptions, make_virtual_bundle
-from thintact_sdk.plugin_manager import get_registry
-from thintact_sdk.profile import load_profile, profile_from_dict
+from thintact_sdk.device.registry import get_registry
+from thintact_sdk.formats.profiles import load_profile, profile_from_dict
+from thintact_sdk.reconstruction.bundle import CalibrationBundle, find_latest
+from thintact_sdk.reconstruction.virtual_bundle import (
+    VirtualCalibrationOptions,
+    make_virtual_bundle,
+)
 
 REPO = Path(__file__).resolve().parents[2]
 

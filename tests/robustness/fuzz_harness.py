@@ -18,7 +18,7 @@ from typing import Any
 
 import rob_kit
 
-from thintact_sdk.cli.main import main
+from thintact_sdk.apps.cli.main import main
 
 NOISE = ("Traceback", "internal error", "DLASCL", "RuntimeWarning", "LinAlgError", "Warning:")
 

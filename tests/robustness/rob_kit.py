@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from thintact_sdk.profile import Profile, profile_from_dict
+from thintact_sdk.formats.profiles import Profile, profile_from_dict
 
 K = 40
 
@@ -57,8 +57,8 @@ def scenes(count: int, seed: int = 0) -> np.ndarray:
 
 def measurements(profile: Profile, scene_stack: np.ndarray, seed: int = 0) -> np.ndarray:
     """Noisy raw DN (black level included) of ``scene_stack``, ``F × 24 × 30 × 3`` uint16."""
-    from thintact_sdk.imaging.noise import signal_to_dn
-    from thintact_sdk.imaging.simulator import Simulator
+    from thintact_sdk.simulation.noise import signal_to_dn
+    from thintact_sdk.simulation.simulator import Simulator
 
     sim = Simulator(profile)
     gain = sim.reference_gain()
@@ -90,10 +90,10 @@ def write_bundle(root: Path, profile: Profile) -> Path:
     """A calibration bundle of the tiny device: the simulator's two-term fit, a joint filter
     that passes the measurement through as the open part estimate's complement, τ from the
     matrices' scale."""
-    from thintact_sdk.imaging.calibration_bundle import CalibrationBundle
-    from thintact_sdk.imaging.recon_filter import JointFilter
-    from thintact_sdk.imaging.simulator import Simulator
-    from thintact_sdk.imaging.t2s import SystemMatrices
+    from thintact_sdk.reconstruction.bundle import CalibrationBundle
+    from thintact_sdk.reconstruction.joint_filter import JointFilter
+    from thintact_sdk.reconstruction.t2s import SystemMatrices
+    from thintact_sdk.simulation.simulator import Simulator
 
     sim = Simulator(profile)
     sm = SystemMatrices.two_term_fit(sim, scale_dn=sim.reference_gain())

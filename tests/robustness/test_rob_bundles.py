@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from thintact_sdk.errors import CalibrationError
-from thintact_sdk.imaging.calibration_bundle import CalibrationBundle
+from thintact_sdk.reconstruction.bundle import CalibrationBundle
 
 
 def _rewrite_npz(path: Path, **replace: np.ndarray) -> None:

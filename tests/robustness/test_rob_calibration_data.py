@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 import rob_kit
 
+from thintact_sdk.apps.cli.main import main
 from thintact_sdk.calibration.collect import collect_slits
-from thintact_sdk.cli.main import main
 from thintact_sdk.errors import CalibrationError
-from thintact_sdk.recording import Recording
+from thintact_sdk.formats.recording import Recording
 
 
 @pytest.fixture

@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from thintact_sdk.cli.main import main
+from thintact_sdk.apps.cli.main import main
 
 
 def one_error(capfd: pytest.CaptureFixture[str], *needles: str) -> str:
@@ -115,7 +115,7 @@ def test_out_is_checked_before_any_work(command: str, tiny: dict[str, Any], tmp_
     out.mkdir()
     (out / "report.json").write_text("{}")
     called: list[str] = []
-    import thintact_sdk.recording as recording
+    import thintact_sdk.formats.recording as recording
 
     monkeypatch.setattr(recording.Recording, "__init__", lambda *a, **k: called.append("read"))
     argv = (["diagnose", str(tiny["recording"]), "--out", str(out)] if command == "diagnose"
@@ -235,7 +235,7 @@ def test_diagnose_keeps_a_saturated_frame_as_data(tiny: dict[str, Any], rec_copy
 
 
 def test_diagnose_never_writes_a_report_with_nan_figures() -> None:
-    from thintact_sdk.cli.commands.diagnose import _check_finite
+    from thintact_sdk.apps.cli.commands.diagnose import _check_finite
     from thintact_sdk.errors import ThinTactError
 
     good = {"noise_rms_dn": 2.0, "baseline": {"rms_dn": 3.0, "chi2_per_dof": 1.2},
@@ -247,7 +247,7 @@ def test_diagnose_never_writes_a_report_with_nan_figures() -> None:
 
 def test_record_append_of_another_device_is_refused_before_the_camera_opens(
         tiny: dict[str, Any], rec_copy: Path, capfd: Any, monkeypatch: Any) -> None:
-    import thintact_sdk.cli.commands.record as record_cmd
+    import thintact_sdk.apps.cli.commands.record as record_cmd
 
     monkeypatch.setattr(record_cmd, "create_camera", lambda *a, **k: pytest.fail("camera opened"))
     manifest_before = (rec_copy / "manifest.json").read_text()
@@ -258,7 +258,7 @@ def test_record_append_of_another_device_is_refused_before_the_camera_opens(
 
 
 def test_claim_output_policy(tmp_path: Path) -> None:
-    from thintact_sdk.cli.output_path import claim_output
+    from thintact_sdk.apps.cli.output_path import claim_output
     from thintact_sdk.errors import OutputError
 
     (tmp_path / "f.npy").write_bytes(b"x")
@@ -276,7 +276,7 @@ def test_claim_output_policy(tmp_path: Path) -> None:
 
 def test_new_luts_go_to_the_users_calibrations_never_the_checkout(tmp_path: Path, monkeypatch: Any,
                                                                    repo_root: Path) -> None:
-    from thintact_sdk.tactile.store import calibration_roots, user_calibrations_root
+    from thintact_sdk.tactile.calibration.store import calibration_roots, user_calibrations_root
 
     monkeypatch.chdir(tmp_path)
     monkeypatch.delenv("THINTACT_CALIBRATION_PATH", raising=False)

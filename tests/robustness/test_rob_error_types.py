@@ -9,11 +9,11 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
-from thintact_sdk.bayer import bin_bayer
 from thintact_sdk.errors import InvalidShapeError, InvalidValueError, ThinTactError
-from thintact_sdk.imaging.metrics import psnr
-from thintact_sdk.imaging.scenes import make_scene
-from thintact_sdk.imaging.tikhonov import TikhonovSolver
+from thintact_sdk.pixels.bayer import bin_bayer
+from thintact_sdk.reconstruction.metrics import psnr
+from thintact_sdk.reconstruction.tikhonov import TikhonovSolver
+from thintact_sdk.simulation.scenes import make_scene
 
 CASES: list[tuple[str, Callable[[], object], type, str]] = [
     ("odd mosaic", lambda: bin_bayer(np.zeros((3, 4), np.uint16), "RGGB"), InvalidShapeError, "even"),
@@ -49,12 +49,12 @@ def test_plugin_user_data_errors_are_thintact_errors() -> None:
 def test_a_sensor_with_a_bad_decoder_setting_fails_with_a_thintact_error() -> None:
     """Through the robot API: an invalid decoder setting in the profile is a user error."""
     import thintact_sdk
-    from thintact_sdk.profile import load_profile
+    from thintact_sdk.formats.profiles import load_profile
 
     profile = load_profile("virtual-mini")
     data = profile.contract_dict()
     data["decoder"] = {"plugin": "thintact-noniterative", "settings": {"fold": "sideways"}}
-    from thintact_sdk.profile import profile_from_dict
+    from thintact_sdk.formats.profiles import profile_from_dict
 
     bad = profile_from_dict(data, where="test")
     with pytest.raises(ThinTactError, match="fold must be"):

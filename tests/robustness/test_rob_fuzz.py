@@ -28,9 +28,9 @@ from fuzz_harness import assert_nothing_outside, judge, run_cli, snapshot
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from thintact_sdk.imaging.calibration_bundle import CalibrationBundle
-from thintact_sdk.plugin_manager import get_registry
-from thintact_sdk.recording import Recording
+from thintact_sdk.device.registry import get_registry
+from thintact_sdk.formats.recording import Recording
+from thintact_sdk.reconstruction.bundle import CalibrationBundle
 
 SCALE = max(1, int(os.environ.get("THINTACT_FUZZ_SCALE", "1")))
 """Multiplies every test's number of examples (a longer campaign: THINTACT_FUZZ_SCALE=10)."""
@@ -336,7 +336,7 @@ def test_fuzz_diagnose_arguments(draws: dict[str, Any], tiny: dict[str, Any], ca
             assert np.isfinite(rep[part]["rms_dn"]) and np.isfinite(rep[part]["chi2_per_dof"])
         assert (out / "fitted_profile.json").is_file()
 
-    with mock.patch("thintact_sdk.diagnose.outputs.write_html", _stub_html):
+    with mock.patch("thintact_sdk.diagnosis.imaging.outputs.write_html", _stub_html):
         _fuzz_cli("argv → diagnose", tiny, capfd, ["diagnose", "{in}/rec", "--quiet"],
                   {"--out": "out", "--time-budget": "3", "--sys-frac": "0.001", "--max-effects": "1"},
                   draws, check)
@@ -379,7 +379,7 @@ def test_fuzz_calibrate_from_recording_arguments(draws: dict[str, Any], tiny: di
     def stub_report(outcome: Any, profile: Any, path: Path) -> Path:
         return _stub_html(None, path)
 
-    with mock.patch("thintact_sdk.calibration.report.write_report", stub_report):
+    with mock.patch("thintact_sdk.calibration.unit_report.write_report", stub_report):
         # exit 1 is the documented validation FAIL verdict, with a complete bundle
         _fuzz_cli("argv → calibrate --from-recording", tiny, capfd,
                   ["calibrate", "--from-recording", str(slit_recording), "--no-progress"],

@@ -15,16 +15,16 @@ from pathlib import Path
 
 import pytest
 
-from thintact_sdk.cli.main import main
+from thintact_sdk.apps.cli.main import main
+from thintact_sdk.device.registry import get_registry
 from thintact_sdk.errors import RecordingError
-from thintact_sdk.plugin_manager import get_registry
-from thintact_sdk.recording import Recording
+from thintact_sdk.formats.recording import Recording
 
 TRIALS = 3
 
 
 def _cmd(out: Path, frames: int) -> list[str]:
-    return [sys.executable, "-m", "thintact_sdk.cli.main", "record", "--profile", "virtual-mini",
+    return [sys.executable, "-m", "thintact_sdk.apps.cli.main", "record", "--profile", "virtual-mini",
             "--frames", str(frames), "--out", str(out), "--set", "fps=0", "--quiet"]
 
 

@@ -12,7 +12,7 @@ import pytest
 import rob_kit
 
 from thintact_sdk.errors import RecordingError
-from thintact_sdk.recording import Recording, RecordingWriter
+from thintact_sdk.formats.recording import Recording, RecordingWriter
 
 
 def _edit_frame(rec: Path, i: int, **fields: object) -> None:
@@ -118,7 +118,7 @@ def test_append_with_another_device_is_refused_naming_both(tmp_path: Path, tiny:
     RecordingWriter(tmp_path / "r", tiny["profile"]).add(tiny["meas"][0], label="a")
     other = rob_kit.tiny_profile_dict()
     other.update(name="robust-other", sensor={**other["sensor"], "rows": 48, "cols": 60})
-    from thintact_sdk.profile import profile_from_dict
+    from thintact_sdk.formats.profiles import profile_from_dict
 
     with pytest.raises(RecordingError) as err:
         RecordingWriter(tmp_path / "r", profile_from_dict(other))

@@ -20,10 +20,10 @@ import rob_kit
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from thintact_sdk.cli.main import build_parser, main
-from thintact_sdk.cli.output_path import LOCK_NAME, claim_output, write_lock
+from thintact_sdk.apps.cli.main import build_parser, main
+from thintact_sdk.apps.cli.output_path import LOCK_NAME, claim_output, write_lock
 from thintact_sdk.errors import CalibrationError, OutputError, RecordingError
-from thintact_sdk.imaging.calibration_bundle import CalibrationBundle
+from thintact_sdk.reconstruction.bundle import CalibrationBundle
 
 FUZZ = settings(max_examples=30, deadline=None, derandomize=True, database=None,
                 suppress_health_check=[HealthCheck.function_scoped_fixture])
@@ -159,7 +159,7 @@ def test_a_missing_input_is_no_overlap(tmp_path: Path) -> None:
 @pytest.fixture(scope="module")
 def camera_profile(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """The tiny device with the virtual camera (random scenes, unpaced): quick to record."""
-    from thintact_sdk.plugin_manager import get_registry
+    from thintact_sdk.device.registry import get_registry
 
     if "virtual" not in get_registry().components("camera"):
         pytest.skip("virtual camera plugin not installed")
@@ -218,7 +218,7 @@ def test_racing_mcap_recorders_exactly_one_wins(camera_profile: Path, tmp_path: 
 
 def test_two_recorder_processes_exactly_one_wins(camera_profile: Path, tmp_path: Path) -> None:
     out = tmp_path / "rec"
-    cmd = [sys.executable, "-m", "thintact_sdk.cli.main", "record", "--profile", str(camera_profile),
+    cmd = [sys.executable, "-m", "thintact_sdk.apps.cli.main", "record", "--profile", str(camera_profile),
            "--frames", "20", "--out", str(out), "--quiet"]
     procs = [subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
              for _ in range(2)]
@@ -243,8 +243,8 @@ def test_the_write_lock_is_exclusive_and_released(tmp_path: Path) -> None:
 
 def test_a_recording_is_still_refused_without_append_under_the_lock(camera_profile: Path,
                                                                     tmp_path: Path) -> None:
-    from thintact_sdk.cli.commands.record import record
-    from thintact_sdk.profile import load_profile
+    from thintact_sdk.apps.cli.commands.record import record
+    from thintact_sdk.formats.profiles import load_profile
 
     profile = load_profile(str(camera_profile))
     record(profile, 1, tmp_path / "rec", progress=False)
@@ -378,9 +378,9 @@ def saturated_recording(repo_root: Path, tmp_path_factory: pytest.TempPathFactor
     the white frame reads that level at every pixel, the other frames clip in part."""
     import importlib.util
 
-    from thintact_sdk.imaging.noise import signal_to_dn
-    from thintact_sdk.imaging.simulator import Simulator
-    from thintact_sdk.recording import RecordingWriter
+    from thintact_sdk.formats.recording import RecordingWriter
+    from thintact_sdk.simulation.noise import signal_to_dn
+    from thintact_sdk.simulation.simulator import Simulator
 
     spec = importlib.util.spec_from_file_location("make_concealed_dataset",
                                                   repo_root / "tools" / "make_concealed_dataset.py")
@@ -406,8 +406,8 @@ def saturated_recording(repo_root: Path, tmp_path_factory: pytest.TempPathFactor
 
 
 def test_a_saturated_white_frame_is_diagnosed_as_saturation(saturated_recording: Path) -> None:
-    from thintact_sdk.diagnose import DiagnoseOptions, diagnose, load_diagnosis_data
-    from thintact_sdk.recording import Recording
+    from thintact_sdk.diagnosis.imaging import DiagnoseOptions, diagnose, load_diagnosis_data
+    from thintact_sdk.formats.recording import Recording
 
     white = Recording(saturated_recording).measurement(0)
     assert white.min() == white.max() == SATURATION_DN  # the case really is a saturated frame
@@ -422,7 +422,7 @@ def test_a_saturated_white_frame_is_diagnosed_as_saturation(saturated_recording:
 def test_a_dead_frame_in_that_recording_is_still_refused(saturated_recording: Path, tmp_path: Path) -> None:
     import shutil
 
-    from thintact_sdk.diagnose import load_diagnosis_data
+    from thintact_sdk.diagnosis.imaging import load_diagnosis_data
 
     rec = Path(shutil.copytree(saturated_recording, tmp_path / "rec"))
     first = sorted((rec / "measurements").iterdir())[1]

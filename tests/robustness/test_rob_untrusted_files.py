@@ -25,9 +25,9 @@ import torch
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from thintact_sdk.cli.main import main
+from thintact_sdk.apps.cli.main import main
 from thintact_sdk.errors import CalibrationError, ProfileError, RecordingError, ThinTactError
-from thintact_sdk.safe_arrays import ArrayFileError, read_npy, read_npz
+from thintact_sdk.formats.safe_arrays import ArrayFileError, read_npy, read_npz
 
 REAL_PACK = Path(__file__).resolve().parents[2] / "thintact_sdk" / "data" / "gelsight" / \
     "gelsight_ball_presses.npz"
@@ -92,19 +92,19 @@ def test_the_payload_really_runs_code_when_unpickled(tmp_path: Path) -> None:
 # -- press packs ------------------------------------------------------------------------------
 
 def _load_pack(p: Path) -> object:
-    from thintact_sdk.tactile.gelsight_eval import load_pack
+    from thintact_sdk.tactile.calibration.gelsight_eval import load_pack
 
     return load_pack(p)
 
 
 def _from_pack(p: Path) -> object:
-    from thintact_sdk.tactile.real2sim.domains import RealPresses
+    from thintact_sdk.tactile.learning.domains import RealPresses
 
     return RealPresses.from_pack(p)
 
 
 def _load_presses(p: Path) -> object:
-    from thintact_sdk.tactile.sim_diagnosis.data import load_presses
+    from thintact_sdk.diagnosis.tactile.press_data import load_presses
 
     return load_presses(p)
 
@@ -243,7 +243,7 @@ def test_simulate_and_calibrate_pose_refuse_hostile_npy(damage: str, tiny: dict[
 def test_a_hostile_recording_frame_is_refused(damage: str, tiny: dict[str, Any], rec_copy: Path,
                                               tmp_path: Path,
                                               capfd: pytest.CaptureFixture[str]) -> None:
-    from thintact_sdk.recording import Recording
+    from thintact_sdk.formats.recording import Recording
 
     marker = tmp_path / "ran"
     frame = rec_copy / "measurements" / "001.npy"
@@ -269,7 +269,7 @@ def test_a_hostile_recording_frame_is_refused(damage: str, tiny: dict[str, Any],
 
 
 def test_a_manifest_nested_100000_deep_is_refused(rec_copy: Path) -> None:
-    from thintact_sdk.recording import Recording
+    from thintact_sdk.formats.recording import Recording
 
     manifest = rec_copy / "manifest.json"
     manifest.write_text('{"format": "thintact-recording/1", "x": ' + "[" * 100_000 + "]" * 100_000 + "}")
@@ -283,7 +283,7 @@ def test_a_manifest_nested_100000_deep_is_refused(rec_copy: Path) -> None:
 # -- calibration files -------------------------------------------------------------------------
 
 def test_bundle_meta_json_nested_deeply_is_refused(bundle_copy: Path) -> None:
-    from thintact_sdk.imaging.npz_io import read_npz as read_bundle_npz
+    from thintact_sdk.formats.bundle_npz import read_npz as read_bundle_npz
 
     path = bundle_copy / "filter.npz"
     with np.load(path, allow_pickle=False) as z:
@@ -296,9 +296,9 @@ def test_bundle_meta_json_nested_deeply_is_refused(bundle_copy: Path) -> None:
 
 def test_calibration_loaders_refuse_pickled_members(bundle_copy: Path, tiny: dict[str, Any],
                                                     tmp_path: Path) -> None:
-    from thintact_sdk.calibration.matrices_io import import_matrices
-    from thintact_sdk.imaging.calibration_bundle import CalibrationBundle
-    from thintact_sdk.tactile.photometric import PhotometricLUT
+    from thintact_sdk.formats.matrices import import_matrices
+    from thintact_sdk.reconstruction.bundle import CalibrationBundle
+    from thintact_sdk.tactile.interpretation.photometric import PhotometricLUT
 
     marker = tmp_path / "ran"
     evil = payload_npy(marker)
@@ -316,7 +316,7 @@ def test_calibration_loaders_refuse_pickled_members(bundle_copy: Path, tiny: dic
 
 
 def test_a_tone_curve_table_file_is_read_strictly(tmp_path: Path) -> None:
-    from thintact_sdk.profile import (
+    from thintact_sdk.formats.profiles import (
         load_profile,
         profile_from_dict,
         read_profile_file,
@@ -339,8 +339,8 @@ def test_a_tone_curve_table_file_is_read_strictly(tmp_path: Path) -> None:
 # -- Real2Sim checkpoints and generators -------------------------------------------------------
 
 def test_real2sim_checkpoint_and_generator_never_run_code(tmp_path: Path) -> None:
-    from thintact_sdk.tactile.real2sim.model_file import load_generator
-    from thintact_sdk.tactile.real2sim.train import CHECKPOINT_FORMAT, Real2SimTrainer, TrainConfig
+    from thintact_sdk.tactile.learning.model_file import load_generator
+    from thintact_sdk.tactile.learning.train import CHECKPOINT_FORMAT, Real2SimTrainer, TrainConfig
 
     marker = tmp_path / "ran"
     rng = np.random.default_rng(0)
@@ -368,7 +368,7 @@ def test_real2sim_checkpoint_and_generator_never_run_code(tmp_path: Path) -> Non
 
 
 def test_a_real_checkpoint_still_resumes(tmp_path: Path) -> None:
-    from thintact_sdk.tactile.real2sim.train import Real2SimTrainer, TrainConfig
+    from thintact_sdk.tactile.learning.train import Real2SimTrainer, TrainConfig
 
     real = np.random.default_rng(0).random((3, 24, 32, 3), dtype=np.float32)
     cfg = TrainConfig(iterations=1, batch=2, crop=16, width=4, blocks=1, edge_kernel=3,
@@ -537,8 +537,8 @@ def test_fuzz_press_pack_structure(case: tuple[dict[str, tuple[str, tuple[int, .
 
 
 def test_force_calibration_pack_and_loads_are_read_strictly(tmp_path: Path) -> None:
-    from thintact_sdk.profile import load_profile
-    from thintact_sdk.tactile.force_calibration import load_loads, load_press_pack
+    from thintact_sdk.formats.profiles import load_profile
+    from thintact_sdk.tactile.calibration.force_gains import load_loads, load_press_pack
 
     marker = tmp_path / "ran"
     profile = load_profile("virtual-finger")
@@ -557,7 +557,7 @@ def test_force_calibration_pack_and_loads_are_read_strictly(tmp_path: Path) -> N
 
 def test_bundle_metadata_nested_100000_deep_is_one_calibration_error(tmp_path: Path) -> None:
     from thintact_sdk.errors import CalibrationError
-    from thintact_sdk.imaging.calibration_bundle import META_FILE, CalibrationBundle
+    from thintact_sdk.reconstruction.bundle import META_FILE, CalibrationBundle
 
     (tmp_path / META_FILE).write_text("[" * 100_000 + "]" * 100_000)
     with pytest.raises(CalibrationError, match="not a calibration bundle.*nested"):

@@ -6,7 +6,7 @@ from typing import Any
 
 import numpy as np
 
-from thintact_sdk.profile import Profile, profile_from_dict
+from thintact_sdk.formats.profiles import Profile, profile_from_dict
 
 
 def tiny_profile(physics: dict[str, Any] | None = None, *, rows: int = 6, cols: int = 8,

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy.integrate import cumulative_trapezoid
 
-from thintact_sdk.imaging.sim_axis import mask_cell_edges_mm, second_antiderivative
+from thintact_sdk.simulation.axis import mask_cell_edges_mm, second_antiderivative
 
 
 def _numerical(edges: np.ndarray, values: np.ndarray, t: np.ndarray) -> np.ndarray:

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from tests.simulator.sim_helpers import rel_rms, tiny_profile
-from thintact_sdk.imaging.sim_reference import reference_forward
-from thintact_sdk.imaging.simulator import Simulator
+from thintact_sdk.simulation.reference import reference_forward
+from thintact_sdk.simulation.simulator import Simulator
 
 
 @pytest.mark.parametrize("physics", [

@@ -1,4 +1,4 @@
-"""Kernel builds split over threads (``thintact_sdk.imaging.build_threads``): the setting, the
+"""Kernel builds split over threads (``thintact_sdk.host.build_threads``): the setting, the
 map, and the rotated + refracted kernel built in round-robin groups equal to the serial one."""
 
 from __future__ import annotations
@@ -10,9 +10,9 @@ import pytest
 
 from tests.simulator.sim_helpers import rel_rms, tiny_profile
 from thintact_sdk.errors import InvalidValueError
-from thintact_sdk.imaging import sim_refracted
-from thintact_sdk.imaging.build_threads import ENV_BUILD_THREADS, build_threads, thread_map
-from thintact_sdk.imaging.simulator import Simulator, clear_kernel_cache
+from thintact_sdk.host.build_threads import ENV_BUILD_THREADS, build_threads, thread_map
+from thintact_sdk.simulation import refracted as sim_refracted
+from thintact_sdk.simulation.simulator import Simulator, clear_kernel_cache
 
 
 def test_build_threads_setting():

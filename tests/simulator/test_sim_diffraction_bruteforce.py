@@ -1,7 +1,7 @@
 """The simulator's diffraction paths (alone, with a rotated or shifted mask, with leakage,
 angular response and moved distances) against the brute-force Fresnel reference of the
 contract's definition (CONTRACTS §4, §5 ``diffraction``;
-:mod:`thintact_sdk.imaging.sim_reference_fresnel`), which shares no code with them.
+:mod:`thintact_sdk.simulation.reference_fresnel`), which shares no code with them.
 
 The reference used for the comparisons (:func:`crossing_grid_reference_kernel`) integrates
 every pixel pair exactly in ``δ = s - u`` and by a midpoint grid in the mask plane; it is
@@ -20,12 +20,12 @@ import numpy as np
 import pytest
 
 from tests.simulator.sim_helpers import rel_rms, tiny_profile
-from thintact_sdk.imaging.sim_reference_fresnel import (
+from thintact_sdk.simulation.reference_fresnel import (
     crossing_grid_reference_kernel,
     ray_offset_reference_kernel,
     subsampled_reference_kernel,
 )
-from thintact_sdk.imaging.simulator import Simulator
+from thintact_sdk.simulation.simulator import Simulator
 
 DEVICE: dict[str, Any] = dict(rows=16, cols=20, pitch_um=20.0, scene_rows=6, scene_cols=8, scene_pitch_um=60.0,
               feature_um=20.0, k=24, z_mm=1.0, d_mm=0.3)

@@ -1,6 +1,6 @@
 """Every kernel-effect path of the simulator, alone and in pairs, against the brute-force 4-D
 quadrature of the contract's definitions (CONTRACTS §1, §4, §5;
-:mod:`thintact_sdk.imaging.sim_reference`), with the brute force shown converging.
+:mod:`thintact_sdk.simulation.reference`), with the brute force shown converging.
 
 Devices are tiny with wide angles (H = 1.3 mm, offsets up to ~7°), so the radiometry, the
 Snell crossing and the rotation all matter. The brute force's own error falls roughly as
@@ -18,8 +18,8 @@ import numpy as np
 import pytest
 
 from tests.simulator.sim_helpers import rel_rms, tiny_profile
-from thintact_sdk.imaging.sim_reference import reference_forward, reference_kernel
-from thintact_sdk.imaging.simulator import Simulator
+from thintact_sdk.simulation.reference import reference_forward, reference_kernel
+from thintact_sdk.simulation.simulator import Simulator
 
 #: 25 µm cells, 20 µm pixels, 60 µm scene pixels, H = 1.3 mm
 RAY = dict(rows=4, cols=5, scene_rows=3, scene_cols=4, pitch_um=20.0, scene_pitch_um=60.0,

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from tests.simulator.sim_helpers import rel_rms
-from thintact_sdk.imaging.simulator import Simulator
-from thintact_sdk.profile import read_profile_file
+from thintact_sdk.formats.profiles import read_profile_file
+from thintact_sdk.simulation.simulator import Simulator
 
 # The golden baseline was regenerated (2026-11-23) with the reference renderer's 1/8 um mask
 # offset fixed, so the contract-exact simulator (the mask exactly where CONTRACTS §1 puts it)

@@ -10,10 +10,10 @@ from pathlib import Path
 
 import pytest
 
-import thintact_sdk.imaging as imaging
+import thintact_sdk.simulation as simulation
 
-KERNEL_MODULES = ("sim_params", "sim_direct", "sim_rotated", "sim_refracted", "sim_separable",
-                  "sim_axis", "sim_radiometry")
+KERNEL_MODULES = ("params", "direct", "rotated", "refracted", "refracted_blocked", "separable",
+                  "axis", "radiometry")
 
 
 def _imports(path: Path) -> set[str]:
@@ -28,11 +28,11 @@ def _imports(path: Path) -> set[str]:
 
 @pytest.mark.parametrize("name", KERNEL_MODULES)
 def test_kernel_module_does_not_import_the_simulator(name: str) -> None:
-    path = Path(imaging.__file__).parent / f"{name}.py"
-    assert "thintact_sdk.imaging.simulator" not in _imports(path)
+    path = Path(simulation.__file__).parent / f"{name}.py"
+    assert "thintact_sdk.simulation.simulator" not in _imports(path)
 
 
 def test_direct_kernel_module_imports_on_its_own() -> None:
-    code = "import thintact_sdk.imaging.sim_direct as d; print(d.KernelParams.__module__)"
+    code = "import thintact_sdk.simulation.direct as d; print(d.KernelParams.__module__)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-    assert out.stdout.strip() == "thintact_sdk.imaging.sim_params"
+    assert out.stdout.strip() == "thintact_sdk.simulation.params"

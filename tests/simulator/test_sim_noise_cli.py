@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from thintact_sdk.cli.main import main
-from thintact_sdk.imaging.noise import noise_variance_dn, signal_to_dn
-from thintact_sdk.profile import NoiseSpec, load_profile
+from thintact_sdk.apps.cli.main import main
+from thintact_sdk.formats.profiles import NoiseSpec, load_profile
+from thintact_sdk.simulation.noise import noise_variance_dn, signal_to_dn
 
 NOISE = NoiseSpec(black_level_dn=64.0, read_noise_dn=2.0, electrons_per_dn=4.0, saturation_dn=4095.0)
 

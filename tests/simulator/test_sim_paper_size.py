@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from thintact_sdk.errors import ThinTactError
-from thintact_sdk.imaging.simulator import Simulator, clear_kernel_cache
-from thintact_sdk.profile import load_profile
+from thintact_sdk.formats.profiles import load_profile
+from thintact_sdk.simulation.simulator import Simulator, clear_kernel_cache
 
 
 @pytest.mark.parametrize("physics, match", [
@@ -35,7 +35,7 @@ def test_quarter_paper_device_simulates_shift_and_leakage() -> None:
     d = base.contract_dict()
     d["sensor"]["rows"], d["sensor"]["cols"] = 256, 320
     d["scene"]["rows"], d["scene"]["cols"] = 100, 128
-    from thintact_sdk.profile import profile_from_dict
+    from thintact_sdk.formats.profiles import profile_from_dict
 
     prof = profile_from_dict(d)
     x = np.random.default_rng(0).random((2, 100, 128, 3))

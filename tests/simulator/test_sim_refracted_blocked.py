@@ -1,4 +1,4 @@
-"""The blocked refracted kernel (:mod:`thintact_sdk.imaging.sim_refracted_blocked`): the same
+"""The blocked refracted kernel (:mod:`thintact_sdk.simulation.refracted_blocked`): the same
 integrals as the separable refracted path, filled group by group without a ``D²`` family."""
 
 from __future__ import annotations
@@ -10,11 +10,12 @@ import pytest
 
 from tests.simulator.sim_helpers import rel_rms, tiny_profile
 from thintact_sdk.errors import ThinTactError
-from thintact_sdk.imaging import sim_refracted, sim_refracted_blocked
-from thintact_sdk.imaging.sim_params import kernel_params
-from thintact_sdk.imaging.sim_reference import reference_kernel
-from thintact_sdk.physics import resolve_physics
-from thintact_sdk.profile import load_profile
+from thintact_sdk.formats.profiles import load_profile
+from thintact_sdk.simulation import refracted as sim_refracted
+from thintact_sdk.simulation import refracted_blocked as sim_refracted_blocked
+from thintact_sdk.simulation.effects import resolve_physics
+from thintact_sdk.simulation.params import kernel_params
+from thintact_sdk.simulation.reference import reference_kernel
 
 SMALL = dict(rows=16, cols=20, pitch_um=20.0, scene_rows=6, scene_cols=8, scene_pitch_um=100.0,
              feature_um=20.0, k=24, z_mm=1.0, d_mm=0.3)

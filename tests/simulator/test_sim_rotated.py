@@ -1,4 +1,4 @@
-"""The rotated mask (separable, :mod:`thintact_sdk.imaging.sim_rotated`) against a brute-force
+"""The rotated mask (separable, :mod:`thintact_sdk.simulation.rotated`) against a brute-force
 4-D quadrature of the contract's definitions (CONTRACTS §1, §4, §5 ``mask_misalignment``)."""
 
 from __future__ import annotations
@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from tests.simulator.sim_helpers import rel_rms, tiny_profile
-from thintact_sdk.imaging.sim_reference import reference_forward, reference_kernel
-from thintact_sdk.imaging.simulator import Simulator
-from thintact_sdk.profile import load_profile
+from thintact_sdk.formats.profiles import load_profile
+from thintact_sdk.simulation.reference import reference_forward, reference_kernel
+from thintact_sdk.simulation.simulator import Simulator
 
 #: 20 um pixels and cells, a 60 um scene pitch and H = 1.3 mm: rotations of a fraction of a
 #: degree move the cell edges by a visible part of a cell across the few pixels
@@ -87,8 +87,8 @@ def test_rotation_composes_with_kernel_effects(physics, n_samples):
 def test_radiometric_factors_are_memoised_read_only():
     """Kernels of one geometry share one expansion; its factor values at repeated offsets
     are computed once, returned read-only, and equal a fresh evaluation."""
-    from thintact_sdk.imaging import simulator as sim_mod
-    from thintact_sdk.imaging.sim_radiometry import SeparableExpansion
+    from thintact_sdk.simulation import simulator as sim_mod
+    from thintact_sdk.simulation.radiometry import SeparableExpansion
 
     exp = sim_mod._cached_expansion(5.8, 4.0, 1.5, 1.2, 1e-7)
     assert sim_mod._cached_expansion(5.8, 4.0, 1.5, 1.2, 1e-7) is exp

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from thintact_sdk.imaging.sim_separable import SeparableKernel, SeparableTerm, compress_terms
+from thintact_sdk.simulation.separable import SeparableKernel, SeparableTerm, compress_terms
 
 
 def _terms(rng: np.random.Generator, rows: int, cols: int, n: int, m: int) -> list[SeparableTerm]:

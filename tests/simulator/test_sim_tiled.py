@@ -1,4 +1,4 @@
-"""Kernels of sensor windows (:mod:`thintact_sdk.imaging.sim_tiled`): a window's kernel is the
+"""Kernels of sensor windows (:mod:`thintact_sdk.simulation.tiled`): a window's kernel is the
 whole device's on the window's pixels, and a rotated mask built window by window gives the
 whole build's frames (the whole build is checked against the brute force in
 ``test_sim_rotated.py``)."""
@@ -10,12 +10,13 @@ import pytest
 
 from tests.simulator.sim_helpers import rel_rms
 from thintact_sdk.errors import ThinTactError
-from thintact_sdk.imaging import sim_rotated, sim_tiled
-from thintact_sdk.imaging.sim_params import kernel_params
-from thintact_sdk.imaging.sim_tiled import TiledKernel, plan_windows, split_axis, window_params
-from thintact_sdk.imaging.simulator import Simulator, build_separable_kernel, clear_kernel_cache
-from thintact_sdk.physics import resolve_physics
-from thintact_sdk.profile import load_profile
+from thintact_sdk.formats.profiles import load_profile
+from thintact_sdk.simulation import rotated as sim_rotated
+from thintact_sdk.simulation import tiled as sim_tiled
+from thintact_sdk.simulation.effects import resolve_physics
+from thintact_sdk.simulation.params import kernel_params
+from thintact_sdk.simulation.simulator import Simulator, build_separable_kernel, clear_kernel_cache
+from thintact_sdk.simulation.tiled import TiledKernel, plan_windows, split_axis, window_params
 
 
 def _scenes(n: int = 2) -> np.ndarray:
@@ -28,7 +29,7 @@ def _kp(physics: dict) -> object:
 
 
 def _rank(kp: object) -> int:
-    from thintact_sdk.imaging.simulator import _expansion
+    from thintact_sdk.simulation.simulator import _expansion
 
     return int(_expansion(kp).rank)  # type: ignore[arg-type]
 
@@ -68,7 +69,7 @@ def test_rotated_mask_in_windows_matches_the_whole_build(physics):
     whole = build_separable_kernel(kp).apply(x)
     spans = [(r0, r1, c0, c1) for r0, r1 in split_axis(kp.rows, 2) for c0, c1 in split_axis(kp.cols, 3)]
     exp_info: dict[str, float] = {}
-    from thintact_sdk.imaging import simulator as simmod
+    from thintact_sdk.simulation import simulator as simmod
 
     exp = simmod._expansion(kp)
     tiled = sim_tiled.build_tiled_kernel(kp, spans, lambda w: simmod._build_rotated_window(w, exp, dict(exp_info)))
@@ -125,7 +126,7 @@ def test_simulator_tiles_a_device_whose_rotated_family_is_large(monkeypatch):
 
 
 def test_refraction_and_direct_paths_refuse_a_window():
-    from thintact_sdk.imaging.simulator import get_kernel
+    from thintact_sdk.simulation.simulator import get_kernel
 
     kp = window_params(_kp({"refraction": {"n_scene_side": 1.4}}), 0, 10, 0, 10)
     with pytest.raises(ThinTactError, match="straight rays"):
@@ -140,8 +141,8 @@ def test_streamed_windows_give_the_kept_windows_frames(monkeypatch):
     """``Simulator(stream_windows=True)`` builds each window at the forward call and drops it
     (for rendering a paper-size rotated recording, whose kept windows would not fit): the same
     windows, so the same frames as the kept tiled build, and nothing enters the kernel cache."""
-    from thintact_sdk.imaging import simulator as simmod
-    from thintact_sdk.imaging.sim_tiled import StreamedTiledKernel
+    from thintact_sdk.simulation import simulator as simmod
+    from thintact_sdk.simulation.tiled import StreamedTiledKernel
 
     physics = {"mask_misalignment": {"angle_deg": 0.35}, "mask_leakage": {"transmittance": 0.03}}
     prof = load_profile("virtual-mini").with_physics(physics)
@@ -164,7 +165,7 @@ def test_streamed_windows_give_the_kept_windows_frames(monkeypatch):
 
 
 def test_rotated_build_bytes_sums_the_windows_and_grows_with_the_angle():
-    from thintact_sdk.imaging.simulator import rotated_build_bytes
+    from thintact_sdk.simulation.simulator import rotated_build_bytes
 
     assert rotated_build_bytes(_kp({})) == 0.0
     small = rotated_build_bytes(_kp({"mask_misalignment": {"angle_deg": 0.1}}))
@@ -180,8 +181,8 @@ def test_a_window_refused_for_its_size_is_built_in_quadrants():
     the window is then built as its quadrants, recursively, covering it exactly and giving the
     same frames; a window still refused after the last split keeps the refusal."""
     from thintact_sdk.errors import KernelSizeError
-    from thintact_sdk.imaging import simulator as simmod
-    from thintact_sdk.imaging.sim_tiled import MAX_SPLITS, build_window_pieces
+    from thintact_sdk.simulation import simulator as simmod
+    from thintact_sdk.simulation.tiled import MAX_SPLITS, build_window_pieces
 
     kp = _kp({"mask_misalignment": {"angle_deg": 0.35, "dx_um": 3.0}})
     exp = simmod._expansion(kp)

@@ -9,12 +9,18 @@ from typing import Any
 import numpy as np
 
 import thintact_sdk
-from thintact_sdk.bayer import mosaic_from_rgb
+from thintact_sdk.device.registry import PluginRegistry
 from thintact_sdk.errors import DeviceError
+from thintact_sdk.formats.profiles import (
+    CameraConfig,
+    DecoderConfig,
+    Profile,
+    SensorSpec,
+    load_profile,
+)
 from thintact_sdk.frames import RawFrame
 from thintact_sdk.interfaces import Camera, CameraCapabilities, Decoder, LightController
-from thintact_sdk.plugin_manager import PluginRegistry
-from thintact_sdk.profile import CameraConfig, DecoderConfig, Profile, SensorSpec, load_profile
+from thintact_sdk.pixels.bayer import mosaic_from_rgb
 from thintact_sdk.tactile import TactileSimulator
 
 GAIN_DN = 2000.0

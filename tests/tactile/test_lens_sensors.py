@@ -11,9 +11,9 @@ import pytest
 
 import thintact_sdk as thintact
 from thintact_sdk.errors import CalibrationError, DeviceNotFoundError, ProfileError
+from thintact_sdk.formats.profiles import load_profile
 from thintact_sdk.frames import TactileFrame
-from thintact_sdk.profile import load_profile
-from thintact_sdk.tactile.photometric import PhotometricLUT
+from thintact_sdk.tactile.interpretation.photometric import PhotometricLUT
 
 TEST_PRESSES = [3, 9, 15, 21, 27, 33]  # none of them is among the 8 the LUT was made from
 

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from thintact_sdk.cli.main import build_parser
+from thintact_sdk.apps.cli.main import build_parser
 
 
 def test_bench_tactile_arguments():
@@ -24,9 +24,9 @@ def test_latency_decoder_from_a_bundle_directory_or_an_in_memory_bundle():
     the directly generated matrices (instead of the flatcam default)."""
     from pathlib import Path
 
-    from thintact_sdk.benchmarks.tactile import _latency_decoder
-    from thintact_sdk.imaging.calibration_bundle import find_latest
-    from thintact_sdk.profile import load_profile
+    from thintact_sdk.apps.benchmarks.tactile_accuracy import _latency_decoder
+    from thintact_sdk.formats.profiles import load_profile
+    from thintact_sdk.reconstruction.bundle import find_latest
 
     profile = load_profile("virtual-mini")
     bundle_dir = find_latest(Path(__file__).resolve().parents[2] / "thintact_sdk" / "data" / "calibrations"

@@ -6,12 +6,12 @@ import numpy as np
 import pytest
 from tac_fakes import GAIN_DN, block_profile, make_registry
 
-from thintact_sdk.cli.main import main
-from thintact_sdk.recording import RecordingWriter
-from thintact_sdk.sensor import Sensor
+from thintact_sdk.apps.cli.main import main
+from thintact_sdk.device.sensor import Sensor
+from thintact_sdk.formats.recording import RecordingWriter
 from thintact_sdk.tactile import Sphere, TactileSimulator, random_ball_presses
-from thintact_sdk.tactile.device_calibration import calibrate_recording
-from thintact_sdk.tactile.interpreter import colour_change
+from thintact_sdk.tactile.calibration.device import calibrate_recording
+from thintact_sdk.tactile.interpretation.interpreter import colour_change
 
 
 def _measurement(scene: np.ndarray) -> np.ndarray:
@@ -53,9 +53,9 @@ def test_cli_unknown_profile(capsys):
 
 @pytest.mark.slow
 def test_cli_calibrates_the_virtual_finger(tmp_path, monkeypatch, capsys):
+    from thintact_sdk.device.registry import get_registry
     from thintact_sdk.errors import CalibrationError
-    from thintact_sdk.plugin_manager import get_registry
-    from thintact_sdk.profile import load_profile
+    from thintact_sdk.formats.profiles import load_profile
 
     prof = load_profile("virtual-finger")
     try:

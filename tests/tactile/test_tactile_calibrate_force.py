@@ -10,12 +10,12 @@ from typing import Any
 import numpy as np
 import pytest
 
-from thintact_sdk.cli.main import main
-from thintact_sdk.profile import load_profile
+from thintact_sdk.apps.cli.main import main
+from thintact_sdk.formats.profiles import load_profile
 from thintact_sdk.tactile import Sphere, TactileSimulator
-from thintact_sdk.tactile.elastic import Elastomer
-from thintact_sdk.tactile.force import ForceModel
-from thintact_sdk.tactile.loaded_press import simulate_loaded_press
+from thintact_sdk.tactile.interpretation.force import ForceModel
+from thintact_sdk.tactile.simulation.elastic import Elastomer
+from thintact_sdk.tactile.simulation.loaded_press import simulate_loaded_press
 
 STIFFER = Elastomer(youngs_mpa=0.6, poisson=0.48)
 """The 'real' gel: twice as stiff as the profile's default 0.3 MPa."""

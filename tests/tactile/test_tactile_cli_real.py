@@ -13,9 +13,9 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from thintact_sdk.cli.main import main
-from thintact_sdk.tactile.press_pack import import_folder, load_press_pack
-from thintact_sdk.tactile.progress import stage_reporter
+from thintact_sdk.apps.cli.main import main
+from thintact_sdk.host.progress import stage_reporter
+from thintact_sdk.tactile.calibration.press_pack import import_folder, load_press_pack
 
 VENDORED = Path(__file__).resolve().parents[2] / "thintact_sdk" / "data" / "gelsight" / \
     "gelsight_ball_presses.npz"
@@ -69,7 +69,7 @@ def test_cli_import_evaluate_depth(tmp_path, capsys):
     assert res["train"] == [0, 2, 4, 6] and res["test"] == [1, 3, 5, 7]
     assert res["gradient_model"] == "lut" and len(res["presses"]) == 4
     lut = tmp_path / "lut.npz"
-    from thintact_sdk.tactile.press_pack import evaluate_pack
+    from thintact_sdk.tactile.calibration.press_pack import evaluate_pack
 
     evaluate_pack(loaded, 2.0, 0.1245, model="lut")["lut"].save(lut)
     depth = tmp_path / "depth"
@@ -140,8 +140,8 @@ def test_empty_outputs_are_refused_before_any_work(tmp_path, capsys, monkeypatch
 
 
 def _gelsight_recording(tmp_path: Path, presses: int) -> Path:
-    from thintact_sdk.profile import load_profile
-    from thintact_sdk.recording import RecordingWriter
+    from thintact_sdk.formats.profiles import load_profile
+    from thintact_sdk.formats.recording import RecordingWriter
 
     prof = load_profile("gelsight-mini")
     with np.load(VENDORED, allow_pickle=False) as z:
@@ -199,7 +199,7 @@ def test_damaged_pack_is_one_line_exit_2(tmp_path, capsys, cut, junk):
 @given(text=st.text(alphabet="0123456789,-x ", max_size=12))
 def test_crop_option_is_parsed_or_refused(text):
     from thintact_sdk.errors import CalibrationError
-    from thintact_sdk.tactile.press_pack import parse_crop
+    from thintact_sdk.tactile.calibration.press_pack import parse_crop
 
     try:
         crop = parse_crop(text)

@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 
 from thintact_sdk.errors import CalibrationError
-from thintact_sdk.tactile.ball_eval import ball_cap, fit_sphere, press_figures
-from thintact_sdk.tactile.calibration import find_press_circle
-from thintact_sdk.tactile.gradient_model import MLPGradient, train_mlp
-from thintact_sdk.tactile.photometric import PhotometricLUT, calibrate_lut, net_path
-from thintact_sdk.tactile.poisson import integrate_gradients
+from thintact_sdk.tactile.calibration.ball_eval import ball_cap, fit_sphere, press_figures
+from thintact_sdk.tactile.calibration.ball_press import find_press_circle
+from thintact_sdk.tactile.interpretation.gradient_model import MLPGradient, train_mlp
+from thintact_sdk.tactile.interpretation.photometric import PhotometricLUT, calibrate_lut, net_path
+from thintact_sdk.tactile.interpretation.poisson import integrate_gradients
 
 MM = 0.1
 
@@ -137,7 +137,7 @@ def test_vendored_real_presses_figures_and_report():
     annotation-free, through the interpreter: the figures docs/tactile.md reports."""
     from pathlib import Path
 
-    from thintact_sdk.tactile.press_pack import evaluate_pack, load_press_pack
+    from thintact_sdk.tactile.calibration.press_pack import evaluate_pack, load_press_pack
 
     path = Path(__file__).resolve().parents[2] / "thintact_sdk" / "data" / "gelsight" / \
         "gelsight_ball_presses.npz"
@@ -157,11 +157,11 @@ def test_vendored_real_presses_figures_and_report():
 def test_edge_press_reads_as_deep_as_an_interior_one():
     """A simulated ball press whose contact crosses the frame's edge keeps its depth through
     the interpreter (free boundary); pinning the border to 0 loses it."""
-    from thintact_sdk.profile import load_profile
-    from thintact_sdk.tactile.calibration import scene_level_lut
-    from thintact_sdk.tactile.indenters import Sphere
-    from thintact_sdk.tactile.interpreter import TactileInterpreter
-    from thintact_sdk.tactile.simulate import TactileSimulator
+    from thintact_sdk.formats.profiles import load_profile
+    from thintact_sdk.tactile.calibration.ball_press import scene_level_lut
+    from thintact_sdk.tactile.interpretation.interpreter import TactileInterpreter
+    from thintact_sdk.tactile.simulation.indenters import Sphere
+    from thintact_sdk.tactile.simulation.membrane import TactileSimulator
 
     profile = load_profile("virtual-finger")
     sim = TactileSimulator.for_profile(profile)
@@ -180,8 +180,8 @@ def test_edge_press_reads_as_deep_as_an_interior_one():
 
 
 def test_network_on_another_grid_is_refused_when_the_interpreter_is_built(tmp_path):
-    from thintact_sdk.profile import load_profile
-    from thintact_sdk.tactile.interpreter import TactileInterpreter
+    from thintact_sdk.formats.profiles import load_profile
+    from thintact_sdk.tactile.interpretation.interpreter import TactileInterpreter
 
     net, change, _ = _network(tmp_path, steps=5)
     lut = calibrate_lut([change], [change[..., 0]], [change[..., 1]],

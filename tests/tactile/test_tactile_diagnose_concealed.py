@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from thintact_sdk.tactile.real2sim.domains import RealPresses
-from thintact_sdk.tactile.sim_diagnosis import TactileDiagnosisOptions, diagnose_tactile
-from thintact_sdk.tactile.sim_diagnosis.model import Press, TactileModel, ball_normals
+from thintact_sdk.diagnosis.tactile import TactileDiagnosisOptions, diagnose_tactile
+from thintact_sdk.diagnosis.tactile.press_model import Press, TactileModel, ball_normals
+from thintact_sdk.tactile.learning.domains import RealPresses
 
 SHAPE = (60, 80)
 MM_PER_PX = 0.1245

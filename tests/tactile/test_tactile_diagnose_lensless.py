@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from thintact_sdk.tactile.sim_diagnosis.lensless import CONCEALED_GAMMA, conceal
+from thintact_sdk.diagnosis.tactile.lensless import CONCEALED_GAMMA, conceal
 
 
 def test_conceal_applies_field_exposure_and_gamma() -> None:
@@ -20,11 +20,11 @@ def test_conceal_applies_field_exposure_and_gamma() -> None:
 
 @pytest.mark.slow
 def test_concealed_rows_through_the_lensless_path() -> None:
-    from thintact_sdk.plugin_manager import get_registry
-    from thintact_sdk.profile import load_profile
-    from thintact_sdk.sensor import Sensor
-    from thintact_sdk.tactile.device_calibration import calibrate_virtual, scene_slot
-    from thintact_sdk.tactile.sim_diagnosis.lensless import evaluate_concealed
+    from thintact_sdk.device.registry import get_registry
+    from thintact_sdk.device.sensor import Sensor
+    from thintact_sdk.diagnosis.tactile.lensless import evaluate_concealed
+    from thintact_sdk.formats.profiles import load_profile
+    from thintact_sdk.tactile.calibration.device import calibrate_virtual, scene_slot
 
     profile = load_profile("virtual-finger")
     settings = dict(profile.decoder.settings)

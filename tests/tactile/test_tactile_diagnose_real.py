@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 import yaml
 
-from thintact_sdk.cli.main import main
-from thintact_sdk.tactile.sim_diagnosis.correction import evaluate_correction
-from thintact_sdk.tactile.sim_diagnosis.report import model_from_section
+from thintact_sdk.apps.cli.main import main
+from thintact_sdk.diagnosis.tactile.correction import evaluate_correction
+from thintact_sdk.diagnosis.tactile.report import model_from_section
 
 
 def _pack(shared_dir):

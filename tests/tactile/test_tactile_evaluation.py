@@ -5,9 +5,9 @@ from __future__ import annotations
 import pytest
 from tac_fakes import SLOTS, block_profile, make_registry
 
-from thintact_sdk.sensor import Sensor
+from thintact_sdk.device.sensor import Sensor
 from thintact_sdk.tactile import Sphere, scene_level_lut
-from thintact_sdk.tactile.evaluation import depth_rms, evaluate_depth, evaluate_markers
+from thintact_sdk.tactile.calibration.evaluation import depth_rms, evaluate_depth, evaluate_markers
 
 
 @pytest.fixture(scope="module")

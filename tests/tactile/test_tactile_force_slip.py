@@ -5,18 +5,18 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from thintact_sdk.formats.profiles import load_profile
 from thintact_sdk.frames import TactileFrame
-from thintact_sdk.profile import load_profile
 from thintact_sdk.tactile import Sphere, TactileInterpreter, TactileSimulator, scene_level_lut
-from thintact_sdk.tactile.elastic import (
+from thintact_sdk.tactile.interpretation.force import ForceModel, fit_gain
+from thintact_sdk.tactile.interpretation.grid import pixel_grid_mm
+from thintact_sdk.tactile.interpretation.slip import estimate_slip_ratio
+from thintact_sdk.tactile.simulation.elastic import (
     Elastomer,
     solve_normal_contact,
     tangential_displacement,
 )
-from thintact_sdk.tactile.force import ForceModel, fit_gain
-from thintact_sdk.tactile.grid import pixel_grid_mm
-from thintact_sdk.tactile.loaded_press import simulate_loaded_press
-from thintact_sdk.tactile.slip import estimate_slip_ratio
+from thintact_sdk.tactile.simulation.loaded_press import simulate_loaded_press
 
 EL = Elastomer(youngs_mpa=0.3, poisson=0.48)
 PX = 0.06
@@ -118,8 +118,8 @@ def test_fit_gain_and_frame_defaults():
 
 @pytest.mark.slow
 def test_bench_force_slip_rows(capsys):
-    from thintact_sdk.benchmarks.tactile import force_slip
-    from thintact_sdk.cli.main import build_parser
+    from thintact_sdk.apps.benchmarks.tactile_accuracy import force_slip
+    from thintact_sdk.apps.cli.main import build_parser
 
     args = build_parser().parse_args(["bench", "tactile", "--force-presses", "4"])
     out: dict = {}
@@ -132,14 +132,14 @@ def test_bench_force_slip_rows(capsys):
 
 def test_evaluation_refuses_a_field_too_small_for_its_presses():
     from thintact_sdk.errors import ThinTactError
-    from thintact_sdk.tactile.loaded_press import evaluate_force_slip
+    from thintact_sdk.tactile.simulation.loaded_press import evaluate_force_slip
 
     with pytest.raises(ThinTactError, match="use virtual-finger"):
         evaluate_force_slip(load_profile("virtual-mini"), presses=2)
 
 
 def test_a_pointed_contact_is_clamped_to_the_paraboloid_shape_constant():
-    from thintact_sdk.tactile.force import loaded_core
+    from thintact_sdk.tactile.interpretation.force import loaded_core
 
     yy, xx = np.mgrid[-30:30, -30:30] * 0.1
     cone = np.clip(0.6 - 0.3 * np.hypot(xx, yy), 0.0, None)  # fill ratio ≈ 1/3

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from thintact_sdk.tactile.gelsight_eval import evaluate_gelsight
+from thintact_sdk.tactile.calibration.gelsight_eval import evaluate_gelsight
 
 
 def test_lut_from_real_presses_predicts_held_out_slopes(shared_dir):
@@ -20,7 +20,7 @@ def test_lut_from_real_presses_predicts_held_out_slopes(shared_dir):
 
 def test_image_only_ball_calibration_on_real_presses(shared_dir):
     """What `thintact calibrate-tactile` does with a recording: no annotations used."""
-    from thintact_sdk.tactile.gelsight_eval import evaluate_gelsight_image_only
+    from thintact_sdk.tactile.calibration.gelsight_eval import evaluate_gelsight_image_only
 
     pack = shared_dir / "data" / "taxim_gelsight_ball_small" / "dataPack_small.npz"
     if not pack.is_file():

@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 
 import thintact_sdk as thintact
-from thintact_sdk.cli.main import main
+from thintact_sdk.apps.cli.main import main
 from thintact_sdk.errors import CalibrationError
-from thintact_sdk.profile import load_profile
-from thintact_sdk.tactile.calibration import ball_radius_for_field, random_ball_presses
+from thintact_sdk.formats.profiles import load_profile
+from thintact_sdk.tactile.calibration.ball_press import ball_radius_for_field, random_ball_presses
 
 README = Path(__file__).resolve().parents[2] / "README.md"
 

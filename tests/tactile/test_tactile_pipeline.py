@@ -9,7 +9,7 @@ import pytest
 from scipy.spatial import cKDTree
 
 from thintact_sdk.errors import CalibrationError, ThinTactError
-from thintact_sdk.profile import load_profile
+from thintact_sdk.formats.profiles import load_profile
 from thintact_sdk.tactile import (
     BallPress,
     ChamferedPrism,
@@ -31,7 +31,7 @@ from thintact_sdk.tactile import (
     random_ball_presses,
     scene_level_lut,
 )
-from thintact_sdk.tactile.interpreter import colour_change
+from thintact_sdk.tactile.interpretation.interpreter import colour_change
 
 
 @pytest.fixture(scope="module")
@@ -100,7 +100,7 @@ def test_poisson_recovers_a_bump():
 @pytest.mark.parametrize("shape, factor", [((400, 512, 3), 4), ((403, 517, 3), 4), ((37, 50), 3),
                                            ((20, 24, 7), 2), ((5, 6, 3), 8)])
 def test_bin_image_is_the_block_mean(shape, factor):
-    from thintact_sdk.tactile.grid import bin_image
+    from thintact_sdk.tactile.interpretation.grid import bin_image
 
     a = np.random.default_rng(1).random(shape)
     n, m = shape[0] // factor, shape[1] // factor
@@ -234,7 +234,7 @@ def test_wrong_image_size_is_a_clear_error(profile, lut):
 
 
 def test_fine_grids_are_processed_binned_and_returned_full(profile):
-    from thintact_sdk.profile import SceneSpec, TactileConfig
+    from thintact_sdk.formats.profiles import SceneSpec, TactileConfig
 
     fine = profile.model_copy(
         update={
@@ -255,7 +255,7 @@ def test_fine_grids_are_processed_binned_and_returned_full(profile):
 
 
 def test_a_stored_lut_for_another_grid_is_refused(tmp_path, monkeypatch, profile, lut):
-    from thintact_sdk.profile import SceneSpec, TactileConfig
+    from thintact_sdk.formats.profiles import SceneSpec, TactileConfig
     from thintact_sdk.tactile import load_device_lut, save_device_lut
 
     monkeypatch.setenv("THINTACT_CALIBRATION_PATH", str(tmp_path))
@@ -274,7 +274,7 @@ def test_reference_is_the_mean_of_the_first_frames(profile, sim, lut):
     noisy = [flat + rng.normal(0, 0.03, flat.shape).astype(np.float32) for _ in range(4)]
     for img in noisy:
         interp.interpret(img)
-    from thintact_sdk.tactile.grid import bin_image
+    from thintact_sdk.tactile.interpretation.grid import bin_image
 
     expected = bin_image(np.mean(noisy, axis=0), interp.factor)
     membrane = bin_image(flat, interp.factor).min(axis=2) > 0.45  # markers are filled in

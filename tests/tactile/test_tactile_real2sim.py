@@ -9,16 +9,16 @@ import numpy as np
 import pytest
 import torch
 
-from thintact_sdk.cli.main import main
+from thintact_sdk.apps.cli.main import main
 from thintact_sdk.errors import ThinTactError
-from thintact_sdk.profile import load_profile
-from thintact_sdk.tactile.indenters import Sphere
-from thintact_sdk.tactile.interpreter import TactileInterpreter
-from thintact_sdk.tactile.real2sim import Real2SimTranslator
-from thintact_sdk.tactile.real2sim.domains import RealPresses, sensor_profile, simulated_presses
-from thintact_sdk.tactile.real2sim.evaluate import evaluate_real2sim
-from thintact_sdk.tactile.real2sim.train import Real2SimTrainer, TrainConfig
-from thintact_sdk.tactile.simulate import TactileSimulator
+from thintact_sdk.formats.profiles import load_profile
+from thintact_sdk.tactile.interpretation.interpreter import TactileInterpreter
+from thintact_sdk.tactile.learning import Real2SimTranslator
+from thintact_sdk.tactile.learning.domains import RealPresses, sensor_profile, simulated_presses
+from thintact_sdk.tactile.learning.evaluate import evaluate_real2sim
+from thintact_sdk.tactile.learning.train import Real2SimTrainer, TrainConfig
+from thintact_sdk.tactile.simulation.indenters import Sphere
+from thintact_sdk.tactile.simulation.membrane import TactileSimulator
 
 TINY = dict(batch=2, crop=16, width=4, blocks=1, edge_kernel=3, checkpoint_every=2)
 

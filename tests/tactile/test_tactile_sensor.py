@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 from tac_fakes import LIGHTS, SLOTS, block_profile, make_registry
 
+from thintact_sdk.device.sensor import Sensor
 from thintact_sdk.errors import CalibrationError, DeviceError
 from thintact_sdk.frames import TactileFrame
-from thintact_sdk.sensor import Sensor
 from thintact_sdk.tactile import Sphere, TactileSimulator, save_device_lut, scene_level_lut
 
 
@@ -106,7 +106,7 @@ def test_reading_a_closed_sensor_is_a_clear_error(profile, registry, lut):
 
 
 def test_leds_are_set_from_the_profile_and_released(profile, registry, lut):
-    from thintact_sdk.profile import LightConfig
+    from thintact_sdk.formats.profiles import LightConfig
 
     lit = profile.model_copy(update={"light": LightConfig(
         plugin="tac-test-lights", port="loop://", intensities=[0.5] * 10)}, deep=True)
@@ -123,8 +123,8 @@ def test_same_api_on_a_replayed_recording(tmp_path, profile, lut):
     from tac_fakes import GAIN_DN
 
     from thintact_sdk.errors import EndOfStreamError
-    from thintact_sdk.profile import CameraConfig
-    from thintact_sdk.recording import RecordingWriter
+    from thintact_sdk.formats.profiles import CameraConfig
+    from thintact_sdk.formats.recording import RecordingWriter
 
     sim = TactileSimulator.for_profile(profile)
     rec = RecordingWriter(tmp_path / "presses", profile)

@@ -1,6 +1,6 @@
 import numpy as np
 
-from thintact_sdk.tactile.sim_diagnosis import fit_illumination_field
+from thintact_sdk.diagnosis.tactile import fit_illumination_field
 
 
 def _frames(rng: np.random.Generator) -> np.ndarray:

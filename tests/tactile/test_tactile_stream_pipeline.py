@@ -11,9 +11,9 @@ import pytest
 from tac_fakes import SLOTS, BlockDecoder, block_profile, make_registry
 
 import thintact_sdk
+from thintact_sdk.device.sensor import Sensor
+from thintact_sdk.formats.profiles import DecoderConfig
 from thintact_sdk.frames import TactileFrame
-from thintact_sdk.profile import DecoderConfig
-from thintact_sdk.sensor import Sensor
 from thintact_sdk.tactile import TactileSimulator, scene_level_lut
 
 STAGE_S = 0.06
@@ -118,7 +118,7 @@ def test_warm_up_does_not_touch_the_reference(profile, lut) -> None:
 def test_bench_tactile_reports_streamed_fps_and_latency_percentiles(profile, lut) -> None:
     from tac_fakes import BlockCamera
 
-    from thintact_sdk.benchmarks.tactile import _streamed_fps
+    from thintact_sdk.apps.benchmarks.tactile_accuracy import _streamed_fps
 
     cam = BlockCamera(profile, {})
     cam.open()
@@ -175,11 +175,11 @@ def test_a_frame_finished_after_a_newer_one_is_skipped_not_delivered_late(profil
 def test_streaming_holds_kernel_threads_at_one_and_restores_them(profile, lut, monkeypatch) -> None:
     import torch
 
-    from thintact_sdk.blas import openblas_threads
-    from thintact_sdk.compute_threads import kernel_threads_held
+    from thintact_sdk.host.blas import openblas_threads
+    from thintact_sdk.host.compute_threads import kernel_threads_held
 
     monkeypatch.setenv("THINTACT_DECODE_WORKERS", "2")
-    monkeypatch.setattr("thintact_sdk.sensor.usable_cores", lambda: 8)  # the warm-up keeps the threads
+    monkeypatch.setattr("thintact_sdk.device.sensor.usable_cores", lambda: 8)  # the warm-up keeps the threads
     torch_before, blas_before = torch.get_num_threads(), openblas_threads()
     seen: list[tuple[int, int | None, int]] = []
 
@@ -205,11 +205,11 @@ def test_a_two_core_host_streams_one_worker_on_one_kernel_thread(profile, lut, m
     host keeps the threads for a single worker."""
     import torch
 
-    from thintact_sdk.blas import openblas_threads
-    from thintact_sdk.compute_threads import kernel_threads_held
+    from thintact_sdk.host.blas import openblas_threads
+    from thintact_sdk.host.compute_threads import kernel_threads_held
 
     monkeypatch.setenv("THINTACT_DECODE_WORKERS", "1")
-    monkeypatch.setattr("thintact_sdk.sensor.usable_cores", lambda: cores)
+    monkeypatch.setattr("thintact_sdk.device.sensor.usable_cores", lambda: cores)
     before = (torch.get_num_threads(), openblas_threads(), 0)
     seen: list[int] = []
 
@@ -230,7 +230,7 @@ def test_a_two_core_host_streams_one_worker_on_one_kernel_thread(profile, lut, m
 def test_workers_are_chosen_from_the_decode_timed_at_warm_up(profile, lut, monkeypatch) -> None:
     """A 60 ms decode does not fit in a 100 fps camera's period: one worker per usable core.
     A fast decode at 10 fps does: one worker (the lowest latency)."""
-    from thintact_sdk.compute_threads import suggested_decode_workers
+    from thintact_sdk.host.compute_threads import suggested_decode_workers
 
     monkeypatch.delenv("THINTACT_DECODE_WORKERS", raising=False)
     for decoder, fps, want in ((SlowDecoder(), 100.0, suggested_decode_workers()), (BlockDecoder(), 10.0, 1)):
@@ -248,10 +248,10 @@ def test_a_single_frame_decodes_on_one_kernel_thread_on_two_cores(profile, lut, 
     every frame. A larger host keeps the library's threads."""
     import torch
 
-    from thintact_sdk.blas import openblas_threads
-    from thintact_sdk.compute_threads import kernel_threads_held
+    from thintact_sdk.host.blas import openblas_threads
+    from thintact_sdk.host.compute_threads import kernel_threads_held
 
-    monkeypatch.setattr("thintact_sdk.sensor.usable_cores", lambda: cores)
+    monkeypatch.setattr("thintact_sdk.device.sensor.usable_cores", lambda: cores)
     before = (torch.get_num_threads(), openblas_threads(), 0)
     seen: list[tuple[int, int | None]] = []
 

@@ -10,8 +10,8 @@ import pytest
 import thintact_sdk as thintact
 from thintact_sdk.errors import CalibrationError
 from thintact_sdk.tactile import Sphere, TactileSimulator
-from thintact_sdk.tactile.device_calibration import calibrate_virtual, scene_slot
-from thintact_sdk.tactile.evaluation import depth_rms, set_reference
+from thintact_sdk.tactile.calibration.device import calibrate_virtual, scene_slot
+from thintact_sdk.tactile.calibration.evaluation import depth_rms, set_reference
 
 
 @pytest.mark.slow
@@ -22,7 +22,7 @@ def test_press_through_the_lensless_path():
         try:
             finger.read_image()
         except CalibrationError:
-            from thintact_sdk.benchmarks.tactile import _simulator_decoder
+            from thintact_sdk.apps.benchmarks.tactile_accuracy import _simulator_decoder
 
             finger.decoder, _ = _simulator_decoder(finger, slot, "t2s-closed-form")
         finger.lut = calibrate_virtual(finger, presses=8)

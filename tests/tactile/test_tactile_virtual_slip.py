@@ -12,9 +12,9 @@ from thintact_virtual.tactile_scenes import (
     tactile_scene,
 )
 
-from thintact_sdk.profile import load_profile
+from thintact_sdk.formats.profiles import load_profile
 from thintact_sdk.tactile import TactileInterpreter, TactileSimulator, scene_level_lut
-from thintact_sdk.tactile.slip import SLIPPING_RATIO, is_slipping
+from thintact_sdk.tactile.interpretation.slip import SLIPPING_RATIO, is_slipping
 
 
 @pytest.fixture(scope="module")
@@ -59,7 +59,7 @@ def test_is_slipping_threshold() -> None:
 
 
 def test_a_field_too_small_for_the_marker_pitch_keeps_the_calibration_ball() -> None:
-    from thintact_sdk.tactile.calibration import ball_radius_for_field
+    from thintact_sdk.tactile.calibration.ball_press import ball_radius_for_field
 
     mini = load_profile("virtual-mini")
     assert cycle_ball_radius_mm(mini) == ball_radius_for_field(mini)

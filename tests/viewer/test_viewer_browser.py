@@ -14,11 +14,11 @@ import numpy as np
 import pytest
 
 import thintact_sdk as thintact
+from thintact_sdk.apps.viewer import LiveView, ViewerServer
+from thintact_sdk.apps.viewer.page import HEADER_PX
+from thintact_sdk.apps.viewer.panels import dashboard_size, panel_boxes
 from thintact_sdk.tactile import Sphere, TactileSimulator
-from thintact_sdk.tactile.device_calibration import scene_slot
-from thintact_sdk.viewer import LiveView, ViewerServer
-from thintact_sdk.viewer.page import HEADER_PX
-from thintact_sdk.viewer.panels import dashboard_size, panel_boxes
+from thintact_sdk.tactile.calibration.device import scene_slot
 
 BROWSER = shutil.which("chromium") or shutil.which("chromium-browser")
 
@@ -131,7 +131,7 @@ def test_snapshot_and_record_buttons_work_in_chromium(tmp_path):
 
     from viewer_kit import FramesSensor, HeadlessChromium
 
-    from thintact_sdk.recording import Recording
+    from thintact_sdk.formats.recording import Recording
 
     def until(check, what):
         deadline = time.monotonic() + 30  # a bound on a hang: the clicks' fetches are asynchronous

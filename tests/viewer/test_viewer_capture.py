@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 from viewer_kit import FramesSensor, http
 
-from thintact_sdk.recording import Recording
-from thintact_sdk.viewer import LiveView, ViewerServer
-from thintact_sdk.viewer.server import TOKEN_HEADER
+from thintact_sdk.apps.viewer import LiveView, ViewerServer
+from thintact_sdk.apps.viewer.server import TOKEN_HEADER
+from thintact_sdk.formats.recording import Recording
 
 
 def _wait_frames(server: ViewerServer, sensor: int, frames: int) -> None:

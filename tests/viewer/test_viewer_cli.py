@@ -13,12 +13,12 @@ import urllib.request
 
 import pytest
 
-from thintact_sdk.cli.main import main
+from thintact_sdk.apps.cli.main import main
 
 
 def test_view_prints_the_url_and_serves_the_sensor():
     proc = subprocess.Popen(
-        [sys.executable, "-m", "thintact_sdk.cli.main", "view", "virtual-finger", "--port", "0",
+        [sys.executable, "-m", "thintact_sdk.apps.cli.main", "view", "virtual-finger", "--port", "0",
          "--set", "fps=0", "--duration", "300"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
@@ -59,7 +59,7 @@ def test_view_stops_on_a_signal_even_where_sigint_was_ignored(sig):
     """Issue 30: started as a script's background job (SIGINT ignored on entry), the viewer
     still stops on Ctrl-C; SIGTERM stops it the same way. Exit 0, the sensor closed."""
     proc = subprocess.Popen(
-        [sys.executable, "-m", "thintact_sdk.cli.main", "view", "virtual-finger", "--port", "0",
+        [sys.executable, "-m", "thintact_sdk.apps.cli.main", "view", "virtual-finger", "--port", "0",
          "--set", "fps=0"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
@@ -76,7 +76,7 @@ def test_view_stops_on_a_signal_even_where_sigint_was_ignored(sig):
 
 SLOW_OPEN = """
 import sys, time
-import thintact_sdk, thintact_sdk.cli.main as cli
+import thintact_sdk, thintact_sdk.apps.cli.main as cli
 real_open = thintact_sdk.open
 def slow_open(*args, **kwargs):
     print("opening", flush=True)
@@ -117,7 +117,7 @@ def test_view_shows_two_sensors_and_their_buttons_write_under_out(tmp_path):
     record (with the page's token) write under DIR; Ctrl-C reports each sensor."""
     out_dir = tmp_path / "viewer-out"
     proc = subprocess.Popen(
-        [sys.executable, "-m", "thintact_sdk.cli.main", "view", "virtual-finger", "virtual-finger",
+        [sys.executable, "-m", "thintact_sdk.apps.cli.main", "view", "virtual-finger", "virtual-finger",
          "--port", "0", "--set", "fps=0", "--out", str(out_dir)],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path)
     try:
@@ -158,6 +158,6 @@ def test_view_shows_two_sensors_and_their_buttons_write_under_out(tmp_path):
     assert started.startswith(str(out_dir / "recording-virtual-finger-0-"))
     assert "stopped virtual-finger-0:" in out and "stopped virtual-finger-1:" in out
     assert "Traceback" not in err
-    from thintact_sdk.recording import Recording
+    from thintact_sdk.formats.recording import Recording
 
     assert len(Recording(started)) == stopped["frames"]

@@ -12,11 +12,11 @@ import numpy as np
 import pytest
 
 import thintact_sdk as thintact
+from thintact_sdk.apps.viewer import LiveView, ViewerServer
+from thintact_sdk.apps.viewer.panels import Rates, dashboard_size, panel_boxes, render_dashboard
+from thintact_sdk.apps.viewer.server import TOKEN_HEADER
+from thintact_sdk.formats.profiles import load_profile
 from thintact_sdk.frames import RawFrame, TactileFrame
-from thintact_sdk.profile import load_profile
-from thintact_sdk.viewer import LiveView, ViewerServer
-from thintact_sdk.viewer.panels import Rates, dashboard_size, panel_boxes, render_dashboard
-from thintact_sdk.viewer.server import TOKEN_HEADER
 
 ARROW_RGB = np.array([255, 210, 60])
 
@@ -104,8 +104,8 @@ def test_server_serves_page_frames_and_stats_on_loopback(finger):
 
 
 def test_raw_preview_keeps_the_bayer_phase():
-    from thintact_sdk.bayer import bin_bayer
-    from thintact_sdk.viewer.panels import preview_mosaic
+    from thintact_sdk.apps.viewer.panels import preview_mosaic
+    from thintact_sdk.pixels.bayer import bin_bayer
 
     mosaic = np.random.default_rng(1).integers(0, 4096, (2048, 2560), dtype=np.uint16)
     small = preview_mosaic(mosaic, max_cols=320)

@@ -11,8 +11,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from viewer_kit import CountingLive, http, raw_request
 
-from thintact_sdk.viewer import ViewerServer
-from thintact_sdk.viewer.server import MAX_BODY_BYTES, TOKEN_HEADER
+from thintact_sdk.apps.viewer import ViewerServer
+from thintact_sdk.apps.viewer.server import MAX_BODY_BYTES, TOKEN_HEADER
 
 
 @pytest.fixture(scope="module")

@@ -8,8 +8,8 @@ import threading
 from types import SimpleNamespace
 from typing import Any
 
+from thintact_sdk.apps.viewer import LiveView
 from thintact_sdk.errors import EndOfStreamError
-from thintact_sdk.viewer import LiveView
 
 
 class _EndedSensor:
@@ -212,7 +212,7 @@ class FramesSensor:
     def __init__(self, fps: float = 30.0) -> None:
         import numpy as np
 
-        from thintact_sdk.profile import load_profile
+        from thintact_sdk.formats.profiles import load_profile
 
         self.profile = load_profile("virtual-finger")
         self._rng = np.random.default_rng(0)

@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 from thintact_virtual.bench import get_scene_slot, signal_scale_dn
 
-from thintact_sdk.bayer import bin_bayer
-from thintact_sdk.imaging.noise import noise_variance_dn
-from thintact_sdk.imaging.scenes import make_scene
-from thintact_sdk.imaging.simulator import Simulator
-from thintact_sdk.plugin_manager import get_registry
-from thintact_sdk.profile import load_profile
+from thintact_sdk.device.registry import get_registry
+from thintact_sdk.formats.profiles import load_profile
+from thintact_sdk.pixels.bayer import bin_bayer
+from thintact_sdk.simulation.noise import noise_variance_dn
+from thintact_sdk.simulation.scenes import make_scene
+from thintact_sdk.simulation.simulator import Simulator
 
 
 @pytest.fixture(scope="module")

@@ -11,11 +11,11 @@ Modules:
 - :mod:`~thintact_sdk.calibration.sumrule`: the white frame as the sum of the slits (dark level,
   per-frame gains);
 - :mod:`~thintact_sdk.calibration.pipeline`: solve, filter training, τ, validation, bundle;
-- :mod:`~thintact_sdk.calibration.plan`, :mod:`~thintact_sdk.calibration.capture`,
+- :mod:`~thintact_sdk.calibration.plan`, :mod:`~thintact_sdk.calibration.pattern_capture`,
   :mod:`~thintact_sdk.calibration.registration`, :mod:`~thintact_sdk.calibration.wizard`: the LCD
   wizard with resume;
-- :mod:`~thintact_sdk.calibration.report`: the HTML report;
-- :mod:`~thintact_sdk.calibration.synthetic`, :mod:`~thintact_sdk.calibration.benchmark`: synthetic
+- :mod:`~thintact_sdk.calibration.unit_report`: the HTML report;
+- :mod:`~thintact_sdk.calibration.synthetic`, :mod:`~thintact_sdk.calibration.stress_cases`: synthetic
   systems and the robustness benchmark.
 
 See ``docs/calibration.md``.

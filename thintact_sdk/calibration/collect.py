@@ -31,7 +31,7 @@ from thintact_sdk.calibration.sumrule import (
     unit_slit_frames,
 )
 from thintact_sdk.errors import CalibrationError, InvalidValueError
-from thintact_sdk.recording import Recording
+from thintact_sdk.formats.recording import Recording
 
 Progress = Callable[[int, int, str], None]
 """``progress(done, total, what)``: called after each frame is processed."""

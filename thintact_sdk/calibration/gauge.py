@@ -23,7 +23,7 @@ import numpy as np
 from scipy.linalg import eigh
 
 from thintact_sdk.calibration.channel_matrices import ChannelMatrices
-from thintact_sdk.imaging.t2s import SystemMatrices
+from thintact_sdk.reconstruction.t2s import SystemMatrices
 
 
 def _roughness(a: np.ndarray, b: np.ndarray) -> float:

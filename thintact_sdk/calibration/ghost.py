@@ -38,11 +38,11 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from thintact_sdk.blas import blas_threads
 from thintact_sdk.calibration.slits import ChannelSlits, SlitStack
-from thintact_sdk.imaging.direct_generation import AxisGeometry, DirectGenerator
-from thintact_sdk.imaging.t2s import SystemMatrices
-from thintact_sdk.profile import Profile
+from thintact_sdk.formats.profiles import Profile
+from thintact_sdk.host.blas import blas_threads
+from thintact_sdk.reconstruction.direct_generation import AxisGeometry, DirectGenerator
+from thintact_sdk.reconstruction.t2s import SystemMatrices
 
 MIN_LAG_CELLS = 2.0
 """Smallest offset searched, in mask-shadow cells (feature × (z + d) / z on the sensor)."""

@@ -31,17 +31,17 @@ from typing import Any
 import numpy as np
 from scipy import ndimage
 
-from thintact_sdk.blas import blas_threads
 from thintact_sdk.calibration.blemish import find_blemishes, ratio_map
 from thintact_sdk.calibration.classify import classify_scene, is_dark, is_slit
 from thintact_sdk.calibration.collect import SlitCollection, signal_of
 from thintact_sdk.calibration.ghost import GhostScan, find_ghosts
 from thintact_sdk.errors import CalibrationError
-from thintact_sdk.imaging.filter_training import scene_for_channels
-from thintact_sdk.imaging.noise import QUANTISATION_VARIANCE_DN2
-from thintact_sdk.imaging.t2s import SystemMatrices
-from thintact_sdk.profile import NoiseSpec
-from thintact_sdk.recording import Recording
+from thintact_sdk.formats.profiles import NoiseSpec
+from thintact_sdk.formats.recording import Recording
+from thintact_sdk.host.blas import blas_threads
+from thintact_sdk.reconstruction.filter_training import scene_for_channels
+from thintact_sdk.reconstruction.t2s import SystemMatrices
+from thintact_sdk.simulation.noise import QUANTISATION_VARIANCE_DN2
 
 _MEDIAN_CHI2_1 = 0.45494
 """Median of a χ² variable with one degree of freedom (r²/σ² of Gaussian noise)."""

@@ -15,7 +15,7 @@ from thintact_sdk.calibration.selection import TauSelection
 from thintact_sdk.calibration.solver import SolveReport
 from thintact_sdk.calibration.validation import ValidationResult
 from thintact_sdk.calibration.verdict import Verdict
-from thintact_sdk.imaging.calibration_bundle import CalibrationBundle
+from thintact_sdk.reconstruction.bundle import CalibrationBundle
 
 
 @dataclass

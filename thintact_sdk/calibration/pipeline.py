@@ -34,10 +34,10 @@ from thintact_sdk.calibration.validation import (
 )
 from thintact_sdk.calibration.verdict import judge
 from thintact_sdk.errors import CalibrationError
-from thintact_sdk.imaging.calibration_bundle import CalibrationBundle
-from thintact_sdk.imaging.t2s import SystemMatrices
-from thintact_sdk.profile import CalibrationLimits, Profile
-from thintact_sdk.recording import Recording
+from thintact_sdk.formats.profiles import CalibrationLimits, Profile
+from thintact_sdk.formats.recording import Recording
+from thintact_sdk.reconstruction.bundle import CalibrationBundle
+from thintact_sdk.reconstruction.t2s import SystemMatrices
 
 
 @dataclass
@@ -139,7 +139,7 @@ def build_bundle(
     progress: Callable[[str], None] | None = None,
 ) -> tuple[CalibrationBundle, dict[str, float]]:
     """Train the joint filter on ``sm`` and choose τ: a bundle ready to decode with."""
-    from thintact_sdk.imaging.filter_training import train_joint_filter, training_scenes
+    from thintact_sdk.reconstruction.filter_training import train_joint_filter, training_scenes
 
     n, m = sm.scene_shape
     noise = averaged_noise(profile.noise, frames_averaged)
@@ -408,7 +408,7 @@ def calibrate_recording(
         outcome = CalibrationOutcome(bundle, out, reports, collection, val, passed, registration, ref_info,
                                      tau_table, selection, health, prediction, verdict)
         if report:
-            from thintact_sdk.calibration.report import write_report
+            from thintact_sdk.calibration.unit_report import write_report
 
             out.mkdir(parents=True, exist_ok=True)
             write_report(outcome, profile, out / "report.html")
@@ -437,7 +437,7 @@ def bundle_from_matrices(
     """
     from thintact_sdk.calibration.classify import classify_scene, is_dark, is_slit
     from thintact_sdk.calibration.collect import dark_level
-    from thintact_sdk.imaging.noise import QUANTISATION_VARIANCE_DN2
+    from thintact_sdk.simulation.noise import QUANTISATION_VARIANCE_DN2
 
     opts = options or CalibrationOptions()
     k = _frames_averaged(recording, opts) if recording is not None else max(1, opts.frames_averaged or 1)

@@ -11,11 +11,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from thintact_sdk.imaging.scenes import make_scene
-from thintact_sdk.profile import Profile
+from thintact_sdk.formats.profiles import Profile
+from thintact_sdk.simulation.scenes import make_scene
 
 DEFAULT_VALIDATION = ("gelsight:0", "gelsight:5", "usaf", "checker", "smooth_color")
-"""Validation scenes (``name`` or ``name:index`` of :func:`thintact_sdk.imaging.scenes.make_scene`)."""
+"""Validation scenes (``name`` or ``name:index`` of :func:`thintact_sdk.simulation.scenes.make_scene`)."""
 
 REGISTRATION_CORNERS = ("tl", "tr", "bl", "br")
 

@@ -3,7 +3,7 @@ residual rotation, offset and the shadow's scale, with how sure the estimate is.
 
 A uniformly lit scene gives ``Y = (Po·1)(Qo·1)ᵀ + (Pc·1)(Qc·1)ᵀ``: along each axis the image
 lies in the span of the open profile ``Po·1`` and the coding profile ``Pc·1``, which is the
-known φ seen through the geometry (direct generation, :mod:`thintact_sdk.imaging.direct_generation`).
+known φ seen through the geometry (direct generation, :mod:`thintact_sdk.reconstruction.direct_generation`).
 
 0. **Working size.** A frame larger than :data:`WORK_MAX_SIDE` along its longer side is binned
    ``b × b`` (a centred crop to a multiple of ``b``) while the shadow keeps at least
@@ -48,9 +48,9 @@ import numpy as np
 from scipy import ndimage, optimize
 
 from thintact_sdk.errors import CalibrationError
-from thintact_sdk.imaging.direct_generation import AxisGeometry, DirectGenerator
-from thintact_sdk.imaging.mask_orientation import ORIENTATIONS, Orientation
-from thintact_sdk.profile import Profile
+from thintact_sdk.formats.profiles import Profile
+from thintact_sdk.reconstruction.direct_generation import AxisGeometry, DirectGenerator
+from thintact_sdk.reconstruction.mask_orientation import ORIENTATIONS, Orientation
 
 Unknown = Literal["z", "pitch", "none"]
 Progress = Callable[[str], None]

@@ -23,16 +23,16 @@ from thintact_sdk.calibration.solver import Method, solve_channel
 from thintact_sdk.calibration.tau import cross_validate, tau_grid
 from thintact_sdk.calibration.validation import averaged_noise, make_decoder, score
 from thintact_sdk.errors import ThinTactError
-from thintact_sdk.imaging.calibration_bundle import CalibrationBundle
-from thintact_sdk.imaging.filter_training import (
+from thintact_sdk.formats.profiles import NoiseSpec, Profile
+from thintact_sdk.reconstruction.bundle import CalibrationBundle
+from thintact_sdk.reconstruction.filter_training import (
     scene_for_channels,
     train_joint_filter,
     training_scenes,
 )
-from thintact_sdk.imaging.noise import signal_to_dn
-from thintact_sdk.imaging.simulator import Simulator
-from thintact_sdk.imaging.t2s import SystemMatrices
-from thintact_sdk.profile import NoiseSpec, Profile
+from thintact_sdk.reconstruction.t2s import SystemMatrices
+from thintact_sdk.simulation.noise import signal_to_dn
+from thintact_sdk.simulation.simulator import Simulator
 
 SLIT_BATCH = 16
 """Slit scenes simulated per batch (bounds memory at paper size: 16 × 1024 × 1280 × 3 float64)."""

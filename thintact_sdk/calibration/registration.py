@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from thintact_sdk.profile import Profile
+from thintact_sdk.formats.profiles import Profile
 
 MAX_OFFSET_FRACTION = 0.15
 """Largest accepted centroid offset, as a fraction of the sensor's width / height."""

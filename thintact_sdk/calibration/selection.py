@@ -34,10 +34,10 @@ from thintact_sdk.calibration.validation import (
     make_decoder,
     score,
 )
-from thintact_sdk.imaging.calibration_bundle import CalibrationBundle
-from thintact_sdk.imaging.scene_prior import ScenePrior
-from thintact_sdk.profile import Profile
-from thintact_sdk.recording import Recording
+from thintact_sdk.formats.profiles import Profile
+from thintact_sdk.formats.recording import Recording
+from thintact_sdk.reconstruction.bundle import CalibrationBundle
+from thintact_sdk.reconstruction.scene_prior import ScenePrior
 
 CANDIDATE_DECODERS = ("thintact-noniterative", "t2s-closed-form")
 """Decoders the calibration compares when none is imposed."""

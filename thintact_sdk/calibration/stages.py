@@ -38,10 +38,10 @@ from thintact_sdk.calibration.collect import SlitCollection
 from thintact_sdk.calibration.slits import ChannelSlits, SlitStack
 from thintact_sdk.calibration.solver import SolveReport
 from thintact_sdk.errors import CalibrationError
-from thintact_sdk.imaging.recon_filter import JointFilter
-from thintact_sdk.imaging.t2s import SystemMatrices
-from thintact_sdk.safe_arrays import read_npz
-from thintact_sdk.safe_json import loads as safe_loads
+from thintact_sdk.formats.safe_arrays import read_npz
+from thintact_sdk.formats.safe_json import loads as safe_loads
+from thintact_sdk.reconstruction.joint_filter import JointFilter
+from thintact_sdk.reconstruction.t2s import SystemMatrices
 
 STAGE_DIR = "stages"
 CHECKPOINT_FORMAT = "thintact-calibration-stage/1"

@@ -20,7 +20,7 @@ import numpy as np
 
 from thintact_sdk.calibration.classify import ChannelRole, classify_scene
 from thintact_sdk.calibration.slits import SlitStack
-from thintact_sdk.recording import Recording
+from thintact_sdk.formats.recording import Recording
 
 UNIT_TOL = 1e-4
 GAIN_IMPROVEMENT = 0.5

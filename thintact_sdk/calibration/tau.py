@@ -38,9 +38,9 @@ from typing import Any
 import numpy as np
 
 from thintact_sdk.calibration.validation import score
-from thintact_sdk.imaging.filter_training import scene_for_channels
-from thintact_sdk.imaging.scene_prior import ScenePrior
-from thintact_sdk.imaging.t2s import SystemMatrices
+from thintact_sdk.reconstruction.filter_training import scene_for_channels
+from thintact_sdk.reconstruction.scene_prior import ScenePrior
+from thintact_sdk.reconstruction.t2s import SystemMatrices
 
 TAU_STEPS_PER_DECADE = 2
 """Resolution of the coarse τ grid; :func:`refine` adds :data:`FINE_STEPS_PER_DECADE` points
@@ -298,7 +298,7 @@ PRIOR_DECODERS = ("t2s-closed-form",)
 ``calibration.json`` → ``scene_prior`` → decoder name)."""
 PRIOR_ALPHAS = (0.5, 1.0, 1.5)
 PRIOR_KNEES = (4.0, 8.0, 16.0)
-"""The scene priors (:class:`~thintact_sdk.imaging.scene_prior.ScenePrior`, weights
+"""The scene priors (:class:`~thintact_sdk.reconstruction.scene_prior.ScenePrior`, weights
 ``(1 + k/k0)^α`` per DCT axis) :func:`cross_validate_prior` compares with plain Tikhonov."""
 
 

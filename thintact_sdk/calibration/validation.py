@@ -11,16 +11,16 @@ from typing import Any
 
 import numpy as np
 
+from thintact_sdk.device.registry import get_registry
 from thintact_sdk.errors import InvalidValueError
-from thintact_sdk.imaging.calibration_bundle import CalibrationBundle
-from thintact_sdk.imaging.filter_training import scene_for_channels
-from thintact_sdk.imaging.metrics import psnr, ssim
-from thintact_sdk.imaging.noise import signal_variance_dn
-from thintact_sdk.imaging.tau_sweep import sweep_tau
-from thintact_sdk.imaging.tikhonov import TikhonovSolver
+from thintact_sdk.formats.profiles import NoiseSpec, Profile
 from thintact_sdk.interfaces import Decoder
-from thintact_sdk.plugin_manager import get_registry
-from thintact_sdk.profile import NoiseSpec, Profile
+from thintact_sdk.reconstruction.bundle import CalibrationBundle
+from thintact_sdk.reconstruction.filter_training import scene_for_channels
+from thintact_sdk.reconstruction.metrics import psnr, ssim
+from thintact_sdk.reconstruction.tau_sweep import sweep_tau
+from thintact_sdk.reconstruction.tikhonov import TikhonovSolver
+from thintact_sdk.simulation.noise import signal_variance_dn
 
 DEFAULT_DECODER = "thintact-noniterative"
 TAU_GRID = tuple(10.0 ** e for e in range(-9, 0))

@@ -24,7 +24,7 @@ from thintact_sdk.calibration.health import HealthReport
 from thintact_sdk.calibration.prediction import Prediction
 from thintact_sdk.calibration.registration import RegistrationResult
 from thintact_sdk.calibration.validation import ValidationResult
-from thintact_sdk.profile import CalibrationLimits
+from thintact_sdk.formats.profiles import CalibrationLimits
 
 _DEFECT_FIX = {
     "dust speck": "clean the mask and the sensor cover glass at that spot, then calibrate again",

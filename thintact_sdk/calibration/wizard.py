@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from thintact_sdk.calibration.capture import set_exposure_from_white, show_and_capture
+from thintact_sdk.calibration.pattern_capture import set_exposure_from_white, show_and_capture
 from thintact_sdk.calibration.pipeline import (
     CalibrationOptions,
     CalibrationOutcome,
@@ -25,11 +25,11 @@ from thintact_sdk.calibration.pipeline import (
 from thintact_sdk.calibration.plan import REGISTRATION_CORNERS, Step, build_plan
 from thintact_sdk.calibration.registration import RegistrationResult, check_registration
 from thintact_sdk.errors import CalibrationError, UnsupportedFeatureError
-from thintact_sdk.imaging.calibration_bundle import META_FILE, timestamp_name
-from thintact_sdk.imaging.t2s import SystemMatrices
+from thintact_sdk.formats.profiles import Profile
+from thintact_sdk.formats.recording import Recording, RecordingWriter, remove_partial_writes
 from thintact_sdk.interfaces import Camera, Display
-from thintact_sdk.profile import Profile
-from thintact_sdk.recording import Recording, RecordingWriter, remove_partial_writes
+from thintact_sdk.reconstruction.bundle import META_FILE, timestamp_name
+from thintact_sdk.reconstruction.t2s import SystemMatrices
 
 CAPTURE_DIR = "capture"
 StepProgress = Callable[[int, int, str], None]

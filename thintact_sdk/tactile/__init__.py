@@ -12,7 +12,7 @@ Two calls cover most programs::
 See ``docs/tactile.md``.
 """
 
-from thintact_sdk.tactile.calibration import (
+from thintact_sdk.tactile.calibration.ball_press import (
     CALIBRATION_BALL_RADIUS_MM,
     BallPress,
     ball_slopes,
@@ -21,9 +21,28 @@ from thintact_sdk.tactile.calibration import (
     random_ball_presses,
     scene_level_lut,
 )
-from thintact_sdk.tactile.colour_change import fill_masked
-from thintact_sdk.tactile.grid import TactileParams, pixel_grid_mm
-from thintact_sdk.tactile.indenters import (
+from thintact_sdk.tactile.calibration.store import (
+    calibration_roots,
+    calibrations_root,
+    device_lut_path,
+    find_lut,
+    load_device_lut,
+    lut_for_profile,
+    save_device_lut,
+)
+from thintact_sdk.tactile.interpretation.colour_change import fill_masked
+from thintact_sdk.tactile.interpretation.grid import TactileParams, pixel_grid_mm
+from thintact_sdk.tactile.interpretation.interpreter import TactileInterpreter
+from thintact_sdk.tactile.interpretation.markers import (
+    MarkerDetection,
+    MarkerTracker,
+    detect_markers,
+    marker_lattice_mm,
+    mean_shear,
+)
+from thintact_sdk.tactile.interpretation.photometric import PhotometricLUT, calibrate_lut
+from thintact_sdk.tactile.interpretation.poisson import integrate_gradients
+from thintact_sdk.tactile.simulation.indenters import (
     INDENTERS,
     ChamferedPrism,
     CubeEdge,
@@ -34,27 +53,8 @@ from thintact_sdk.tactile.indenters import (
     Texture,
     make_indenter,
 )
-from thintact_sdk.tactile.interpreter import TactileInterpreter
-from thintact_sdk.tactile.lighting import LED, PhongShading, default_leds
-from thintact_sdk.tactile.markers import (
-    MarkerDetection,
-    MarkerTracker,
-    detect_markers,
-    marker_lattice_mm,
-    mean_shear,
-)
-from thintact_sdk.tactile.photometric import PhotometricLUT, calibrate_lut
-from thintact_sdk.tactile.poisson import integrate_gradients
-from thintact_sdk.tactile.simulate import TactileScene, TactileSimulator, simulate_press
-from thintact_sdk.tactile.store import (
-    calibration_roots,
-    calibrations_root,
-    device_lut_path,
-    find_lut,
-    load_device_lut,
-    lut_for_profile,
-    save_device_lut,
-)
+from thintact_sdk.tactile.simulation.lighting import LED, PhongShading, default_leds
+from thintact_sdk.tactile.simulation.membrane import TactileScene, TactileSimulator, simulate_press
 
 __all__ = [
     "CALIBRATION_BALL_RADIUS_MM",

@@ -134,7 +134,7 @@ class ArrayBackend:
         """``R × S × C`` numpy image (any real dtype, e.g. uint16 DN) → ``C × R × S`` on this backend.
 
         A frame already stored channel by channel in the target precision (what
-        :func:`thintact_sdk.bayer.bin_bayer` returns) is taken as it is, without a copy: the
+        :func:`thintact_sdk.pixels.bayer.bin_bayer` returns) is taken as it is, without a copy: the
         result may share memory with ``image`` and is read, never written, by the decoders.
         Otherwise one pass converts and de-interleaves: numpy ``copyto`` into a channel-first
         buffer, or on a torch CPU backend a ``copy_`` of the permuted input straight into the

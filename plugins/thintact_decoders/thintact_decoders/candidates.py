@@ -14,7 +14,7 @@ from dataclasses import dataclass, replace
 
 from thintact_decoders.backend import ArrayBackend
 from thintact_sdk.errors import InvalidValueError
-from thintact_sdk.machine import HostCapabilities
+from thintact_sdk.host.machine import HostCapabilities
 
 
 @dataclass(frozen=True)

@@ -6,9 +6,9 @@ from pathlib import Path
 from typing import Any
 
 from thintact_sdk.algorithms import CalibrationBundle, find_latest
-from thintact_sdk.capture import camera_is_simulated
+from thintact_sdk.device.cameras import camera_is_simulated
 from thintact_sdk.errors import CalibrationError
-from thintact_sdk.profile import Profile
+from thintact_sdk.formats.profiles import Profile
 
 
 def calibration_roots() -> list[Path]:

@@ -32,9 +32,9 @@ import numpy as np
 from thintact_decoders.modes import TauSpec, channel_taus
 from thintact_decoders.shapes import check_measurement_shape
 from thintact_sdk.algorithms import SystemMatrices
-from thintact_sdk.bayer import block_mean, planar_frame
 from thintact_sdk.errors import InvalidShapeError, InvalidValueError
 from thintact_sdk.interfaces import Decoder, RawDecoder
+from thintact_sdk.pixels.bayer import block_mean, planar_frame
 
 SENSOR_BIN = 2
 """The binning offered to the selection (the only one: 2 × 2 halves the work; 3 × 3 would
@@ -109,7 +109,7 @@ def bin_system_matrices(sm: SystemMatrices, b: int = SENSOR_BIN) -> SystemMatric
 def bin_frame(frame: np.ndarray, b: int = SENSOR_BIN, out: np.ndarray | None = None,
               offset: float = 0.0) -> np.ndarray:
     """Block means of ``b × b`` pixels of an ``R × S × C`` frame, minus ``offset`` (DN):
-    :func:`thintact_sdk.bayer.block_mean` with this module's default ``b``."""
+    :func:`thintact_sdk.pixels.bayer.block_mean` with this module's default ``b``."""
     return block_mean(frame, b, out, offset)
 
 
@@ -211,7 +211,7 @@ class SensorBinnedDecoder(Decoder):
 
     def decode_binned(self, binned: np.ndarray, black_level_dn: float) -> np.ndarray:
         """``R/b × S/b × C`` block means of the raw frame (DN, black level included, e.g.
-        :func:`thintact_sdk.capture.to_measurement` with ``sensor_bin = b``) → ``N × M × C``
+        :func:`thintact_sdk.device.cameras.to_measurement` with ``sensor_bin = b``) → ``N × M × C``
         float32; the same as :meth:`decode_raw` on the unbinned frame up to float32 rounding."""
         check_measurement_shape(binned, (self.sensor_shape[0] // self.b, self.sensor_shape[1] // self.b),
                                 self.channels)

@@ -9,7 +9,7 @@ Display components (``factory(profile, settings) -> thintact_sdk.interfaces.Disp
     elsewhere. See :mod:`thintact_displays.pygame_display`.
 ``virtual``
     Puts the scene in the virtual sensor's scene slot
-    (``thintact_sdk.virtual_bench.get_scene_slot(key).set(scene)``), so the virtual camera
+    (``thintact_sdk.device.virtual_bench.get_scene_slot(key).set(scene)``), so the virtual camera
     renders it. See :mod:`thintact_displays.virtual_display`.
 """
 
@@ -21,7 +21,7 @@ from thintact_displays.layout import PanelLayout, panel_layout, scene_to_rgb8
 from thintact_displays.pygame_display import PygameDisplay
 from thintact_displays.virtual_display import VirtualDisplay
 from thintact_sdk import Component, hookimpl
-from thintact_sdk.profile import Profile
+from thintact_sdk.formats.profiles import Profile
 
 __all__ = ["PanelLayout", "PygameDisplay", "VirtualDisplay", "panel_layout", "scene_to_rgb8"]
 

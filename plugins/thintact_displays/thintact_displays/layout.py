@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from thintact_sdk.errors import DeviceError, InvalidShapeError, ProfileError
-from thintact_sdk.profile import Profile
+from thintact_sdk.formats.profiles import Profile
 
 
 @dataclass(frozen=True)

@@ -12,9 +12,9 @@ import numpy as np
 
 from thintact_masks.fitness import Evaluation, FitnessEvaluator, FitnessSettings
 from thintact_sdk.algorithms import direct_system_matrices
-from thintact_sdk.blas import blas_threads
+from thintact_sdk.formats.profiles import Profile
+from thintact_sdk.host.blas import blas_threads
 from thintact_sdk.interfaces import Mask
-from thintact_sdk.profile import Profile
 
 
 @dataclass
@@ -105,8 +105,8 @@ def direct_vs_simulator(profile: Profile, d_stripe_px: float | None = None,
     """Relative Frobenius difference of the direct-generation T2S operator from the
     simulator's best two-term fit, after the best overall scale (gain is a nuisance).
 
-    Needs :class:`thintact_sdk.imaging.simulator.Simulator` and
-    :meth:`thintact_sdk.imaging.t2s.SystemMatrices.two_term_fit`.
+    Needs :class:`thintact_sdk.simulation.simulator.Simulator` and
+    :meth:`thintact_sdk.reconstruction.t2s.SystemMatrices.two_term_fit`.
     """
     from thintact_sdk.algorithms import Simulator, SystemMatrices, kron_sum_norm2
 

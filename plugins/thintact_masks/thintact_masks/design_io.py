@@ -11,7 +11,8 @@ from typing import Any
 import numpy as np
 
 from thintact_masks.errors import MaskDesignError
-from thintact_sdk import __version__, safe_json
+from thintact_sdk import __version__
+from thintact_sdk.formats import safe_json
 from thintact_sdk.interfaces import Mask
 
 DESIGN_FORMAT = "thintact-mask-design/1"

@@ -1,7 +1,7 @@
 """The paper's mask fitness (§III-C-1, §V-B): simulated reconstruction quality of a φ.
 
 For a gene φ the coding matrices ``Pc(φ)``, ``Qc(φ)`` come from direct generation
-(:mod:`thintact_sdk.imaging.direct_generation`); the simulated coding measurement of a
+(:mod:`thintact_sdk.reconstruction.direct_generation`); the simulated coding measurement of a
 ground-truth scene is ``Yc = Pc X Qcᵀ + noise``; ``X̂`` is the closed-form Tikhonov solution
 (paper eq. 12); and::
 
@@ -47,7 +47,7 @@ from thintact_sdk.algorithms import (
     white,
 )
 from thintact_sdk.errors import InvalidShapeError, InvalidValueError
-from thintact_sdk.profile import Profile
+from thintact_sdk.formats.profiles import Profile
 
 #: Floor of 1 − SSIM and of the white image's total variation (keeps f finite for a
 #: perfect reconstruction).
@@ -116,7 +116,7 @@ class Evaluation:
 
 
 class SSIMReference:
-    """SSIM against one fixed ground truth, identical to :func:`thintact_sdk.imaging.metrics.ssim`
+    """SSIM against one fixed ground truth, identical to :func:`thintact_sdk.reconstruction.metrics.ssim`
     (11-tap Gaussian window, σ = 1.5 px, peak 1) with the truth's local statistics computed
     once: three Gaussian filterings per estimate instead of five.
 

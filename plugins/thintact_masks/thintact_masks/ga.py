@@ -30,8 +30,8 @@ import numpy as np
 
 from thintact_masks.errors import MaskDesignError
 from thintact_masks.mls import mls_sequence, repeat_to_length
-from thintact_sdk import safe_json
-from thintact_sdk.safe_arrays import read_npz
+from thintact_sdk.formats import safe_json
+from thintact_sdk.formats.safe_arrays import read_npz
 
 CHECKPOINT_NAME = "checkpoint.npz"
 CHECKPOINT_FORMAT = "thintact-ga-checkpoint/1"

@@ -1,8 +1,8 @@
 """``replay``: a camera that plays a ``thintact-recording/1`` directory.
 
 Each recorded measurement (``R × S × 3`` raw DN) is delivered as a ``2R × 2S`` Bayer mosaic
-built with :func:`thintact_sdk.bayer.mosaic_from_rgb` in the profile's CFA layout, so
-:func:`thintact_sdk.capture.to_measurement` gives the recorded measurement back exactly
+built with :func:`thintact_sdk.pixels.bayer.mosaic_from_rgb` in the profile's CFA layout, so
+:func:`thintact_sdk.device.cameras.to_measurement` gives the recorded measurement back exactly
 (profile ``bayer_pattern: none`` delivers the ``R × S × 3`` frame itself; a monochrome
 profile the ``R × S`` frame; an ``R, Gr, Gb, B`` profile the per-site mosaic). A profile with
 ``sensor.tone_curve`` gets the linear measurement re-encoded with the curve (float32), as the
@@ -46,21 +46,21 @@ import numpy as np
 from pydantic import Field
 
 from thintact_replay.pacing import wait_until_due
-from thintact_sdk.bayer import mosaic_from_planes, mosaic_from_rgb
-from thintact_sdk.camera_settings import CameraSettings, parse_camera_settings
-from thintact_sdk.capture import channel_layout
+from thintact_sdk.device.camera_settings import CameraSettings, parse_camera_settings
+from thintact_sdk.device.cameras import channel_layout
 from thintact_sdk.errors import (
     DeviceError,
     EndOfStreamError,
     RecordingError,
 )
+from thintact_sdk.formats.profiles import Profile
+from thintact_sdk.formats.raw_frames import RAW_FIELD, load_raw_data
+from thintact_sdk.formats.recording import Recording
+from thintact_sdk.formats.safe_arrays import read_npy
 from thintact_sdk.frames import RawFrame
 from thintact_sdk.interfaces import Camera, CameraCapabilities
-from thintact_sdk.profile import Profile
-from thintact_sdk.recording import Recording
-from thintact_sdk.recording_raw import RAW_FIELD, load_raw_data
-from thintact_sdk.safe_arrays import read_npy
-from thintact_sdk.tone_curve import encode as encode_tone
+from thintact_sdk.pixels.bayer import mosaic_from_planes, mosaic_from_rgb
+from thintact_sdk.pixels.tone_curve import encode as encode_tone
 
 
 class EndOfRecording(EndOfStreamError):

@@ -1,7 +1,7 @@
 """``replay`` of an MCAP log: ``camera.settings.path`` ending in ``.mcap``.
 
 Plays the ``/thintact/raw`` frames of a log written by ``thintact record --format mcap``
-(:mod:`thintact_sdk.mcaplog`) exactly as the camera delivered them (same pixel format,
+(:mod:`thintact_sdk.formats.mcap`) exactly as the camera delivered them (same pixel format,
 frame ids, data), at their recorded times or as fast as possible, like a
 ``thintact-recording/1`` directory. A log cut short by a killed writer or a full disk
 plays up to its last complete chunk (with a warning).
@@ -21,12 +21,12 @@ from typing import Any
 
 from thintact_replay.camera import EndOfRecording, ReplaySourceSettings
 from thintact_replay.pacing import wait_until_due
-from thintact_sdk.camera_settings import parse_camera_settings
+from thintact_sdk.device.camera_settings import parse_camera_settings
 from thintact_sdk.errors import DeviceError, RecordingError
+from thintact_sdk.formats.mcap import McapLog
+from thintact_sdk.formats.profiles import Profile
 from thintact_sdk.frames import RawFrame
 from thintact_sdk.interfaces import Camera, CameraCapabilities
-from thintact_sdk.mcaplog import McapLog
-from thintact_sdk.profile import Profile
 
 MCAP_SUFFIX = ".mcap"
 

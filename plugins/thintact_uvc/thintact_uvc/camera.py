@@ -22,7 +22,7 @@ crop, transpose, flip, rotate
     Reshape every frame before binning (lens sensors whose stream is not the gel's
     orientation or includes the housing): margins in pixels or fractions, rows ↔ columns,
     mirror, degrees counter-clockwise; applied in that order
-    (:class:`thintact_sdk.camera_settings.FrameGeometrySettings`, docs/lens-sensors.md).
+    (:class:`thintact_sdk.device.camera_settings.FrameGeometrySettings`, docs/lens-sensors.md).
     ``capabilities()`` reports the reshaped size.
 led_intensity
     Live DIGIT sensors: LED brightness 1..255, sent as the UVC zoom control
@@ -52,7 +52,7 @@ import cv2
 import numpy as np
 from pydantic import Field
 
-from thintact_sdk.camera_settings import (
+from thintact_sdk.device.camera_settings import (
     FrameGeometrySettings,
     apply_geometry,
     crop_box,
@@ -68,9 +68,9 @@ from thintact_sdk.errors import (
     RecordingError,
     UnsupportedFeatureError,
 )
+from thintact_sdk.formats.profiles import Profile
 from thintact_sdk.frames import RawFrame
 from thintact_sdk.interfaces import Camera, CameraCapabilities, Range
-from thintact_sdk.profile import Profile
 from thintact_uvc.sources import Source, resolve_source
 
 V4L2_EXPOSURE_UNIT_US = 100.0

@@ -2,7 +2,7 @@
 
 Camera component ``virtual``: ``factory(profile, settings)`` →
 :class:`thintact_virtual.camera.VirtualCamera` (settings documented there). Scene injection
-for calibration and tests: :func:`thintact_sdk.virtual_bench.get_scene_slot`.
+for calibration and tests: :func:`thintact_sdk.device.virtual_bench.get_scene_slot`.
 """
 
 from __future__ import annotations
@@ -10,8 +10,8 @@ from __future__ import annotations
 from typing import Any
 
 from thintact_sdk import Component, hookimpl
-from thintact_sdk.profile import Profile
-from thintact_sdk.virtual_bench import SceneSlot, get_scene_slot, signal_scale_dn
+from thintact_sdk.device.virtual_bench import SceneSlot, get_scene_slot, signal_scale_dn
+from thintact_sdk.formats.profiles import Profile
 from thintact_virtual.camera import VirtualCamera
 
 __all__ = ["SceneSlot", "VirtualCamera", "get_scene_slot", "signal_scale_dn"]

@@ -3,7 +3,7 @@ a monochrome profile; distinct Gr and Gb sites for a profile with per-site plane
 
 Settings (``profile.camera.settings`` merged with the factory's ``settings``):
 
-``scenes``          library name of :data:`thintact_sdk.imaging.scenes.LIBRARY`, ``"tactile"``
+``scenes``          library name of :data:`thintact_sdk.simulation.scenes.LIBRARY`, ``"tactile"``
                     (the tactile simulator's membrane: unloaded, then 8 ball presses, see
                     :mod:`thintact_virtual.tactile_scenes`) or a list of names (default
                     ``"gelsight"``); frame k shows ``names[k % len]`` with index ``k // len``
@@ -18,7 +18,7 @@ Settings (``profile.camera.settings`` merged with the factory's ``settings``):
 ``exposure_us``     exposure (default 10 000 us); the signal scales linearly with it.
 
 A profile declaring ``sensor.tone_curve`` gets frames encoded with that curve (as a camera's
-ISP would); :func:`thintact_sdk.capture.to_measurement` undoes it.
+ISP would); :func:`thintact_sdk.device.cameras.to_measurement` undoes it.
 """
 
 from __future__ import annotations
@@ -37,14 +37,14 @@ from thintact_sdk.algorithms import (
     scene_for_channels,
     signal_to_dn,
 )
-from thintact_sdk.bayer import mosaic_from_planes, mosaic_from_rgb
-from thintact_sdk.camera_settings import CameraSettings, parse_camera_settings
+from thintact_sdk.device.camera_settings import CameraSettings, parse_camera_settings
+from thintact_sdk.device.virtual_bench import REFERENCE_EXPOSURE_US, get_scene_slot, white_level_dn
 from thintact_sdk.errors import DeviceError, ThinTactError, UnsupportedFeatureError
+from thintact_sdk.formats.profiles import Profile
 from thintact_sdk.frames import RawFrame
 from thintact_sdk.interfaces import Camera, CameraCapabilities, Range
-from thintact_sdk.profile import Profile
-from thintact_sdk.tone_curve import encode as encode_tone
-from thintact_sdk.virtual_bench import REFERENCE_EXPOSURE_US, get_scene_slot, white_level_dn
+from thintact_sdk.pixels.bayer import mosaic_from_planes, mosaic_from_rgb
+from thintact_sdk.pixels.tone_curve import encode as encode_tone
 from thintact_virtual.tactile_scenes import CYCLE, TACTILE_SCENE, tactile_scene
 
 EXPOSURE_RANGE_US = Range(10.0, 1_000_000.0, "us")

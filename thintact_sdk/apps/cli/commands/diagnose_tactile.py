@@ -1,0 +1,89 @@
+"""``thintact diagnose-tactile PACK --out DIR``: compare real tactile press frames with the
+tactile simulation of the same presses, name the effects it leaves out, fit them and show the
+fit improve (report.json, report.html, fitted_tactile.yaml)."""
+
+from __future__ import annotations
+
+import argparse
+import math
+import time
+
+from thintact_sdk.apps.cli.argtypes import int_range, positive_float
+from thintact_sdk.apps.cli.output_path import add_force_argument, claim_output
+
+
+def _indices(text: str) -> list[int] | None:
+    if text == "all":
+        return None
+    if text == "even":
+        return [-2]
+    try:
+        return [int(t) for t in text.split(",") if t.strip()]
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"'all', 'even' or press indices: {text!r}") from exc
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("diagnose-tactile",
+                       help="name and fit what the tactile simulation misses on real presses",
+                       description=__doc__)
+    p.add_argument("pack", metavar="RECORDING_OR_PACK",
+                   help="press pack (.npz with imgs P×H×W×3 and f0, e.g. Taxim's dataPack) "
+                   "or a directory holding one")
+    p.add_argument("--out", required=True, metavar="DIR", help="output directory")
+    p.add_argument("--ball-radius-mm", type=positive_float, default=2.0,
+                   help="radius of the pressed ball, mm (default 2.0: Taxim's GelSight pack)")
+    p.add_argument("--mm-per-px", type=positive_float, default=0.1245,
+                   help="image pixel size, mm (default 0.1245)")
+    p.add_argument("--presses", type=_indices, default=None, metavar="all|even|I,J,…",
+                   help="presses to use (default all)")
+    p.add_argument("--max-effects", type=int_range(0, 8), default=8,
+                   help="accept at most K effects (default 8)")
+    p.add_argument("--quiet", action="store_true", help="no progress lines")
+    add_force_argument(p, "into an existing non-empty --out")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from rich.console import Console
+
+    from thintact_sdk.diagnosis.tactile.press_data import load_presses
+    from thintact_sdk.diagnosis.tactile.press_engine import (
+        TactileDiagnosisOptions,
+        diagnose_tactile,
+    )
+    from thintact_sdk.diagnosis.tactile.report import write_tactile_outputs
+    from thintact_sdk.errors import ThinTactError
+
+    out = claim_output(args.out, "directory", force=args.force, inputs=(args.pack,))
+    con = Console(stderr=True, quiet=args.quiet)
+    t0 = time.perf_counter()
+    real = load_presses(args.pack)
+    n = len(real.images)
+    idx = args.presses
+    if idx == [-2]:
+        idx = list(range(0, n, 2))
+    if idx is not None and (len(idx) < 2 or min(idx) < 0 or max(idx) >= n):
+        raise ThinTactError(f"--presses: at least 2 indices in 0..{n - 1}")
+    con.print(f"{n} presses of {real.reference.shape[1]}×{real.reference.shape[0]} px from {real.source}")
+    from thintact_sdk.host.progress import stage_reporter
+
+    with stage_reporter(args.quiet) as say:  # lines also when stderr is a file or a pipe
+        d = diagnose_tactile(real, args.ball_radius_mm, args.mm_per_px, idx,
+                             TactileDiagnosisOptions(max_effects=args.max_effects),
+                             progress=say)
+    rep = d.report
+    for part in ("baseline", "final"):
+        if not math.isfinite(rep[part]["chi2_per_dof"]):
+            raise ThinTactError("the diagnosis gave a non-finite χ² (no usable pixels?); nothing written")
+    paths = write_tactile_outputs(d, out)
+    print(f"noise {rep['noise_rms_dn']} DN; baseline chi2/dof {rep['baseline']['chi2_per_dof']:.3f}")
+    for f in rep["findings"]:
+        alt = f" (or: {', '.join(f['alternatives'])})" if f["alternatives"] else ""
+        print(f"  + {f['effect']}{alt}: chi2/dof {f['chi2_per_dof_after']:.3f}  {f['params']}")
+    print(f"final chi2/dof {rep['final']['chi2_per_dof']:.3f}")
+    if rep["unexplained"]["significant"]:
+        print(f"unexplained: {rep['unexplained']['summary']}")
+    print(f"wrote {paths['report']}, {paths['html']}, {paths['fitted_profile']} "
+          f"in {time.perf_counter() - t0:.1f} s")
+    return 0

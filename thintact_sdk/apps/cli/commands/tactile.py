@@ -1,0 +1,250 @@
+"""``thintact tactile import | depth | evaluate``: press packs, depth maps and ball-press figures."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from typing import Any
+
+from thintact_sdk.apps.cli.argtypes import int_range, positive_float, positive_int
+from thintact_sdk.apps.cli.output_path import add_force_argument, claim_output
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "tactile",
+        help="press packs (import a folder of images), depth maps, ball-press evaluation",
+        description="Tools for real tactile data: import a folder of reference + press images "
+        "as a press pack, write depth maps of a pack or a recording, evaluate ball presses of "
+        "known radius (calibrate on some presses, measure the others).",
+    )
+    tsub = p.add_subparsers(dest="tactile_command", metavar="SUBCOMMAND", required=True)
+
+    imp = tsub.add_parser(
+        "import", help="a folder of reference + press images → a press pack (.npz)",
+        description="Read a no-contact reference image and ball-press images (JPEG, PNG, ...) "
+        "from a folder and write a press pack (.npz, no pickle: imgs, f0, names, mm_per_px, "
+        "ball_radius_mm).")
+    imp.add_argument("folder", type=Path, help="folder holding the images")
+    imp.add_argument("--out", required=True, help="press pack to write (.npz)")
+    imp.add_argument("--reference", default="ref.*",
+                     help="glob of the no-contact image in the folder (default ref.*)")
+    imp.add_argument("--presses", default="sample_*",
+                     help="glob of the press images (default sample_*)")
+    imp.add_argument("--colour-order", choices=("rgb", "bgr"), default="rgb",
+                     help="rgb: ordinary colour files; bgr: red and blue swapped in the files")
+    imp.add_argument("--crop", default="0,0,0,0",
+                     help="pixels removed from top,bottom,left,right (default 0,0,0,0)")
+    imp.add_argument("--mm-per-px", type=positive_float, help="gel mm per image pixel")
+    imp.add_argument("--ball-radius-mm", type=positive_float, help="ball radius in mm")
+    add_force_argument(imp, "over an existing pack")
+    imp.set_defaults(func=run_import)
+
+    dep = tsub.add_parser(
+        "depth", help="depth maps (npy + PNG) and per-frame contact/peak/force JSON",
+        description="Interpret every press of a pack (against its reference) or every frame of "
+        "a recording and write depth_NNNN.npy (float32 mm), depth_NNNN.png (16-bit, µm) and "
+        "frames.json (contact, contact area, peak depth, force per frame).")
+    src = dep.add_mutually_exclusive_group(required=True)
+    src.add_argument("--pack", type=Path, help="press pack (.npz)")
+    src.add_argument("--recording", type=Path, help="recording (thintact-recording/1)")
+    dep.add_argument("--profile", help="device profile (recording: required; pack: optional)")
+    dep.add_argument("--lut", type=Path, help="tactile LUT (.npz) for a pack without a profile")
+    dep.add_argument("--mm-per-px", type=positive_float,
+                     help="pack pixel size (default: the pack's)")
+    dep.add_argument("--out", required=True, help="output folder")
+    dep.add_argument("--quiet", action="store_true", help="no progress lines")
+    add_force_argument(dep, "into an existing non-empty folder")
+    dep.set_defaults(func=run_depth)
+
+    ev = tsub.add_parser(
+        "evaluate", help="calibrate on some ball presses of a pack, measure the others",
+        description="Annotation-free: calibrate the gradient model on the --train presses "
+        "(default the even ones) from the images and the ball radius, reconstruct the others "
+        "and report the fitted sphere radius, contact radius against sqrt(2Rd - d^2), depth "
+        "and slope RMS against the ball fitted with its radius fixed (and against the "
+        "annotated circles when the pack has them).")
+    ev.add_argument("pack", type=Path, help="press pack (.npz)")
+    ev.add_argument("--ball-radius-mm", type=positive_float,
+                    help="ball radius (default: the pack's)")
+    ev.add_argument("--mm-per-px", type=positive_float, help="pixel size (default: the pack's)")
+    ev.add_argument("--train", help="comma-separated training presses (default: even ones)")
+    ev.add_argument("--model", choices=("auto", "lut", "mlp"), default="auto",
+                    help="gradient model (auto: chosen on validation presses, default)")
+    ev.add_argument("--bins", type=int_range(4, 256), default=24, help="LUT nodes per axis")
+    ev.add_argument("--mlp-steps", type=positive_int, default=1500, help="network steps")
+    ev.add_argument("--json", dest="json_out", help="write every figure to this JSON file")
+    ev.add_argument("--quiet", action="store_true", help="no progress lines")
+    add_force_argument(ev, "over an existing --json")
+    ev.set_defaults(func=run_evaluate)
+
+
+def run_import(args: argparse.Namespace) -> int:
+    from thintact_sdk.tactile.calibration.press_pack import import_folder, parse_crop
+
+    out = claim_output(args.out, "file", force=args.force, inputs=(args.folder,))
+    pack = import_folder(args.folder, args.reference, args.presses, args.colour_order,
+                         parse_crop(args.crop), args.mm_per_px, args.ball_radius_mm)
+    path = pack.save(out)
+    h, w = pack.reference.shape[:2]
+    print(f"{len(pack.images)} presses of {w}×{h} px ({args.colour_order}, crop "
+          f"{args.crop}; reference {pack.meta['reference']}) → {path}")
+    return 0
+
+
+def _number(value: Any, what: str, option: str) -> float:
+    from thintact_sdk.errors import ThinTactError
+
+    if value is None:
+        raise ThinTactError(f"the pack does not state its {what}: give {option}")
+    return float(value)
+
+
+def _frames_json(frames: list[dict[str, Any]], out: Path) -> Path:
+    p = out / "frames.json"
+    p.write_text(json.dumps({"format": "thintact-depth-frames/1", "frames": frames}, indent=1)
+                 + "\n")
+    return p
+
+
+def _write_depth(out: Path, k: int, depth: Any) -> None:
+    import cv2
+    import numpy as np
+
+    np.save(out / f"depth_{k:04d}.npy", np.asarray(depth, np.float32), allow_pickle=False)
+    um = np.clip(np.round(np.asarray(depth, np.float64) * 1000.0), 0, 65535).astype(np.uint16)
+    cv2.imwrite(str(out / f"depth_{k:04d}.png"), um)
+
+
+def _frame_entry(k: int, name: str, frame: Any) -> dict[str, Any]:
+    import math
+
+    force = [None if not math.isfinite(v) else round(float(v), 5) for v in frame.force_n]
+    return {"frame": k, "name": name, "contact": bool(frame.contact),
+            "contact_area_mm2": round(float(frame.contact_area_mm2), 4),
+            "peak_depth_mm": round(float(frame.depth_mm.max()), 4), "force_n": force}
+
+
+def run_depth(args: argparse.Namespace) -> int:
+    from thintact_sdk.errors import ThinTactError
+    from thintact_sdk.formats.profiles import load_profile
+    from thintact_sdk.host.progress import stage_reporter
+    from thintact_sdk.tactile.interpretation.interpreter import TactileInterpreter
+    from thintact_sdk.tactile.interpretation.photometric import PhotometricLUT
+
+    inputs = [args.pack, args.recording, args.lut]
+    out = claim_output(args.out, "directory", force=args.force, inputs=inputs)
+    frames: list[dict[str, Any]] = []
+    with stage_reporter(args.quiet) as say:
+        if args.pack is not None:
+            from thintact_sdk.tactile.calibration.press_pack import load_press_pack, pack_profile
+
+            pack = load_press_pack(args.pack)
+            if args.profile is not None:
+                profile = load_profile(args.profile)
+                lut = PhotometricLUT.load(args.lut) if args.lut is not None else None
+                interp = (TactileInterpreter(profile, lut) if lut is not None
+                          else TactileInterpreter.for_profile(profile))
+            else:
+                if args.lut is None:
+                    raise ThinTactError("a pack without --profile needs --lut (a tactile LUT "
+                                        "from calibrate-tactile or tactile evaluate --json)")
+                mm = _number(args.mm_per_px or pack.mm_per_px, "pixel size", "--mm-per-px")
+                profile = pack_profile(pack.reference.shape[:2], mm)
+                interp = TactileInterpreter(profile, PhotometricLUT.load(args.lut))
+            interp.set_reference(pack.reference_image())
+            out.mkdir(parents=True, exist_ok=True)
+            for k in range(len(pack.images)):
+                frame = interp.interpret(pack.image(k), frame_id=k)
+                _write_depth(out, k, frame.depth_mm)
+                frames.append(_frame_entry(k, pack.names[k], frame))
+                say(f"press {k + 1}/{len(pack.images)}")
+        else:
+            from thintact_sdk.device.sensor import Sensor
+            from thintact_sdk.formats.recording import Recording
+            from thintact_sdk.frames import Measurement
+
+            if args.profile is None:
+                raise ThinTactError("--recording needs --profile (the device that recorded it)")
+            profile = load_profile(args.profile)
+            sensor = Sensor(profile)
+            rec = Recording(args.recording, profile)
+            interp = TactileInterpreter(profile, PhotometricLUT.load(args.lut)) \
+                if args.lut is not None else TactileInterpreter.for_profile(profile)
+            labels = [f.label for f in rec.frames]
+            ref_i = labels.index("reference") if "reference" in labels else 0
+            black = float(profile.noise.black_level_dn)
+
+            def image(i: int) -> Any:
+                import numpy as np
+
+                m = Measurement(rec.measurement(i).astype(np.float32), black)
+                return np.asarray(sensor.reconstruct(m), np.float32)
+
+            interp.set_reference(image(ref_i))
+            out.mkdir(parents=True, exist_ok=True)
+            for k in range(len(rec)):
+                frame = interp.interpret(image(k), frame_id=k)
+                _write_depth(out, k, frame.depth_mm)
+                frames.append(_frame_entry(k, labels[k] or f"frame_{k}", frame))
+                say(f"frame {k + 1}/{len(rec)}")
+    path = _frames_json(frames, out)
+    touching = sum(f["contact"] for f in frames)
+    print(f"{len(frames)} depth maps ({touching} in contact) in {out}; per-frame figures in "
+          f"{path.name}")
+    return 0
+
+
+def run_evaluate(args: argparse.Namespace) -> int:
+    from thintact_sdk.errors import ThinTactError
+    from thintact_sdk.host.progress import stage_reporter
+    from thintact_sdk.tactile.calibration.press_pack import evaluate_pack, load_press_pack
+
+    json_out = None
+    if args.json_out is not None:
+        json_out = claim_output(args.json_out, "file", force=args.force, inputs=(args.pack,))
+    pack = load_press_pack(args.pack)
+    radius = _number(args.ball_radius_mm or pack.ball_radius_mm, "ball radius",
+                     "--ball-radius-mm")
+    mm = _number(args.mm_per_px or pack.mm_per_px, "pixel size", "--mm-per-px")
+    train = None
+    if args.train is not None:
+        try:
+            train = [int(t) for t in args.train.split(",") if t.strip()]
+        except ValueError:
+            raise ThinTactError(f"--train {args.train!r}: comma-separated press numbers") from None
+    with stage_reporter(args.quiet) as say:
+        res = evaluate_pack(pack, radius, mm, train, args.model, args.bins,
+                            mlp_steps=args.mlp_steps, stage=say)
+    s = res["summary"]
+    for entry in res["press_report"]:
+        for w in entry["warnings"]:
+            print(f"calibration press {res['train'][entry['press']]}: {w}")
+    val = res["validation"]
+    chosen = res["gradient_model"]
+    if val:
+        print(f"gradient model: {chosen} (validation slope RMS: table {val['slope_rms_lut']:.3f}, "
+              f"network {val['slope_rms_mlp']:.3f})")
+    else:
+        print(f"gradient model: {chosen}")
+    print(f"{s['presses']} test presses, ball radius {radius:g} mm:")
+    print(f"  fitted sphere radius  median {s['sphere_radius_median_mm']:.2f} mm "
+          f"({s['sphere_radius_median_mm'] / radius - 1:+.0%}), middle half "
+          f"{s['sphere_radius_q25_mm']:.2f}-{s['sphere_radius_q75_mm']:.2f} mm")
+    if s["contact_ratio_median"] is not None:
+        print(f"  contact radius / sqrt(2Rd-d^2)  median {s['contact_ratio_median']:.2f}")
+    print(f"  depth RMS {s['depth_rms_mm']:.3f} mm, slope RMS {s['slope_rms']:.3f} "
+          f"(flat {s['slope_rms_flat']:.3f}) against the ball fitted with its radius fixed")
+    if "annotated_depth_rms_mm" in s:
+        print(f"  against the annotated circles: depth RMS {s['annotated_depth_rms_mm']:.3f} mm "
+              f"(their mean press depth {s['annotated_press_mean_mm']:.2f} mm), slope RMS "
+              f"{s['annotated_slope_rms']:.3f}")
+    print(f"  edge presses {s['edge_presses']}"
+          + (f", fitted radius vs interior {s['edge_radius_vs_interior_median']:+.0%}"
+             if "edge_radius_vs_interior_median" in s else ""))
+    if json_out is not None:
+        res.pop("lut")
+        json_out.write_text(json.dumps(res, indent=1, default=float) + "\n")
+        print(f"wrote {json_out}")
+    return 0

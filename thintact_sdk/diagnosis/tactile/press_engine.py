@@ -1,0 +1,213 @@
+"""The tactile-simulation diagnosis: baseline, locate, name effects by BIC, fit, report.
+
+1. Nuisances from the images alone (press circle, cap depth); per-pixel noise σ from
+   repeat frames (:mod:`.data`).
+2. Baseline: the SDK's tactile simulation of the same presses (Phong, 10-LED layout,
+   σ_e = 0.25 mm) with one gain per channel (a nuisance, never a finding).
+3. Greedy forward selection over the vocabulary (:mod:`.vocabulary`): every effect not yet
+   in the model is added and fitted; the one with the lowest BIC is accepted when it lowers
+   BIC by more than ``min_delta_bic`` and explains at least ``min_excess_share`` of the
+   excess χ²/dof left (χ²/dof − 1). After an
+   effect is accepted, the press nuisances are refitted under the new model, but only once the
+   model carries fitted lights (``led_directions``): the baseline's light layout belongs to
+   another sensor, and fitting press positions to it moves them away from the true ones.
+4. An effect that was significant in one round and no longer is once another was accepted is
+   named as that finding's alternative (the data cannot tell them apart).
+5. What is left is located again; structure above ``unexplained_chi2`` is flagged.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from thintact_sdk.diagnosis.tactile.fit import (
+    PressData,
+    Score,
+    all_normals,
+    clipped_mask,
+    fit_linear,
+    fit_presses,
+    score,
+    variance,
+)
+from thintact_sdk.diagnosis.tactile.press_data import estimate_noise, initial_presses
+from thintact_sdk.diagnosis.tactile.press_model import Normals, Press, TactileModel
+from thintact_sdk.diagnosis.tactile.press_residuals import TactileLocation, locate_residual
+from thintact_sdk.diagnosis.tactile.vocabulary import PROPOSERS, effect_params
+from thintact_sdk.tactile.learning.domains import RealPresses
+
+
+@dataclass
+class TactileDiagnosisOptions:
+    """Acceptance rules of the diagnosis."""
+
+    max_effects: int = 8
+    min_delta_bic: float = 10.0
+    min_excess_share: float = 0.02
+    unexplained_chi2: float = 1.5
+    effects: tuple[str, ...] = tuple(PROPOSERS)
+
+
+@dataclass
+class TactileDiagnosis:
+    """Everything the diagnosis found (``report`` is ``report.json``)."""
+
+    report: dict[str, Any]
+    data: PressData
+    presses: list[Press]
+    baseline: TactileModel
+    final: TactileModel
+    baseline_pred: np.ndarray
+    final_pred: np.ndarray
+    baseline_location: TactileLocation
+    final_location: TactileLocation
+    indices: list[int] = field(default_factory=list)
+
+
+def _stats_json(s: Score) -> dict[str, float]:
+    return {"rms_dn": round(s.stats.rms_dn * 255, 4), "chi2_per_dof": round(s.chi2_per_dof, 5),
+            "bic": round(s.bic, 1)}
+
+
+def _fit_with_presses(m: TactileModel, data: PressData, presses: list[Press], passes: int = 1
+                      ) -> tuple[TactileModel, list[Press], list[Normals]]:
+    for _ in range(passes):
+        presses = fit_presses(m, data, presses)
+        nrm = all_normals(data, presses, m.sigma_mm)
+        m = fit_linear(m, data, nrm, iterations=5)
+    return m, presses, nrm
+
+
+def diagnose_tactile(
+    real: RealPresses,
+    ball_radius_mm: float,
+    mm_per_px: float,
+    indices: list[int] | None = None,
+    options: TactileDiagnosisOptions | None = None,
+    progress: Callable[[str], None] | None = None,
+    exclude: np.ndarray | None = None,
+) -> TactileDiagnosis:
+    """Diagnose the tactile simulation against real ball presses.
+
+    Parameters
+    ----------
+    real
+        Press frames and the no-contact frame (display units).
+    ball_radius_mm, mm_per_px
+        The indenter (known) and the image pixel size.
+    indices
+        Presses to use (default all); the others are never looked at.
+    exclude
+        Optional ``P × H × W`` boolean pixels to leave out of every fit (e.g. markers), one
+        frame per press used.
+    """
+    opts = options or TactileDiagnosisOptions()
+    say = progress or (lambda _m: None)
+    t0 = time.perf_counter()
+    idx = list(range(len(real.images))) if indices is None else list(indices)
+    images = real.images[idx].astype(np.float64)
+    reference = real.reference.astype(np.float64)
+    presses = initial_presses(images, reference, ball_radius_mm, mm_per_px)
+    sigma = estimate_noise(images, presses, ball_radius_mm, mm_per_px)
+    valid = clipped_mask(images)
+    if exclude is not None:
+        valid &= ~np.asarray(exclude, bool)[..., None]
+    data = PressData(images, reference, valid, sigma, mm_per_px, ball_radius_mm)
+    model = TactileModel()
+    normals = all_normals(data, presses, model.sigma_mm)
+    model = fit_linear(model, data, normals)
+    base_score, base_pred = score(model, data, normals)
+    baseline = model.copy()
+    base_loc = locate_residual(images, base_pred, variance(model, data, base_pred), data.valid,
+                               normals)
+    say(f"baseline χ²/dof {base_score.chi2_per_dof:.2f}")
+    current = base_score
+    findings: list[dict[str, Any]] = []
+    rounds: list[dict[str, Any]] = []
+    significant_before: set[str] = set()
+    while len(findings) < opts.max_effects:
+        tried: dict[str, tuple[Score, TactileModel, list[Normals]]] = {}
+        for name in opts.effects:
+            if name in model.effects:
+                continue
+            say(f"trying {name}")
+            cand = PROPOSERS[name](model, data, presses, normals)
+            if cand is None:
+                continue
+            nrm = normals if cand.sigma_mm == model.sigma_mm else all_normals(
+                data, presses, cand.sigma_mm)
+            tried[name] = (score(cand, data, nrm)[0], cand, nrm)
+        row = {k: {"delta_bic": round(v[0].bic - current.bic, 1),
+                   "chi2_per_dof": round(v[0].chi2_per_dof, 5)} for k, v in tried.items()}
+        rounds.append(row)
+        good = {k for k, v in tried.items()
+                if v[0].bic - current.bic < -opts.min_delta_bic
+                and current.chi2_per_dof - v[0].chi2_per_dof
+                > opts.min_excess_share * max(current.chi2_per_dof - 1.0, 0.0)}
+        if findings:
+            findings[-1]["alternatives"] = sorted(significant_before - good - {findings[-1]["effect"]})
+        if not good:
+            break
+        best = min(good, key=lambda k: tried[k][0].bic)
+        significant_before = good - {best}
+        sc, model, normals = tried[best]
+        if "led_directions" in model.effects:
+            model, presses, normals = _fit_with_presses(
+                model, data, presses, passes=2 if best == "led_directions" else 1)
+            sc = score(model, data, normals)[0]
+        delta = sc.bic - current.bic
+        findings.append({
+            "effect": best, "params": effect_params(best, model, mm_per_px),
+            "rms_dn_after": round(sc.stats.rms_dn * 255, 4),
+            "chi2_per_dof_after": round(sc.chi2_per_dof, 5),
+            "delta_bic": round(delta, 1),
+            "evidence": (f"χ²/dof {current.chi2_per_dof:.3f} → {sc.chi2_per_dof:.3f}, "
+                         f"ΔBIC {delta:.0f} over {sc.stats.n_pixels} values"),
+            "alternatives": [],
+        })
+        say(f"accepted {best}: χ²/dof {sc.chi2_per_dof:.3f}")
+        current = sc
+    accepted = {f["effect"] for f in findings}
+    for f in findings:  # an effect accepted later is not an alternative
+        f["alternatives"] = [a for a in f["alternatives"] if a not in accepted]
+    final_score, final_pred = score(model, data, normals)
+    final_loc = locate_residual(images, final_pred, variance(model, data, final_pred), data.valid,
+                                normals)
+    sig = final_score.chi2_per_dof > opts.unexplained_chi2
+    fl = final_loc.report
+    unexplained = {
+        "significant": bool(sig),
+        "summary": ("structured residual left: " + fl["summary"]) if sig else
+        f"residual within {opts.unexplained_chi2}× the noise (χ²/dof {final_score.chi2_per_dof:.2f})",
+        "hotspots": fl["hotspots"] if sig else [],
+    }
+    report = {
+        "format": "thintact-tactile-diagnosis/1",
+        "source": real.source,
+        "presses_used": idx,
+        "ball_radius_mm": ball_radius_mm,
+        "mm_per_px": mm_per_px,
+        "noise_rms_dn": [round(float(s) * 255, 4) for s in sigma],
+        "noise_sigma": [float(s) for s in sigma],
+        "baseline": _stats_json(base_score),
+        "located": base_loc.report,
+        "findings": findings,
+        "rounds": rounds,
+        "final": _stats_json(final_score),
+        "final_located": final_loc.report,
+        "unexplained": unexplained,
+        "presses": [{"index": i, "row_px": round(p.row, 3), "col_px": round(p.col, 3),
+                     "x_mm": round((p.col - (data.shape[1] - 1) / 2) * mm_per_px, 4),
+                     "y_mm": round((p.row - (data.shape[0] - 1) / 2) * mm_per_px, 4),
+                     "depth_mm": round(p.depth_mm, 4)} for i, p in zip(idx, presses, strict=True)],
+        "seconds": round(time.perf_counter() - t0, 2),
+        "units": "rms_dn in 8-bit DN (display units × 255); χ² per value with σ the measured "
+                 "per-pixel noise",
+    }
+    return TactileDiagnosis(report, data, presses, baseline, model, base_pred, final_pred,
+                            base_loc, final_loc, idx)

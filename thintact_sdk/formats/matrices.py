@@ -1,0 +1,112 @@
+"""Bring your own matrices: system matrices calibrated elsewhere, in and out of a bundle.
+
+Accepted files (``.npz`` or MATLAB ``.mat`` read with :func:`scipy.io.loadmat`):
+
+* the four T2S matrices ``Po``, ``Qo``, ``Pc``, ``Qc``;
+* FlatCam's one-term model ``Y = Φ_L X Φ_Rᵀ`` as ``Phi_L`` and ``Phi_R`` (also ``PhiL``/``PhiR``,
+  ``phi_l``/``phi_r``): imported as ``Pc = Φ_L``, ``Qc = Φ_R`` and zero open matrices.
+
+Each matrix is ``rows × cols`` (the same for every channel) or ``C × rows × cols``; ``P``-type
+matrices are ``R × N`` (sensor rows × scene rows), ``Q``-type ``S × M``, in DN above black per
+display unit per scene pixel. Shapes are checked against the profile with an error naming the
+file, the array and the expected shape.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from thintact_sdk.errors import CalibrationError
+from thintact_sdk.formats.profiles import Profile
+from thintact_sdk.formats.safe_arrays import read_npz
+from thintact_sdk.reconstruction.t2s import SystemMatrices
+
+T2S_KEYS = ("Po", "Qo", "Pc", "Qc")
+FLATCAM_KEYS = (("Phi_L", "Phi_R"), ("PhiL", "PhiR"), ("phi_l", "phi_r"))
+
+
+def _read(path: Path) -> dict[str, np.ndarray]:
+    if not path.is_file():
+        raise CalibrationError(f"matrices file not found: {path}")
+    try:
+        if path.suffix.lower() == ".mat":
+            from scipy.io import loadmat
+
+            raw = loadmat(path)
+            return {k: np.asarray(v) for k, v in raw.items() if not k.startswith("__")}
+        if path.suffix.lower() == ".npz":
+            return read_npz(path, what="matrices", error=CalibrationError)
+    except (OSError, ValueError, NotImplementedError) as err:
+        raise CalibrationError(f"cannot read {path}: {err}") from None
+    raise CalibrationError(f"{path}: unknown matrices format {path.suffix!r}; use .npz or .mat")
+
+
+def _stack(path: Path, key: str, a: np.ndarray, want: tuple[int, int], channels: int) -> np.ndarray:
+    arr = np.asarray(a)
+    if not np.issubdtype(arr.dtype, np.number) or np.iscomplexobj(arr):
+        raise CalibrationError(f"{path}: {key} must be a real numeric array, got {arr.dtype}")
+    if arr.ndim == 2:
+        arr = np.repeat(arr[None], channels, axis=0)
+    if arr.ndim != 3 or arr.shape[1:] != want or arr.shape[0] != channels:
+        raise CalibrationError(
+            f"{path}: {key} is {'×'.join(map(str, a.shape))}, expected {want[0]}×{want[1]} or "
+            f"{channels}×{want[0]}×{want[1]} for profile's sensor and scene grids"
+        )
+    arr = arr.astype(np.float64)
+    if not np.all(np.isfinite(arr)):
+        raise CalibrationError(f"{path}: {key} holds NaN or infinite values")
+    return arr
+
+
+def import_matrices(path: str | os.PathLike[str], profile: Profile) -> SystemMatrices:
+    """Read externally calibrated matrices for ``profile`` (see the module docstring).
+
+    Raises
+    ------
+    CalibrationError
+        Missing arrays, wrong shapes, non-finite values, unreadable file.
+    """
+    p = Path(path)
+    arrays = _read(p)
+    c = len(profile.sensor.channels)
+    p_shape = (profile.sensor.rows, profile.scene.rows)
+    q_shape = (profile.sensor.cols, profile.scene.cols)
+    if all(k in arrays for k in T2S_KEYS):
+        po, qo, pc, qc = (_stack(p, k, arrays[k], p_shape if k.startswith("P") else q_shape, c)
+                          for k in T2S_KEYS)
+        kind = "t2s"
+    else:
+        pair = next(((lk, rk) for lk, rk in FLATCAM_KEYS if lk in arrays and rk in arrays), None)
+        if pair is None:
+            raise CalibrationError(
+                f"{p}: found arrays {', '.join(sorted(arrays)) or 'none'}; expected Po, Qo, Pc, Qc "
+                "(T2S) or Phi_L, Phi_R (FlatCam)")
+        pc = _stack(p, pair[0], arrays[pair[0]], p_shape, c)
+        qc = _stack(p, pair[1], arrays[pair[1]], q_shape, c)
+        po, qo = np.zeros_like(pc), np.zeros_like(qc)
+        kind = "flatcam"
+    return SystemMatrices(po, qo, pc, qc, {"source": "import", "imported_from": str(p.resolve()),
+                                           "model": kind, "profile": profile.name,
+                                           "profile_hash": profile.content_hash()})
+
+
+def export_matrices(sm: SystemMatrices, path: str | os.PathLike[str]) -> Path:
+    """Write ``Po, Qo, Pc, Qc`` (``C × rows × cols`` float64) as ``.npz`` or MATLAB ``.mat``."""
+    p = Path(path)
+    arrays = {k: np.asarray(getattr(sm, k), np.float64) for k in T2S_KEYS}
+    p.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        if p.suffix.lower() == ".mat":
+            from scipy.io import savemat
+
+            savemat(p, arrays, do_compression=True)
+        elif p.suffix.lower() == ".npz":
+            np.savez_compressed(p, **arrays)  # type: ignore[arg-type]
+        else:
+            raise CalibrationError(f"{p}: unknown matrices format {p.suffix!r}; use .npz or .mat")
+    except OSError as err:
+        raise CalibrationError(f"cannot write {p}: {err}") from None
+    return p

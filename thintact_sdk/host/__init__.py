@@ -1,0 +1,1 @@
+"""The host the SDK runs on: CPU capabilities, BLAS and kernel threads, the measured GEMM roofline, progress output."""

@@ -1,0 +1,149 @@
+"""How the stream pipeline spends the host's cores: optionally several decode workers, one
+kernel thread each.
+
+A decode split over two cores inside one product (OpenBLAS or torch intra-op threads) waits
+on its slowest thread at every product: when anything else runs on the second core it slows
+by 2-6× (measured on a 2-core Intel Xeon with AMX, paper-size ``t2s-closed-form`` alone:
+torch float32 31.6 → 175.8 ms per frame with one core busy; with 1 thread 42.1 ms either
+way). Decoding consecutive frames on separate workers, one kernel thread each, avoids those
+waits: decode alone streamed 48.7 instead of 33.1 frames/s quiet (torch float32; bfloat16
+133.9 instead of 82.9) and 31.0 instead of 24.3 with one core busy.
+
+In the whole stream pipeline (paper device, camera at 30 fps, ``tools/bench_stream_workers.py``,
+same host, 2026-11-24) two workers pay where the decode is the bottleneck: float32 20.0-20.9
+→ 27.1-28.0 tactile frames/s quiet and 9.9 → 16.5 with one core busy; where one decode fits
+in a camera period (bfloat16 products, 10-11 ms) both keep up with the camera (30.5 / 30.6
+fps) and one worker has the lower latency (p50 52 against 77 ms with a core busy). So the
+choice is measured: :func:`decode_workers` takes one worker when a decode (timed at warm-up)
+fits in the camera's frame period, else one per usable core; ``THINTACT_DECODE_WORKERS``
+overrides.
+
+:func:`decode_workers` says how many workers a stream uses, and
+:func:`single_threaded_kernels` holds OpenBLAS at one thread while any stream with several
+workers runs (process-wide, counted, the previous setting restored by the last), each worker
+setting torch to one thread in its own thread (:func:`prepare_worker_thread`).
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import threading
+from collections.abc import Iterator
+from contextlib import ExitStack, contextmanager
+
+from thintact_sdk.errors import InvalidValueError
+from thintact_sdk.host.blas import blas_threads
+
+MAX_DECODE_WORKERS = 4
+ENV_DECODE_WORKERS = "THINTACT_DECODE_WORKERS"
+
+PIPELINE_SHARES_CORES_UP_TO = 2
+"""On a host with at most this many usable cores a stream holds the kernels at one thread
+even with one decode worker. Its other stages (Bayer binning, tactile interpretation, ~11 ms
+of the paper device's 33 ms frame period; ~17 ms when this was measured) run while it decodes, so a product split over both
+cores waits for the core they hold at every product: on the 2-core Xeon-AMX at load ~2.8,
+``t2s-closed-form`` (numpy float32, binned 2 × 2) streamed 5.1 frames/s with one worker on two
+kernel threads against 26.7 on one (p50 192 against 90 ms; tools/bench_stream_workers.py).
+On larger hosts a single worker keeps the library's threads (the other stages take a
+smaller share of the cores; not measured here)."""
+
+_lock = threading.Lock()
+_holders = 0
+_restore: ExitStack | None = None
+_torch_threads_before: int | None = None
+
+
+def usable_cores() -> int:
+    """CPU cores this process may run on (its affinity mask where the OS has one)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
+
+
+def decode_workers(decode_ms: float | None = None, camera_fps: float | None = None,
+                   environ: dict[str, str] | None = None) -> int:
+    """Decode workers for a stream.
+
+    ``THINTACT_DECODE_WORKERS`` if set (1-16). Otherwise measured: one worker (the lowest
+    latency) when one decode, measured on this host (``decode_ms``), fits in the camera's
+    frame period; :func:`suggested_decode_workers` when it does not, or when the camera gives
+    no frame rate, so the stream keeps up with the camera instead of dropping frames. One
+    when nothing was measured.
+
+    Raises
+    ------
+    InvalidValueError
+        When the environment variable is not a whole number from 1 to 16.
+    """
+    env = os.environ if environ is None else environ
+    text = env.get(ENV_DECODE_WORKERS, "").strip()
+    if text:
+        if not text.isdigit() or not 1 <= int(text) <= 16:
+            raise InvalidValueError(f"{ENV_DECODE_WORKERS}={text!r}: expected a whole number from 1 to 16")
+        return int(text)
+    if decode_ms is None:
+        return 1
+    if camera_fps and camera_fps > 0 and decode_ms <= 1e3 / camera_fps:
+        return 1
+    return suggested_decode_workers()
+
+
+def suggested_decode_workers() -> int:
+    """The usable cores, at most :data:`MAX_DECODE_WORKERS`: what to try with
+    ``THINTACT_DECODE_WORKERS`` (and measure) on a many-core host."""
+    return max(1, min(usable_cores(), MAX_DECODE_WORKERS))
+
+
+def prepare_worker_thread() -> None:
+    """Call first in a decode worker thread while :func:`single_threaded_kernels` is held.
+
+    torch's CPU thread count is per calling thread (OpenMP) once a thread has set it, and
+    the value new threads start from: each worker sets its own to one, the caller's threads
+    keep theirs, and the last hold to end puts back the value new threads start from. Does
+    nothing where torch was not loaded when the hold began (torch is never imported here).
+    """
+    with _lock:
+        held_with_torch = _holders > 0 and _torch_threads_before is not None
+    torch = sys.modules.get("torch")
+    if held_with_torch and torch is not None:
+        torch.set_num_threads(1)
+
+
+@contextmanager
+def single_threaded_kernels() -> Iterator[None]:
+    """Hold OpenBLAS (process-wide) at one thread while the block runs, and let decode workers
+    (:func:`prepare_worker_thread`) set torch to one thread in their own threads.
+
+    Re-entrant across threads and sensors: the first holder saves the settings and the last
+    one out restores them, so two sensors streaming at once never undo each other.
+    """
+    global _holders, _restore, _torch_threads_before
+    with _lock:
+        if _holders == 0:
+            stack = ExitStack()
+            stack.enter_context(blas_threads(1))
+            torch = sys.modules.get("torch")
+            _torch_threads_before = int(torch.get_num_threads()) if torch is not None else None
+            _restore = stack
+        _holders += 1
+    try:
+        yield
+    finally:
+        with _lock:
+            _holders -= 1
+            if _holders == 0:
+                if _restore is not None:
+                    _restore.close()
+                torch = sys.modules.get("torch")
+                if torch is not None and _torch_threads_before is not None:
+                    torch.set_num_threads(_torch_threads_before)
+                _restore = None
+                _torch_threads_before = None
+
+
+def kernel_threads_held() -> int:
+    """How many streams hold :func:`single_threaded_kernels` now (for tests and ``doctor``)."""
+    with _lock:
+        return _holders

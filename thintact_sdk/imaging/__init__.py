@@ -1,1 +1,0 @@
-"""Lensless imaging: forward simulation, T2S system matrices, reconstruction, metrics."""

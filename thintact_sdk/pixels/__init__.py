@@ -1,0 +1,1 @@
+"""Pixel operations shared by every camera path: Bayer binning and tone curves."""

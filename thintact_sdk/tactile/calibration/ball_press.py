@@ -1,0 +1,524 @@
+"""Calibrating the photometric-stereo LUT from ball presses (paper: a 3 mm ball).
+
+Two sources of ground-truth slopes:
+
+* a ball of known radius pressed where the image says (real sensors, recordings): the
+  press centre is found in the colour change, the press depth by fitting the slope
+  magnitude of the ball's cap smoothed by the elastomer (``tactile.elastomer_sigma_mm``)
+  to the colour-change magnitude, then refined once through the LUT (integrate its slopes
+  to depth, refit the depth, recalibrate);
+* the tactile simulator's own slopes (virtual sensors): the press is commanded, so the
+  ground truth is known exactly, elastomer smoothing included.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import cv2
+import numpy as np
+from scipy.ndimage import gaussian_filter
+
+from thintact_sdk.errors import CalibrationError
+from thintact_sdk.formats.profiles import Profile
+from thintact_sdk.tactile.interpretation.colour_change import colour_change, fill_masked
+from thintact_sdk.tactile.interpretation.grid import (
+    TactileParams,
+    bin_image,
+    binned_params,
+    working_factor,
+)
+from thintact_sdk.tactile.interpretation.markers import detect_markers
+from thintact_sdk.tactile.interpretation.photometric import PhotometricLUT, calibrate_lut
+from thintact_sdk.tactile.interpretation.poisson import integrate_gradients
+from thintact_sdk.tactile.simulation.indenters import Sphere
+from thintact_sdk.tactile.simulation.membrane import TactileScene, TactileSimulator
+
+CALIBRATION_BALL_RADIUS_MM = 1.5
+MIN_PRESSES_TO_CHOOSE = 12
+"""``model="auto"`` compares the table and the network only from this many presses on."""
+
+
+@dataclass
+class BallPress:
+    """One calibration press: the image and what is known about its slopes.
+
+    Attributes
+    ----------
+    image
+        ``N × M × 3`` membrane image (reconstructed or simulated), display units.
+    grad_x, grad_y
+        ``N × M`` known slopes (mm per mm), or None to derive them from the ball model.
+    """
+
+    image: np.ndarray
+    grad_x: np.ndarray | None = None
+    grad_y: np.ndarray | None = None
+
+
+_EDGE_MARGIN_RADII = 1.5
+"""Press centres stay this many ball radii inside the field's edges."""
+_DEPTH_RANGE_RADII = (0.2, 2.0 / 3.0)
+"""Default press depths as fractions of the ball radius (0.3-1.0 mm for the 1.5 mm ball)."""
+
+
+def _field_half_mm(params: TactileParams) -> tuple[float, float]:
+    """Half width and half height of the membrane field in mm."""
+    return (params.cols / 2) * params.mm_per_px, (params.rows / 2) * params.mm_per_px
+
+
+def ball_radius_for_field(profile: Profile, ball_radius_mm: float = CALIBRATION_BALL_RADIUS_MM) -> float:
+    """The calibration ball radius (mm) to simulate on ``profile``: ``ball_radius_mm``, or a
+    smaller ball when that one does not fit (centres :data:`_EDGE_MARGIN_RADII` radii inside
+    the edges, with room to move: a third of the shorter half side at most)."""
+    half_w, half_h = _field_half_mm(TactileSimulator.for_profile(profile).params)
+    return min(ball_radius_mm, min(half_w, half_h) / (_EDGE_MARGIN_RADII + 1.5))
+
+
+def random_ball_presses(
+    profile: Profile,
+    count: int = 12,
+    ball_radius_mm: float | None = None,
+    depth_range_mm: tuple[float, float] | None = None,
+    seed: int = 0,
+) -> list[tuple[TactileScene, dict[str, float]]]:
+    """Simulated ball presses at random places and depths inside the field.
+
+    Parameters
+    ----------
+    ball_radius_mm
+        Ball radius in mm; None: the 1.5 mm calibration ball, or a smaller one on a field
+        too small for it (:func:`ball_radius_for_field`).
+    depth_range_mm
+        Press depths drawn uniformly in this range (mm); None: 0.2-0.67 ball radii.
+
+    Returns
+    -------
+    list of (scene, press)
+        ``press`` holds ``x_mm``, ``y_mm``, ``depth_mm``, ``ball_radius_mm``.
+
+    Raises
+    ------
+    CalibrationError
+        An explicit ``ball_radius_mm`` too large for the field (the message gives the
+        largest that fits).
+    """
+    sim = TactileSimulator.for_profile(profile)
+    p = sim.params
+    radius = ball_radius_for_field(profile) if ball_radius_mm is None else float(ball_radius_mm)
+    field_w, field_h = _field_half_mm(p)
+    half_w = field_w - _EDGE_MARGIN_RADII * radius
+    half_h = field_h - _EDGE_MARGIN_RADII * radius
+    if not (radius > 0 and half_w > 0 and half_h > 0):
+        largest = min(field_w, field_h) / _EDGE_MARGIN_RADII
+        raise CalibrationError(
+            f"a ball of radius {radius:g} mm does not fit in the {2 * field_w:.3g} x "
+            f"{2 * field_h:.3g} mm field of profile {profile.name!r}; use a ball radius below "
+            f"{largest:.3g} mm"
+        )
+    if depth_range_mm is None:
+        depth_range_mm = (_DEPTH_RANGE_RADII[0] * radius, _DEPTH_RANGE_RADII[1] * radius)
+    rng = np.random.default_rng(seed)
+    out = []
+    for _ in range(count):
+        press = {
+            "x_mm": float(rng.uniform(-half_w, half_w)),
+            "y_mm": float(rng.uniform(-half_h, half_h)),
+            "depth_mm": float(rng.uniform(*depth_range_mm)),
+            "ball_radius_mm": radius,
+        }
+        scene = sim.press(Sphere(radius), press["depth_mm"], (press["x_mm"], press["y_mm"]))
+        out.append((scene, press))
+    return out
+
+
+def ball_slopes(
+    shape: tuple[int, int],
+    center_rc: tuple[float, float],
+    contact_radius_px: float,
+    ball_radius_px: float,
+    rim_fraction: float = 0.9,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Slopes of a ball's cap inside its contact circle.
+
+    Parameters
+    ----------
+    shape
+        ``(N, M)`` image size.
+    center_rc
+        (row, col) of the circle centre, px.
+    contact_radius_px, ball_radius_px
+        Contact circle and ball radius, px.
+    rim_fraction
+        Only pixels within this fraction of ``min(contact, 0.95·ball)`` radius are trusted
+        (the rim is blurred by the elastomer and the slope diverges at r → R).
+
+    Returns
+    -------
+    (grad_x, grad_y, inside)
+        ``N × M`` slopes ∂d/∂x, ∂d/∂y (dimensionless) and the trusted-pixel mask.
+    """
+    rr, cc = np.mgrid[0 : shape[0], 0 : shape[1]].astype(np.float64)
+    x, y = cc - center_rc[1], rr - center_rc[0]
+    r2 = x**2 + y**2
+    radius = rim_fraction * min(contact_radius_px, 0.95 * ball_radius_px)
+    inside = r2 < radius**2
+    root = np.sqrt(np.clip(ball_radius_px**2 - r2, 1e-9, None))
+    gx = np.where(inside, -x / root, 0.0)
+    gy = np.where(inside, -y / root, 0.0)
+    return gx, gy, inside
+
+
+def find_press_circle(
+    change: np.ndarray, marker_mask: np.ndarray | None = None, blur_px: float = 3.0
+) -> tuple[tuple[float, float], float]:
+    """Locate a ball press in a colour-change image.
+
+    The colour-change magnitude is blurred (a press is a bright ring or disc, background
+    clutter is thinner or weaker), its maximum seeds the press, and the region above half
+    that maximum connected to it, holes filled, gives the centre (magnitude-weighted
+    centroid) and the radius (of the circle with its area).
+
+    Parameters
+    ----------
+    change
+        ``N × M × C`` colour minus background (any number of channels C ≥ 1), or ``N × M``
+        for a one-channel image.
+    marker_mask
+        Pixels to ignore (markers).
+    blur_px
+        Gaussian blur of the magnitude, px.
+
+    Returns
+    -------
+    ((row, col), radius_px)
+
+    Raises
+    ------
+    CalibrationError
+        When no press stands out.
+    """
+    from scipy.ndimage import binary_fill_holes, label
+
+    arr = np.asarray(change, np.float32)
+    if arr.ndim == 2:
+        arr = arr[..., None]
+    if arr.ndim != 3 or arr.shape[0] < 3 or arr.shape[1] < 3 or arr.shape[2] < 1:
+        raise CalibrationError(
+            f"a press image must be N × M or N × M × C, got shape {'×'.join(map(str, arr.shape))}")
+    mag = np.linalg.norm(arr, axis=2).astype(np.float32)
+    if marker_mask is not None:
+        mag = fill_masked(mag, marker_mask, 2.0)
+    blurred = cv2.GaussianBlur(mag, (0, 0), blur_px)
+    peak = float(blurred.max())
+    if peak <= 3.0 * float(np.median(blurred)) or peak < 1e-3:
+        raise CalibrationError("no press found in the frame: press the ball into the membrane")
+    labels, _ = label(blurred > 0.5 * peak)
+    seed = np.unravel_index(int(np.argmax(blurred)), blurred.shape)
+    region = binary_fill_holes(labels == labels[seed])
+    area = float(region.sum())
+    if area < 20:
+        raise CalibrationError(f"press too small ({area:.0f} px): press the ball deeper")
+    rr, cc = np.nonzero(region)
+    w = blurred[rr, cc]
+    centre = (float((w * rr).sum() / w.sum()), float((w * cc).sum() / w.sum()))
+    return centre, float(np.sqrt(area / np.pi))
+
+
+def calibrate_from_presses(
+    profile: Profile,
+    reference: np.ndarray,
+    presses: list[BallPress],
+    ball_radius_mm: float = CALIBRATION_BALL_RADIUS_MM,
+    bins: int = 32,
+    meta: dict[str, Any] | None = None,
+    max_work_mm: float = 0.13,
+    smooth_px: float = 1.0,
+    refine_rounds: int = 1,
+    model: str = "lut",
+    mlp_steps: int = 1500,
+    stage: Callable[[str], None] | None = None,
+) -> PhotometricLUT:
+    """Calibrate a LUT from ball presses against a no-contact reference image.
+
+    Parameters
+    ----------
+    profile
+        The device (scene grid, pixel size, markers).
+    reference
+        ``N × M × 3`` no-contact image.
+    presses
+        Press images with known slopes, or without (ball model from the found circle).
+    ball_radius_mm
+        Radius of the calibration ball (used with the ball model).
+    bins
+        LUT nodes per colour axis.
+    meta
+        Extra provenance stored with the LUT.
+    max_work_mm, smooth_px
+        Work on the grid binned and smoothed as the interpreter does (same defaults).
+    refine_rounds
+        Ball-model presses only: rounds of self-consistent refinement. Each round integrates
+        the current LUT's slopes to depth, fits the press depth of a ball cap smoothed by the
+        elastomer (``tactile.elastomer_sigma_mm``) to it, and recalibrates with that model's
+        slopes over the whole image (the ideal cap ignores the smoothing and the rim).
+    model
+        The gradient model: ``"lut"`` (colour change → slope table), ``"mlp"`` (the colour +
+        position network of :mod:`~thintact_sdk.tactile.interpretation.gradient_model`, the table kept
+        beside it) or ``"auto"``: both are fitted on all presses but every fourth
+        (validation presses) and the one with the lower slope RMS error on the validation
+        presses' trusted pixels is refitted on all presses and stored
+        (``meta["gradient_model"]``, figures in ``meta["validation"]``). ``"auto"`` with
+        fewer than :data:`MIN_PRESSES_TO_CHOOSE` presses keeps the table (one or two
+        validation presses do not tell the models apart; the network, which also sees the
+        position, needs presses all over the gel).
+    mlp_steps
+        Training steps of the network.
+    stage
+        Called with a short message as each stage starts (progress for long runs).
+
+    The result's ``meta["press_report"]`` holds, per ball-model press, the circle found
+    (centre px, radius mm), the fitted press depth and contact radius (mm), and warnings:
+    a circle at least as wide as the ball (``radius ≥ ball radius``: the ball radius or
+    ``tactile.mm_per_px`` is wrong, or the press deeper than the ball model holds), a press
+    depth at the fit's limit, a press touching the frame's edge.
+    """
+    say = stage or (lambda _msg: None)
+    if model not in ("lut", "mlp", "auto"):
+        raise CalibrationError(f"gradient model must be 'lut', 'mlp' or 'auto', not {model!r}")
+    full = TactileParams.from_profile(profile)
+    factor = working_factor(full, max_work_mm)
+    params = binned_params(full, factor)
+    sigma = max(0.5, 0.3 * params.marker_diameter_mm / params.mm_per_px)
+    reference = bin_image(reference, factor)
+    ref_det = detect_markers(reference, params)
+    background = fill_masked(reference, ref_det.mask, sigma)
+    feats: list[np.ndarray] = []
+    gxs: list[np.ndarray] = []
+    gys: list[np.ndarray] = []
+    valids: list[np.ndarray] = []
+    images: list[np.ndarray] = []
+    ball: list[tuple[int, tuple[float, float], np.ndarray]] = []
+    report: list[dict[str, Any]] = []
+    rng = np.random.default_rng(0)
+    say(f"{len(presses)} presses: finding the ball in each")
+    for n_press, press in enumerate(presses):
+        img = bin_image(press.image, factor)
+        det = detect_markers(img, params)
+        change = colour_change(img, background, det.mask, sigma, smooth_px)
+        if press.grad_x is None or press.grad_y is None:
+            try:
+                center, radius_px = find_press_circle(change, det.mask)
+            except CalibrationError as err:
+                raise CalibrationError(f"press {n_press}: {err}") from None
+            cap = fit_ball_to_change(change, center, ball_radius_mm, params, smooth_px)
+            report.append(_press_entry(n_press, center, radius_px, cap, ball_radius_mm, params))
+            gy, gx = np.gradient(cap, params.mm_per_px)
+            if smooth_px > 0:
+                gx = cv2.GaussianBlur(gx.astype(np.float32), (0, 0), smooth_px)
+                gy = cv2.GaussianBlur(gy.astype(np.float32), (0, 0), smooth_px)
+            rr, cc = np.mgrid[0 : img.shape[0], 0 : img.shape[1]]
+            far = (rr - center[0]) ** 2 + (cc - center[1]) ** 2 > (1.6 * radius_px) ** 2
+            flat = far & (rng.random(far.shape) < 0.1)
+            valid = ~det.mask & (~far | flat)
+            ball.append((len(feats), center, valid))
+        else:
+            gx, gy = bin_image(press.grad_x, factor), bin_image(press.grad_y, factor)
+            if smooth_px > 0:  # the slopes the smoothed colours stand for
+                gx = cv2.GaussianBlur(gx, (0, 0), smooth_px)
+                gy = cv2.GaussianBlur(gy, (0, 0), smooth_px)
+            moving = np.hypot(gx, gy) > 1e-3
+            valid = (moving | (rng.random(gx.shape) < 0.1)) & ~det.mask
+        feats.append(change)
+        images.append(background + change)
+        gxs.append(gx)
+        gys.append(gy)
+        valids.append(valid)
+    info: dict[str, Any] = {
+        "profile": profile.name,
+        "profile_hash": profile.content_hash(),
+        "presses": len(presses),
+        "ball_radius_mm": ball_radius_mm,
+        "slopes_from": "ball model" if presses and presses[0].grad_x is None else "simulator",
+        "work_mm_per_px": params.mm_per_px,
+    }
+    info.update(meta or {})
+    if report:
+        info["press_report"] = report
+    say("fitting the colour → slope table")
+    lut = calibrate_lut(feats, gxs, gys, valids, bins=bins, meta=info)
+    for _ in range(refine_rounds if ball else 0):
+        say("refining the ball fits through the table")
+        for k, center, trusted in ball:
+            gx, gy = lut.lookup(feats[k])
+            depth = integrate_gradients(gx, gy, params.mm_per_px)
+            refit = fit_smoothed_ball(depth, center, ball_radius_mm, params)
+            my, mx = np.gradient(refit, params.mm_per_px)
+            if smooth_px > 0:
+                mx = cv2.GaussianBlur(mx.astype(np.float32), (0, 0), smooth_px)
+                my = cv2.GaussianBlur(my.astype(np.float32), (0, 0), smooth_px)
+            gxs[k], gys[k], valids[k] = mx, my, trusted
+        lut = calibrate_lut(feats, gxs, gys, valids, bins=bins, meta=info)
+        lut.meta["refine_rounds"] = refine_rounds
+    if model == "lut" or (model == "auto" and len(presses) < MIN_PRESSES_TO_CHOOSE):
+        lut.meta["gradient_model"] = "lut"
+        return lut
+    return _attach_network(lut, model, feats, images, gxs, gys, valids, bins, mlp_steps, say)
+
+
+def _attach_network(
+    lut: PhotometricLUT, model: str, feats: list[np.ndarray], images: list[np.ndarray],
+    gxs: list[np.ndarray], gys: list[np.ndarray], valids: list[np.ndarray], bins: int,
+    steps: int, say: Callable[[str], None],
+) -> PhotometricLUT:
+    """Fit the network on the presses' targets; with ``model == "auto"`` first compare it
+    with the table on every fourth press held out, and keep the table when it is better."""
+    from thintact_sdk.tactile.interpretation.gradient_model import train_mlp
+
+    def pick(seq: list[np.ndarray], idx: list[int]) -> list[np.ndarray]:
+        return [seq[i] for i in idx]
+
+    if model == "auto":
+        val = [i for i in range(len(feats)) if i % 4 == 3]
+        fit = [i for i in range(len(feats)) if i % 4 != 3]
+        say(f"validation: table and network fitted on {len(fit)} presses, "
+            f"compared on {len(val)}")
+        t_lut = calibrate_lut(pick(feats, fit), pick(gxs, fit), pick(gys, fit),
+                              pick(valids, fit), bins=bins)
+        t_net = train_mlp(pick(feats, fit), pick(images, fit), pick(gxs, fit), pick(gys, fit),
+                          pick(valids, fit), steps=steps)
+        err_lut: list[np.ndarray] = []
+        err_net: list[np.ndarray] = []
+        for i in val:
+            m = valids[i]
+            lx, ly = t_lut.lookup(feats[i])
+            nx, ny = t_net.predict(feats[i], images[i])
+            err_lut.append(np.hypot(lx - gxs[i], ly - gys[i])[m])
+            err_net.append(np.hypot(nx - gxs[i], ny - gys[i])[m])
+        rms_lut = float(np.sqrt(np.mean(np.concatenate(err_lut) ** 2)))
+        rms_net = float(np.sqrt(np.mean(np.concatenate(err_net) ** 2)))
+        lut.meta["validation"] = {"presses": val, "slope_rms_lut": rms_lut,
+                                  "slope_rms_mlp": rms_net}
+        if rms_lut <= rms_net:
+            lut.meta["gradient_model"] = "lut"
+            return lut
+    say(f"training the colour + position network on {len(feats)} presses")
+    lut.net = train_mlp(feats, images, gxs, gys, valids, steps=steps)
+    lut.meta["gradient_model"] = "mlp"
+    return lut
+
+
+def _press_entry(
+    index: int, center: tuple[float, float], radius_px: float, cap: np.ndarray,
+    ball_radius_mm: float, params: TactileParams,
+) -> dict[str, Any]:
+    """One press of the calibration report (see :func:`calibrate_from_presses`)."""
+    mm = params.mm_per_px
+    depths = _press_depths(ball_radius_mm)
+    # the press depth of the fitted cap: its smoothed peak is below the press depth, so take
+    # the grid value whose smoothed peak is nearest
+    peaks = [float(smoothed_ball_depth(cap.shape, center, float(p), ball_radius_mm,
+                                       params).max()) for p in depths]
+    press = float(depths[int(np.argmin(np.abs(np.array(peaks) - float(cap.max()))))])
+    contact = float(np.sqrt(max(2 * ball_radius_mm * press - press**2, 0.0)))
+    warnings = []
+    if radius_px * mm >= ball_radius_mm:
+        warnings.append(
+            f"circle radius {radius_px * mm:.2f} mm >= ball radius {ball_radius_mm:g} mm: not "
+            "physical for this ball (check --ball-radius-mm and tactile.mm_per_px)")
+    if press >= float(depths[-1]) - 1e-9:
+        warnings.append(f"press depth at the fit's limit ({press:.2f} mm)")
+    rows, cols = cap.shape
+    if (center[0] - radius_px <= 0 or center[1] - radius_px <= 0
+            or center[0] + radius_px >= rows - 1 or center[1] + radius_px >= cols - 1):
+        warnings.append("the press touches the frame's edge")
+    return {"press": index, "centre_rc": [round(center[0], 2), round(center[1], 2)],
+            "circle_radius_mm": round(radius_px * mm, 4), "press_mm": round(press, 4),
+            "contact_radius_mm": round(contact, 4), "warnings": warnings}
+
+
+def smoothed_ball_depth(
+    shape: tuple[int, int], center_rc: tuple[float, float], press_mm: float,
+    ball_radius_mm: float, params: TactileParams,
+) -> np.ndarray:
+    """Depth (mm, ``N × M``) of a ball pressed ``press_mm`` at ``center_rc`` (px), smoothed by
+    the elastomer Gaussian (``params.elastomer_sigma_mm``), as the tactile simulator does."""
+    rr, cc = np.mgrid[0 : shape[0], 0 : shape[1]].astype(np.float64)
+    r2 = ((rr - center_rc[0]) ** 2 + (cc - center_rc[1]) ** 2) * params.mm_per_px**2
+    cap = np.sqrt(np.clip(ball_radius_mm**2 - r2, 0.0, None)) - (ball_radius_mm - press_mm)
+    rigid = np.clip(cap, 0.0, None)
+    sigma_px = params.elastomer_sigma_mm / params.mm_per_px
+    return gaussian_filter(rigid, sigma_px, mode="constant") if sigma_px > 0 else rigid
+
+
+def _press_depths(ball_radius_mm: float) -> np.ndarray:
+    return np.arange(0.05, min(1.5, 0.95 * ball_radius_mm) + 1e-9, 0.025)
+
+
+def fit_ball_to_change(
+    change: np.ndarray, center_rc: tuple[float, float], ball_radius_mm: float,
+    params: TactileParams, smooth_px: float = 1.0,
+) -> np.ndarray:
+    """First estimate of a ball press from the image alone: the smoothed ball cap whose
+    slope magnitude, times a free scale, best matches the colour-change magnitude (for
+    moderate slopes the colour change grows about linearly with the slope).
+
+    Returns
+    -------
+    numpy.ndarray
+        ``N × M`` model depth in mm.
+    """
+    mag = np.linalg.norm(change, axis=2)
+    rr, cc = np.mgrid[0 : mag.shape[0], 0 : mag.shape[1]]
+    dist_mm = np.hypot(rr - center_rc[0], cc - center_rc[1]) * params.mm_per_px
+    best: tuple[float, np.ndarray] | None = None
+    for press in _press_depths(ball_radius_mm):
+        model = smoothed_ball_depth(mag.shape, center_rc, float(press), ball_radius_mm, params)
+        gy, gx = np.gradient(model, params.mm_per_px)
+        slope = np.hypot(gx, gy).astype(np.float32)
+        if smooth_px > 0:
+            slope = cv2.GaussianBlur(slope, (0, 0), smooth_px)
+        a = np.sqrt(max(2 * ball_radius_mm * press - press**2, 1e-6))
+        w = dist_mm < 2.0 * a + 3 * params.elastomer_sigma_mm
+        ss = float((slope[w] ** 2).sum())
+        if ss <= 0:
+            continue
+        k = float((slope[w] * mag[w]).sum()) / ss
+        err = float(((mag[w] - k * slope[w]) ** 2).sum()) / max(int(w.sum()), 1)
+        if best is None or err < best[0]:
+            best = (err, model)
+    if best is None:
+        raise CalibrationError("cannot fit the ball press: press the ball deeper")
+    return best[1]
+
+
+def fit_smoothed_ball(
+    depth_mm: np.ndarray, center_rc: tuple[float, float], ball_radius_mm: float,
+    params: TactileParams,
+) -> np.ndarray:
+    """The smoothed ball-cap depth map whose press depth best fits ``depth_mm`` (least squares
+    within 2.5 contact radii of the centre; press depths 0.05-1.5 mm in 0.025 mm steps)."""
+    best: tuple[float, np.ndarray] | None = None
+    rr, cc = np.mgrid[0 : depth_mm.shape[0], 0 : depth_mm.shape[1]]
+    dist_mm = np.hypot(rr - center_rc[0], cc - center_rc[1]) * params.mm_per_px
+    for press in _press_depths(ball_radius_mm):
+        model = smoothed_ball_depth(depth_mm.shape, center_rc, float(press), ball_radius_mm, params)
+        a = np.sqrt(max(2 * ball_radius_mm * press - press**2, 1e-6))
+        window = dist_mm < 2.5 * a + 2 * params.elastomer_sigma_mm
+        err = float(np.mean((model[window] - depth_mm[window]) ** 2))
+        if best is None or err < best[0]:
+            best = (err, model)
+    assert best is not None
+    return best[1]
+
+
+def scene_level_lut(profile: Profile, presses: int = 12, seed: int = 0) -> PhotometricLUT:
+    """A LUT calibrated on the tactile simulator's own scenes (no lensless imaging):
+    what a virtual sensor uses until ``thintact calibrate-tactile`` stores one."""
+    sim = TactileSimulator.for_profile(profile)
+    ref = sim.flat().scene
+    data = random_ball_presses(profile, presses, seed=seed)
+    items = [BallPress(s.scene, s.grad_x, s.grad_y) for s, _ in data]
+    return calibrate_from_presses(profile, ref, items, meta={"source": "tactile-simulator"})

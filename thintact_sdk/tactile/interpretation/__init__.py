@@ -1,0 +1,1 @@
+"""Run-time tactile interpretation: image to depth (photometric stereo, Poisson), markers, force and slip."""

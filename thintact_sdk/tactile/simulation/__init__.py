@@ -1,0 +1,1 @@
+"""Tactile scene simulation: indenters, lighting, the elastic half-space and loaded presses."""
