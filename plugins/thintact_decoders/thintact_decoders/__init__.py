@@ -51,9 +51,13 @@ from thintact_decoders.sensor_binning import binnable_build, binning_offered
 from thintact_decoders.t2s_closed_form import T2SClosedFormDecoder
 from thintact_sdk.algorithms import CalibrationBundle, ScenePrior, SystemMatrices
 from thintact_sdk.errors import CalibrationError
-from thintact_sdk.formats.profiles import Profile
-from thintact_sdk.host.machine import host_capabilities, host_fingerprint, kernel_threads_now
 from thintact_sdk.interfaces import Decoder
+from thintact_sdk.plugin_support import (
+    Profile,
+    host_capabilities,
+    host_fingerprint,
+    kernel_threads_now,
+)
 
 REMEASURE_ENV = "THINTACT_BACKEND_REMEASURE"  # set (not "0"): measure again, replace the cached record
 EMULATED_BF16 = ("bfloat16 is emulated in software on this CPU (no AVX512-BF16, AMX or BF16 flag), "

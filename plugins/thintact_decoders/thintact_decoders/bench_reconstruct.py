@@ -37,7 +37,7 @@ ORACLE = "thintact-noniterative, oracle filter (true open term removed)"
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """Command-line options of ``thintact bench reconstruct``."""
-    from thintact_sdk.apps.cli.argtypes import positive_int
+    from thintact_sdk.plugin_support import positive_int
 
     p.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
     p.add_argument("--profile", default="thintact-paper", help="device profile (default thintact-paper)")
@@ -82,7 +82,7 @@ class _Device:
             train_joint_filter,
             training_scenes,
         )
-        from thintact_sdk.device.virtual_bench import signal_scale_dn
+        from thintact_sdk.plugin_support import signal_scale_dn
 
         self.profile = profile
         say(f"{profile.name}: simulator and two-term fit")
@@ -107,7 +107,7 @@ class _Device:
 def _as_binned(raw: np.ndarray) -> np.ndarray:
     """``raw`` (``R × S × 3`` uint16) as the Sensor hands a binned frame to its decoder:
     float32 DN in channel-planar storage (:func:`thintact_sdk.pixels.bayer.planar_frame`)."""
-    from thintact_sdk.pixels.bayer import planar_frame
+    from thintact_sdk.plugin_support import planar_frame
 
     frame = planar_frame(*raw.shape)
     frame[...] = raw
@@ -126,7 +126,7 @@ def _sensor_call(dec: Any, frame: np.ndarray, black: float, b: int) -> Callable[
     it), else through ``decode_raw``."""
     if b == 1:
         return _raw_call(dec, frame, black)
-    from thintact_sdk.pixels.bayer import block_mean
+    from thintact_sdk.plugin_support import block_mean
 
     small = block_mean(frame, b)
     return lambda: dec.decode_binned(small, black)
@@ -173,10 +173,15 @@ def run(args: argparse.Namespace) -> int:
     from thintact_decoders.candidates import candidate_specs
     from thintact_decoders.selection import Probe, select_backend
     from thintact_decoders.sensor_binning import SENSOR_BIN, binnable_build, binning_possible
-    from thintact_sdk.formats.profiles import load_profile
-    from thintact_sdk.host.compute_threads import prepare_worker_thread, single_threaded_kernels
-    from thintact_sdk.host.machine import host_capabilities, machine_summary
-    from thintact_sdk.host.roofline import measure_sgemm_gflops, roofline_ratio
+    from thintact_sdk.plugin_support import (
+        host_capabilities,
+        load_profile,
+        machine_summary,
+        measure_sgemm_gflops,
+        prepare_worker_thread,
+        roofline_ratio,
+        single_threaded_kernels,
+    )
 
     console = Console(stderr=True)
     t_start = time.perf_counter()
@@ -295,7 +300,7 @@ def run(args: argparse.Namespace) -> int:
 def _mask_compare(profile: Any, dev: _Device, result: dict[str, Any], args: argparse.Namespace,
                   say: Callable[[str], None]) -> dict[str, Any]:
     from thintact_decoders import NonIterativeDecoder, T2SClosedFormDecoder
-    from thintact_sdk.formats.profiles import profile_from_dict
+    from thintact_sdk.plugin_support import profile_from_dict
 
     out: dict[str, Any] = {"mls": {
         k: result["quality"][f"{k} [numpy-float32]"] for k in ("thintact-noniterative", "t2s-closed-form")}}

@@ -14,7 +14,7 @@ from dataclasses import dataclass, replace
 
 from thintact_decoders.backend import ArrayBackend
 from thintact_sdk.errors import InvalidValueError
-from thintact_sdk.host.machine import HostCapabilities
+from thintact_sdk.plugin_support import HostCapabilities
 
 
 @dataclass(frozen=True)

@@ -24,8 +24,8 @@ import cv2
 import numpy as np
 
 from thintact_sdk.errors import ProfileError
-from thintact_sdk.formats.profiles import Profile
 from thintact_sdk.interfaces import Decoder
+from thintact_sdk.plugin_support import Profile
 
 FLIPS = {"none": None, "horizontal": 1, "vertical": 0, "both": -1}
 

@@ -6,9 +6,8 @@ from pathlib import Path
 from typing import Any
 
 from thintact_sdk.algorithms import CalibrationBundle, find_latest
-from thintact_sdk.device.cameras import camera_is_simulated
 from thintact_sdk.errors import CalibrationError
-from thintact_sdk.formats.profiles import Profile
+from thintact_sdk.plugin_support import Profile, camera_is_simulated
 
 
 def calibration_roots() -> list[Path]:

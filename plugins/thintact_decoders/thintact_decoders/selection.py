@@ -24,8 +24,8 @@ from thintact_decoders.backend import ArrayBackend
 from thintact_decoders.backend_cache import BackendCache
 from thintact_decoders.candidates import BackendSpec
 from thintact_sdk.algorithms import SystemMatrices, psnr
-from thintact_sdk.formats.profiles import NoiseSpec
 from thintact_sdk.interfaces import Decoder
+from thintact_sdk.plugin_support import NoiseSpec
 
 PSNR_BOUND_DB = 0.1
 PREFERENCE_SLACK = 0.2

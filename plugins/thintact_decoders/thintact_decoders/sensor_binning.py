@@ -34,7 +34,7 @@ from thintact_decoders.shapes import check_measurement_shape
 from thintact_sdk.algorithms import SystemMatrices
 from thintact_sdk.errors import InvalidShapeError, InvalidValueError
 from thintact_sdk.interfaces import Decoder, RawDecoder
-from thintact_sdk.pixels.bayer import block_mean, planar_frame
+from thintact_sdk.plugin_support import block_mean, planar_frame
 
 SENSOR_BIN = 2
 """The binning offered to the selection (the only one: 2 × 2 halves the work; 3 × 3 would

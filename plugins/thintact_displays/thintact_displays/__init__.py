@@ -21,7 +21,7 @@ from thintact_displays.layout import PanelLayout, panel_layout, scene_to_rgb8
 from thintact_displays.pygame_display import PygameDisplay
 from thintact_displays.virtual_display import VirtualDisplay
 from thintact_sdk import Component, hookimpl
-from thintact_sdk.formats.profiles import Profile
+from thintact_sdk.plugin_support import Profile
 
 __all__ = ["PanelLayout", "PygameDisplay", "VirtualDisplay", "panel_layout", "scene_to_rgb8"]
 

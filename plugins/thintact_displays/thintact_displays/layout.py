@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from thintact_sdk.errors import DeviceError, InvalidShapeError, ProfileError
-from thintact_sdk.formats.profiles import Profile
+from thintact_sdk.plugin_support import Profile
 
 
 @dataclass(frozen=True)

@@ -19,8 +19,8 @@ import numpy as np
 
 from thintact_displays.layout import PanelLayout, check_scene_shape, panel_layout, scene_to_rgb8
 from thintact_sdk.errors import DeviceError, DeviceNotFoundError, PluginError
-from thintact_sdk.formats.profiles import Profile
 from thintact_sdk.interfaces import Display
+from thintact_sdk.plugin_support import Profile
 
 
 class PygameDisplay(Display):

@@ -14,8 +14,8 @@ import numpy as np
 
 from thintact_displays.layout import check_scene_shape
 from thintact_sdk.errors import PluginError
-from thintact_sdk.formats.profiles import Profile
 from thintact_sdk.interfaces import Display
+from thintact_sdk.plugin_support import Profile
 
 
 def slot_key(profile: Profile, settings: dict[str, Any]) -> str:
@@ -50,7 +50,7 @@ class VirtualDisplay(Display):
 
     def open(self) -> None:
         try:
-            from thintact_sdk.device.virtual_bench import get_scene_slot
+            from thintact_sdk.plugin_support import get_scene_slot
         except ImportError as err:
             raise PluginError(
                 "the virtual display needs the virtual sensor plugin (thintact-virtual); "

@@ -11,7 +11,7 @@ from typing import Any
 
 from thintact_genicam.camera import GenICamCamera, GenICamSettingWarning
 from thintact_sdk import Component, hookimpl
-from thintact_sdk.formats.profiles import Profile
+from thintact_sdk.plugin_support import Profile
 
 __all__ = ["GenICamCamera", "GenICamSettingWarning"]
 

@@ -49,8 +49,6 @@ from thintact_genicam.features import (
 from thintact_genicam.producers import quiet_harvesters, resolve_producer
 from thintact_genicam.shared import acquire_harvester, release_harvester
 from thintact_genicam.trigger import fire_software_trigger, set_trigger
-from thintact_sdk.device.camera_settings import CameraSettings, parse_camera_settings
-from thintact_sdk.device.cameras import FrameGapCounter, bit_depth_problem
 from thintact_sdk.errors import (
     CameraSettingsError,
     DeviceError,
@@ -59,9 +57,15 @@ from thintact_sdk.errors import (
     DeviceTimeoutError,
     UnsupportedFeatureError,
 )
-from thintact_sdk.formats.profiles import Profile
 from thintact_sdk.frames import RawFrame
 from thintact_sdk.interfaces import Camera, CameraCapabilities, Range
+from thintact_sdk.plugin_support import (
+    CameraSettings,
+    FrameGapCounter,
+    Profile,
+    bit_depth_problem,
+    parse_camera_settings,
+)
 
 MAX_WAIT_S = 3600.0
 

@@ -14,8 +14,8 @@ from typing import Any
 from thintact_masks.errors import MaskDesignError
 from thintact_masks.mls import MLSDesigner, RandomDesigner
 from thintact_sdk import Component, hookimpl
-from thintact_sdk.formats.profiles import Profile, load_profile
 from thintact_sdk.interfaces import Mask, MaskDesigner
+from thintact_sdk.plugin_support import Profile, load_profile
 
 __all__ = ["GADesigner", "MLSDesigner", "MaskDesignError", "RandomDesigner", "thintact_masks"]
 

@@ -12,7 +12,12 @@ import json
 from pathlib import Path
 from typing import Any
 
-from thintact_sdk.apps.cli.argtypes import (
+from thintact_sdk.errors import ThinTactError
+from thintact_sdk.plugin_support import (
+    add_force_argument,
+    check_not_an_input,
+    claim_output,
+    file_input,
     fraction,
     int_range,
     non_negative_int,
@@ -20,13 +25,6 @@ from thintact_sdk.apps.cli.argtypes import (
     positive_int,
     seed,
 )
-from thintact_sdk.apps.cli.output_path import (
-    add_force_argument,
-    check_not_an_input,
-    claim_output,
-    file_input,
-)
-from thintact_sdk.errors import ThinTactError
 
 MAX_PNG_SIDE_PX = 16384
 """Largest side of the image ``mask show`` renders (K × cell px), checked before allocating."""
@@ -155,7 +153,7 @@ def run_optimize(args: argparse.Namespace) -> int:
 
     from thintact_masks.ga import CHECKPOINT_NAME, GAConfig
     from thintact_masks.optimize import DESIGN_NAME, PLOT_NAME, optimize_mask
-    from thintact_sdk.formats.profiles import load_profile
+    from thintact_sdk.plugin_support import load_profile
 
     inputs = (file_input(args.profile),)
     if not (Path(args.out) / CHECKPOINT_NAME).is_file() or not str(args.out).strip():
@@ -219,8 +217,8 @@ def run_compare(args: argparse.Namespace) -> int:
     from thintact_masks.design_io import load_design
     from thintact_masks.devices import scaled_profile
     from thintact_masks.optimize import baseline_phi
-    from thintact_sdk.formats.profiles import load_profile
     from thintact_sdk.interfaces import Mask
+    from thintact_sdk.plugin_support import load_profile
 
     device = scaled_profile(load_profile(args.profile), args.scale)
     k = args.K if args.K is not None else device.mask.K
@@ -258,7 +256,7 @@ def run_compare(args: argparse.Namespace) -> int:
 def run_design(args: argparse.Namespace) -> int:
     _plugin()
     from thintact_masks.design_io import design_record, write_json_atomic
-    from thintact_sdk.device.registry import get_registry
+    from thintact_sdk.plugin_support import get_registry
 
     out = claim_output(args.out, "file", force=args.force)
     if args.kind == "ga":
@@ -293,7 +291,7 @@ def run_import(args: argparse.Namespace) -> int:
 
 def _profile_source(name_or_path: str) -> Path | None:
     """The YAML file a profile argument names (a path, or a profile on the search path)."""
-    from thintact_sdk.formats.profiles import available_profiles
+    from thintact_sdk.plugin_support import available_profiles
 
     p = Path(name_or_path)
     src = p if p.is_file() else available_profiles().get(str(name_or_path))
@@ -305,8 +303,8 @@ def _write_keeping_text(name_or_path: str, new: Any, mask: dict[str, Any], out: 
     layout kept, phi in flow style); None when the source or ``out`` is not YAML or the
     edit does not give back ``new`` (the caller then writes the profile afresh)."""
     from thintact_masks.profile_text import replace_mask_section
-    from thintact_sdk.formats import safe_yaml as yaml_safe
-    from thintact_sdk.formats.profiles import profile_from_dict
+    from thintact_sdk.plugin_support import profile_from_dict
+    from thintact_sdk.plugin_support import safe_yaml as yaml_safe
 
     src = _profile_source(name_or_path)
     if src is None or Path(out).suffix.lower() == ".json":
@@ -329,7 +327,7 @@ def _write_keeping_text(name_or_path: str, new: Any, mask: dict[str, Any], out: 
 def run_apply(args: argparse.Namespace) -> int:
     _plugin()
     from thintact_masks.design_io import load_design
-    from thintact_sdk.formats.profiles import load_profile, profile_from_dict, write_profile
+    from thintact_sdk.plugin_support import load_profile, profile_from_dict, write_profile
 
     out = claim_output(args.out, "file", force=args.force,
                        inputs=(args.design, file_input(args.profile)))

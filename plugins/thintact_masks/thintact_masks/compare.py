@@ -12,9 +12,8 @@ import numpy as np
 
 from thintact_masks.fitness import Evaluation, FitnessEvaluator, FitnessSettings
 from thintact_sdk.algorithms import direct_system_matrices
-from thintact_sdk.formats.profiles import Profile
-from thintact_sdk.host.blas import blas_threads
 from thintact_sdk.interfaces import Mask
+from thintact_sdk.plugin_support import Profile, blas_threads
 
 
 @dataclass

@@ -12,8 +12,8 @@ import numpy as np
 
 from thintact_masks.errors import MaskDesignError
 from thintact_sdk import __version__
-from thintact_sdk.formats import safe_json
 from thintact_sdk.interfaces import Mask
+from thintact_sdk.plugin_support import safe_json
 
 DESIGN_FORMAT = "thintact-mask-design/1"
 DESIGNS_DIR = Path(__file__).parent / "designs"

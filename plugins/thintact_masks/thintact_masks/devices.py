@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from thintact_masks.errors import MaskDesignError
-from thintact_sdk.formats.profiles import Profile
+from thintact_sdk.plugin_support import Profile
 
 
 def scaled_profile(profile: Profile, scale: float) -> Profile:

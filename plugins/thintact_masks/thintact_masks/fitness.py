@@ -47,7 +47,7 @@ from thintact_sdk.algorithms import (
     white,
 )
 from thintact_sdk.errors import InvalidShapeError, InvalidValueError
-from thintact_sdk.formats.profiles import Profile
+from thintact_sdk.plugin_support import Profile
 
 #: Floor of 1 − SSIM and of the white image's total variation (keeps f finite for a
 #: perfect reconstruction).

@@ -30,8 +30,7 @@ import numpy as np
 
 from thintact_masks.errors import MaskDesignError
 from thintact_masks.mls import mls_sequence, repeat_to_length
-from thintact_sdk.formats import safe_json
-from thintact_sdk.formats.safe_arrays import read_npz
+from thintact_sdk.plugin_support import read_npz, safe_json
 
 CHECKPOINT_NAME = "checkpoint.npz"
 CHECKPOINT_FORMAT = "thintact-ga-checkpoint/1"

@@ -143,7 +143,7 @@ def _read_array(path: Path) -> np.ndarray:
                 raise MaskDesignError(f"{path}: {im.size[0]}×{im.size[1]} px is larger than {MAX_IMPORT_SIDE}")
             return np.asarray(im.convert("L"), np.float64)
     if suffix == ".npy":
-        from thintact_sdk.formats.safe_arrays import read_npy
+        from thintact_sdk.plugin_support import read_npy
 
         return np.asarray(read_npy(path, what="mask pattern", error=MaskDesignError, kinds="uifb"), np.float64)
     if suffix in (".csv", ".txt"):

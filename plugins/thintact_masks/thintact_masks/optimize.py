@@ -15,9 +15,8 @@ from thintact_masks.fitness import FitnessEvaluator, FitnessSettings
 from thintact_masks.ga import GAConfig, ProgressFn, run_ga
 from thintact_masks.mls import MLSDesigner, random_phi
 from thintact_sdk.errors import InvalidValueError
-from thintact_sdk.formats.profiles import Profile
-from thintact_sdk.host.blas import blas_threads
 from thintact_sdk.interfaces import Mask
+from thintact_sdk.plugin_support import Profile, blas_threads
 
 DESIGN_NAME = "design.json"
 PLOT_NAME = "fitness.png"

@@ -157,7 +157,7 @@ def evaluate_genes(boxed_ref: list[Any], genes: np.ndarray, device: str
     reference rather than a per-task copy). Returns the ``(G,)`` fitness, the worker's pid
     and the seconds spent evaluating.
     """
-    from thintact_sdk.host.blas import blas_threads
+    from thintact_sdk.plugin_support import blas_threads
 
     evaluator = _evaluator_of(boxed_ref[0])
     t0 = time.perf_counter()

@@ -14,7 +14,7 @@ from typing import Any
 from thintact_replay.camera import EndOfRecording, ReplayCamera
 from thintact_replay.mcap_source import McapReplayCamera, is_mcap_path
 from thintact_sdk import Component, hookimpl
-from thintact_sdk.formats.profiles import Profile
+from thintact_sdk.plugin_support import Profile
 
 __all__ = ["EndOfRecording", "McapReplayCamera", "ReplayCamera"]
 

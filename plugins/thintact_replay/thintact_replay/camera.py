@@ -46,21 +46,26 @@ import numpy as np
 from pydantic import Field
 
 from thintact_replay.pacing import wait_until_due
-from thintact_sdk.device.camera_settings import CameraSettings, parse_camera_settings
-from thintact_sdk.device.cameras import channel_layout
 from thintact_sdk.errors import (
     DeviceError,
     EndOfStreamError,
     RecordingError,
 )
-from thintact_sdk.formats.profiles import Profile
-from thintact_sdk.formats.raw_frames import RAW_FIELD, load_raw_data
-from thintact_sdk.formats.recording import Recording
-from thintact_sdk.formats.safe_arrays import read_npy
 from thintact_sdk.frames import RawFrame
 from thintact_sdk.interfaces import Camera, CameraCapabilities
-from thintact_sdk.pixels.bayer import mosaic_from_planes, mosaic_from_rgb
-from thintact_sdk.pixels.tone_curve import encode as encode_tone
+from thintact_sdk.plugin_support import (
+    RAW_FIELD,
+    CameraSettings,
+    Profile,
+    Recording,
+    channel_layout,
+    load_raw_data,
+    mosaic_from_planes,
+    mosaic_from_rgb,
+    parse_camera_settings,
+    read_npy,
+)
+from thintact_sdk.plugin_support import encode as encode_tone
 
 
 class EndOfRecording(EndOfStreamError):

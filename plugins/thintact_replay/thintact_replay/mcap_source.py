@@ -21,12 +21,10 @@ from typing import Any
 
 from thintact_replay.camera import EndOfRecording, ReplaySourceSettings
 from thintact_replay.pacing import wait_until_due
-from thintact_sdk.device.camera_settings import parse_camera_settings
 from thintact_sdk.errors import DeviceError, RecordingError
-from thintact_sdk.formats.mcap import McapLog
-from thintact_sdk.formats.profiles import Profile
 from thintact_sdk.frames import RawFrame
 from thintact_sdk.interfaces import Camera, CameraCapabilities
+from thintact_sdk.plugin_support import McapLog, Profile, parse_camera_settings
 
 MCAP_SUFFIX = ".mcap"
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 from typing import Any
 
 from thintact_sdk import Component, hookimpl
-from thintact_sdk.formats.profiles import Profile
+from thintact_sdk.plugin_support import Profile
 from thintact_uvc.camera import EndOfVideo, UvcCamera, UvcSettingWarning
 
 __all__ = ["EndOfVideo", "UvcCamera", "UvcSettingWarning"]

@@ -52,12 +52,6 @@ import cv2
 import numpy as np
 from pydantic import Field
 
-from thintact_sdk.device.camera_settings import (
-    FrameGeometrySettings,
-    apply_geometry,
-    crop_box,
-    parse_camera_settings,
-)
 from thintact_sdk.errors import (
     DeviceError,
     DeviceLostError,
@@ -68,9 +62,15 @@ from thintact_sdk.errors import (
     RecordingError,
     UnsupportedFeatureError,
 )
-from thintact_sdk.formats.profiles import Profile
 from thintact_sdk.frames import RawFrame
 from thintact_sdk.interfaces import Camera, CameraCapabilities, Range
+from thintact_sdk.plugin_support import (
+    FrameGeometrySettings,
+    Profile,
+    apply_geometry,
+    crop_box,
+    parse_camera_settings,
+)
 from thintact_uvc.sources import Source, resolve_source
 
 V4L2_EXPOSURE_UNIT_US = 100.0

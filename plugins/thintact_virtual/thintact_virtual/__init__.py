@@ -10,8 +10,7 @@ from __future__ import annotations
 from typing import Any
 
 from thintact_sdk import Component, hookimpl
-from thintact_sdk.device.virtual_bench import SceneSlot, get_scene_slot, signal_scale_dn
-from thintact_sdk.formats.profiles import Profile
+from thintact_sdk.plugin_support import Profile, SceneSlot, get_scene_slot, signal_scale_dn
 from thintact_virtual.camera import VirtualCamera
 
 __all__ = ["SceneSlot", "VirtualCamera", "get_scene_slot", "signal_scale_dn"]

@@ -37,14 +37,20 @@ from thintact_sdk.algorithms import (
     scene_for_channels,
     signal_to_dn,
 )
-from thintact_sdk.device.camera_settings import CameraSettings, parse_camera_settings
-from thintact_sdk.device.virtual_bench import REFERENCE_EXPOSURE_US, get_scene_slot, white_level_dn
 from thintact_sdk.errors import DeviceError, ThinTactError, UnsupportedFeatureError
-from thintact_sdk.formats.profiles import Profile
 from thintact_sdk.frames import RawFrame
 from thintact_sdk.interfaces import Camera, CameraCapabilities, Range
-from thintact_sdk.pixels.bayer import mosaic_from_planes, mosaic_from_rgb
-from thintact_sdk.pixels.tone_curve import encode as encode_tone
+from thintact_sdk.plugin_support import (
+    REFERENCE_EXPOSURE_US,
+    CameraSettings,
+    Profile,
+    get_scene_slot,
+    mosaic_from_planes,
+    mosaic_from_rgb,
+    parse_camera_settings,
+    white_level_dn,
+)
+from thintact_sdk.plugin_support import encode as encode_tone
 from thintact_virtual.tactile_scenes import CYCLE, TACTILE_SCENE, tactile_scene
 
 EXPOSURE_RANGE_US = Range(10.0, 1_000_000.0, "us")

@@ -30,7 +30,7 @@ from thintact_sdk.algorithms import (
     ball_radius_for_field,
     simulate_loaded_press,
 )
-from thintact_sdk.formats.profiles import Profile
+from thintact_sdk.plugin_support import Profile
 
 TACTILE_SCENE = "tactile"
 """Scene name selecting this source in the camera's ``scenes`` setting."""
