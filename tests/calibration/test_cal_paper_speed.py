@@ -9,19 +9,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from thintact_sdk.calibration.prediction import _slit_signal_dn, slit_factors
+from thintact_sdk.calibration.prediction import _slit_signal_dn, slit_factors, slit_scenes
 from thintact_sdk.formats.profiles import Profile, load_profile
 from thintact_sdk.simulation.simulator import Simulator
-
-
-def _slit_scenes(idx: list[int], n: int, m: int, c: int) -> np.ndarray:
-    x = np.zeros((len(idx), n, m, c))
-    for b, i in enumerate(idx):
-        if i < n:
-            x[b, i] = 1.0
-        else:
-            x[b, :, i - n] = 1.0
-    return x
 
 
 def test_slit_images_from_the_separable_expansion_equal_the_simulator() -> None:
@@ -32,7 +22,7 @@ def test_slit_images_from_the_separable_expansion_equal_the_simulator() -> None:
     assert factors is not None
     idx = [0, 7, n - 1, n, n + 20, n + m - 1]
     gains = np.array([900.0, 800.0, 700.0])
-    want = sim.predict_signal_dn(_slit_scenes(idx, n, m, 3), gains)
+    want = sim.predict_signal_dn(slit_scenes(idx, n, m, 3), gains)
     got = np.stack([_slit_signal_dn(factors, gains, range(i, i + 1), n)[0] for i in idx])
     assert np.max(np.abs(got - want)) <= 1e-9 * np.max(np.abs(want))
 

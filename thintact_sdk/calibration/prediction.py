@@ -12,6 +12,7 @@ its design.
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -57,6 +58,19 @@ def design_gains(profile: Profile, calibrated: SystemMatrices, sim: Simulator) -
     model = sim.linear_batch(white[None])[0]
     return np.array([float(np.sum(got[..., c] * model[..., c]) / np.sum(model[..., c] ** 2))
                      for c in range(calibrated.channels)])
+
+
+def slit_scenes(idx: Iterable[int], n: int, m: int, c: int) -> np.ndarray:
+    """The slit scenes ``len(idx) × n × m × c`` of slit indices ``idx``: index ``i < n`` lights
+    scene row ``i``, index ``n + j`` lights scene column ``j`` (display value 1, the rest 0)."""
+    idx = list(idx)
+    x = np.zeros((len(idx), n, m, c))
+    for b, i in enumerate(idx):
+        if i < n:
+            x[b, i] = 1.0
+        else:
+            x[b, :, i - n] = 1.0
+    return x
 
 
 def slit_factors(sim: Simulator, channels: int) -> list[tuple[np.ndarray, np.ndarray]] | None:
@@ -119,13 +133,7 @@ def simulated_calibration(profile: Profile, gains: np.ndarray, noise: NoiseSpec,
     for start in range(0, n + m, SLIT_BATCH):
         idx = range(start, min(start + SLIT_BATCH, n + m))
         if factors is None:
-            x = np.zeros((len(idx), n, m, c))
-            for b, i in enumerate(idx):
-                if i < n:
-                    x[b, i] = 1.0
-                else:
-                    x[b, :, i - n] = 1.0
-            expected = sim.predict_signal_dn(x, gains)
+            expected = sim.predict_signal_dn(slit_scenes(idx, n, m, c), gains)
         else:
             expected = _slit_signal_dn(factors, np.asarray(gains, float), idx, n)
         ys = signal_to_dn(expected, noise, rng) - dark_dn
