@@ -17,8 +17,11 @@ thintact_displays         ``factory(profile: Profile, settings: dict) -> Display
 thintact_cli_commands     ``factory(subparsers) -> None`` (adds argparse subcommands)
 thintact_benchmarks       ``factory(parser) -> None`` (a ``thintact bench NAME``: adds its
                           arguments and ``set_defaults(func=run)``)
-thintact_device_listers   ``factory(source: str) -> list[dict]`` (the devices a
-                          source offers, for ``thintact devices``; the name is the source kind)
+thintact_device_listers   ``factory(parser) -> lister`` (a section of ``thintact devices``:
+                          adds its options to the command's parser, returns
+                          ``lister(args) -> (data, lines)``: its JSON-able section, printed
+                          under the component's name by ``--json``, and its text lines, a
+                          heading first; ``args.timeout`` bounds one enumeration, seconds)
 ========================  =====================================================
 """
 
@@ -111,5 +114,5 @@ class ThinTactSpec:
 
     @hookspec
     def thintact_device_listers(self) -> list[Component]:
-        """Device enumerators for ``thintact devices`` (e.g. the devices of a GenTL producer)."""
+        """Sections of ``thintact devices`` (e.g. the GenTL producers and their devices)."""
         return []

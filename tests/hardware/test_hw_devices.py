@@ -117,9 +117,9 @@ def test_bad_usb_backend_is_a_one_line_error(capsys):
 def test_a_hanging_producer_is_reported_not_waited_for():
     import time
 
-    from thintact_sdk.apps.cli.commands.devices import _bounded
+    from thintact_genicam.listing import bounded
 
     t0 = time.monotonic()
-    devices, error = _bounded(lambda cti: time.sleep(2.0) or [], "slow.cti", 0.2)
+    devices, error = bounded(lambda cti: time.sleep(2.0) or [], "slow.cti", 0.2)
     assert devices == [] and "did not finish enumerating within" in error
     assert time.monotonic() - t0 < 1.0

@@ -3,10 +3,15 @@
 Camera component ``genicam``: ``factory(profile, settings)`` →
 :class:`thintact_genicam.camera.GenICamCamera` (settings documented there and in
 docs/cameras.md). :mod:`thintact_genicam.producers` finds producers and lists devices.
+
+Device lister ``genicam`` (the GenICam section of ``thintact devices``): ``factory(parser)``
+adds ``--cti`` and ``--no-profiles`` and returns :func:`thintact_genicam.listing.list_section`.
 """
 
 from __future__ import annotations
 
+import argparse
+from collections.abc import Callable
 from typing import Any
 
 from thintact_genicam.camera import GenICamCamera, GenICamSettingWarning
@@ -31,13 +36,14 @@ def thintact_cameras() -> list[Component]:
     ]
 
 
-def _list_producer_devices(source: str) -> list[dict[str, Any]]:
-    from thintact_genicam.producers import list_devices
+def _device_lister(parser: argparse.ArgumentParser) -> Callable[[argparse.Namespace], Any]:
+    from thintact_genicam.listing import device_lister
 
-    return list_devices(source)
+    return device_lister(parser)
 
 
 @hookimpl
 def thintact_device_listers() -> list[Component]:
-    return [Component("genicam", _list_producer_devices,
-                      "the devices a GenTL producer (.cti file) offers, via harvesters")]
+    return [Component("genicam", _device_lister,
+                      "the GenTL producers (.cti files) named by profiles, --cti and "
+                      "GENICAM_GENTL64_PATH, and the devices each offers, via harvesters")]

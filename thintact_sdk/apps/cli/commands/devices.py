@@ -2,10 +2,12 @@
 
 Sections
 --------
-GenICam
-    For each GenTL producer (``camera.settings.cti`` of the shipped and user profiles,
-    ``--cti PATH``, and ``GENICAM_GENTL64_PATH``), the devices it offers. Producers are only
-    loaded when named; nothing is broadcast on a network by this command itself.
+one per device lister (the ``thintact_device_listers`` hook), first
+    Each lister adds its own options to this command and returns its section, as data
+    (``--json`` prints it under the lister's name) and as text lines. The GenICam plugin's
+    lister ``genicam`` lists the GenTL producers that profiles, ``--cti`` and
+    ``GENICAM_GENTL64_PATH`` name, and their devices. ``--timeout`` is the longest wait,
+    in seconds, a lister gives one enumeration.
 UVC
     ``/dev/video*`` nodes with their ``/dev/v4l/by-id`` names.
 Serial
@@ -20,105 +22,66 @@ USB
 from __future__ import annotations
 
 import argparse
-import concurrent.futures as cf
 import importlib
 import json
 import os
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 from thintact_sdk.apps.cli.argtypes import positive_float
 from thintact_sdk.device.registry import get_registry
-from thintact_sdk.errors import PluginError, ThinTactError
-from thintact_sdk.formats.profiles import available_profiles, read_profile_file
+from thintact_sdk.errors import ThinTactError
 
-GENTL_PATH_ENV = "GENICAM_GENTL64_PATH"
 CLI_DESCRIPTION = """\
 List what this machine can see:
-  GenICam  devices of each GenTL producer named by a profile (camera.settings.cti),
-           by --cti, or by GENICAM_GENTL64_PATH
+  plugins  each device lister's section (GenICam: the devices of each GenTL producer
+           named by a profile's camera.settings.cti, by --cti, or by GENICAM_GENTL64_PATH)
   UVC      /dev/video* nodes with their /dev/v4l/by-id names
   Serial   serial ports with USB VID:PID (use one as a profile's light.port)
   USB      every USB device by VID:PID with its strings (pyusb; --usb-backend injects one)
 """
 
+#: A device lister as built by its component's factory: parsed arguments → (data, text lines).
+Lister = Callable[[argparse.Namespace], tuple[Any, list[str]]]
+
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("devices", help="list GenICam and UVC cameras, serial ports and USB devices",
+    p = sub.add_parser("devices", help="list cameras (plugins' listers, UVC), serial ports and USB devices",
                        description=CLI_DESCRIPTION,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--cti", action="append", default=[], metavar="PATH",
-                   help="also enumerate this GenTL producer (repeatable)")
-    p.add_argument("--no-profiles", action="store_true",
-                   help="do not load the producers named by profiles")
     p.add_argument("--usb-backend", metavar="MODULE:ATTR",
                    help="pyusb backend to use (an IBackend, or a callable returning one)")
     p.add_argument("--timeout", type=positive_float, default=10.0, metavar="S",
-                   help="longest wait for one GenTL producer's enumeration (default 10)")
+                   help="longest wait for one enumeration of a device lister, e.g. one GenTL "
+                        "producer (default 10)")
     p.add_argument("--json", action="store_true", help="machine-readable output")
-    p.set_defaults(func=run)
+    p.set_defaults(func=run, device_listers=_device_listers(p))
 
 
-# -- collection ------------------------------------------------------------------------
-def genicam_producers(extra: list[str], from_profiles: bool = True) -> dict[str, list[str]]:
-    """Producer path → what named it (``profile NAME``, ``--cti``, the environment variable)."""
-    named: dict[str, list[str]] = {}
-    if from_profiles:
-        for name, path in sorted(available_profiles().items()):
-            try:
-                prof = read_profile_file(path)
-            except ThinTactError:
-                continue
-            cam = prof.camera
-            if cam is None or cam.plugin != "genicam" or not cam.settings.get("cti"):
-                continue
-            cti = str(prof.resolve_path(str(cam.settings["cti"])))
-            named.setdefault(cti, []).append(f"profile {name}")
-    for cti in extra:
-        named.setdefault(str(Path(cti).expanduser().resolve()), []).append("--cti")
-    for d in os.environ.get(GENTL_PATH_ENV, "").split(os.pathsep):
-        if not d:
-            continue
-        files = sorted(Path(d).glob("*.cti")) if Path(d).is_dir() else [Path(d)]
-        for f in files:
-            named.setdefault(str(f.resolve()), []).append(GENTL_PATH_ENV)
-    return named
-
-
-def _bounded(fn: Any, arg: str, timeout_s: float) -> tuple[list[dict[str, Any]], str | None]:
-    """``fn(arg)`` on a worker thread; a producer that hangs is reported, not waited for."""
-    pool = cf.ThreadPoolExecutor(max_workers=1, thread_name_prefix="gentl-enum")
-    future = pool.submit(fn, arg)
+def _device_listers(parser: argparse.ArgumentParser) -> dict[str, Lister | str]:
+    """Name → lister (its options added to ``parser``), or → why it could not be built."""
     try:
-        return future.result(timeout=timeout_s), None
-    except cf.TimeoutError:
-        return [], f"the producer did not finish enumerating within {timeout_s:.0f} s"
-    except ThinTactError as err:
-        return [], str(err)
-    finally:
-        pool.shutdown(wait=False)
+        components = get_registry().components("device_lister")
+    except ThinTactError:  # a broken plugin set still leaves the core's sections
+        return {}
+    listers: dict[str, Lister | str] = {}
+    for name in sorted(components):
+        try:
+            listers[name] = get_registry().create("device_lister", name, parser)
+        except ThinTactError:  # recorded on its plugin
+            listers[name] = f"device lister {name!r} failed to build; `thintact plugins` shows why"
+    return listers
 
 
-def genicam_devices(extra: list[str], from_profiles: bool = True,
-                    timeout_s: float = 10.0) -> list[dict[str, Any]]:
-    """One entry per producer: ``producer``, ``named_by``, ``devices`` and ``error``.
-
-    A producer whose enumeration takes longer than ``timeout_s`` is reported as hanging.
-    """
-    out: list[dict[str, Any]] = []
-    for cti, named_by in genicam_producers(extra, from_profiles).items():
-        entry: dict[str, Any] = {"producer": cti, "named_by": named_by, "devices": [],
-                                 "error": None}
-        if not Path(cti).is_file():
-            entry["error"] = "producer file not found (install the camera vendor's GenTL SDK)"
+def lister_sections(args: argparse.Namespace) -> dict[str, tuple[Any, list[str]]]:
+    """Each device lister's section for ``args``: name → (data, text lines)."""
+    out: dict[str, tuple[Any, list[str]]] = {}
+    for name, lister in getattr(args, "device_listers", {}).items():
+        if isinstance(lister, str):
+            out[name] = ({"error": lister}, [name, f"  {lister}"])
         else:
-            try:
-                lister = get_registry().get("device_lister", "genicam").factory
-            except PluginError:
-                entry["error"] = "the thintact-genicam plugin (harvesters) is not installed"
-            else:
-                entry["devices"], entry["error"] = _bounded(lister, cti, timeout_s)
-        out.append(entry)
+            out[name] = lister(args)
     return out
 
 
@@ -199,12 +162,16 @@ def usb_devices(backend: Any = None) -> dict[str, Any]:
     return {"devices": devices, "error": None}
 
 
-def collect(args: argparse.Namespace, usb_backend: Any = None) -> dict[str, Any]:
-    """Every section as plain data (what ``--json`` prints)."""
+def collect(args: argparse.Namespace, usb_backend: Any = None,
+            sections: dict[str, tuple[Any, list[str]]] | None = None) -> dict[str, Any]:
+    """Every section as plain data (what ``--json`` prints): each lister's under its name
+    (from ``sections`` when given, else :func:`lister_sections`), then ``uvc``, ``serial``
+    and ``usb``."""
     if usb_backend is None and args.usb_backend:
         usb_backend = load_usb_backend(args.usb_backend)
-    return {
-        "genicam": genicam_devices(args.cti, not args.no_profiles, args.timeout),
+    if sections is None:
+        sections = lister_sections(args)
+    return {name: data for name, (data, _) in sections.items()} | {
         "uvc": uvc_devices(),
         "serial": serial_ports(),
         "usb": usb_devices(usb_backend),
@@ -212,19 +179,10 @@ def collect(args: argparse.Namespace, usb_backend: Any = None) -> dict[str, Any]
 
 
 # -- output ----------------------------------------------------------------------------
-def _print_text(found: dict[str, Any]) -> None:
-    print("GenICam (GenTL producers)")
-    if not found["genicam"]:
-        print(f"  no producer named (profiles' camera.settings.cti, --cti, {GENTL_PATH_ENV})")
-    for entry in found["genicam"]:
-        print(f"  {entry['producer']}  ({', '.join(entry['named_by'])})")
-        if entry["error"]:
-            print(f"    {entry['error']}")
-        elif not entry["devices"]:
-            print("    no device")
-        for i, d in enumerate(entry["devices"]):
-            print(f"    [{i}] {d.get('vendor') or ''} {d.get('model') or ''}  serial "
-                  f"{d.get('serial')}  id {d.get('id')}")
+def _print_text(found: dict[str, Any], lister_lines: list[str]) -> None:
+    """The listers' lines, then the UVC, serial and USB sections of ``found``."""
+    for line in lister_lines:
+        print(line)
     print("UVC / V4L2")
     if not found["uvc"]:
         print("  no /dev/video* device")
@@ -253,9 +211,11 @@ def _print_text(found: dict[str, Any]) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    found = collect(args)
+    usb_backend = load_usb_backend(args.usb_backend) if args.usb_backend else None
+    sections = lister_sections(args)
+    found = collect(args, usb_backend, sections)
     if args.json:
         print(json.dumps(found, indent=1, default=str))
     else:
-        _print_text(found)
+        _print_text(found, [line for _, lines in sections.values() for line in lines])
     return 0
