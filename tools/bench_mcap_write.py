@@ -28,8 +28,8 @@ from pathlib import Path
 
 import numpy as np
 
-from thintact_sdk.apps.cli.commands.record import storage_array
 from thintact_sdk.device.cameras import create_camera, to_measurement
+from thintact_sdk.device.capture_record import storage_array
 from thintact_sdk.formats.mcap import McapLogWriter
 from thintact_sdk.formats.profiles import load_profile
 from thintact_sdk.formats.raw_frames import save_raw_frame

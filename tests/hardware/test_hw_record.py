@@ -9,9 +9,9 @@ import pytest
 import yaml
 from thintact_genicam.producers import viky_producer
 
-from thintact_sdk.apps.cli.commands.record import storage_array
 from thintact_sdk.apps.cli.main import main
 from thintact_sdk.device.cameras import create_camera, to_measurement
+from thintact_sdk.device.capture_record import storage_array
 from thintact_sdk.formats.profiles import load_profile
 from thintact_sdk.formats.recording import Recording, RecordingWriter
 
@@ -80,6 +80,35 @@ def test_record_then_replay_is_bit_exact(tmp_path, capsys):
         assert len(got) == 6
         for g, m in zip(got, meas, strict=True):
             np.testing.assert_array_equal(g, m)
+
+
+def test_the_library_record_writes_what_the_command_writes(tmp_path, capsys):
+    """``thintact record`` only parses and prints: the library's ``record`` gives the same
+    recording (manifest apart from capture times, and every stored file) from the same source."""
+    from thintact_sdk.device.capture_record import record
+
+    _source_recording(tmp_path / "src", n=4, ids=[0, 1, 3, 4])
+    prof = _replay_profile(tmp_path, tmp_path / "src")
+    assert main(["record", "--profile", str(prof), "--frames", "4", "--out", str(tmp_path / "cli"),
+                 "--raw", "--quiet"]) == 0
+    capsys.readouterr()
+    summary = record(load_profile(str(prof)), 4, tmp_path / "lib", keep_raw=True, progress=False)
+    assert (summary.frames, summary.dropped) == (4, 1)
+
+    def content(root):  # the host's capture time is the one field that differs between runs
+        manifest = json.loads((root / "manifest.json").read_text())
+        for fr in manifest["frames"]:
+            assert isinstance(fr.pop("timestamp_ns"), int)
+        files = {str(f.relative_to(root)): f.read_bytes() for f in sorted(root.rglob("*"))
+                 if f.is_file() and f.name != "manifest.json"}
+        return manifest, files
+
+    cli_manifest, cli_files = content(tmp_path / "cli")
+    lib_manifest, lib_files = content(tmp_path / "lib")
+    assert [fr["dropped_before"] for fr in cli_manifest["frames"] if "dropped_before" in fr] == [1]
+    assert lib_manifest == cli_manifest
+    assert lib_files.keys() == cli_files.keys() and len(cli_files) >= 8
+    assert lib_files == cli_files
 
 
 def test_dropped_frames_are_reported_and_can_fail(tmp_path, capsys):

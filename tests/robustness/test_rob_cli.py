@@ -247,7 +247,7 @@ def test_diagnose_never_writes_a_report_with_nan_figures() -> None:
 
 def test_record_append_of_another_device_is_refused_before_the_camera_opens(
         tiny: dict[str, Any], rec_copy: Path, capfd: Any, monkeypatch: Any) -> None:
-    import thintact_sdk.apps.cli.commands.record as record_cmd
+    import thintact_sdk.device.capture_record as record_cmd
 
     monkeypatch.setattr(record_cmd, "create_camera", lambda *a, **k: pytest.fail("camera opened"))
     manifest_before = (rec_copy / "manifest.json").read_text()

@@ -243,7 +243,7 @@ def test_the_write_lock_is_exclusive_and_released(tmp_path: Path) -> None:
 
 def test_a_recording_is_still_refused_without_append_under_the_lock(camera_profile: Path,
                                                                     tmp_path: Path) -> None:
-    from thintact_sdk.apps.cli.commands.record import record
+    from thintact_sdk.device.capture_record import record
     from thintact_sdk.formats.profiles import load_profile
 
     profile = load_profile(str(camera_profile))

@@ -1,13 +1,8 @@
 """``thintact record``: capture N frames from a profile's camera into a recording.
 
-The recording is a ``thintact-recording/1`` directory (CONTRACTS §3). Every frame goes
-through :func:`thintact_sdk.device.cameras.to_measurement` (Bayer binning, profile black level);
-measurements are stored as uint16 when every value is an integer in 0..65535, else float32.
-Each manifest entry carries ``timestamp_ns``, ``frame_id``, ``exposure_us`` (and
-``gain_db``, ``device_timestamp_ns``, ``dropped_before`` when known). A ground-truth scene
-that the camera reports (``meta["scene"]``, e.g. the virtual camera) is saved as the
-frame's scene. ``--raw`` also keeps each raw mosaic (``raw/<index>.npy``, see
-:mod:`thintact_sdk.formats.raw_frames`), which the ``replay`` camera then delivers as recorded.
+Parsing, the output policy and the summary lines; the recording itself is
+:func:`thintact_sdk.device.capture_record.record` (a ``thintact-recording/1`` directory,
+CONTRACTS §3) or :func:`~thintact_sdk.device.capture_record.record_log` (``--format mcap``).
 
 Dropped frames (gaps in the camera's frame ids) are never silent: each gap is reported,
 the count is printed at the end, and ``--fail-on-drop`` turns any drop into an error.
@@ -18,9 +13,6 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
-from typing import Any
-
-import numpy as np
 
 from thintact_sdk.apps.cli.argtypes import (
     KEY_VALUE_HELP,
@@ -34,15 +26,11 @@ from thintact_sdk.apps.cli.output_path import (
     check_not_an_input,
     claim_output,
     file_input,
-    write_lock,
 )
-from thintact_sdk.device.cameras import create_camera, to_measurement
-from thintact_sdk.device.capture_loop import RecordSummary, capture_frames
-from thintact_sdk.errors import DeviceError, OutputError, RecordingError, ThinTactError
+from thintact_sdk.device.capture_loop import RecordSummary
+from thintact_sdk.device.capture_record import record, record_log
+from thintact_sdk.errors import DeviceError, RecordingError, ThinTactError
 from thintact_sdk.formats.profiles import Profile, load_profile
-from thintact_sdk.formats.raw_frames import save_raw_frame
-from thintact_sdk.formats.recording import RecordingWriter, check_appendable
-from thintact_sdk.frames import RawFrame
 
 CLI_DESCRIPTION = """\
 Capture N frames from the profile's camera into a thintact-recording/1 directory.
@@ -104,135 +92,19 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def storage_array(data: np.ndarray) -> np.ndarray:
-    """The measurement as stored: uint16 when integral and within 0..65535, else float32."""
-    if data.size and np.all(np.isfinite(data)):
-        lo, hi = float(data.min()), float(data.max())
-        if lo >= 0 and hi <= 65535 and np.array_equal(data, np.round(data)):
-            return data.astype(np.uint16)
-    return data.astype(np.float32, copy=False)
-
-
-def _frame_fields(raw: RawFrame, missing_before: int) -> dict[str, Any]:
-    extra: dict[str, Any] = {"timestamp_ns": int(raw.timestamp_ns), "frame_id": int(raw.frame_id),
-                             "exposure_us": raw.exposure_us}
-    if raw.gain_db is not None:
-        extra["gain_db"] = raw.gain_db
-    if raw.device_timestamp_ns is not None:
-        extra["device_timestamp_ns"] = int(raw.device_timestamp_ns)
-    if missing_before:
-        extra["dropped_before"] = missing_before
-    return extra
-
-
-def _scene_of(raw: RawFrame, profile: Profile) -> np.ndarray | None:
-    scene = raw.meta.get("scene")
-    if isinstance(scene, np.ndarray) and scene.shape[:2] == (profile.scene.rows, profile.scene.cols):
-        return scene.astype(np.float32, copy=False)
-    return None
-
-
-def record(
-    profile: Profile,
-    frames: int,
-    out: Path,
-    *,
-    keep_raw: bool = False,
-    timeout_s: float = 5.0,
-    settings: dict[str, Any] | None = None,
-    append: bool = False,
-    scenes: bool = True,
-    progress: bool = True,
-    buffer_mb: float = 512.0,
-) -> RecordSummary:
-    """Record ``frames`` frames from the profile's camera into ``out``.
-
-    A capture thread reads the camera into a queue of at most ``buffer_mb`` MiB of frames
-    while this thread bins and writes them, so a burst faster than the disk is absorbed;
-    when the queue is full the capture thread waits and the camera drops frames, which the
-    frame-id gaps then report (:func:`thintact_sdk.device.capture_loop.capture_frames`).
-
-    The directory is held with :func:`~thintact_sdk.apps.cli.output_path.write_lock` for the
-    whole recording, and whether it already holds a recording is decided under that lock:
-    of several runs racing for the same ``out`` exactly one records, the others fail.
-
-    Raises
-    ------
-    RecordingError
-        When ``out`` already holds a recording and ``append`` is false.
-    OutputError
-        When another process is recording into ``out``.
-    DeviceError
-        When the camera fails; every frame written before the fault stays in the recording.
-    """
-    if frames <= 0:
-        raise ThinTactError("--frames must be at least 1")
-    with write_lock(out, "directory"):
-        if (out / "manifest.json").is_file():
-            if not append:
-                raise RecordingError(f"{out} already holds a recording; choose a new --out or pass --append")
-            check_appendable(out, profile)  # before the camera is opened
-        save_raw = save_raw_frame if keep_raw else None
-        camera = create_camera(profile, settings=settings)
-        sink = _RecordingSink(out, profile, save_raw=save_raw, scenes=scenes)
-        return capture_frames(camera, profile, frames, sink, saved_in=out, timeout_s=timeout_s,
-                              buffer_mb=buffer_mb, progress=progress)
-
-
-class _RecordingSink:
-    """Bins each frame and appends it to a ``thintact-recording/1`` directory."""
-
-    def __init__(self, out: Path, profile: Profile, *, save_raw: Any, scenes: bool) -> None:
-        self.out = out
-        self.profile = profile
-        self.save_raw = save_raw
-        self.scenes = scenes
-        self._writer: RecordingWriter | None = None
-        self._first_index = 0
-
-    def start(self) -> None:
-        self._writer = RecordingWriter(self.out, self.profile)
-        self._first_index = len(self._writer.frames)
-
-    def write(self, index: int, raw: RawFrame, dropped_before: int) -> None:
-        assert self._writer is not None
-        meas = to_measurement(raw, self.profile)
-        extra = _frame_fields(raw, dropped_before)
-        at = self._first_index + index
-        if self.save_raw is not None:
-            extra.update(self.save_raw(self.out, at, raw))
-        self._writer.add(
-            storage_array(meas.data),
-            scene=_scene_of(raw, self.profile) if self.scenes else None,
-            label=f"frame{at:06d}",
-            **extra,
-        )
-
-    def close(self) -> None:
-        """Nothing to finish: every frame is in the manifest as soon as it is added."""
-
-
 def _record_mcap(args: argparse.Namespace, profile: Profile, out: Path) -> RecordSummary:
     """``--format mcap``: the options that only make sense for a recording directory fail."""
-    from thintact_sdk.formats.mcap.recorder import record_mcap
-
     for flag, given in (("--raw", args.raw), ("--append", args.append),
                         ("--no-scenes", args.no_scenes)):
         if given:
             raise ThinTactError(f"{flag} applies to --format recording only; an MCAP log "
                                 "always holds the raw frames and is never appended to")
-    with write_lock(out, "file"):  # exactly one of several runs racing for the same --out
-        if out.exists():
-            if not args.force:
-                raise OutputError(f"--out {out} already exists; pass --force to overwrite it "
-                                  "or choose another path")
-            out.unlink()
-        return record_mcap(
-            profile, args.frames, out, tactile=not args.no_tactile, timeout_s=args.timeout,
-            settings=key_values(args.set), compression=args.compression,
-            image_encoding=args.image_encoding, raw_preview=False if args.no_raw_preview else None,
-            progress=not args.quiet, buffer_mb=args.buffer_mb,
-        )
+    return record_log(
+        profile, args.frames, out, overwrite=args.force, tactile=not args.no_tactile,
+        timeout_s=args.timeout, settings=key_values(args.set), compression=args.compression,
+        image_encoding=args.image_encoding, raw_preview=False if args.no_raw_preview else None,
+        progress=not args.quiet, buffer_mb=args.buffer_mb,
+    )
 
 
 def claim_recording_dir(path: str, append: bool, force: bool, inputs: tuple[Path | None, ...] = ()) -> Path:
