@@ -171,6 +171,13 @@ class MaskDesigner(abc.ABC):
     def design(self, K: int, feature_um: float, **options: Any) -> Mask:  # noqa: N803
         ...
 
+    def stored_design(self, device: str) -> tuple[Mask, dict[str, Any]] | None:
+        """A design this designer made earlier for the device (profile name) ``device`` and
+        ships or keeps, with its record (JSON object: ``design``, ``K``, ``feature_um`` ...);
+        ``None`` (the default) when it has none. ``thintact bench reconstruct`` compares the
+        profile's mask with every stored design it finds."""
+        return None
+
 
 class ImagingModel(abc.ABC):
     """Forward model: scene (``N × M × C``, display units) → signal (``R × S × C``)."""

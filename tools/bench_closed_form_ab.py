@@ -26,8 +26,8 @@ from typing import Any
 CHILD = r'''
 import contextlib, json, os, sys, time
 import numpy as np
-from thintact_decoders import ArrayBackend, T2SClosedFormDecoder
-from thintact_decoders.sensor_binning import SensorBinnedDecoder, bin_frame, bin_system_matrices
+from thintact_sdk.reconstruction.decoders import ArrayBackend, T2SClosedFormDecoder
+from thintact_sdk.reconstruction.decoders.sensor_binning import SensorBinnedDecoder, bin_frame, bin_system_matrices
 from thintact_sdk.algorithms import SystemMatrices, coding_power
 from thintact_sdk.pixels.bayer import planar_frame
 from thintact_sdk.host.compute_threads import single_threaded_kernels

@@ -25,8 +25,6 @@ import time
 from collections.abc import Callable
 
 import numpy as np
-from thintact_decoders import ArrayBackend, T2SClosedFormDecoder
-from thintact_decoders.sensor_binning import SensorBinnedDecoder, bin_frame, bin_system_matrices
 
 from thintact_sdk.algorithms import SystemMatrices, coding_power
 from thintact_sdk.device.cameras import to_measurement
@@ -36,6 +34,12 @@ from thintact_sdk.host.compute_threads import single_threaded_kernels
 from thintact_sdk.host.machine import machine_summary
 from thintact_sdk.host.roofline import measure_sgemm_gflops
 from thintact_sdk.pixels.bayer import mosaic_from_rgb, planar_frame
+from thintact_sdk.reconstruction.decoders import ArrayBackend, T2SClosedFormDecoder
+from thintact_sdk.reconstruction.decoders.sensor_binning import (
+    SensorBinnedDecoder,
+    bin_frame,
+    bin_system_matrices,
+)
 from thintact_sdk.reconstruction.direct_generation import direct_system_matrices
 
 

@@ -34,8 +34,7 @@ def main() -> None:
     p.add_argument("--bundle", type=Path, help="calibration bundle directory for the decoder")
     args = p.parse_args()
 
-    import thintact_decoders
-
+    import thintact_sdk.reconstruction.decoders.components as thintact_decoders
     from thintact_sdk.apps.benchmarks.tactile_accuracy import latency
     from thintact_sdk.host.machine import host_capabilities, machine_summary
 

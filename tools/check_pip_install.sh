@@ -40,7 +40,7 @@ step "installing the wheels into a fresh venv ($("$PY" --version))"
 cd "$work/run"
 unset THINTACT_CALIBRATION_PATH PYTHONPATH
 py="$work/venv/bin/python"
-where=$("$py" -c 'import thintact_sdk, thintact_virtual, thintact_decoders; print(thintact_sdk.__file__)') \
+where=$("$py" -c 'import thintact_sdk, thintact_virtual; print(thintact_sdk.__file__)') \
   || fail "import thintact_sdk from the fresh venv"
 case "$where" in
   "$work/venv/"*) ;;

@@ -83,7 +83,7 @@ def test_monochrome_device_calibrates_and_decodes(tmp_path: Path, decoder: str) 
 
 
 def test_one_term_matrices_decode_quietly_with_t2s_closed_form() -> None:
-    from thintact_decoders.t2s_closed_form import T2SClosedFormDecoder
+    from thintact_sdk.reconstruction.decoders.t2s_closed_form import T2SClosedFormDecoder
 
     rng = np.random.default_rng(0)
     pc, qc = rng.standard_normal((1, 30, 12)), rng.standard_normal((1, 36, 14))

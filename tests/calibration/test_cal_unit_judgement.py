@@ -325,9 +325,8 @@ def test_bundle_tau_per_channel_is_used_unless_tau_is_given(tmp_path: Path) -> N
 
 
 def test_bundle_scene_prior_is_used_unless_tau_is_given_and_old_bundles_decode_as_before(tmp_path: Path) -> None:
-    from thintact_decoders import ArrayBackend, T2SClosedFormDecoder
-
     from thintact_sdk.errors import CalibrationError
+    from thintact_sdk.reconstruction.decoders import ArrayBackend, T2SClosedFormDecoder
 
     profile = small_profile(("R", "G", "B"))
     sm = _random_matrices(profile, seed=6)

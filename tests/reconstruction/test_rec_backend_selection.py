@@ -9,15 +9,6 @@ from typing import Any
 
 import numpy as np
 import pytest
-from thintact_decoders import ArrayBackend, FlatCamDecoder
-from thintact_decoders.backend_cache import BackendCache, cache_dir
-from thintact_decoders.candidates import BackendSpec, candidate_specs, parse_preference
-from thintact_decoders.selection import (
-    BackendPreferenceWarning,
-    decide,
-    make_probes,
-    select_backend,
-)
 
 from thintact_sdk.device.registry import get_registry
 from thintact_sdk.formats.profiles import load_profile
@@ -26,6 +17,19 @@ from thintact_sdk.host.machine import (
     cpu_flags,
     has_native_bf16,
     host_capabilities,
+)
+from thintact_sdk.reconstruction.decoders import ArrayBackend, FlatCamDecoder
+from thintact_sdk.reconstruction.decoders.backend_cache import BackendCache, cache_dir
+from thintact_sdk.reconstruction.decoders.backend_candidates import (
+    BackendSpec,
+    candidate_specs,
+    parse_preference,
+)
+from thintact_sdk.reconstruction.decoders.backend_selection import (
+    BackendPreferenceWarning,
+    decide,
+    make_probes,
+    select_backend,
 )
 from thintact_sdk.reconstruction.synthetic_matrices import frequency_split_matrices
 
@@ -173,7 +177,7 @@ def test_preference_names() -> None:
 
 
 def test_a_bfloat16_profile_setting_decodes_in_float32_without_native_support(monkeypatch) -> None:
-    import thintact_decoders
+    import thintact_sdk.reconstruction.decoders.components as thintact_decoders
 
     monkeypatch.setattr(thintact_decoders, "host_capabilities",
                         lambda: replace(host_capabilities(), native_bf16=False))

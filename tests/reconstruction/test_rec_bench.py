@@ -5,10 +5,9 @@ from __future__ import annotations
 import argparse
 import json
 
-from thintact_decoders import bench_reconstruct as reconstruct
-from thintact_decoders.sensor_binning import binning_possible
-
+from thintact_sdk.apps.benchmarks import decoder_latency as reconstruct
 from thintact_sdk.host.machine import host_capabilities
+from thintact_sdk.reconstruction.decoders.sensor_binning import binning_possible
 
 
 def test_bench_reconstruct_runs_on_virtual_mini(capsys, monkeypatch) -> None:
@@ -68,10 +67,10 @@ def test_decoders_take_the_binned_planes_without_a_copy_and_decode_them_alike() 
     operand is that storage itself (no per-frame conversion pass), and the result equals
     the one from an interleaved copy of the same frame."""
     import numpy as np
-    from thintact_decoders import ArrayBackend, T2SClosedFormDecoder
 
     from thintact_sdk.algorithms import SystemMatrices
     from thintact_sdk.pixels.bayer import bin_bayer
+    from thintact_sdk.reconstruction.decoders import ArrayBackend, T2SClosedFormDecoder
 
     rng = np.random.default_rng(3)
     mosaic = rng.integers(60, 4000, size=(32, 40)).astype(np.uint16)

@@ -4,12 +4,17 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from thintact_decoders import ArrayBackend, FlatCamDecoder, NonIterativeDecoder, T2SIterativeDecoder
 
 from thintact_sdk.device.registry import get_registry
 from thintact_sdk.errors import CalibrationError
 from thintact_sdk.formats.profiles import load_profile, profile_from_dict
 from thintact_sdk.reconstruction.bundle import CalibrationBundle
+from thintact_sdk.reconstruction.decoders import (
+    ArrayBackend,
+    FlatCamDecoder,
+    NonIterativeDecoder,
+    T2SIterativeDecoder,
+)
 from thintact_sdk.reconstruction.synthetic_matrices import frequency_split_matrices
 from thintact_sdk.reconstruction.t2s import SystemMatrices
 
@@ -100,7 +105,7 @@ def test_decoders_load_through_the_plugin_registry(synthetic, tmp_path) -> None:
     )
     reg = get_registry()
     assert {"thintact-noniterative", "t2s-iterative", "flatcam"} <= set(reg.components("decoder"))
-    assert reg.get("decoder", "flatcam").plugin == "thintact-decoders"
+    assert reg.get("decoder", "flatcam").plugin == "thintact-sdk"
     dec = reg.create("decoder", "thintact-noniterative", profile, {"calibration": str(bundle_dir)})
     np.testing.assert_allclose(dec.decode(y), x, atol=1e-4)
     it = reg.create("decoder", "t2s-iterative", profile,

@@ -11,10 +11,13 @@ pytestmark = pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA d
 
 
 def test_cuda_is_a_candidate_and_decodes_like_numpy() -> None:
-    from thintact_decoders import ArrayBackend, NonIterativeDecoder, T2SClosedFormDecoder
-    from thintact_decoders.candidates import candidate_specs
-
     from thintact_sdk.host.machine import host_capabilities
+    from thintact_sdk.reconstruction.decoders import (
+        ArrayBackend,
+        NonIterativeDecoder,
+        T2SClosedFormDecoder,
+    )
+    from thintact_sdk.reconstruction.decoders.backend_candidates import candidate_specs
     from thintact_sdk.reconstruction.synthetic_matrices import frequency_split_matrices
 
     assert "cuda-float32" in [s.key for s in candidate_specs(host_capabilities())]

@@ -5,16 +5,16 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from thintact_decoders import (
+
+from thintact_sdk.host.roofline import measure_sgemm_gflops, roofline_ratio
+from thintact_sdk.reconstruction.decoders import (
     ArrayBackend,
     FlatCamDecoder,
     NonIterativeDecoder,
     T2SClosedFormDecoder,
 )
-from thintact_decoders.backend import synthesis_macs
-from thintact_decoders.modes import kept_mode_counts
-
-from thintact_sdk.host.roofline import measure_sgemm_gflops, roofline_ratio
+from thintact_sdk.reconstruction.decoders.backend import synthesis_macs
+from thintact_sdk.reconstruction.decoders.modes import kept_mode_counts
 from thintact_sdk.reconstruction.synthetic_matrices import frequency_split_matrices
 from thintact_sdk.reconstruction.t2s import SystemMatrices
 

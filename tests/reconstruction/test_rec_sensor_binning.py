@@ -7,16 +7,6 @@ import threading
 
 import numpy as np
 import pytest
-from thintact_decoders import ArrayBackend, T2SClosedFormDecoder
-from thintact_decoders.backend_cache import BackendCache
-from thintact_decoders.candidates import candidate_specs, parse_preference
-from thintact_decoders.selection import make_probes, select_backend
-from thintact_decoders.sensor_binning import (
-    SensorBinnedDecoder,
-    bin_frame,
-    bin_system_matrices,
-    binning_possible,
-)
 
 from thintact_sdk.algorithms import SystemMatrices
 from thintact_sdk.device.sensor import Sensor
@@ -25,6 +15,19 @@ from thintact_sdk.formats.profiles import load_profile
 from thintact_sdk.host.machine import HostCapabilities
 from thintact_sdk.interfaces import Decoder
 from thintact_sdk.pixels.bayer import planar_frame
+from thintact_sdk.reconstruction.decoders import ArrayBackend, T2SClosedFormDecoder
+from thintact_sdk.reconstruction.decoders.backend_cache import BackendCache
+from thintact_sdk.reconstruction.decoders.backend_candidates import (
+    candidate_specs,
+    parse_preference,
+)
+from thintact_sdk.reconstruction.decoders.backend_selection import make_probes, select_backend
+from thintact_sdk.reconstruction.decoders.sensor_binning import (
+    SensorBinnedDecoder,
+    bin_frame,
+    bin_system_matrices,
+    binning_possible,
+)
 
 HOST = HostCapabilities("Test CPU", 2, "AVX2", False, "openblas (2 threads)", "2.13.0+cpu, 2 threads", (),
                         ("avx2", "fma"))
@@ -175,7 +178,7 @@ def test_concurrent_decode_workers_do_not_share_the_binned_frame() -> None:
 
 
 def test_binning_is_offered_by_default_only_where_the_products_are_heavy() -> None:
-    from thintact_decoders.sensor_binning import binning_offered
+    from thintact_sdk.reconstruction.decoders.sensor_binning import binning_offered
 
     assert binning_offered((1024, 1280), (400, 512), 3) == 2  # the paper device: 3.1 GFLOP first product
     assert binning_offered((256, 320), (100, 128), 3) == 1  # the virtual finger: 0.05 GFLOP
@@ -211,13 +214,12 @@ def test_sensor_bins_the_mosaic_once_for_a_binned_decoder(pixel_format: str) -> 
     """Raw Bayer → the binned decoder's input in one pass (``sensor_bin = 2``: 4 × 4 cells of
     the mosaic per colour site) decodes to the same scene, to float32 rounding, as binning
     2 × 2 into the measurement and letting the decoder bin it again; black level included."""
-    from thintact_decoders.sensor_binning import binnable_build
-
     from thintact_sdk.device.cameras import to_measurement
     from thintact_sdk.device.sensor import _InFlight
     from thintact_sdk.frames import RawFrame
     from thintact_sdk.interfaces import BinnedInputDecoder, binned_input
     from thintact_sdk.pixels.bayer import mosaic_from_rgb
+    from thintact_sdk.reconstruction.decoders.sensor_binning import binnable_build
 
     profile = load_profile("virtual-mini")  # 128 × 160 sensor, 50 × 64 scene, black 64 DN
     sm = _operator(128, 160, 50, 64)

@@ -4,9 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from thintact_decoders import ArrayBackend, T2SClosedFormDecoder, T2SIterativeDecoder
 
 from thintact_sdk.errors import CalibrationError, InvalidValueError
+from thintact_sdk.reconstruction.decoders import (
+    ArrayBackend,
+    T2SClosedFormDecoder,
+    T2SIterativeDecoder,
+)
 from thintact_sdk.reconstruction.scene_prior import ScenePrior
 from thintact_sdk.reconstruction.t2s import SystemMatrices
 
@@ -133,8 +137,7 @@ def test_iterate_reproduces_the_iterative_decoder() -> None:
 
 
 def test_set_tau_equals_a_fresh_decoder() -> None:
-    from thintact_decoders import NonIterativeDecoder
-
+    from thintact_sdk.reconstruction.decoders import NonIterativeDecoder
     from thintact_sdk.reconstruction.synthetic_matrices import frequency_split_matrices
 
     sm = _low_rank_open_matrices(8)
@@ -178,7 +181,7 @@ def test_exact_in_any_gauge_of_the_same_operator() -> None:
 
 
 def test_a_tau_per_channel_decodes_each_channel_at_its_own_tau() -> None:
-    from thintact_decoders import NonIterativeDecoder
+    from thintact_sdk.reconstruction.decoders import NonIterativeDecoder
 
     sm = _low_rank_open_matrices(5)
     rng = np.random.default_rng(6)
@@ -203,7 +206,7 @@ def test_blocked_numpy_solve_is_the_generic_solve(monkeypatch: pytest.MonkeyPatc
     scale / project / correct per block of rows) gives the generic path's answer: float64 to
     1e-10, float32 to float32 rounding; one block and many, with the coding modes truncated
     (zero-padded coefficients) and a black level."""
-    import thintact_decoders.t2s_closed_form as t2s
+    import thintact_sdk.reconstruction.decoders.t2s_closed_form as t2s
 
     monkeypatch.setattr(t2s, "BLOCK_BYTES", block_bytes)
     sm = _low_rank_open_matrices(3)

@@ -34,9 +34,10 @@ def test_core_user_data_errors_are_thintact_errors(label: str, call: Callable[[]
 
 
 def test_plugin_user_data_errors_are_thintact_errors() -> None:
-    from thintact_decoders.backend import ArrayBackend
-    from thintact_decoders.shapes import check_measurement_shape
     from thintact_serial_led.protocol import level_to_wire
+
+    from thintact_sdk.reconstruction.decoders.backend import ArrayBackend
+    from thintact_sdk.reconstruction.decoders.shapes import check_measurement_shape
 
     with pytest.raises(InvalidShapeError, match="measurement must be 4×5×3"):
         check_measurement_shape(np.zeros((4, 4, 3)), (4, 5), 3)

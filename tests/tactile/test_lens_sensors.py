@@ -103,7 +103,7 @@ def test_lens_profiles_and_their_errors():
         assert p.mask.K == 1 and p.mask.phi == [1]  # open aperture: no coded mask
     with pytest.raises(DeviceNotFoundError, match="no UVC camera 7"):
         thintact.open("digit", camera_settings={"device": 7})
-    from thintact_decoders.identity import IdentityDecoder
+    from thintact_sdk.reconstruction.decoders.identity import IdentityDecoder
 
     with pytest.raises(ProfileError, match="flip must be one of"):
         IdentityDecoder((4, 4), 255.0, flip="sideways")

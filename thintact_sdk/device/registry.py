@@ -17,6 +17,7 @@ package can never silently take the place of the SDK's own component.
 
 from __future__ import annotations
 
+import importlib
 import importlib.metadata as md
 import itertools
 import traceback
@@ -31,6 +32,9 @@ from thintact_sdk.hookspecs import KINDS, PROJECT, Component, ThinTactSpec
 from thintact_sdk.interfaces import Camera, Decoder, Display, LightController, MaskDesigner
 
 ENTRY_POINT_GROUP = "thintact"
+BUILTIN_PLUGINS = {"thintact-sdk": "thintact_sdk.reconstruction.decoders.components"}
+"""The core's own components (plugin name → module), registered through the same hooks as an
+entry point and before them (:meth:`PluginRegistry.load_builtins`): the paper's decoders."""
 MAX_COMPONENTS_PER_HOOK = 1000
 """A hook yielding more components than this is refused (an endless generator)."""
 MAX_FAILURES = 20
@@ -80,6 +84,22 @@ class PluginRegistry:
         self._namespaced: dict[str, dict[str, Component]] = {k: {} for k in KINDS}
 
     # -- loading -----------------------------------------------------------------------
+    def load_builtins(self) -> None:
+        """Register the core's modules of :data:`BUILTIN_PLUGINS` as plugins (pluggy style),
+        exactly as an entry point would be; a failure is recorded, not raised."""
+        for name, module in BUILTIN_PLUGINS.items():
+            if name in self.plugins:
+                continue
+            info = PluginInfo(name=name, module=module, distribution="thintact-sdk",
+                              version=_sdk_version())
+            self.plugins[name] = info
+            try:
+                obj = importlib.import_module(module)
+            except Exception as err:  # noqa: BLE001 - reported like a plugin's import failure
+                info.error = f"{type(err).__name__}: {err}"
+                continue
+            self.register(obj, name, info)
+
     def load_entry_points(self, group: str = ENTRY_POINT_GROUP) -> None:
         """Import every entry point in ``group``; failures are recorded, not raised."""
         for ep in sorted(md.entry_points(group=group), key=lambda e: e.name):
@@ -254,6 +274,13 @@ def _components_of(result: object, hook_name: str, info: PluginInfo) -> list[Com
     return good
 
 
+def _sdk_version() -> str | None:
+    try:
+        return md.version("thintact-sdk")
+    except md.PackageNotFoundError:
+        return None
+
+
 def _short(value: object) -> str:
     """``repr(value)``, at most 60 characters (a plugin's repr may be long or fail)."""
     try:
@@ -271,6 +298,7 @@ def get_registry(reload: bool = False) -> PluginRegistry:
     global _REGISTRY
     if _REGISTRY is None or reload:
         reg = PluginRegistry()
+        reg.load_builtins()
         reg.load_entry_points()
         _REGISTRY = reg
     return _REGISTRY

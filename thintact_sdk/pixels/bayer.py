@@ -43,7 +43,7 @@ def planar_frame(rows: int, cols: int, channels: int) -> np.ndarray:
     one contiguous plane: binning writes it with unit stride (paper device: 2.9 instead of
     3.8 ms per frame, Xeon-AMX, one thread) and the decoders take the planes as their
     channel-first GEMM operand without a copy (:meth:`ArrayBackend.channels_first
-    <thintact_decoders.backend.ArrayBackend.channels_first>`), which saved a 3.5 ms pass per
+    <thintact_sdk.reconstruction.decoders.backend.ArrayBackend.channels_first>`), which saved a 3.5 ms pass per
     paper-size frame. It indexes like any ``R × S × C`` array; ``np.ascontiguousarray``
     gives the interleaved layout where one is needed.
     """

@@ -49,6 +49,13 @@ class GADesigner(MaskDesigner):
                                 options.get("out_dir"), options.get("progress"))
         return mask
 
+    def stored_design(self, device: str) -> tuple[Mask, dict[str, Any]] | None:
+        """The shipped GA design of ``device`` (``designs/<device>-ga.json``), if there is one."""
+        from thintact_masks.design_io import DESIGNS_DIR, load_design
+
+        path = DESIGNS_DIR / f"{device}-ga.json"
+        return load_design(path) if path.is_file() else None
+
 
 @hookimpl
 def thintact_masks() -> list[Component]:
