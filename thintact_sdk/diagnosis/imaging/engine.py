@@ -9,6 +9,12 @@ from typing import Any
 
 import numpy as np
 
+from thintact_sdk.diagnosis.core.report_sections import (
+    diagnosis_report,
+    finding_entry,
+    fit_section,
+    unexplained_section,
+)
 from thintact_sdk.diagnosis.imaging.candidates import CANDIDATES
 from thintact_sdk.diagnosis.imaging.coarse_angle import EFFECT as ANGLE_EFFECT
 from thintact_sdk.diagnosis.imaging.coarse_angle import (
@@ -384,18 +390,15 @@ def _diagnose(
         history.append((f"+ {rnd.name}", view.stats.rms_dn, view.stats.chi2_per_dof))
         phys[rnd.name] = profile_params(rnd.name, findings[-1]["params"])
     fitted = prof.with_physics(phys)
-    report: dict[str, Any] = {
-        "noise_rms_dn": round(base.stats.noise_rms_dn, 4),
-        "baseline": {"rms_dn": round(base.stats.rms_dn, 4), "chi2_per_dof": round(base.stats.chi2_per_dof, 4)},
-        "located": {"summary": loc0.summary, "hotspots": [h.to_json() for h in loc0.hotspots]},
-        "findings": findings,
-        "final": {"rms_dn": round(final.stats.rms_dn, 4), "chi2_per_dof": round(final.stats.chi2_per_dof, 4)},
-        "unexplained": {
-            "significant": bool(struct.significant),
-            "summary": struct.summary,
-            "hotspots": [h.to_json() for h in struct.hotspots],
-        },
-    }
+    report = diagnosis_report(
+        noise_rms_dn=round(base.stats.noise_rms_dn, 4),
+        baseline=fit_section(round(base.stats.rms_dn, 4), round(base.stats.chi2_per_dof, 4)),
+        located={"summary": loc0.summary, "hotspots": [h.to_json() for h in loc0.hotspots]},
+        findings=findings,
+        final=fit_section(round(final.stats.rms_dn, 4), round(final.stats.chi2_per_dof, 4)),
+        unexplained=unexplained_section(struct.significant, struct.summary,
+                                        [h.to_json() for h in struct.hotspots]),
+    )
     low = _below_floor_json(binned_sel, stage, sel.values, device, opt)
     if low:  # beyond CONTRACTS §6, only when there is something to say
         report["below_floor"] = low
@@ -532,11 +535,5 @@ def _finding(
             f" {a.name} explains the recording about as well (Δχ² {a.dchi2:.0f}). "
             + tell_apart(rnd.name, a.name, _frame_hint(data, model, rnd.evaluation, a.evaluation))
         )
-    return {
-        "effect": rnd.name,
-        "params": params,
-        "rms_dn_after": round(view.stats.rms_dn, 4),
-        "chi2_per_dof_after": round(view.stats.chi2_per_dof, 4),
-        "evidence": ev_txt,
-        "alternatives": alts,
-    }
+    return finding_entry(rnd.name, params, round(view.stats.rms_dn, 4),
+                         round(view.stats.chi2_per_dof, 4), ev_txt, alts)

@@ -1,5 +1,6 @@
 """Where a residual sits: in space (hotspots), by channel, scene, signal level, radius
-from the optical axis and spatial frequency.
+from the optical axis and spatial frequency: the imaging axes over the shared statistics of
+:mod:`~thintact_sdk.diagnosis.core.residual_axes`.
 
 Inputs are ``F × R × S × C`` arrays: ``z`` the residual in noise units (zero at invalid
 pixels), ``valid`` the pixels that count, ``signal_dn`` the predicted signal above black.
@@ -11,39 +12,15 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy import ndimage
 
-
-@dataclass
-class Hotspot:
-    """A rectangle of sensor pixels ``[row0, row1) × [col0, col1)`` holding ``share`` of the
-    excess χ² (χ² minus its expectation under the noise model)."""
-
-    row0: int
-    row1: int
-    col0: int
-    col1: int
-    share: float
-
-    def to_json(self) -> dict[str, Any]:
-        return {
-            "row0": self.row0,
-            "row1": self.row1,
-            "col0": self.col0,
-            "col1": self.col1,
-            "share": round(float(self.share), 4),
-        }
-
-
-@dataclass
-class Profile1D:
-    """Mean z² (χ² per value) against a binned quantity; ``centres`` in the quantity's unit."""
-
-    name: str
-    unit: str
-    centres: np.ndarray
-    chi2: np.ndarray
-    counts: np.ndarray
+from thintact_sdk.diagnosis.core.residual_axes import (
+    Hotspot,
+    Profile1D,
+    binned_chi2,
+    excess_map,
+    find_hotspots,
+    mean_z_map,
+)
 
 
 @dataclass
@@ -61,67 +38,6 @@ class Location:
     total_excess: float
     summary: str = ""
     extra: dict[str, Any] = field(default_factory=dict)
-
-
-def excess_map(z: np.ndarray, valid: np.ndarray) -> np.ndarray:
-    """``R × S`` map of Σ over frames and channels of (z² − 1) at valid pixels."""
-    return np.sum(np.where(valid, z * z - 1.0, 0.0), axis=(0, 3))
-
-
-def find_hotspots(
-    excess: np.ndarray,
-    counts: np.ndarray,
-    smooth_px: float = 2.0,
-    min_sigma: float = 5.0,
-    rel: float = 0.3,
-    max_spots: int = 6,
-    min_share: float = 0.02,
-) -> list[Hotspot]:
-    """Rectangles where the excess χ² concentrates.
-
-    The excess map is smoothed with a Gaussian of ``smooth_px`` pixels and expressed in
-    units of its null standard deviation (z² − 1 has variance 2 per value); pixels above
-    both ``min_sigma`` and ``rel`` × the peak form connected regions whose bounding boxes
-    are the hotspots, each with its share of the total positive excess.
-
-    Parameters
-    ----------
-    excess
-        ``R × S`` Σ (z² − 1).
-    counts
-        ``R × S`` number of valid values summed at each pixel.
-    """
-    total = float(np.sum(excess))
-    if total <= 0:
-        return []
-    kern_norm = 1.0 / (4.0 * np.pi * smooth_px**2)  # Σ k² of a unit-sum 2-D Gaussian
-    sm = ndimage.gaussian_filter(excess, smooth_px, mode="nearest")
-    null_sd = np.sqrt(2.0 * np.maximum(ndimage.gaussian_filter(counts, smooth_px), 1.0) * kern_norm)
-    s = sm / null_sd
-    peak = float(s.max())
-    if peak < min_sigma:
-        return []
-    hot = s > max(min_sigma, rel * peak)
-    lab, n = ndimage.label(hot)
-    spots: list[Hotspot] = []
-    for sl in ndimage.find_objects(lab)[:n]:
-        if sl is None:
-            continue
-        r0, r1 = int(sl[0].start), int(sl[0].stop)
-        c0, c1 = int(sl[1].start), int(sl[1].stop)
-        share = float(np.sum(excess[r0:r1, c0:c1])) / total
-        if share >= min_share:
-            spots.append(Hotspot(r0, r1, c0, c1, share))
-    spots.sort(key=lambda h: -h.share)
-    return spots[:max_spots]
-
-
-def _binned(x: np.ndarray, y: np.ndarray, edges: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    idx = np.clip(np.digitize(x, edges) - 1, 0, len(edges) - 2)
-    cnt = np.bincount(idx, minlength=len(edges) - 1).astype(np.float64)
-    tot = np.bincount(idx, weights=y, minlength=len(edges) - 1)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(cnt > 0, tot / np.maximum(cnt, 1), np.nan), cnt
 
 
 def radius_map_mm(rows: int, cols: int, pitch_um: float) -> np.ndarray:
@@ -151,7 +67,7 @@ def frequency_profile(
     fmax = 0.5 / (pitch_um * 1e-3)
     edges = np.linspace(0.0, fmax, n_bins + 1)
     mean_ratio = np.mean(ratio, axis=(0, 3))
-    prof, cnt = _binned(fr.ravel(), mean_ratio.ravel(), edges)
+    prof, cnt = binned_chi2(fr.ravel(), mean_ratio.ravel(), edges)
     return Profile1D("spatial frequency", "cycles/mm", 0.5 * (edges[1:] + edges[:-1]), prof, cnt)
 
 
@@ -171,19 +87,19 @@ def locate(
     z2 = np.where(valid, z * z, 0.0)
     nval = valid.sum(axis=(0, 3)).astype(np.float64)
     exc = excess_map(z, valid)
+    mean_z = mean_z_map(z, valid)
     with np.errstate(invalid="ignore", divide="ignore"):
-        mean_z = np.where(nval > 0, np.sum(z, axis=(0, 3)) / np.maximum(nval, 1), 0.0)
         by_channel = z2.sum(axis=(0, 1, 2)) / np.maximum(valid.sum(axis=(0, 1, 2)), 1)
         by_frame = z2.sum(axis=(1, 2, 3)) / np.maximum(valid.sum(axis=(1, 2, 3)), 1)
     hot = find_hotspots(exc, nval)
     sig = signal_dn[valid]
     top = float(np.percentile(sig, 99.5)) if sig.size else 1.0
     edges = np.linspace(min(0.0, float(sig.min()) if sig.size else 0.0), max(top, 1.0), 11)
-    sp, scnt = _binned(sig, z2[valid], edges)
+    sp, scnt = binned_chi2(sig, z2[valid], edges)
     by_signal = Profile1D("signal level", "DN", 0.5 * (edges[1:] + edges[:-1]), sp, scnt)
     rad = np.broadcast_to(radius_map_mm(r, s, pitch_um)[None, :, :, None], z.shape)[valid]
     redges = np.linspace(0.0, float(rad.max()) + 1e-9 if rad.size else 1.0, 9)
-    rp, rcnt = _binned(rad, z2[valid], redges)
+    rp, rcnt = binned_chi2(rad, z2[valid], redges)
     by_radius = Profile1D("radius from axis", "mm", 0.5 * (redges[1:] + redges[:-1]), rp, rcnt)
     by_freq = frequency_profile(residual_dn, variance_dn2, valid, pitch_um)
     loc = Location(

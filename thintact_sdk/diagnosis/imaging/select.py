@@ -13,7 +13,9 @@ Round by round, at the current model (effects accepted so far, gains profiled):
    profiled χ², finite-difference Jacobians, re-simulating).
 3. *Accept* the best if Δχ² > k·ln(n) + margin (BIC with k parameters, n pixel values)
    and its effect on the prediction exceeds the systematic-error floor; candidates whose
-   fit is as good within the BIC resolution are named as alternatives.
+   fit is as good within the BIC resolution are named as alternatives. The loop and the
+   criterion are the ones tactile shares
+   (:mod:`~thintact_sdk.diagnosis.core.forward_selection`); this module supplies the rounds.
 
 W holds 1/(σ² + (sys_frac·signal)²): the systematic-error allowance.
 
@@ -33,6 +35,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from thintact_sdk.diagnosis.core.forward_selection import InformationCriterion, forward_select
 from thintact_sdk.diagnosis.imaging import optimise
 from thintact_sdk.diagnosis.imaging.candidates import CANDIDATES, Candidate
 from thintact_sdk.diagnosis.imaging.deadline import Deadline, DeadlineExpired
@@ -407,51 +410,75 @@ def select_effects(
     deadline = deadline or Deadline.never()
     say = progress or (lambda _m: None)
     state = _SelectionState(model, dict(values or {}), [c for c in candidates if c not in (values or {})])
-    ln_n = float(np.log(max(model.n_fit, 2)))
+    criterion = InformationCriterion.for_values(model.n_fit, margin)
     sig = (state.ev.pred_dn - model.black)[model.fit_mask]
     signal_rms = float(np.sqrt(np.mean(sig * sig))) if sig.size else 1.0
-    while state.remaining and len(state.rounds) < max_effects:
-        try:
-            deadline.check("selection")
-            fitted, scores = _round_candidates(state, n_fit, margin, ln_n, deadline, say)
-        except DeadlineExpired as stop:
-            state.log.append(str(stop))
-            break
-        ok = [
-            r for r in fitted
-            if r.dchi2 is not None
-            and r.dchi2 > r.k * ln_n + margin
-            and (r.amplitude_dn > amp_floor * signal_rms
-                 or _clears_fine_floor(state, r, amp_floor, fine_amplitude, say))
-        ]
-        if not ok:
-            state.rejected.extend(fitted)
-            state.below_floor = sorted(
-                (BelowFloor(r.name, r.dchi2, r.k * ln_n + margin, r.amplitude_dn / max(signal_rms, 1e-12),
-                            r.fine_amplitude, np.asarray(r.fitted, float))
-                 for r in fitted if r.dchi2 is not None and r.fitted is not None
-                 and r.dchi2 > r.k * ln_n + margin),
-                key=lambda b: -b.dchi2)
-            state.log.append("no remaining candidate clears the criterion: " + ", ".join(
-                f"{r.name} Δχ²={r.dchi2:.1f} (needs {r.k * ln_n + margin:.1f}), "
-                f"amplitude {r.amplitude_dn:.2f} DN (floor {amp_floor * signal_rms:.2f})"
-                + ("" if r.fine_amplitude is None
-                   else f", {r.fine_amplitude:.1e} of the signal unbinned (floor {amp_floor:.0e})")
-                for r in fitted
-            ))
-            break
-        ok.sort(key=lambda r: -((r.dchi2 or 0.0) - r.k * ln_n))
-        best = ok[0]
-        assert best.dchi2 is not None
-        tol = alt_tol if alt_tol is not None else 2 * ln_n + 0.002 * best.dchi2
-        best_bic = best.dchi2 - best.k * ln_n
-        alts = [
-            r for r in fitted
-            if r is not best and r.dchi2 is not None and r.dchi2 - r.k * ln_n > best_bic - tol
-            and r.dchi2 > r.k * ln_n + margin
-        ]
-        state.accept(best, alts, scores, best.k * ln_n + margin)
+    search = _ImagingSearch(state, criterion, n_fit, signal_rms, amp_floor, alt_tol, deadline, say,
+                            fine_amplitude)
+    forward_select(search, criterion, max_effects)
     return Selection(state.values, state.rounds, state.ev, state.rejected, state.log, state.below_floor)
+
+
+class _ImagingSearch:
+    """The imaging side of :func:`~thintact_sdk.diagnosis.core.forward_selection.forward_select`:
+    rounds of score, line search and fit (:func:`_round_candidates`); the amplitude floor
+    (binned, or on the finer data) as the admission rule; rivals within ``alt_tol`` as
+    alternatives."""
+
+    def __init__(self, state: _SelectionState, criterion: InformationCriterion, n_fit: int,
+                 signal_rms: float, amp_floor: float, alt_tol: float | None, deadline: Deadline,
+                 say: Callable[[str], None], fine_amplitude: FineAmplitude | None) -> None:
+        self.state, self.criterion, self.n_fit = state, criterion, n_fit
+        self.signal_rms, self.amp_floor, self.alt_tol = signal_rms, amp_floor, alt_tol
+        self.deadline, self.say, self.fine_amplitude = deadline, say, fine_amplitude
+        self.scores: list[CandidateResult] = []
+
+    def has_candidates(self) -> bool:
+        return bool(self.state.remaining)
+
+    def propose(self) -> list[CandidateResult] | None:
+        try:
+            self.deadline.check("selection")
+            fitted, self.scores = _round_candidates(
+                self.state, self.n_fit, self.criterion.margin, self.criterion.ln_n, self.deadline,
+                self.say)
+        except DeadlineExpired as stop:
+            self.state.log.append(str(stop))
+            return None
+        return fitted
+
+    def admits(self, r: CandidateResult) -> bool:
+        return r.amplitude_dn > self.amp_floor * self.signal_rms or _clears_fine_floor(
+            self.state, r, self.amp_floor, self.fine_amplitude, self.say)
+
+    def review(self, tried: list[CandidateResult], cleared: list[CandidateResult]) -> None:
+        return None
+
+    def alternatives(self, best: CandidateResult, cleared: list[CandidateResult],
+                     tried: list[CandidateResult]) -> list[CandidateResult]:
+        assert best.dchi2 is not None
+        tol = self.alt_tol if self.alt_tol is not None else 2 * self.criterion.ln_n + 0.002 * best.dchi2
+        return self.criterion.rivals(best, tried, tol)
+
+    def accept(self, best: CandidateResult, alternatives: list[CandidateResult],
+               threshold: float) -> None:
+        self.state.accept(best, alternatives, self.scores, threshold)
+
+    def settle(self, tried: list[CandidateResult]) -> None:
+        state, crit = self.state, self.criterion
+        state.rejected.extend(tried)
+        state.below_floor = sorted(
+            (BelowFloor(r.name, r.dchi2, crit.threshold(r.k), r.amplitude_dn / max(self.signal_rms, 1e-12),
+                        r.fine_amplitude, np.asarray(r.fitted, float))
+             for r in tried if r.dchi2 is not None and r.fitted is not None and crit.clears(r)),
+            key=lambda b: -b.dchi2)
+        state.log.append("no remaining candidate clears the criterion: " + ", ".join(
+            f"{r.name} Δχ²={r.dchi2:.1f} (needs {crit.threshold(r.k):.1f}), "
+            f"amplitude {r.amplitude_dn:.2f} DN (floor {self.amp_floor * self.signal_rms:.2f})"
+            + ("" if r.fine_amplitude is None
+               else f", {r.fine_amplitude:.1e} of the signal unbinned (floor {self.amp_floor:.0e})")
+            for r in tried
+        ))
 
 
 def _clears_fine_floor(

@@ -1,4 +1,9 @@
-"""Residual statistics against the noise model (CONTRACTS §6 χ²).
+"""Residual statistics against the imaging noise model (CONTRACTS §6 χ²).
+
+The contract statistics themselves (:class:`FitStats`, :func:`fit_stats`,
+:func:`normalised_residual`) are the shared ones of
+:mod:`~thintact_sdk.diagnosis.core.residual_stats`, re-exported here for the imaging modules;
+this module adds what is special to a recording: the noise model and the saturated pixels.
 
 All arrays are ``F × R × S × C`` (frames, sensor rows, sensor columns, channels) in raw
 digital numbers (DN, black level included) unless stated otherwise.
@@ -7,11 +12,14 @@ digital numbers (DN, black level included) unless stated otherwise.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
 
 import numpy as np
 
+from thintact_sdk.diagnosis.core.residual_stats import FitStats, fit_stats, normalised_residual
 from thintact_sdk.formats.profiles import NoiseSpec
+
+__all__ = ["FitStats", "VarianceFn", "default_variance_fn", "fit_stats", "normalised_residual",
+           "valid_pixels"]
 
 VarianceFn = Callable[[np.ndarray, NoiseSpec], np.ndarray]
 
@@ -48,52 +56,3 @@ def valid_pixels(
     if exclude is not None:
         ok &= ~exclude[None, :, :, None]
     return ok
-
-
-@dataclass
-class FitStats:
-    """Goodness of fit of one prediction.
-
-    Attributes
-    ----------
-    rms_dn
-        Root-mean-square of measured − predicted over valid pixels, DN.
-    chi2_per_dof
-        Mean of (measured − predicted)² / σ² over valid pixels, σ² from the noise model at
-        the predicted value (CONTRACTS §6).
-    noise_rms_dn
-        Root of the mean noise variance over the same pixels, DN (what ``rms_dn`` would be
-        for a perfect model).
-    n_pixels
-        Number of valid pixel values (frames × pixels × channels).
-    """
-
-    rms_dn: float
-    chi2_per_dof: float
-    noise_rms_dn: float
-    n_pixels: int
-
-
-def fit_stats(
-    measured_dn: np.ndarray, predicted_dn: np.ndarray, variance_dn2: np.ndarray, valid: np.ndarray
-) -> FitStats:
-    """Contract statistics of a prediction (see :class:`FitStats`)."""
-    r = (measured_dn - predicted_dn)[valid]
-    v = variance_dn2[valid]
-    n = int(r.size)
-    if n == 0:
-        return FitStats(float("nan"), float("nan"), float("nan"), 0)
-    return FitStats(
-        rms_dn=float(np.sqrt(np.mean(r * r))),
-        chi2_per_dof=float(np.mean(r * r / v)),
-        noise_rms_dn=float(np.sqrt(np.mean(v))),
-        n_pixels=n,
-    )
-
-
-def normalised_residual(
-    measured_dn: np.ndarray, predicted_dn: np.ndarray, variance_dn2: np.ndarray, valid: np.ndarray
-) -> np.ndarray:
-    """z = (measured − predicted) / σ, zero at invalid pixels (``F × R × S × C``)."""
-    z = (measured_dn - predicted_dn) / np.sqrt(variance_dn2)
-    return np.where(valid, z, 0.0)

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
-from thintact_sdk.diagnosis.imaging.locate import Hotspot
+from thintact_sdk.diagnosis.core.residual_axes import Hotspot
 
 
 @dataclass

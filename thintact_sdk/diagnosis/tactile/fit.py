@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import minimize
 
-from thintact_sdk.diagnosis.imaging.stats import FitStats, fit_stats
+from thintact_sdk.diagnosis.core.residual_stats import FitStats, fit_stats
 from thintact_sdk.diagnosis.tactile.press_model import (
     Normals,
     Press,

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from thintact_sdk.diagnosis.imaging.stats import fit_stats
+from thintact_sdk.diagnosis.core.residual_stats import fit_stats
 
 
 @dataclass

@@ -4,16 +4,18 @@
    repeat frames (:mod:`.data`).
 2. Baseline: the SDK's tactile simulation of the same presses (Phong, 10-LED layout,
    σ_e = 0.25 mm) with one gain per channel (a nuisance, never a finding).
-3. Greedy forward selection over the vocabulary (:mod:`.vocabulary`): every effect not yet
-   in the model is added and fitted; the one with the lowest BIC is accepted when it lowers
-   BIC by more than ``min_delta_bic`` and explains at least ``min_excess_share`` of the
-   excess χ²/dof left (χ²/dof − 1). After an
-   effect is accepted, the press nuisances are refitted under the new model, but only once the
+3. Greedy forward selection over the vocabulary (:mod:`.vocabulary`), the loop and BIC
+   criterion imaging shares (:mod:`~thintact_sdk.diagnosis.core.forward_selection`): every
+   effect not yet in the model is added and fitted; the one with the lowest BIC is accepted
+   when it lowers BIC by more than ``min_delta_bic`` and explains at least
+   ``min_excess_share`` of the excess χ²/dof left (χ²/dof − 1). After an effect is accepted, the press nuisances are refitted under the new model, but only once the
    model carries fitted lights (``led_directions``): the baseline's light layout belongs to
    another sensor, and fitting press positions to it moves them away from the true ones.
 4. An effect that was significant in one round and no longer is once another was accepted is
    named as that finding's alternative (the data cannot tell them apart).
-5. What is left is located again; structure above ``unexplained_chi2`` is flagged.
+5. What is left is located again; structure above ``unexplained_chi2`` is flagged; the
+   report is the shared skeleton (:mod:`~thintact_sdk.diagnosis.core.report_sections`) with
+   the tactile keys around it.
 """
 
 from __future__ import annotations
@@ -25,6 +27,13 @@ from typing import Any
 
 import numpy as np
 
+from thintact_sdk.diagnosis.core.forward_selection import InformationCriterion, forward_select
+from thintact_sdk.diagnosis.core.report_sections import (
+    diagnosis_report,
+    finding_entry,
+    fit_section,
+    unexplained_section,
+)
 from thintact_sdk.diagnosis.tactile.fit import (
     PressData,
     Score,
@@ -70,8 +79,7 @@ class TactileDiagnosis:
 
 
 def _stats_json(s: Score) -> dict[str, float]:
-    return {"rms_dn": round(s.stats.rms_dn * 255, 4), "chi2_per_dof": round(s.chi2_per_dof, 5),
-            "bic": round(s.bic, 1)}
+    return fit_section(round(s.stats.rms_dn * 255, 4), round(s.chi2_per_dof, 5), bic=round(s.bic, 1))
 
 
 def _fit_with_presses(m: TactileModel, data: PressData, presses: list[Press], passes: int = 1
@@ -81,6 +89,90 @@ def _fit_with_presses(m: TactileModel, data: PressData, presses: list[Press], pa
         nrm = all_normals(data, presses, m.sigma_mm)
         m = fit_linear(m, data, nrm, iterations=5)
     return m, presses, nrm
+
+
+@dataclass
+class _Tried:
+    """One effect added and fitted in a round: ``dchi2`` and ``k`` against the current model
+    (so that ``dchi2 − k·ln n`` is the BIC drop)."""
+
+    name: str
+    dchi2: float
+    k: int
+    score: Score
+    model: TactileModel
+    normals: list[Normals]
+
+
+class _TactileSearch:
+    """The tactile side of :func:`~thintact_sdk.diagnosis.core.forward_selection.forward_select`
+    (module docstring, steps 3-4): every effect of the vocabulary not yet in the model is
+    added and fitted; the excess-share rule admits; alternatives are named a round late."""
+
+    def __init__(self, data: PressData, presses: list[Press], model: TactileModel,
+                 normals: list[Normals], current: Score, opts: TactileDiagnosisOptions,
+                 say: Callable[[str], None]) -> None:
+        self.data, self.presses, self.model, self.normals = data, presses, model, normals
+        self.current, self.opts, self.say = current, opts, say
+        self.findings: list[dict[str, Any]] = []
+        self.rounds: list[dict[str, Any]] = []
+        self.significant_before: set[str] = set()
+
+    def has_candidates(self) -> bool:
+        return True  # a round with nothing left to add clears nothing and ends the loop
+
+    def propose(self) -> list[_Tried]:
+        model, data, cur = self.model, self.data, self.current
+        tried: list[_Tried] = []
+        for name in self.opts.effects:
+            if name in model.effects:
+                continue
+            self.say(f"trying {name}")
+            cand = PROPOSERS[name](model, data, self.presses, self.normals)
+            if cand is None:
+                continue
+            nrm = self.normals if cand.sigma_mm == model.sigma_mm else all_normals(
+                data, self.presses, cand.sigma_mm)
+            sc = score(cand, data, nrm)[0]
+            tried.append(_Tried(name, cur.neg2loglike - sc.neg2loglike, sc.n_params - cur.n_params,
+                                sc, cand, nrm))
+        self.rounds.append({t.name: {"delta_bic": round(t.score.bic - cur.bic, 1),
+                                     "chi2_per_dof": round(t.score.chi2_per_dof, 5)} for t in tried})
+        return tried
+
+    def admits(self, t: _Tried) -> bool:
+        cur = self.current
+        return (cur.chi2_per_dof - t.score.chi2_per_dof
+                > self.opts.min_excess_share * max(cur.chi2_per_dof - 1.0, 0.0))
+
+    def review(self, tried: list[_Tried], cleared: list[_Tried]) -> None:
+        good = {t.name for t in cleared}
+        if self.findings:  # significant last round, no longer once the finding is in
+            last = self.findings[-1]["effect"]
+            self.findings[-1]["alternatives"] = sorted(self.significant_before - good - {last})
+        self.significant_before = good
+
+    def alternatives(self, best: _Tried, cleared: list[_Tried], tried: list[_Tried]) -> list[_Tried]:
+        return []  # named by :meth:`review` in the next round
+
+    def accept(self, best: _Tried, alternatives: list[_Tried], threshold: float) -> None:
+        data, current = self.data, self.current
+        sc, model, normals, presses = best.score, best.model, best.normals, self.presses
+        if "led_directions" in model.effects:
+            model, presses, normals = _fit_with_presses(
+                model, data, presses, passes=2 if best.name == "led_directions" else 1)
+            sc = score(model, data, normals)[0]
+        delta = sc.bic - current.bic
+        self.findings.append(finding_entry(
+            best.name, effect_params(best.name, model, data.mm_per_px),
+            round(sc.stats.rms_dn * 255, 4), round(sc.chi2_per_dof, 5),
+            f"χ²/dof {current.chi2_per_dof:.3f} → {sc.chi2_per_dof:.3f}, "
+            f"ΔBIC {delta:.0f} over {sc.stats.n_pixels} values", [], delta_bic=round(delta, 1)))
+        self.say(f"accepted {best.name}: χ²/dof {sc.chi2_per_dof:.3f}")
+        self.model, self.presses, self.normals, self.current = model, presses, normals, sc
+
+    def settle(self, tried: list[_Tried]) -> None:
+        return None
 
 
 def diagnose_tactile(
@@ -126,52 +218,11 @@ def diagnose_tactile(
     base_loc = locate_residual(images, base_pred, variance(model, data, base_pred), data.valid,
                                normals)
     say(f"baseline χ²/dof {base_score.chi2_per_dof:.2f}")
-    current = base_score
-    findings: list[dict[str, Any]] = []
-    rounds: list[dict[str, Any]] = []
-    significant_before: set[str] = set()
-    while len(findings) < opts.max_effects:
-        tried: dict[str, tuple[Score, TactileModel, list[Normals]]] = {}
-        for name in opts.effects:
-            if name in model.effects:
-                continue
-            say(f"trying {name}")
-            cand = PROPOSERS[name](model, data, presses, normals)
-            if cand is None:
-                continue
-            nrm = normals if cand.sigma_mm == model.sigma_mm else all_normals(
-                data, presses, cand.sigma_mm)
-            tried[name] = (score(cand, data, nrm)[0], cand, nrm)
-        row = {k: {"delta_bic": round(v[0].bic - current.bic, 1),
-                   "chi2_per_dof": round(v[0].chi2_per_dof, 5)} for k, v in tried.items()}
-        rounds.append(row)
-        good = {k for k, v in tried.items()
-                if v[0].bic - current.bic < -opts.min_delta_bic
-                and current.chi2_per_dof - v[0].chi2_per_dof
-                > opts.min_excess_share * max(current.chi2_per_dof - 1.0, 0.0)}
-        if findings:
-            findings[-1]["alternatives"] = sorted(significant_before - good - {findings[-1]["effect"]})
-        if not good:
-            break
-        best = min(good, key=lambda k: tried[k][0].bic)
-        significant_before = good - {best}
-        sc, model, normals = tried[best]
-        if "led_directions" in model.effects:
-            model, presses, normals = _fit_with_presses(
-                model, data, presses, passes=2 if best == "led_directions" else 1)
-            sc = score(model, data, normals)[0]
-        delta = sc.bic - current.bic
-        findings.append({
-            "effect": best, "params": effect_params(best, model, mm_per_px),
-            "rms_dn_after": round(sc.stats.rms_dn * 255, 4),
-            "chi2_per_dof_after": round(sc.chi2_per_dof, 5),
-            "delta_bic": round(delta, 1),
-            "evidence": (f"χ²/dof {current.chi2_per_dof:.3f} → {sc.chi2_per_dof:.3f}, "
-                         f"ΔBIC {delta:.0f} over {sc.stats.n_pixels} values"),
-            "alternatives": [],
-        })
-        say(f"accepted {best}: χ²/dof {sc.chi2_per_dof:.3f}")
-        current = sc
+    search = _TactileSearch(data, presses, model, normals, base_score, opts, say)
+    forward_select(search, InformationCriterion.for_values(base_score.stats.n_pixels,
+                                                           opts.min_delta_bic), opts.max_effects)
+    findings, rounds = search.findings, search.rounds
+    model, presses, normals = search.model, search.presses, search.normals
     accepted = {f["effect"] for f in findings}
     for f in findings:  # an effect accepted later is not an alternative
         f["alternatives"] = [a for a in f["alternatives"] if a not in accepted]
@@ -180,34 +231,25 @@ def diagnose_tactile(
                                 normals)
     sig = final_score.chi2_per_dof > opts.unexplained_chi2
     fl = final_loc.report
-    unexplained = {
-        "significant": bool(sig),
-        "summary": ("structured residual left: " + fl["summary"]) if sig else
+    unexplained = unexplained_section(
+        sig, ("structured residual left: " + fl["summary"]) if sig else
         f"residual within {opts.unexplained_chi2}× the noise (χ²/dof {final_score.chi2_per_dof:.2f})",
-        "hotspots": fl["hotspots"] if sig else [],
-    }
-    report = {
-        "format": "thintact-tactile-diagnosis/1",
-        "source": real.source,
-        "presses_used": idx,
-        "ball_radius_mm": ball_radius_mm,
-        "mm_per_px": mm_per_px,
-        "noise_rms_dn": [round(float(s) * 255, 4) for s in sigma],
-        "noise_sigma": [float(s) for s in sigma],
-        "baseline": _stats_json(base_score),
-        "located": base_loc.report,
-        "findings": findings,
-        "rounds": rounds,
-        "final": _stats_json(final_score),
-        "final_located": final_loc.report,
-        "unexplained": unexplained,
-        "presses": [{"index": i, "row_px": round(p.row, 3), "col_px": round(p.col, 3),
-                     "x_mm": round((p.col - (data.shape[1] - 1) / 2) * mm_per_px, 4),
-                     "y_mm": round((p.row - (data.shape[0] - 1) / 2) * mm_per_px, 4),
-                     "depth_mm": round(p.depth_mm, 4)} for i, p in zip(idx, presses, strict=True)],
-        "seconds": round(time.perf_counter() - t0, 2),
-        "units": "rms_dn in 8-bit DN (display units × 255); χ² per value with σ the measured "
-                 "per-pixel noise",
-    }
+        fl["hotspots"] if sig else [])
+    report = diagnosis_report(
+        head={"format": "thintact-tactile-diagnosis/1", "source": real.source,
+              "presses_used": idx, "ball_radius_mm": ball_radius_mm, "mm_per_px": mm_per_px},
+        noise_rms_dn=[round(float(s) * 255, 4) for s in sigma],
+        baseline=_stats_json(base_score), located=base_loc.report, findings=findings,
+        final=_stats_json(final_score), unexplained=unexplained,
+        after={"noise_rms_dn": {"noise_sigma": [float(s) for s in sigma]},
+               "findings": {"rounds": rounds}, "final": {"final_located": final_loc.report}},
+        tail={"presses": [{"index": i, "row_px": round(p.row, 3), "col_px": round(p.col, 3),
+                           "x_mm": round((p.col - (data.shape[1] - 1) / 2) * mm_per_px, 4),
+                           "y_mm": round((p.row - (data.shape[0] - 1) / 2) * mm_per_px, 4),
+                           "depth_mm": round(p.depth_mm, 4)}
+                          for i, p in zip(idx, presses, strict=True)],
+              "seconds": round(time.perf_counter() - t0, 2),
+              "units": "rms_dn in 8-bit DN (display units × 255); χ² per value with σ the "
+                       "measured per-pixel noise"})
     return TactileDiagnosis(report, data, presses, baseline, model, base_pred, final_pred,
                             base_loc, final_loc, idx)
