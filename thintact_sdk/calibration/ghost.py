@@ -281,8 +281,8 @@ def slit_map(slits: list[ChannelSlits], row_lags: list[int], col_lags: list[int]
     transposed) give the same with the axes swapped; their normal equations are added, over
     every channel, so both families and all channels weigh by how much they see.
     Lines where ``keep_rows`` / ``keep_cols`` are False (located defects) are left out.
-    OpenBLAS is held at one thread meanwhile: with two threads on a busy 2-core host the
-    map of a 128 × 160 channel took 12 s instead of 0.1 s.
+    OpenBLAS is held at one thread meanwhile: the products are small, and on a busy host
+    two threads only spin-wait for each other (many times slower).
     """
     with blas_threads(1):  # small products: threads only spin-wait on a busy machine
         return _slit_map(slits, row_lags, col_lags, keep_rows, keep_cols)

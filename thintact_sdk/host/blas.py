@@ -2,8 +2,8 @@
 
 Work made of many small matrix products (the GA's eigen-decompositions with N ≤ 512, the
 diagnosis's repeated small simulations) gains little from threaded OpenBLAS and loses badly
-on a busy machine, where threads spin-wait for each other: measured 10-30× slower with 2
-threads under load than with 1 (2.7 s vs 0.1 s for one 12-frame diagnosis simulation).
+on a busy machine, where threads spin-wait for each other: many times slower with 2
+threads under load than with 1 (docs/benchmarks.md, history).
 numpy exposes no thread control, so this calls each loaded OpenBLAS's own setter through
 ctypes when it is found, and changes nothing otherwise.
 """
@@ -30,7 +30,7 @@ _scan_lock = threading.Lock()
 def _loaded_openblas() -> list[tuple[Any, Any]]:
     """(set, get) function pairs of every OpenBLAS mapped into this process (Linux).
 
-    Reading ``/proc/self/maps`` costs about 2 ms, too much for a hold taken once per frame
+    Reading ``/proc/self/maps`` costs milliseconds, too much for a hold taken once per frame
     (:meth:`thintact_sdk.device.sensor.Sensor.process`), so the scan is kept until a module is
     imported (the only way a new OpenBLAS gets mapped in)."""
     global _scanned

@@ -3,20 +3,15 @@ kernel thread each.
 
 A decode split over two cores inside one product (OpenBLAS or torch intra-op threads) waits
 on its slowest thread at every product: when anything else runs on the second core it slows
-by 2-6× (measured on a 2-core Intel Xeon with AMX, paper-size ``t2s-closed-form`` alone:
-torch float32 31.6 → 175.8 ms per frame with one core busy; with 1 thread 42.1 ms either
-way). Decoding consecutive frames on separate workers, one kernel thread each, avoids those
-waits: decode alone streamed 48.7 instead of 33.1 frames/s quiet (torch float32; bfloat16
-133.9 instead of 82.9) and 31.0 instead of 24.3 with one core busy.
+several-fold, where a decode on one kernel thread does not. Decoding consecutive frames on
+separate workers, one kernel thread each, avoids those waits.
 
-In the whole stream pipeline (paper device, camera at 30 fps, ``tools/bench_stream_workers.py``,
-same host, 2026-11-24) two workers pay where the decode is the bottleneck: float32 20.0-20.9
-→ 27.1-28.0 tactile frames/s quiet and 9.9 → 16.5 with one core busy; where one decode fits
-in a camera period (bfloat16 products, 10-11 ms) both keep up with the camera (30.5 / 30.6
-fps) and one worker has the lower latency (p50 52 against 77 ms with a core busy). So the
-choice is measured: :func:`decode_workers` takes one worker when a decode (timed at warm-up)
-fits in the camera's frame period, else one per usable core; ``THINTACT_DECODE_WORKERS``
-overrides.
+In the whole stream pipeline two workers pay where the decode is the bottleneck (more tactile
+frames/s, quiet or with a core busy); where one decode fits in a camera period both keep up
+with the camera and one worker has the lower latency (``tools/bench_stream_workers.py``
+measures both; the figures are in docs/benchmarks.md). So the choice is measured:
+:func:`decode_workers` takes one worker when a decode (timed at warm-up) fits in the camera's
+frame period, else one per usable core; ``THINTACT_DECODE_WORKERS`` overrides.
 
 :func:`decode_workers` says how many workers a stream uses, and
 :func:`single_threaded_kernels` holds OpenBLAS at one thread while any stream with several
@@ -40,13 +35,12 @@ ENV_DECODE_WORKERS = "THINTACT_DECODE_WORKERS"
 
 PIPELINE_SHARES_CORES_UP_TO = 2
 """On a host with at most this many usable cores a stream holds the kernels at one thread
-even with one decode worker. Its other stages (Bayer binning, tactile interpretation, ~11 ms
-of the paper device's 33 ms frame period; ~17 ms when this was measured) run while it decodes, so a product split over both
-cores waits for the core they hold at every product: on the 2-core Xeon-AMX at load ~2.8,
-``t2s-closed-form`` (numpy float32, binned 2 × 2) streamed 5.1 frames/s with one worker on two
-kernel threads against 26.7 on one (p50 192 against 90 ms; tools/bench_stream_workers.py).
-On larger hosts a single worker keeps the library's threads (the other stages take a
-smaller share of the cores; not measured here)."""
+even with one decode worker. Its other stages (Bayer binning, tactile interpretation, a
+third of the paper device's frame period or more) run while it decodes, so a product split
+over both cores waits for the core they hold at every product: one worker on two kernel
+threads streams several times fewer frames/s than on one (tools/bench_stream_workers.py;
+docs/benchmarks.md). On larger hosts a single worker keeps the library's threads (the other
+stages take a smaller share of the cores; not measured here)."""
 
 _lock = threading.Lock()
 _holders = 0

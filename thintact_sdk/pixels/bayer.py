@@ -40,11 +40,10 @@ def planar_frame(rows: int, cols: int, channels: int) -> np.ndarray:
     """An uninitialised ``rows × cols × channels`` float32 frame stored channel by channel.
 
     The array is a view of ``channels × rows × cols`` contiguous storage, so each channel is
-    one contiguous plane: binning writes it with unit stride (paper device: 2.9 instead of
-    3.8 ms per frame, Xeon-AMX, one thread) and the decoders take the planes as their
-    channel-first GEMM operand without a copy (:meth:`ArrayBackend.channels_first
-    <thintact_sdk.reconstruction.decoders.backend.ArrayBackend.channels_first>`), which saved a 3.5 ms pass per
-    paper-size frame. It indexes like any ``R × S × C`` array; ``np.ascontiguousarray``
+    one contiguous plane: binning writes it with unit stride and the decoders take the planes
+    as their channel-first GEMM operand without a copy (:meth:`ArrayBackend.channels_first
+    <thintact_sdk.reconstruction.decoders.backend.ArrayBackend.channels_first>`), so no
+    conversion pass runs per frame. It indexes like any ``R × S × C`` array; ``np.ascontiguousarray``
     gives the interleaved layout where one is needed.
     """
     return np.moveaxis(np.empty((channels, rows, cols), np.float32), 0, -1)
@@ -121,8 +120,8 @@ def bin_sites(raw: np.ndarray, channels: tuple[tuple[tuple[int, int], ...], ...]
     ``channels[k]``. Two passes, both over contiguous memory where it counts: for each row
     parity, the ``b`` mosaic rows of a block are summed into one float32 row (reading the
     mosaic once, row by row), then each site's ``b`` columns of that row sum are added into
-    its plane (paper device, ``b = 2``: 2.5 instead of 4.8 ms for binning then
-    :func:`block_mean`, Xeon-AMX, one thread).
+    its plane: one read of the mosaic, where binning then :func:`block_mean` reads the
+    frame twice.
 
     Parameters
     ----------

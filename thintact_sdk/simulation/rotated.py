@@ -56,8 +56,8 @@ SHIFT_RANK_TOL = 3e-4
 
 FAMILY_MAX_BYTES = 2 * 1024**3
 """Largest tabulated displacement family (one axis) the rotated kernels build; the paper's
-1024×1280 → 400×512 device at 0.3° would need about 10 GiB per axis (and, measured, ran out
-of this host's 24 GiB after 12 minutes)."""
+1024×1280 → 400×512 device at 0.3° would need about 10 GiB per axis, more than the
+memory of a typical host."""
 
 
 def family_bytes(grid: AxisGrid, alpha: float, beta: float, t_lo: float, t_hi: float,

@@ -202,10 +202,10 @@ def rotated_build_bytes(kp: KernelParams) -> float:
     sensor windows when it is built window by window: the measure of its build's work
     (0 for an unrotated mask; ``inf`` where even the smallest windows are refused).
 
-    Measured on the 2-core reference host, 2026-11-25: the 32×-binned paper device at 0.35°,
-    0.31 GiB, builds in 20 s; the 16×-binned one, 0.68 GiB, in 40 s; the 8×-binned one,
-    1.63 GiB, in 99 s. The work grows about as the square of the angle (the separable rank of
-    each axis's displacement family grows with it)."""
+    The build time grows about linearly with these bytes (the paper device at 0.35°: 0.31 GiB
+    binned 32×, 0.68 GiB binned 16×, 1.63 GiB binned 8×; times in docs/benchmarks.md), and the
+    bytes about as the square of the angle (the separable rank of each axis's displacement
+    family grows with it)."""
     if kp.angle_deg == 0.0:
         return 0.0
     exp = _expansion(kp)
@@ -260,8 +260,8 @@ def _build_rotated_window(kp: KernelParams, exp: SeparableExpansion,
         px, py, pairs = sim_rotated.diffraction_profiles(kp, lam)
         return sim_rotated.rotated_terms(kp, exp, px, py, pairs)
 
-    # wavelengths side by side only while each one's family is small: the 32×-binned paper
-    # device at 0.05° (110 MiB) peaked at 2.09 GiB so and 1.29 GiB one after another, in 11.1 / 11.9 s
+    # wavelengths side by side only while each one's family is small: side by side holds every
+    # wavelength's terms at once, for little gain in time once a family is large
     parallel = sim_rotated.rotated_family_bytes(kp, exp.rank, 4) <= SIDE_BY_SIDE_FAMILY_BYTES
     per_channel = per_channel_by_wavelength(kp.wavelengths_nm, kp.channels, build, None if parallel else 1)
     info["terms"] = float(max(len(t) for t in per_channel))

@@ -12,10 +12,9 @@ the windows' outputs side by side, the same numbers as one whole-sensor build (t
 compression tolerance), at a fraction of the memory.
 
 Every window shares the whole device's radiometric expansion (it spans every window's
-offsets). Measured on the 2-core reference host (``docs/simulator.md``): the 16×-binned
-paper device (64 × 80 sensor, 400 × 512 scene) rotated by 0.3° builds in 26 s as 4 windows
-against 68 s whole; the 8×-binned one (128 × 160), which the whole build refuses, in 58 s
-as 12 windows within 2.4 GiB; the full 1024 × 1280 sensor at 0.05° in 44 s as 20 windows.
+offsets). Windows make builds possible that the whole build refuses (the 8×-binned paper
+device rotated by 0.3°, the full 1024 × 1280 sensor at 0.05°) and shorten those it takes;
+the times are in ``docs/simulator.md`` and docs/benchmarks.md.
 """
 
 from __future__ import annotations
@@ -36,8 +35,8 @@ until each one's family is at most this (a window of the 8×-binned paper device
 
 TILED_FAMILY_BYTES = 4 * 1024**3
 """Largest sum of the windows' families a tiled build takes on (the work of the build grows
-with it: the 8×-binned paper device's 16 windows sum to 1.7 GiB, 66 s on the reference host;
-the full 1024 × 1280 sensor would need about 256 windows and 35 GiB, about half an hour)."""
+with it: the 8×-binned paper device's 16 windows sum to 1.7 GiB; the full 1024 × 1280
+sensor would need about 256 windows and 35 GiB)."""
 
 MAX_WINDOWS_PER_AXIS = 16
 """Most windows along one sensor axis."""

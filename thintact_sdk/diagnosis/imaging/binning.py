@@ -118,8 +118,7 @@ def unbin_hotspots(report: dict[str, Any], b: int) -> None:
 
 DIAGNOSIS_FAMILY_BYTES = 256 * 1024**2
 """Largest one-axis kernel family a candidate may need for the diagnosis to screen it: the
-fit builds tens of kernels, each family costing seconds per 100 MiB on this project's 2-core
-reference host."""
+fit builds tens of kernels, each taking time in proportion to its family's bytes."""
 
 PROBES: dict[str, tuple[dict[str, dict[str, float]], tuple[str, ...]]] = {
     "mask_misalignment": ({"mask_misalignment": {"angle_deg": 0.3, "dx_um": 0.0, "dy_um": 0.0}},
@@ -251,8 +250,8 @@ def full_size_check(data: DiagnosisData, final_values: dict[str, np.ndarray],
     resolution once (gains and closed-form terms refitted there, the effects' parameters as
     fitted): ``{"rms_dn", "chi2_per_dof"}``, CONTRACTS §6 χ² over every unbinned,
     unsaturated pixel. Structure finer than a block that the binned fit missed shows up
-    here as χ²/dof above 1. (One evaluation: at the paper's size two evaluations, baseline
-    and final, took 500 s of a 647 s run at load 8 and peaked at 5.7 GiB.)
+    here as χ²/dof above 1. (One evaluation: at the paper's size each one is the costliest
+    step of a run, in time and in peak memory.)
     """
     from thintact_sdk.diagnosis.imaging.forward_model import full_size_stats
 

@@ -3,13 +3,13 @@
 The paper's device (1024×1280 sensor → 400×512 scene) is diagnosed on its sensor binned
 8×8 (:mod:`~thintact_sdk.diagnosis.imaging.binning`). There a rotated mask's kernel is too costly to
 screen (:func:`~thintact_sdk.diagnosis.imaging.binning.screening_limits` holds the angle at 0): its
-displacement families sum to 1.6 GiB at 0.35°, a build takes 99 s, and every step of a fit
+displacement families sum to 1.6 GiB at 0.35°, a build takes over a minute, and every step of a fit
 rebuilds it. The work of a rotated build grows with the sensor's pixels and about as the
 square of the angle (:func:`~thintact_sdk.simulation.simulator.rotated_build_bytes`).
 
 Binning is exact for the imaging kernel: the block mean of a rotated device is the same
 rotated device with the block's pitch. So the angle is fitted on blocks coarse enough for
-its builds to be cheap (32×32 on the paper's device: 20 s at 0.35°, 2 s at 0.1°), with every
+its builds to be cheap (32×32 on the paper's device, a fifth of the 8×8 build's bytes), with every
 effect the binned selection accepted held at its values and the gains solved. It is a
 one-parameter search: χ² at two small probe angles (cheap builds) and at the start give a
 parabola, whose vertex is evaluated next; then successive parabolas through the three best
@@ -53,8 +53,8 @@ EFFECT = "mask_misalignment"
 
 COARSE_FAMILY_BYTES = 0.5 * 1024**3
 """Largest rotated build (its displacement families summed over its sensor windows, at
-:data:`PROBE_ANGLE_DEG`) the coarse blocks may need: 0.31 GiB, 20 s, on the paper's device
-binned 32×32; 0.68 GiB, 40 s, binned 16×16 (measured on the 2-core reference host)."""
+:data:`PROBE_ANGLE_DEG`) the coarse blocks may need: 0.31 GiB on the paper's device
+binned 32×32; 0.68 GiB binned 16×16 (their build times: docs/benchmarks.md, history)."""
 
 PROBE_ANGLE_DEG = 0.35
 """The angle at which the coarse block size is chosen (a typical assembly error)."""

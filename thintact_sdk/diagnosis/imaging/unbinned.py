@@ -6,7 +6,7 @@ or more, but an effect whose whole signature lies inside a block is averaged awa
 Gaussian sensor blur of σ = 6 um on the paper's 10 um pixels changes the 8×8-binned
 prediction by far less than the noise, so the binned stage names nothing; on the unbinned
 frames it raises χ²/dof to 1.0018 over 47 million pixel values, 8.7 standard deviations
-above the noise (measured 2026-11-25, ``tools/diagnose_paper_size.py --case sensor_blur``).
+above the noise (``tools/diagnose_paper_size.py --case sensor_blur``).
 
 So after the binned selection, the model it accepted is evaluated on the unbinned frames.
 When their χ² lies more than :data:`EXCESS_Z` standard deviations above its noise-only
