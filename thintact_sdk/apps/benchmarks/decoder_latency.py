@@ -164,10 +164,12 @@ def run(args: argparse.Namespace) -> int:
     """Run the benchmark and print its figures (table or ``--json``)."""
     from rich.console import Console
 
+    from thintact_sdk.apps.benchmarks.accelerator_split import accelerator_split
     from thintact_sdk.formats.profiles import load_profile
     from thintact_sdk.host.compute_threads import prepare_worker_thread, single_threaded_kernels
     from thintact_sdk.host.machine import host_capabilities, machine_summary
     from thintact_sdk.host.roofline import measure_sgemm_gflops, roofline_ratio
+    from thintact_sdk.pixels.bayer import block_mean
     from thintact_sdk.reconstruction.decoders import (
         ArrayBackend,
         NonIterativeDecoder,
@@ -251,6 +253,14 @@ def run(args: argparse.Namespace) -> int:
                     "one_thread": {"ms": round(ms_1, 2), "sgemm_gflops": float(f"{sgemm_1:.4g}"),
                                    "ratio": float(f"{roofline_ratio(ms_1, flops, sgemm_1):.4g}")},
                     "kept_modes": list(dec.kept_modes)}
+                if be.name == "torch" and str(be.device) != "cpu":
+                    # an accelerator: the bus reported apart from the device's work (as fed,
+                    # and from the camera's uint16 where the decoder takes the full sensor)
+                    split = result.setdefault("accelerator", {})
+                    fed = binned if b == 1 else block_mean(binned, b)
+                    split[key] = accelerator_split(dec, fed, black, args.repeats)
+                    if b == 1:
+                        split[f"{key} from uint16"] = accelerator_split(dec, raw, black, args.repeats)
         say("backend selection as a decoder does it (measured now, not cached)")
         probes = [Probe(dev.raw[i], black, dev.scenes[i]) for i in (1, 2)]
         result["backend_choice"] = {}
@@ -380,6 +390,10 @@ def _print(result: dict[str, Any], as_json: bool) -> None:
               "Sensor hands it over (float32, channel-planar; for -bin2 the mosaic binned straight to "
               "R/2 × S/2 in the Bayer stage), 'from uint16' from an interleaved uint16 frame of full "
               "size (a stored recording; -bin2 bins it first); '1 thread' as in a stream's decode worker")
+    for key, acc in result.get("accelerator", {}).items():
+        con.print(f"{key} on {acc['device']} ({acc['input']}): upload {acc['upload_ms']:.2f} ms, "
+                  f"on the device {acc['device_ms']:.2f} ms (roofline {acc['roofline']} @ "
+                  f"{acc['gemm_gflops']:.0f} GFLOP/s), download {acc['download_ms']:.2f} ms")
     for label, summary in result.get("backend_choice", {}).items():
         con.print(f"backend chosen for {label}: {summary}")
     for form in ("gram", "direct"):

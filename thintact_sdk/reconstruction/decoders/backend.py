@@ -149,6 +149,8 @@ class ArrayBackend:
                 return planes
             if self.device == "cpu":
                 return self._torch.from_numpy(planes)
+        if self.name == "torch" and self.device != "cpu":
+            return self._device_planes(image, planes, target)
         if (self.name == "torch" and self.device == "cpu" and image.dtype in _TORCH_COPYABLE
                 and min(image.strides, default=0) >= 0):
             out = self._torch.empty((c, *image.shape[:-1]), dtype=target)
@@ -159,6 +161,33 @@ class ArrayBackend:
         if self.name == "numpy":
             return buf
         return self._torch.from_numpy(buf).to(self.device).to(target)
+
+    def _device_planes(self, image: np.ndarray, planes: np.ndarray, target: Any) -> Any:
+        """:meth:`channels_first` onto an accelerator (``self.device`` not ``"cpu"``): the frame
+        crosses the bus once in its own storage type, and the de-interleave and the conversion
+        to ``target`` run on the device.
+
+        - channel-planar float32 (``planes`` C-contiguous): the planes are sent as they are;
+        - uint16 DN (the raw path): sent as 16-bit words (half the bytes of float32), widened
+          on the device (the words are carried as int16 and masked back to 0..65535, as torch
+          accelerators convert int16 everywhere);
+        - other real types torch copies (uint8, int16, int32, float32, float64): sent as they
+          are; anything else is converted to float32 on the host first.
+        """
+        torch = self._torch
+        if planes.flags.c_contiguous and planes.dtype == np.float32:
+            return torch.from_numpy(planes).to(self.device).to(target)
+        src = np.ascontiguousarray(image)
+        if src.dtype == np.uint16:
+            sent = torch.from_numpy(src.view(np.int16)).to(self.device)
+            sent = sent.to(torch.int32).bitwise_and_(0xFFFF)
+        elif src.dtype in _TORCH_COPYABLE:
+            sent = torch.from_numpy(src).to(self.device)
+        else:
+            sent = torch.from_numpy(src.astype(np.float32)).to(self.device)
+        out = torch.empty((src.shape[-1], *src.shape[:-1]), dtype=target, device=self.device)
+        out.copy_(sent.permute(2, 0, 1))
+        return out
 
     def synthesise(self, vp: Any, coef: Any, vqt: Any) -> np.ndarray:
         """``vp @ coef @ vqt`` (``C × N × kP``, ``C × kP × kQ``, ``C × kQ × M``; ``vp``/``vqt`` in
