@@ -43,7 +43,7 @@ export PYTHONPATH="$SITE${PYTHONPATH:+:$PYTHONPATH}"
 "$PY" -m thintact_sdk.apps.cli.main plugins | head -n 20
 
 step "GPU tests (tests/reconstruction/test_rec_gpu.py: decoders on CUDA agree with numpy, CUDA is measured)"
-limit 90 "$PY" -m pytest -q -p no:cacheprovider --rootdir . tests/reconstruction/test_rec_gpu.py 2>&1 | tee "$OUT/gpu_tests.log"
+limit 90 "$PY" -m pytest -q -p no:cacheprovider --rootdir . tests/reconstruction/test_rec_gpu.py tests/reconstruction/test_rec_accelerator_path.py 2>&1 | tee "$OUT/gpu_tests.log"
 
 step "thintact doctor (host, GPU, the backend the selection chooses for thintact-paper)"
 limit 45 "$PY" -m thintact_sdk.apps.cli.main doctor --profile thintact-paper 2>&1 | tee "$OUT/doctor.txt"
