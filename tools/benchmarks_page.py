@@ -1,0 +1,300 @@
+#!/usr/bin/env python
+"""Write ``docs/benchmarks.md``: the measured figures of this host, with the host and date.
+
+Runs each measuring source below as a child process (or reads its JSON output from an
+earlier run, ``--from NAME=FILE``), then writes the page: the host (CPU model, cores, SIMD
+flags, BLAS, torch, load averages before and after), the date (UTC), one section of figures
+per source, and the page's history section carried over verbatim (the older hand-measured
+figures, each with its host). Nothing else on the page is written by hand.
+
+==============  =====================================================================
+source          what runs (the smallest sizes, except ``reconstruct`` at paper size)
+==============  =====================================================================
+reconstruct     ``thintact bench reconstruct --json --repeats 3`` (paper device)
+tactile         ``thintact bench tactile --json F`` with 1 press per row, few frames
+calibration     ``thintact bench calibration --cases baseline --json F``
+sensor-binning  ``tools/bench_sensor_binning.py --rounds 1 --frames 2``
+==============  =====================================================================
+
+Usage::
+
+    OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 .venv/bin/python tools/benchmarks_page.py \\
+        [--from reconstruct=bench.json] [--skip calibration] [--keep-json DIR] [--out docs/benchmarks.md]
+
+Timings depend on the host and on what else runs on it; the page says both.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as dt
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+HISTORY_BEGIN = "<!-- history: carried over verbatim by tools/benchmarks_page.py -->"
+HISTORY_END = "<!-- end of history -->"
+THINTACT = [sys.executable, "-m", "thintact_sdk.apps.cli.main"]
+
+
+def _thintact(*argv: str) -> list[str]:
+    return [*THINTACT, *argv]
+
+
+# -- sources: how each runs (argv; "{json}" is the file it writes, else it prints JSON) ----
+SOURCES: dict[str, list[str]] = {
+    "reconstruct": _thintact("bench", "reconstruct", "--json", "--repeats", "3"),
+    "tactile": _thintact("bench", "tactile", "--json", "{json}", "--presses", "1",
+                         "--calibration-presses", "4", "--marker-presses", "1",
+                         "--latency-frames", "5", "--force-presses", "2"),
+    "calibration": _thintact("bench", "calibration", "--cases", "baseline", "--json", "{json}"),
+    "sensor-binning": [sys.executable, str(ROOT / "tools" / "bench_sensor_binning.py"),
+                       "--rounds", "1", "--frames", "2"],
+}
+
+
+def run_source(name: str, keep: Path | None) -> tuple[Any, float]:
+    """Run ``name``'s command; its JSON output and the seconds it took."""
+    argv = SOURCES[name]
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / f"{name}.json"
+        cmd = [a.replace("{json}", str(out)) for a in argv]
+        print(f"[{name}] {' '.join(cmd)}", file=sys.stderr, flush=True)
+        t0 = time.perf_counter()
+        proc = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, check=False)
+        seconds = time.perf_counter() - t0
+        if proc.returncode != 0:
+            raise SystemExit(f"{name} failed (exit {proc.returncode}):\n{proc.stderr[-3000:]}")
+        text = out.read_text() if "{json}" in argv else _last_json(proc.stdout)
+    if keep is not None:
+        keep.mkdir(parents=True, exist_ok=True)
+        (keep / f"{name}.json").write_text(text)
+    return json.loads(text), seconds
+
+
+def _last_json(stdout: str) -> str:
+    """The JSON document a tool printed last (tools may print progress lines before it)."""
+    start = stdout.find("{")
+    if start < 0:
+        raise SystemExit(f"no JSON in the output: {stdout[-500:]!r}")
+    return stdout[start:]
+
+
+def shown_command(name: str) -> str:
+    """``name``'s command as the page shows it (``thintact ...`` or ``tools/NAME.py ...``)."""
+    argv = [a.replace("{json}", "FILE") for a in SOURCES[name]]
+    if argv[:len(THINTACT)] == THINTACT:
+        return " ".join(["thintact", *argv[len(THINTACT):]])
+    return " ".join([str(Path(argv[1]).relative_to(ROOT)), *argv[2:]])
+
+
+# -- rendering -----------------------------------------------------------------------------
+def _fmt(v: Any) -> str:
+    if isinstance(v, float):
+        return f"{v:.4g}"
+    if isinstance(v, (list, tuple)):
+        return " × ".join(_fmt(x) for x in v) if all(isinstance(x, int) for x in v) else \
+            ", ".join(_fmt(x) for x in v)
+    return str(v).replace("|", "\\|").replace("\n", " ")
+
+
+def _table(header: tuple[str, ...], rows: list[tuple[Any, ...]]) -> list[str]:
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    lines += ["| " + " | ".join(_fmt(c) for c in row) + " |" for row in rows]
+    return lines
+
+
+def render_reconstruct(d: dict[str, Any]) -> list[str]:
+    lines = [f"Device `{d['profile']}`: sensor {_fmt(d['sensor'])} → scene {_fmt(d['scene'])}; "
+             f"τ {d['tau']}. Latency is the median per frame from the binned frame as the Sensor "
+             "hands it to the decoder (float32, channel-planar); \"from uint16\" from an interleaved "
+             "uint16 frame; roofline is frame time over the decoder's GEMM FLOPs at the float32 "
+             "GEMM rate measured in the same run (1 = the GEMMs alone); PSNR on simulated scenes "
+             "with sensor noise.", ""]
+    rows = []
+    for key, q in d["quality"].items():
+        rf = d.get("roofline", {}).get(key)
+        ms = d["latency_ms"].get(key)
+        if key == "t2s-iterative-800":
+            ms = d["iterative800"]["latency_ms_extrapolated"]
+        rows.append((f"`{key}`", "-" if ms is None else round(ms, 2),
+                     "-" if rf is None else d["latency_ms_from_uint16"].get(key, "-"),
+                     "-" if rf is None else rf["gemm_gflop"],
+                     "-" if rf is None else f"{rf['ratio']:.3g} @ {rf['sgemm_gflops']:.0f} GFLOP/s",
+                     "-" if rf is None else f"{rf['one_thread']['ms']} ms, {rf['one_thread']['ratio']:.3g}",
+                     q["white"]["psnr_db"], q["usaf"]["psnr_db"], q["gelsight"]["psnr_db"]))
+    lines += _table(("decoder [backend]", "ms/frame", "from uint16 (ms)", "GFLOP", "roofline",
+                     "1 thread", "white dB", "USAF dB", "GelSight dB"), rows)
+    lines.append("")
+    for label, summary in d.get("backend_choice", {}).items():
+        lines.append(f"- backend chosen for `{label}`: {summary}")
+    for form in ("gram", "direct"):
+        it = d.get(f"iterative800_{form}")
+        if it:
+            lines.append(f"- iterative-800 ({form} gradient): {it['latency_ms_extrapolated']} ms "
+                         f"extrapolated ({it['measured']})")
+    if "speedup_vs_iterative800" in d:
+        lines.append(f"- speed-up against iterative-800: {_fmt(d['speedup_vs_iterative800'])}")
+    if "mask_compare" in d:
+        lines.append(f"- mask comparison (numpy float32): `{json.dumps(d['mask_compare'])}`")
+    lines.append(f"- two-term fit error against the simulator: {d['two_term_fit_relative_error']:.2%}")
+    return lines
+
+
+def render_tactile(d: dict[str, Any]) -> list[str]:
+    lines = [f"Decoder: {d.get('decoder', '?')}; LUT calibration {d.get('lut_calibration_s', 0):.1f} s. "
+             "Depth RMS over the pixels deeper than the contact threshold, mean over presses "
+             "(one press per row at this size: indicative, not a converged mean).", ""]
+    rows = [(r["indenter"], r["depth_mm"], r["rms_mm"], r["rms_scene_mm"]) for r in d.get("depth", [])]
+    lines += _table(("indenter", "depth (mm)", "RMS sensor (mm)", "RMS scene (mm)"), rows)
+    lines.append("")
+    if "depth_mean_mm" in d:
+        lines.append(f"- depth RMS: mean {d['depth_mean_mm']:.3f} mm, worst {d['depth_worst_mm']:.3f} mm")
+    m = d.get("markers")
+    if m:
+        lines.append(f"- marker displacement RMS {m['rms_mm']:.4f} mm, shear direction error "
+                     f"{m['direction_error_deg']:.1f}°, {m['tracked_fraction']:.0%} tracked")
+    f = d.get("force_slip")
+    if f:
+        lines.append("- force / slip: " + ", ".join(f"{k} {_fmt(v)}" for k, v in f.items()))
+    lat = d.get("latency_ms")
+    if lat:
+        lines.append("- raw Bayer → tactile frame, median ms per stage: "
+                     + ", ".join(f"{k} {v:.1f}" for k, v in lat["median"].items())
+                     + f"; p95 total {lat['p95_total']:.1f} ms; decoder {lat.get('decoder')}")
+    s = d.get("stream")
+    if s:
+        lines.append(f"- streamed: {s['fps']:.1f} fps from a {s['camera_fps']:g} fps camera, latency p50 "
+                     f"{s['latency_p50_ms']:.1f} ms, p99 {s['latency_p99_ms']:.1f} ms, "
+                     f"{s['decode_workers']:g} decode worker(s)")
+    c = d.get("concealed")
+    if c:
+        lines.append(f"- concealed tactile effects: {len(c['rows'])} rows in {c['seconds']:.1f} s")
+    return lines
+
+
+def render_generic(d: Any) -> list[str]:
+    """Any JSON: a list of objects as a table of their scalar fields (one row each), anything
+    else as a table of its leaves by dotted path."""
+    if isinstance(d, list) and d and all(isinstance(x, dict) for x in d):
+        cols = [k for k, v in d[0].items() if not isinstance(v, (dict, list))]
+        return _table(tuple(cols), [tuple(x.get(k, "") for k in cols) for x in d])
+    rows: list[tuple[str, Any]] = []
+
+    def walk(prefix: str, v: Any) -> None:
+        if isinstance(v, dict):
+            for k, x in v.items():
+                walk(f"{prefix}.{k}" if prefix else str(k), x)
+        elif isinstance(v, list) and v and all(isinstance(x, dict) for x in v):
+            for i, x in enumerate(v):
+                walk(f"{prefix}[{i}]", x)
+        else:
+            rows.append((f"`{prefix}`", v))
+
+    walk("", d)
+    return _table(("figure", "value"), rows)
+
+
+RENDER: dict[str, Callable[[Any], list[str]]] = {
+    "reconstruct": render_reconstruct, "tactile": render_tactile,
+}
+TITLE = {
+    "reconstruct": "`thintact bench reconstruct`: decoder latency, roofline and quality",
+    "tactile": "`thintact bench tactile`: depth, markers, force / slip, latency",
+    "calibration": "`thintact bench calibration`: calibration robustness (baseline case)",
+    "sensor-binning": "`tools/bench_sensor_binning.py`: `t2s-closed-form` unbinned and binned 2 × 2",
+}
+
+
+def history(page: Path) -> list[str]:
+    """The history section of the existing page, markers included (empty when there is none)."""
+    if not page.is_file():
+        return []
+    text = page.read_text(encoding="utf-8")
+    if HISTORY_BEGIN not in text or HISTORY_END not in text:
+        return []
+    body = text[text.index(HISTORY_BEGIN):text.index(HISTORY_END) + len(HISTORY_END)]
+    return body.splitlines()
+
+
+def host_lines(load_before: float, load_after: float) -> list[str]:
+    from thintact_sdk.host.machine import host_capabilities, machine_summary
+
+    caps = host_capabilities()
+    return [f"- CPU: {caps.cpu_model}, {caps.cores} logical cores; SIMD {caps.simd}, native "
+            f"bfloat16 {'yes' if caps.native_bf16 else 'no'}; flags {', '.join(caps.flags)}",
+            f"- BLAS (numpy): {caps.blas}; torch {caps.torch}; GPU: {', '.join(caps.gpus) or 'none'}",
+            f"- summary: {machine_summary()}",
+            f"- load average (1 min) {load_before:.1f} before, {load_after:.1f} after, on "
+            f"{os.cpu_count()} cores" + (": measured under load (other jobs were running), so "
+                                         "timings are inflated and vary run to run"
+                                         if max(load_before, load_after) > 0.8 * (os.cpu_count() or 1)
+                                         else "")]
+
+
+def write_page(out: Path, found: dict[str, tuple[Any, str]], load: tuple[float, float],
+               note: str) -> None:
+    now = dt.datetime.now(dt.UTC).strftime("%Y-%m-%d %H:%M UTC")
+    old_history = history(out)
+    lines = ["# Benchmarks", "",
+             "<!-- generated by tools/benchmarks_page.py: edit the tool, not this page "
+             "(only the history section is carried over as it is) -->", "",
+             f"Measured {now} by `tools/benchmarks_page.py` on this host:", ""]
+    lines += host_lines(*load)
+    if note:
+        lines += [f"- note: {note}"]
+    lines += ["", "Each figure is one run; the SDK measures its decoder backend on whichever host it "
+              "runs (`thintact doctor`). The figures of other hosts are in the history below.", ""]
+    for name, (data, how) in found.items():
+        lines += [f"## {TITLE.get(name, name)}", "", f"*{how}.*", ""]
+        lines += RENDER.get(name, render_generic)(data)
+        lines.append("")
+    lines += ["## History: figures measured by hand on other hosts", ""]
+    lines += old_history or [HISTORY_BEGIN, "", "(none yet)", "", HISTORY_END]
+    out.write_text("\n".join(lines).rstrip() + "\n", encoding="utf-8")
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", type=Path, default=ROOT / "docs" / "benchmarks.md")
+    ap.add_argument("--from", dest="given", action="append", default=[], metavar="NAME=FILE",
+                    help="read NAME's JSON output from FILE instead of running it")
+    ap.add_argument("--skip", action="append", default=[], choices=sorted(SOURCES))
+    ap.add_argument("--keep-json", type=Path, metavar="DIR", help="also keep each run's JSON here")
+    ap.add_argument("--note", default="", help="one line about the conditions, printed on the page")
+    args = ap.parse_args(argv)
+    given: dict[str, Path] = {}
+    for item in args.given:
+        name, sep, file = item.partition("=")
+        if not sep or name not in SOURCES:
+            ap.error(f"--from needs NAME=FILE with NAME one of {', '.join(SOURCES)}, got {item!r}")
+        given[name] = Path(file)
+    load_before = os.getloadavg()[0]
+    found: dict[str, tuple[Any, str]] = {}
+    for name in SOURCES:
+        if name in args.skip:
+            continue
+        if name in given:
+            mtime = dt.datetime.fromtimestamp(given[name].stat().st_mtime, dt.UTC)
+            found[name] = (json.loads(given[name].read_text()),
+                           f"`{shown_command(name)}`, read from {given[name].name} "
+                           f"(written {mtime:%Y-%m-%d %H:%M} UTC)")
+        else:
+            data, seconds = run_source(name, args.keep_json)
+            found[name] = (data, f"`{shown_command(name)}`, {seconds:.0f} s")
+    write_page(args.out, found, (load_before, os.getloadavg()[0]), args.note)
+    print(f"wrote {args.out}", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
