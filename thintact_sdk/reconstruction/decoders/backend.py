@@ -203,8 +203,8 @@ class ArrayBackend:
 
     def channels_last(self, a: Any) -> np.ndarray:
         """``C × N × M`` on this backend → ``N × M × C`` float32 numpy (a new, interleaved array:
-        ``np.stack`` writes it plane by plane, 0.33 against 0.56 ms for a transposed copy at
-        3 × 400 × 512, Xeon-AMX)."""
+        ``np.stack`` writes it plane by plane, each plane read contiguously, where a transposed
+        copy reads with a stride)."""
         planes = self.to_numpy(a)
         return np.stack([np.asarray(p, np.float32) for p in planes], axis=-1)
 

@@ -5,8 +5,8 @@ row is seen by 2.56 sensor rows. The closed forms' first product ``U_Pᵀ Y`` co
 ``2·N·R·S`` per channel, over half of the frame's arithmetic; averaging ``2 × 2`` sensor
 blocks first (one pass over the frame) and solving the same Tikhonov problem on the binned
 operator cuts the products by about half. Where the FLOPs set the frame time (a CPU without
-AVX-512: ~40 ms per paper-size frame in float32) that is the difference between missing and
-meeting a 30 fps camera.
+AVX-512 needs a little more than a 30 fps camera period for a paper-size float32 frame) that is the
+difference between missing and meeting a 30 fps camera.
 
 It is not free by construction: binning averages the mask's shadow over ``b`` pixels. So it
 is offered to the backend selection (:mod:`thintact_sdk.reconstruction.decoders.backend_selection`) as one more candidate
