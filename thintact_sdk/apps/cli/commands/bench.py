@@ -19,6 +19,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         if info.name.startswith("_"):
             continue
         mod = importlib.import_module(f"{benchmarks.__name__}.{info.name}")
+        if not (hasattr(mod, "add_arguments") and hasattr(mod, "run")):
+            continue  # a helper of the benchmarks, not one itself
         doc = (mod.__doc__ or info.name).strip().splitlines()[0]
         bp = bsub.add_parser(getattr(mod, "NAME", info.name), help=doc, description=mod.__doc__)
         mod.add_arguments(bp)
