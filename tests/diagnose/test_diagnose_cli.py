@@ -51,3 +51,23 @@ def test_cli_writes_the_three_outputs(concealed_case: Any, tmp_path: Path) -> No
     assert prof["format"] == "thintact-profile/1"
     html = (out / "report.html").read_text()
     assert html.count("data:image/png;base64,") >= 3
+
+
+def test_the_library_diagnosis_is_the_commands(concealed_case: Any, tmp_path: Path) -> None:
+    """``thintact diagnose`` only parses, prints and writes: ``diagnose(path)`` gives the same
+    report.json content and fitted profile, here binned 2×2 so that the binned stages (the
+    unbinned check, the unbinned hotspots, ``binned`` and ``full_size``) are the library's too."""
+    from thintact_sdk.diagnosis.imaging import RecordingOptions, diagnose
+    from thintact_sdk.formats.profiles import write_profile
+
+    rec = concealed_case("clean") / "recording"
+    out = tmp_path / "cli"
+    assert main(["diagnose", str(rec), "--out", str(out), "--bin", "2", "--quiet"]) == 0
+    d = diagnose(rec, options=RecordingOptions(bin_factor=2))
+    cli_report = json.loads((out / "report.json").read_text())
+    assert {"binned", "full_size"} <= set(cli_report)
+    assert cli_report["binned"]["factor"] == 2
+    assert json.loads(json.dumps(d.report)) == cli_report
+    lib_profile = write_profile(d.fitted_profile, tmp_path / "fitted_profile.json")
+    assert json.loads(lib_profile.read_text()) == json.loads((out / "fitted_profile.json").read_text())
+    assert d.fitted_profile.sensor.rows == 2 * d.data.profile.sensor.rows  # the device's own size

@@ -235,7 +235,7 @@ def test_diagnose_keeps_a_saturated_frame_as_data(tiny: dict[str, Any], rec_copy
 
 
 def test_diagnose_never_writes_a_report_with_nan_figures() -> None:
-    from thintact_sdk.apps.cli.commands.diagnose import _check_finite
+    from thintact_sdk.diagnosis.imaging.from_recording import check_finite_report as _check_finite
     from thintact_sdk.errors import ThinTactError
 
     good = {"noise_rms_dn": 2.0, "baseline": {"rms_dn": 3.0, "chi2_per_dof": 1.2},
