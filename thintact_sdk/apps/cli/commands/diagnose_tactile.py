@@ -5,18 +5,15 @@ fit improve (report.json, report.html, fitted_tactile.yaml)."""
 from __future__ import annotations
 
 import argparse
-import math
 import time
 
 from thintact_sdk.apps.cli.argtypes import int_range, positive_float
 from thintact_sdk.apps.cli.output_path import add_force_argument, claim_output
 
 
-def _indices(text: str) -> list[int] | None:
-    if text == "all":
-        return None
-    if text == "even":
-        return [-2]
+def _indices(text: str) -> list[int] | str:
+    if text in ("all", "even"):
+        return text
     try:
         return [int(t) for t in text.split(",") if t.strip()]
     except ValueError as exc:
@@ -47,35 +44,19 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from rich.console import Console
 
-    from thintact_sdk.diagnosis.tactile.press_data import load_presses
-    from thintact_sdk.diagnosis.tactile.press_engine import (
-        TactileDiagnosisOptions,
-        diagnose_tactile,
-    )
+    from thintact_sdk.diagnosis.tactile.from_pack import diagnose_tactile_pack
+    from thintact_sdk.diagnosis.tactile.press_engine import TactileDiagnosisOptions
     from thintact_sdk.diagnosis.tactile.report import write_tactile_outputs
-    from thintact_sdk.errors import ThinTactError
+    from thintact_sdk.host.progress import stage_reporter
 
     out = claim_output(args.out, "directory", force=args.force, inputs=(args.pack,))
     con = Console(stderr=True, quiet=args.quiet)
     t0 = time.perf_counter()
-    real = load_presses(args.pack)
-    n = len(real.images)
-    idx = args.presses
-    if idx == [-2]:
-        idx = list(range(0, n, 2))
-    if idx is not None and (len(idx) < 2 or min(idx) < 0 or max(idx) >= n):
-        raise ThinTactError(f"--presses: at least 2 indices in 0..{n - 1}")
-    con.print(f"{n} presses of {real.reference.shape[1]}×{real.reference.shape[0]} px from {real.source}")
-    from thintact_sdk.host.progress import stage_reporter
-
     with stage_reporter(args.quiet) as say:  # lines also when stderr is a file or a pipe
-        d = diagnose_tactile(real, args.ball_radius_mm, args.mm_per_px, idx,
-                             TactileDiagnosisOptions(max_effects=args.max_effects),
-                             progress=say)
+        d = diagnose_tactile_pack(args.pack, args.ball_radius_mm, args.mm_per_px, args.presses,
+                                  TactileDiagnosisOptions(max_effects=args.max_effects),
+                                  progress=say, log=con.print)
     rep = d.report
-    for part in ("baseline", "final"):
-        if not math.isfinite(rep[part]["chi2_per_dof"]):
-            raise ThinTactError("the diagnosis gave a non-finite χ² (no usable pixels?); nothing written")
     paths = write_tactile_outputs(d, out)
     print(f"noise {rep['noise_rms_dn']} DN; baseline chi2/dof {rep['baseline']['chi2_per_dof']:.3f}")
     for f in rep["findings"]:
