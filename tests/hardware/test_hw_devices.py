@@ -11,6 +11,7 @@ import usb.backend
 import yaml
 from thintact_genicam.producers import viky_producer
 
+from thintact_sdk import Component, hookimpl
 from thintact_sdk.apps.cli.commands.devices import usb_devices
 from thintact_sdk.apps.cli.main import main
 from thintact_sdk.formats.profiles import load_profile
@@ -123,3 +124,37 @@ def test_a_hanging_producer_is_reported_not_waited_for():
     devices, error = bounded(lambda cti: time.sleep(2.0) or [], "slow.cti", 0.2)
     assert devices == [] and "did not finish enumerating within" in error
     assert time.monotonic() - t0 < 1.0
+
+
+def _lister_plugin() -> types.ModuleType:
+    """A plugin with a device lister adding ``--fake-source`` and one whose factory raises."""
+    mod = types.ModuleType("fake_lister_plugin")
+
+    def build(parser):
+        parser.add_argument("--fake-source", default="none")
+        return lambda args: ({"source": args.fake_source, "timeout": args.timeout},
+                             ["Fake sources", f"  {args.fake_source} within {args.timeout:g} s"])
+
+    @hookimpl
+    def thintact_device_listers():
+        return [Component("fake", build), Component("broken", lambda parser: 1 / 0)]
+
+    mod.thintact_device_listers = thintact_device_listers
+    return mod
+
+
+def test_devices_only_calls_the_listers(monkeypatch, capsys):
+    """The core command knows no source: each lister adds its options and returns its section
+    (data under its name, text lines); a lister that fails to build is one line of its own."""
+    import thintact_sdk.device.registry as registry
+
+    monkeypatch.setattr(registry, "_REGISTRY", None)  # this test's registry, restored after
+    registry.get_registry().register(_lister_plugin(), "fake-listers")
+    assert main(["devices", "--json", "--no-profiles", "--fake-source", "bench", "--timeout", "3",
+                 "--usb-backend", "test_hw_devices:make_bus"]) == 0
+    found = json.loads(capsys.readouterr().out)
+    assert found["fake"] == {"source": "bench", "timeout": 3.0}
+    assert "failed to build" in found["broken"]["error"]
+    assert main(["devices", "--no-profiles", "--usb-backend", "test_hw_devices:make_bus"]) == 0
+    out = capsys.readouterr().out
+    assert "Fake sources\n  none within 10 s\n" in out and "device lister 'broken'" in out
