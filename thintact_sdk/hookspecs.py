@@ -70,8 +70,22 @@ class Component:
 
 TRAITS = {
     "simulated": "camera: frames are rendered by the simulator (the virtual sensor)",
+    "calibration-candidate": "decoder: the calibration cross-validates it on the unit's frames and may "
+                             "recommend it; the first one registered is the calibration's default",
+    "tau-key=FIELD": "decoder: reads its Tikhonov tau from calibration.json field FIELD (default: tau)",
+    "scene-prior": "decoder: takes a ScenePrior (setting prior); the calibration fits one for it",
+    "joint-filter": "decoder: needs the bundle's trained joint filter (filter.npz)",
 }
-"""Traits a component may declare, and what each promises."""
+"""Traits a component may declare, and what each promises. A trait is a word, or
+``key=value`` for one that carries a value (:func:`trait_value`)."""
+
+
+def trait_value(traits: tuple[str, ...], key: str) -> str | None:
+    """The value of trait ``key=value`` among ``traits``; ``None`` when not declared."""
+    for trait in traits:
+        if trait.startswith(f"{key}="):
+            return trait[len(key) + 1:]
+    return None
 
 
 class ThinTactSpec:

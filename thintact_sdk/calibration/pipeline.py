@@ -24,7 +24,6 @@ from thintact_sdk.calibration.solver import ChannelMatrices, Method, SolveReport
 from thintact_sdk.calibration.stages import STAGE_DIR, Checkpoints, StageLog, fingerprint
 from thintact_sdk.calibration.tau import TauCurve
 from thintact_sdk.calibration.validation import (
-    DEFAULT_DECODER,
     TAU_GRID,
     ValidationResult,
     averaged_noise,
@@ -66,7 +65,7 @@ class CalibrationOptions:
         Number of training scenes for the filter.
     decoder
         Decoder used for validation; None compares the candidates of
-        :data:`thintact_sdk.calibration.selection.CANDIDATE_DECODERS` and recommends the best.
+        :func:`thintact_sdk.calibration.validation.calibration_decoders` and recommends the best.
     predict
         Predict each validation scene's PSNR from the profile and fail a unit that falls short
         of it by more than ``calibration_limits.psnr_margin_db``.
@@ -166,10 +165,10 @@ def validate(
     collection: SlitCollection,
     profile: Profile,
     bundle: CalibrationBundle,
-    decoder: str | None = DEFAULT_DECODER,
+    decoder: str | None = None,
 ) -> list[ValidationResult]:
     """Reconstruct every validation frame of ``recording`` and score it against its scene."""
-    dec = make_decoder(profile, bundle, decoder or DEFAULT_DECODER)
+    dec = make_decoder(profile, bundle, decoder)
     out = []
     for i in collection.validation:
         truth = recording.scene(i)

@@ -22,7 +22,12 @@ from thintact_sdk.calibration.lowrank import DEFAULT_RANK, LowRankImage, compres
 from thintact_sdk.calibration.slits import ChannelSlits, SlitStack
 from thintact_sdk.calibration.solver import Method, solve_channel
 from thintact_sdk.calibration.tau import cross_validate, tau_grid
-from thintact_sdk.calibration.validation import averaged_noise, make_decoder, score
+from thintact_sdk.calibration.validation import (
+    averaged_noise,
+    make_decoder,
+    needs_joint_filter,
+    score,
+)
 from thintact_sdk.errors import ThinTactError
 from thintact_sdk.formats.profiles import NoiseSpec, Profile
 from thintact_sdk.reconstruction.bundle import CalibrationBundle
@@ -194,7 +199,7 @@ def predict_validation(
     dark_dn = signal_to_dn(np.zeros((*calibrated.sensor_shape, c)), noise, rng)  # one dark capture
     design = simulated_calibration(profile, gains, noise, method, max_iter, tol, rank, rng, dark_dn)
     jf = None
-    if decoder == "thintact-noniterative":
+    if needs_joint_filter(decoder):
         jf = train_joint_filter(design, training_scenes(n, m, count=filter_scenes, seed=0),
                                 noise=noise, steps=filter_steps, seed=0)
     bundle = CalibrationBundle.create(profile, design, jf, tau=1.0, source="simulator")

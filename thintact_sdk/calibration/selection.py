@@ -3,7 +3,7 @@
 Each candidate decoder is cross-validated over the recording's validation scenes
 (:func:`thintact_sdk.calibration.tau.cross_validate`); the one with the best held-out mean
 PSNR is recommended (``calibration.json`` → ``decoder``) and every candidate's own τ is
-stored (``tau`` for ``thintact-noniterative``, ``tau_t2s_closed_form``). GCV and the
+stored (in the ``calibration.json`` field its trait ``tau-key`` names). GCV and the
 discrepancy principle are computed for the recommended decoder and reported. When the
 scenes cannot make two folds, τ is the one chosen on simulated training scenes (GCV when
 there is none): on the test recordings GCV chose a τ 3-15× too small.
@@ -20,7 +20,6 @@ import numpy as np
 from thintact_sdk.calibration.collect import SlitCollection, signal_of
 from thintact_sdk.calibration.health import NoiseEstimate
 from thintact_sdk.calibration.tau import (
-    PRIOR_DECODERS,
     CrossValidation,
     TauCurve,
     cross_validate,
@@ -29,20 +28,18 @@ from thintact_sdk.calibration.tau import (
     tau_grid,
 )
 from thintact_sdk.calibration.validation import (
-    DEFAULT_DECODER,
     ValidationResult,
+    calibration_decoders,
+    default_decoder,
     make_decoder,
     score,
+    takes_scene_prior,
+    tau_key,
 )
 from thintact_sdk.formats.profiles import Profile
 from thintact_sdk.formats.recording import Recording
 from thintact_sdk.reconstruction.bundle import CalibrationBundle
 from thintact_sdk.reconstruction.scene_prior import ScenePrior
-
-CANDIDATE_DECODERS = ("thintact-noniterative", "t2s-closed-form")
-"""Decoders the calibration compares when none is imposed."""
-TAU_KEYS = {"thintact-noniterative": "tau", "t2s-closed-form": "tau_t2s_closed_form"}
-"""``calibration.json`` field holding each decoder's τ (others use ``tau``)."""
 
 
 @dataclass
@@ -120,7 +117,7 @@ class TauSelection:
     def write_taus(self, meta: dict[str, Any]) -> None:
         """Put each decoder's τ (and τ per channel where chosen) into ``calibration.json`` fields."""
         for name, tau in self.decoder_taus.items():
-            meta[TAU_KEYS.get(name, "tau")] = float(tau)
+            meta[tau_key(name)] = float(tau)
         meta.pop("channel_tau", None)
         if self.channel_taus:
             meta["channel_tau"] = {k: [float(t) for t in v] for k, v in self.channel_taus.items()}
@@ -177,7 +174,8 @@ def select(
     noise
         The noise measured on its slit frames (weights of GCV and the discrepancy principle).
     decoder
-        Impose this decoder (default: the best of :data:`CANDIDATE_DECODERS`).
+        Impose this decoder (default: the best of
+        :func:`~thintact_sdk.calibration.validation.calibration_decoders`).
     tau
         Impose this τ (no selection; the validation is then scored at it).
     simulated
@@ -188,20 +186,20 @@ def select(
     """
     sm = bundle.system_matrices
     curves: list[TauCurve] = [simulated] if simulated is not None else []
-    names = [decoder] if decoder else list(CANDIDATE_DECODERS)
+    names = [decoder] if decoder else calibration_decoders()
     if tau is not None:
-        name = names[0] if decoder else DEFAULT_DECODER
+        name = names[0] if decoder else default_decoder()
         dec = make_decoder(profile, bundle, name, tau=tau)
         estimates = [np.asarray(dec.decode(y), np.float32) for y in frames.signals]
         return TauSelection(name, float(tau), "given (--tau)", {name: float(tau)}, curves,
                             validation=_results(frames, estimates))
     grid = tau_grid(sm)
     # plain Tikhonov for a decoder that can take a scene prior, whatever the bundle already holds
-    decoders = {name: make_decoder(profile, bundle, name, **({"prior": None} if name in PRIOR_DECODERS else {}))
+    decoders = {name: make_decoder(profile, bundle, name, **({"prior": None} if takes_scene_prior(name) else {}))
                 for name in names}
     cvs: dict[str, CrossValidation] = {}
     for name, dec in decoders.items():
-        if name in PRIOR_DECODERS:
+        if takes_scene_prior(name):
             # plain Tikhonov is the decoder already built for this name (not a second copy)
             cv = cross_validate_prior(
                 lambda prior, name=name, dec=dec: dec if prior is None else  # type: ignore[misc]
@@ -218,7 +216,7 @@ def select(
         best = max(cvs.values(), key=lambda cv: cv.held_out_mean_db)
         chosen, criterion, tau_chosen = best.decoder, "cross-validation", best.curve.tau
     else:
-        chosen = names[0] if decoder else DEFAULT_DECODER
+        chosen = names[0] if decoder else default_decoder()
         criterion, tau_chosen = "gcv", float("nan")
     if frames.signals and (noise_criteria_curves or (not cvs and simulated is None)):
         inv_var = [1.0 / noise.variance(np.asarray(y, np.float64)) for y in frames.signals]

@@ -24,8 +24,8 @@ Three criteria, each a curve over a log grid of τ:
     Morozov's principle: the largest τ whose residual is not above the noise,
     ``mean(r²/σ²) ≤ 1``, with ``σ²`` from the noise measured on the slit frames.
 
-Every decoder used here must be linear in the measurement and expose ``set_tau``
-(``thintact-noniterative`` and ``t2s-closed-form`` do).
+Every decoder used here must be linear in the measurement and expose ``set_tau`` (the
+closed-form decoders that declare the trait ``calibration-candidate`` do).
 """
 
 from __future__ import annotations
@@ -293,9 +293,6 @@ def cross_validate(decoder: Any, name: str, signals: Sequence[np.ndarray],
     return out
 
 
-PRIOR_DECODERS = ("t2s-closed-form",)
-"""Decoders whose scene prior is cross-validated with τ (:func:`cross_validate_prior`;
-``calibration.json`` → ``scene_prior`` → decoder name)."""
 PRIOR_ALPHAS = (0.5, 1.0, 1.5)
 PRIOR_KNEES = (4.0, 8.0, 16.0)
 """The scene priors (:class:`~thintact_sdk.reconstruction.scene_prior.ScenePrior`, weights

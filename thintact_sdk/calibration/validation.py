@@ -1,7 +1,10 @@
 """Reconstruct validation frames with a calibration and score them (PSNR, SSIM); choose τ.
 
-Reconstruction goes through the decoders plugin (``thintact-noniterative`` by default), so
-the figures are what a user of the bundle gets.
+Reconstruction goes through the registry's decoders (by default the first that declares the
+trait ``calibration-candidate``: :func:`default_decoder`), so the figures are what a user of the
+bundle gets. Which decoders the calibration compares, where each keeps its τ and which take a
+scene prior come from their declared traits (:data:`thintact_sdk.hookspecs.TRAITS`), never from
+their names.
 """
 
 from __future__ import annotations
@@ -12,8 +15,9 @@ from typing import Any
 import numpy as np
 
 from thintact_sdk.device.registry import get_registry
-from thintact_sdk.errors import InvalidValueError
+from thintact_sdk.errors import CalibrationError, InvalidValueError
 from thintact_sdk.formats.profiles import NoiseSpec, Profile
+from thintact_sdk.hookspecs import trait_value
 from thintact_sdk.interfaces import Decoder
 from thintact_sdk.reconstruction.bundle import CalibrationBundle
 from thintact_sdk.reconstruction.filter_training import scene_for_channels
@@ -22,7 +26,6 @@ from thintact_sdk.reconstruction.tau_sweep import sweep_tau
 from thintact_sdk.reconstruction.tikhonov import TikhonovSolver
 from thintact_sdk.simulation.noise import signal_variance_dn
 
-DEFAULT_DECODER = "thintact-noniterative"
 TAU_GRID = tuple(10.0 ** e for e in range(-9, 0))
 """τ candidates relative to the largest ``σ_P² σ_Q²`` of the coding matrices."""
 
@@ -54,11 +57,51 @@ class ValidationResult:
     saturated_fraction: float = 0.0
 
 
+def calibration_decoders() -> list[str]:
+    """The decoders the calibration compares when none is imposed: those declaring the trait
+    ``calibration-candidate``, in registry order (the core's first)."""
+    return [c.name for c in get_registry().with_trait("decoder", "calibration-candidate")]
+
+
+def default_decoder() -> str:
+    """The calibration's decoder when none is named: the first of :func:`calibration_decoders`.
+
+    Raises
+    ------
+    CalibrationError
+        No registered decoder declares ``calibration-candidate``.
+    """
+    names = calibration_decoders()
+    if not names:
+        raise CalibrationError("no registered decoder declares the trait 'calibration-candidate'; "
+                               "`thintact plugins` lists the decoders")
+    return names[0]
+
+
+def tau_key(name: str) -> str:
+    """The ``calibration.json`` field holding decoder ``name``'s τ: its trait ``tau-key=FIELD``,
+    else ``tau``."""
+    return trait_value(get_registry().get("decoder", name).traits, "tau-key") or "tau"
+
+
+def takes_scene_prior(name: str) -> bool:
+    """Whether decoder ``name`` declares the trait ``scene-prior`` (its prior is cross-validated
+    with τ and stored under ``calibration.json`` → ``scene_prior`` → ``name``)."""
+    return "scene-prior" in get_registry().get("decoder", name).traits
+
+
+def needs_joint_filter(name: str) -> bool:
+    """Whether decoder ``name`` declares the trait ``joint-filter`` (it needs the bundle's
+    trained joint filter)."""
+    return "joint-filter" in get_registry().get("decoder", name).traits
+
+
 def make_decoder(
-    profile: Profile, bundle: CalibrationBundle, name: str = DEFAULT_DECODER, **settings: Any
+    profile: Profile, bundle: CalibrationBundle, name: str | None = None, **settings: Any
 ) -> Decoder:
-    """Build decoder ``name`` on ``bundle`` (settings such as ``tau`` are passed through)."""
-    decoder = get_registry().create("decoder", name, profile, {"bundle": bundle, **settings})
+    """Build decoder ``name`` (default: :func:`default_decoder`) on ``bundle`` (settings such
+    as ``tau`` are passed through)."""
+    decoder = get_registry().create("decoder", name or default_decoder(), profile, {"bundle": bundle, **settings})
     return decoder  # type: ignore[no-any-return]
 
 

@@ -163,6 +163,12 @@ class PluginRegistry:
             raise PluginError(f"unknown component kind {kind!r}; kinds: {', '.join(KINDS)}")
         return dict(self._components[kind])
 
+    def with_trait(self, kind: str, trait: str) -> list[Component]:
+        """Components of ``kind`` declaring ``trait`` (a word, or the key of ``key=value``),
+        in load order: the core's built-ins first, then the entry points by name."""
+        return [c for c in self.components(kind).values()
+                if trait in c.traits or any(t.startswith(f"{trait}=") for t in c.traits)]
+
     def _describe(self, plugin: str) -> str:
         """``plugin 'acme' (package acme-thintact-camera 1.2.3)`` for error messages."""
         info = self.plugins.get(plugin)

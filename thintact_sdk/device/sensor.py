@@ -285,7 +285,7 @@ class Sensor:
             if cfg is None:
                 raise ProfileError(
                     f"profile {self.profile.name!r} has no 'decoder' section; add decoder.plugin "
-                    "(thintact-noniterative) and a calibration"
+                    "(a decoder `thintact plugins` lists) and a calibration"
                 )
             self._decoder = self.registry.create("decoder", cfg.plugin, self.profile, cfg.settings)
         return self._decoder
@@ -382,8 +382,8 @@ class Sensor:
         On a host with at most :data:`~thintact_sdk.host.compute_threads.PIPELINE_SHARES_CORES_UP_TO`
         usable cores the decode runs on one kernel thread, as in :meth:`stream`: a product
         split over both cores waits for the busier one, and with the second core taken by
-        another job the paper device's decode went from 10.5 to 105 ms per frame on two
-        threads (measured on the 2-core Xeon-AMX), against about 17 ms on one.
+        another job the decode on two threads becomes many times slower than on one
+        (the figures are in docs/benchmarks.md, history).
         """
         item = _InFlight(raw, time.monotonic_ns())
         with self.single_frame_kernels():

@@ -211,7 +211,8 @@ class LightConfig(_Section):
 class DecoderConfig(_Section):
     """Which decoder reconstructs scenes and from which calibration."""
 
-    plugin: PluginName = Field(default="thintact-noniterative")
+    plugin: PluginName = Field(description="the decoder's registry name (thintact plugins lists them); "
+                               "required: the profile, not the code, chooses the decoder")
     calibration: str | None = Field(
         default=None, description="calibration bundle directory (relative to the profile file)"
     )
@@ -221,7 +222,7 @@ class DecoderConfig(_Section):
 class DisplayConfig(_Section):
     """The LCD that shows calibration patterns: plugin, which display, sensing area placement."""
 
-    plugin: PluginName = Field(default="virtual")
+    plugin: PluginName = Field(description="the display's registry name (thintact plugins lists them)")
     display_index: int = Field(default=0, ge=0, strict=True)
     pixel_pitch_um: PitchUm = Field(default=31.5)
     origin_px: tuple[Annotated[int, Field(strict=True, ge=0)], Annotated[int, Field(strict=True, ge=0)]] = Field(

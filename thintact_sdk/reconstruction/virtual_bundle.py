@@ -16,11 +16,16 @@ from typing import Any
 
 import numpy as np
 
-from thintact_sdk.device.registry import get_registry
 from thintact_sdk.device.virtual_bench import REFERENCE_EXPOSURE_US, signal_scale_dn
 from thintact_sdk.formats.profiles import Profile
 from thintact_sdk.interfaces import TunableDecoder
 from thintact_sdk.reconstruction.bundle import CalibrationBundle
+from thintact_sdk.reconstruction.decoders.components import (
+    make_flatcam,
+    make_iterative,
+    make_noniterative,
+    make_t2s_closed_form,
+)
 from thintact_sdk.reconstruction.filter_training import (
     TrainingData,
     train_joint_filter,
@@ -129,14 +134,14 @@ def make_virtual_bundle(
     val_scenes = [make_scene(name, n, m, i) for name, i in VALIDATION_SCENES]
     val_y, _ = simulate_measurements(sim, scale, val_scenes, profile.noise, opts.seed + 1)
     unit = coding_power(sm)
-    # the decoders come from the registry (no plugin is imported), on an in-memory bundle
+    # the core's own decoders (reconstruction.decoders), on an in-memory bundle
     provisional = CalibrationBundle.create(profile, sm, jf, tau=unit, source="simulator",
                                            scale_dn_per_unit=scale)
 
-    def decoder(name: str, **settings: Any) -> Any:
-        return get_registry().create("decoder", name, profile, {"bundle": provisional, **settings})
+    def decoder(factory: Callable[..., Any], **settings: Any) -> Any:
+        return factory(profile, {"bundle": provisional, **settings})
 
-    ni, cf = decoder("thintact-noniterative"), decoder("t2s-closed-form")
+    ni, cf = decoder(make_noniterative), decoder(make_t2s_closed_form)
     tau, table = choose_tau(ni, unit, val_y, val_scenes)
     tau_cf, table_cf = choose_tau(cf, unit, val_y, val_scenes)
     say("validation")
@@ -144,8 +149,8 @@ def make_virtual_bundle(
     decoders = {
         "": ni.decode,
         "t2s_closed_form_": cf.decode,
-        "iterative800_": decoder("t2s-iterative", tau=tau_cf, iterations=800).decode,
-        "flatcam_": decoder("flatcam", tau=tau).decode,
+        "iterative800_": decoder(make_iterative, tau=tau_cf, iterations=800).decode,
+        "flatcam_": decoder(make_flatcam, tau=tau).decode,
     }
     metrics: dict[str, Any] = {
         "two_term_fit_relative_error": sm.meta["fit_relative_error"],

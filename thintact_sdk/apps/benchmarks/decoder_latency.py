@@ -310,12 +310,13 @@ def run(args: argparse.Namespace) -> int:
 
 def _mask_compare(profile: Any, dev: _Device, result: dict[str, Any], args: argparse.Namespace,
                   say: Callable[[str], None]) -> dict[str, Any]:
-    """The profile's mask (``mls``) against every design a mask component has stored for this
-    device (:meth:`~thintact_sdk.interfaces.MaskDesigner.stored_design`), keyed by the
-    component's name; ``designs`` says so when no mask component has one."""
+    """The profile's mask (keyed by its ``mask.design``, ``profile`` when unnamed) against
+    every design a mask component has stored for this device
+    (:meth:`~thintact_sdk.interfaces.MaskDesigner.stored_design`), keyed by the component's
+    name; ``designs`` says so when no mask component has one."""
     from thintact_sdk.device.registry import get_registry
 
-    out: dict[str, Any] = {"mls": {
+    out: dict[str, Any] = {profile.mask.design or "profile": {
         k: result["quality"][f"{k} [numpy-float32]"] for k in ("thintact-noniterative", "t2s-closed-form")}}
     registry = get_registry()
     for name in sorted(registry.components("mask")):

@@ -101,7 +101,7 @@ def accuracy(args: argparse.Namespace, out: dict[str, Any]) -> None:
     with Sensor(profile, camera_settings=settings, decoder=decoder) as sensor, _progress() as bar:
         slot = scene_slot(sensor)
         if decoder is None:
-            decoder_name = args.decoder or "t2s-closed-form"
+            decoder_name = args.decoder or _filterless_decoder()
             sensor.decoder, tau = _simulator_decoder(sensor, slot, decoder_name)
             decoder_note += f"in-memory two-term fit of the simulator, tau {tau:g} chosen on " \
                             "4 calibration-ball presses"
@@ -176,6 +176,14 @@ def _print_concealed(rows: list[Any], diag: dict[str, Any], seconds: float) -> N
         print(f"{r.depth_mm:5.2f}mm {r.plain_mm:9.3f}mm {r.concealed_mm:8.3f}mm {r.corrected_mm:8.3f}mm")
 
 
+def _filterless_decoder() -> str:
+    """The first calibration decoder that needs no joint filter (traits
+    ``calibration-candidate`` without ``joint-filter``): the closed-form T2S decoder."""
+    from thintact_sdk.calibration.validation import calibration_decoders, needs_joint_filter
+
+    return next(n for n in calibration_decoders() if not needs_joint_filter(n))
+
+
 def _simulator_decoder(sensor: Any, slot: Any, name: str) -> tuple[Any, float]:
     """A decoder for a virtual sensor without a calibration bundle: the two-term fit of its
     simulator (REC's ``SystemMatrices.two_term_fit``), no filter (the closed-form T2S
@@ -223,12 +231,14 @@ def _latency_decoder(profile: Any, name: str | None = None,
     closed-form Tikhonov decoder (``flatcam``: the paper's solve without the joint filter).
     The system matrices are returned where the frames should be rendered with them (a bundle
     given by directory, or the in-memory one)."""
+    from thintact_sdk.calibration.validation import default_decoder
     from thintact_sdk.device.registry import get_registry
     from thintact_sdk.errors import CalibrationError
+    from thintact_sdk.reconstruction.decoders.components import make_flatcam
 
     cfg = profile.decoder
     given = name
-    name = name or (cfg.plugin if cfg is not None else "thintact-noniterative")
+    name = name or (cfg.plugin if cfg is not None else default_decoder())
     settings = dict(cfg.settings) if cfg is not None else {}
     if bundle_dir is not None:
         from thintact_sdk.reconstruction.bundle import CalibrationBundle
@@ -255,8 +265,8 @@ def _latency_decoder(profile: Any, name: str | None = None,
     if given is not None:
         decoder = get_registry().create("decoder", given, profile, fallback)
         return decoder, sm, f"no bundle on disk: {given} on an in-memory bundle of the directly generated matrices"
-    decoder = get_registry().create("decoder", "flatcam", profile, fallback)
-    return decoder, sm, ("no bundle: flatcam closed-form Tikhonov (no joint filter) on the "
+    decoder = make_flatcam(profile, fallback)
+    return decoder, sm, (f"no bundle: {decoder.name} closed-form Tikhonov (no joint filter) on the "
                          "directly generated matrices")
 
 

@@ -216,13 +216,15 @@ def make_t2s_closed_form(profile: Profile, settings: dict[str, Any]) -> T2SClose
 def thintact_decoders() -> list[Component]:
     return [
         Component("thintact-noniterative", make_noniterative,
-                               "ThinTact joint DCT filter + closed-form Tikhonov (real time)"),
+                  "ThinTact joint DCT filter + closed-form Tikhonov (real time)",
+                  traits=("calibration-candidate", "tau-key=tau", "joint-filter")),
         Component("t2s-iterative", make_iterative,
                                "full T2S Tikhonov by Nesterov gradient, 800 iterations (baseline)"),
         Component("flatcam", make_flatcam,
                                "FlatCam closed form, coding term only after mean removal (baseline)"),
         Component("t2s-closed-form", make_t2s_closed_form,
-                               "exact full-T2S Tikhonov without iterations (low-rank open term, Woodbury)"),
+                  "exact full-T2S Tikhonov without iterations (low-rank open term, Woodbury)",
+                  traits=("calibration-candidate", "tau-key=tau_t2s_closed_form", "scene-prior")),
         Component("identity", make_identity,
                                "lens-based sensors (DIGIT, GelSight Mini): the camera image, scaled and resampled"),
     ]

@@ -57,11 +57,12 @@ def write_bundle(profile: Any, sm: Any, args: argparse.Namespace, rec: Any) -> A
     """Filter training, τ and decoder choice and the bundle at ``args.out`` around matrices
     made elsewhere (``calibrate-import``, ``calibrate-direct``); prints where it went."""
     from thintact_sdk.calibration.pipeline import CalibrationOptions, bundle_from_matrices
+    from thintact_sdk.calibration.validation import default_decoder
 
     bundle = bundle_from_matrices(profile, sm, args.out,
                                   CalibrationOptions(tau=args.tau, filter_steps=args.filter_steps), rec)
     sel = bundle.meta["metrics"].get("tau_selection", {})
-    print(f"calibration bundle: {args.out} (decoder {bundle.meta.get('decoder', 'thintact-noniterative')}, "
+    print(f"calibration bundle: {args.out} (decoder {bundle.meta.get('decoder') or default_decoder()}, "
           f"tau {bundle.tau:.4g} DN², {sel.get('criterion')})")
     return bundle
 

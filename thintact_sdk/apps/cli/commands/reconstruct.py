@@ -30,8 +30,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("recording", metavar="RECORDING", help="thintact-recording/1 directory")
     p.add_argument("--calibration", required=True, metavar="CAL", help="calibration bundle directory")
     p.add_argument("--out", required=True, metavar="DIR", help="output directory for the .npy estimates")
-    p.add_argument("--decoder", help="decoder plugin (default: the one the calibration recommends, "
-                   "calibration.json 'decoder', else thintact-noniterative)")
+    p.add_argument("--decoder", help="decoder (default: the one the calibration recommends, "
+                   "calibration.json 'decoder', else the calibration's default: the first decoder "
+                   "declaring the trait calibration-candidate)")
     p.add_argument("--tau", type=positive_float, help="override the bundle's Tikhonov tau (DN², > 0; "
                    "default: the calibration's, chosen on the unit's own frames)")
     p.add_argument("--dark", choices=["auto", "black"], default="auto",
@@ -76,8 +77,8 @@ def run(args: argparse.Namespace) -> int:
             "other physics fields than this recording's profile[/yellow]"
         )
     settings = {} if args.tau is None else {"tau": args.tau}
-    decoder_name = args.decoder or str(bundle.meta.get("decoder") or "thintact-noniterative")
-    decoder = make_decoder(profile, bundle, decoder_name, **settings)
+    decoder_name = args.decoder or bundle.meta.get("decoder") or None
+    decoder = make_decoder(profile, bundle, None if decoder_name is None else str(decoder_name), **settings)
     ref_exposure = bundle.meta.get("exposure_us")
     out.mkdir(parents=True, exist_ok=True)
     dark, dark_source = dark_level(rec, use_dark_frames=args.dark == "auto")
