@@ -51,7 +51,8 @@ def test_bench_reconstruct_runs_on_virtual_mini(capsys, monkeypatch) -> None:
         assert q["thintact-noniterative [numpy-float32]"][name]["psnr_db"] >= \
             q[reconstruct.ORACLE][name]["psnr_db"] - 1.0
     assert out["iterative800"]["latency_ms_extrapolated"] > 0  # timings themselves are load-dependent
-    assert "mls" in out["mask_compare"] and "ga" in out["mask_compare"]
+    # the profile's own mask under its design's name, and the masks plugin's stored GA design
+    assert {"random", "ga"} <= set(out["mask_compare"])
     assert "cores" in out["machine"]
     # the table prints the backend tags as text (rich would take "[numpy-float32]" for markup)
     monkeypatch.setenv("COLUMNS", "220")
