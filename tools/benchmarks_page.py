@@ -62,23 +62,34 @@ SOURCES: dict[str, list[str]] = {
 }
 
 
-def run_source(name: str, keep: Path | None) -> tuple[Any, float]:
-    """Run ``name``'s command; its JSON output and the seconds it took."""
+def run_source(name: str, keep: Path | None) -> tuple[Any, float, list[float]]:
+    """Run ``name``'s command: its JSON output, the seconds it took and the 1-minute load
+    averages before and after it."""
     argv = SOURCES[name]
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / f"{name}.json"
         cmd = [a.replace("{json}", str(out)) for a in argv]
         print(f"[{name}] {' '.join(cmd)}", file=sys.stderr, flush=True)
+        loads = [os.getloadavg()[0]]
         t0 = time.perf_counter()
         proc = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, check=False)
         seconds = time.perf_counter() - t0
+        loads.append(os.getloadavg()[0])
         if proc.returncode != 0:
             raise SystemExit(f"{name} failed (exit {proc.returncode}):\n{proc.stderr[-3000:]}")
         text = out.read_text() if "{json}" in argv else _last_json(proc.stdout)
     if keep is not None:
         keep.mkdir(parents=True, exist_ok=True)
         (keep / f"{name}.json").write_text(text)
-    return json.loads(text), seconds
+    return json.loads(text), seconds, loads
+
+
+def reported_loads(data: Any) -> list[float]:
+    """The 1-minute load average a source's JSON reports (``load_average``), if any."""
+    v = data.get("load_average") if isinstance(data, dict) else None
+    if isinstance(v, list) and v:
+        v = v[0]
+    return [float(v)] if isinstance(v, (int, float)) else []
 
 
 def _last_json(stdout: str) -> str:
@@ -100,11 +111,16 @@ def shown_command(name: str) -> str:
 # -- rendering -----------------------------------------------------------------------------
 def _fmt(v: Any) -> str:
     if isinstance(v, float):
-        return f"{v:.4g}"
+        return f"{v:.0f}" if abs(v) >= 1e4 else f"{v:.4g}"
     if isinstance(v, (list, tuple)):
         return " × ".join(_fmt(x) for x in v) if all(isinstance(x, int) for x in v) else \
             ", ".join(_fmt(x) for x in v)
     return str(v).replace("|", "\\|").replace("\n", " ")
+
+
+def _pairs(d: dict[str, Any]) -> str:
+    """``{"a": 1.23456, "b": 2}`` → ``a 1.235, b 2``."""
+    return ", ".join(f"{k} {_fmt(v)}" for k, v in d.items())
 
 
 def _table(header: tuple[str, ...], rows: list[tuple[Any, ...]]) -> list[str]:
@@ -115,7 +131,7 @@ def _table(header: tuple[str, ...], rows: list[tuple[Any, ...]]) -> list[str]:
 
 def render_reconstruct(d: dict[str, Any]) -> list[str]:
     lines = [f"Device `{d['profile']}`: sensor {_fmt(d['sensor'])} → scene {_fmt(d['scene'])}; "
-             f"τ {d['tau']}. Latency is the median per frame from the binned frame as the Sensor "
+             f"τ {_pairs(d['tau'])} DN². Latency is the median per frame from the binned frame as the Sensor "
              "hands it to the decoder (float32, channel-planar); \"from uint16\" from an interleaved "
              "uint16 frame; roofline is frame time over the decoder's GEMM FLOPs at the float32 "
              "GEMM rate measured in the same run (1 = the GEMMs alone); PSNR on simulated scenes "
@@ -143,9 +159,17 @@ def render_reconstruct(d: dict[str, Any]) -> list[str]:
             lines.append(f"- iterative-800 ({form} gradient): {it['latency_ms_extrapolated']} ms "
                          f"extrapolated ({it['measured']})")
     if "speedup_vs_iterative800" in d:
-        lines.append(f"- speed-up against iterative-800: {_fmt(d['speedup_vs_iterative800'])}")
-    if "mask_compare" in d:
-        lines.append(f"- mask comparison (numpy float32): `{json.dumps(d['mask_compare'])}`")
+        lines.append(f"- speed-up against iterative-800: {_pairs(d['speedup_vs_iterative800'])}")
+    masks = {k: v for k, v in d.get("mask_compare", {}).items() if isinstance(v, dict) and k != "design"}
+    if masks:
+        lines += ["", "Mask designs compared (numpy float32; white, USAF, GelSight PSNR in dB; CV of the "
+                  "white reconstruction):", ""]
+        rows = [(mask, f"`{dec}`", q["white"]["psnr_db"], q["usaf"]["psnr_db"], q["gelsight"]["psnr_db"],
+                 q["white"].get("uniformity", {}).get("cv", "-"))
+                for mask, by_dec in masks.items() for dec, q in by_dec.items()
+                if isinstance(q, dict) and "white" in q]
+        lines += _table(("mask", "decoder", "white dB", "USAF dB", "GelSight dB", "white CV"), rows)
+        lines.append("")
     lines.append(f"- two-term fit error against the simulator: {d['two_term_fit_relative_error']:.2%}")
     return lines
 
@@ -165,7 +189,7 @@ def render_tactile(d: dict[str, Any]) -> list[str]:
                      f"{m['direction_error_deg']:.1f}°, {m['tracked_fraction']:.0%} tracked")
     f = d.get("force_slip")
     if f:
-        lines.append("- force / slip: " + ", ".join(f"{k} {_fmt(v)}" for k, v in f.items()))
+        lines.append("- force / slip: " + _pairs(f))
     lat = d.get("latency_ms")
     if lat:
         lines.append("- raw Bayer → tactile frame, median ms per stage: "
@@ -226,36 +250,41 @@ def history(page: Path) -> list[str]:
     return body.splitlines()
 
 
-def host_lines(load_before: float, load_after: float) -> list[str]:
-    from thintact_sdk.host.machine import host_capabilities, machine_summary
+def host_lines(loads: list[float]) -> list[str]:
+    """The host: CPU model, cores, SIMD flags, GPU, and the load the runs saw (each section
+    adds the machine line its run reported, with the thread settings it ran under)."""
+    from thintact_sdk.host.machine import host_capabilities
 
     caps = host_capabilities()
-    return [f"- CPU: {caps.cpu_model}, {caps.cores} logical cores; SIMD {caps.simd}, native "
-            f"bfloat16 {'yes' if caps.native_bf16 else 'no'}; flags {', '.join(caps.flags)}",
-            f"- BLAS (numpy): {caps.blas}; torch {caps.torch}; GPU: {', '.join(caps.gpus) or 'none'}",
-            f"- summary: {machine_summary()}",
-            f"- load average (1 min) {load_before:.1f} before, {load_after:.1f} after, on "
-            f"{os.cpu_count()} cores" + (": measured under load (other jobs were running), so "
-                                         "timings are inflated and vary run to run"
-                                         if max(load_before, load_after) > 0.8 * (os.cpu_count() or 1)
-                                         else "")]
+    cores = os.cpu_count() or 1
+    lines = [f"- CPU: {caps.cpu_model}, {caps.cores} logical cores; SIMD {caps.simd}, native "
+             f"bfloat16 {'yes' if caps.native_bf16 else 'no'}; flags {', '.join(caps.flags)}",
+             f"- GPU: {', '.join(caps.gpus) or 'none'}"]
+    if not loads:
+        return [*lines, "- load average: not recorded by these runs"]
+    busy = max(loads) > 0.8 * cores
+    return [*lines, f"- load average (1 min) during the runs: {min(loads):.1f} to {max(loads):.1f} on "
+            f"{cores} cores" + (": measured under load (other jobs were running), so timings are "
+                                "inflated and vary run to run" if busy else "")]
 
 
-def write_page(out: Path, found: dict[str, tuple[Any, str]], load: tuple[float, float],
-               note: str) -> None:
+def write_page(out: Path, found: dict[str, tuple[Any, str]], loads: list[float], note: str) -> None:
     now = dt.datetime.now(dt.UTC).strftime("%Y-%m-%d %H:%M UTC")
     old_history = history(out)
     lines = ["# Benchmarks", "",
              "<!-- generated by tools/benchmarks_page.py: edit the tool, not this page "
              "(only the history section is carried over as it is) -->", "",
-             f"Measured {now} by `tools/benchmarks_page.py` on this host:", ""]
-    lines += host_lines(*load)
+             f"Written {now} by `tools/benchmarks_page.py`; each section gives its run's command "
+             "and time. The host:", ""]
+    lines += host_lines(loads)
     if note:
         lines += [f"- note: {note}"]
     lines += ["", "Each figure is one run; the SDK measures its decoder backend on whichever host it "
               "runs (`thintact doctor`). The figures of other hosts are in the history below.", ""]
     for name, (data, how) in found.items():
         lines += [f"## {TITLE.get(name, name)}", "", f"*{how}.*", ""]
+        if isinstance(data, dict) and isinstance(data.get("machine"), str):
+            lines += [f"Machine as the run reported it: {data['machine']}", ""]
         lines += RENDER.get(name, render_generic)(data)
         lines.append("")
     lines += ["## History: figures measured by hand on other hosts", ""]
@@ -278,20 +307,24 @@ def main(argv: list[str] | None = None) -> int:
         if not sep or name not in SOURCES:
             ap.error(f"--from needs NAME=FILE with NAME one of {', '.join(SOURCES)}, got {item!r}")
         given[name] = Path(file)
-    load_before = os.getloadavg()[0]
+    loads: list[float] = []
     found: dict[str, tuple[Any, str]] = {}
     for name in SOURCES:
         if name in args.skip:
             continue
         if name in given:
             mtime = dt.datetime.fromtimestamp(given[name].stat().st_mtime, dt.UTC)
-            found[name] = (json.loads(given[name].read_text()),
+            data = json.loads(given[name].read_text())
+            loads += reported_loads(data)
+            found[name] = (data,
                            f"`{shown_command(name)}`, read from {given[name].name} "
                            f"(written {mtime:%Y-%m-%d %H:%M} UTC)")
         else:
-            data, seconds = run_source(name, args.keep_json)
-            found[name] = (data, f"`{shown_command(name)}`, {seconds:.0f} s")
-    write_page(args.out, found, (load_before, os.getloadavg()[0]), args.note)
+            data, seconds, seen = run_source(name, args.keep_json)
+            loads += seen + reported_loads(data)
+            found[name] = (data, f"`{shown_command(name)}`, run {dt.datetime.now(dt.UTC):%Y-%m-%d %H:%M} UTC, "
+                                 f"{seconds:.0f} s")
+    write_page(args.out, found, loads, args.note)
     print(f"wrote {args.out}", file=sys.stderr)
     return 0
 
