@@ -12,8 +12,8 @@ import yaml
 from thintact_genicam.producers import viky_producer
 
 from thintact_sdk import Component, hookimpl
-from thintact_sdk.apps.cli.commands.devices import usb_devices
 from thintact_sdk.apps.cli.main import main
+from thintact_sdk.device.host_devices import usb_devices
 from thintact_sdk.formats.profiles import load_profile
 
 STRINGS = {1: "ACME Vision", 2: "USB3 camera", 3: "U500123"}
@@ -158,3 +158,17 @@ def test_devices_only_calls_the_listers(monkeypatch, capsys):
     assert main(["devices", "--no-profiles", "--usb-backend", "test_hw_devices:make_bus"]) == 0
     out = capsys.readouterr().out
     assert "Fake sources\n  none within 10 s\n" in out and "device lister 'broken'" in out
+
+
+def test_the_library_listing_is_the_commands(capsys):
+    """``thintact devices --json`` prints exactly what ``device.host_devices.list_devices``
+    returns (no lister's section: ``--no-profiles`` and a registry without listers)."""
+    from thintact_sdk.device.host_devices import list_devices
+    from thintact_sdk.device.registry import get_registry
+
+    assert main(["devices", "--json", "--no-profiles", "--usb-backend", "test_hw_devices:make_bus"]) == 0
+    printed = json.loads(capsys.readouterr().out)
+    listers = {k: v for k, v in printed.items() if k in get_registry().components("device_lister")}
+    expected = json.loads(json.dumps(list_devices(listers, make_bus()), default=str))
+    assert printed == expected
+    assert [d["vid_pid"] for d in printed["usb"]["devices"]] == ["1234:0003", "2e8a:000a"]

@@ -1,5 +1,9 @@
 """``thintact devices``: the cameras, serial ports and USB devices this machine can see.
 
+The UVC, serial and USB sections come from :mod:`thintact_sdk.device.host_devices`
+(:func:`~thintact_sdk.device.host_devices.list_devices`); this module parses, builds the
+plugins' device listers and prints.
+
 Sections
 --------
 one per device lister (the ``thintact_device_listers`` hook), first
@@ -22,14 +26,12 @@ USB
 from __future__ import annotations
 
 import argparse
-import importlib
 import json
-import os
 from collections.abc import Callable
-from pathlib import Path
 from typing import Any
 
 from thintact_sdk.apps.cli.argtypes import positive_float
+from thintact_sdk.device.host_devices import list_devices, load_usb_backend
 from thintact_sdk.device.registry import get_registry
 from thintact_sdk.errors import ThinTactError
 
@@ -85,97 +87,15 @@ def lister_sections(args: argparse.Namespace) -> dict[str, tuple[Any, list[str]]
     return out
 
 
-def uvc_devices() -> list[dict[str, str]]:
-    """``/dev/video*`` nodes: ``path``, ``by_id``, ``name``."""
-    import glob
-
-    by_id = {os.path.realpath(link): link for link in sorted(glob.glob("/dev/v4l/by-id/*"))}
-    out = []
-    for node in sorted(glob.glob("/dev/video*")):
-        try:
-            card = (Path("/sys/class/video4linux") / Path(node).name / "name").read_text(
-                encoding="utf-8").strip()
-        except OSError:
-            card = ""
-        out.append({"path": node, "by_id": by_id.get(os.path.realpath(node), ""), "name": card})
-    return out
-
-
-def serial_ports() -> list[dict[str, Any]]:
-    """Serial ports: ``device``, ``description``, ``vid_pid``, ``serial``, ``hwid``."""
-    from serial.tools import list_ports
-
-    out = []
-    for port in sorted(list_ports.comports(), key=lambda p: p.device):
-        vid_pid = f"{port.vid:04x}:{port.pid:04x}" if port.vid is not None and port.pid is not None else ""
-        out.append({"device": port.device, "description": port.description or "",
-                    "vid_pid": vid_pid, "serial": port.serial_number or "", "hwid": port.hwid or ""})
-    return out
-
-
-def load_usb_backend(spec: str) -> Any:
-    """Import ``MODULE:ATTR``; call it when it is a class or function, to get the backend."""
-    module_name, sep, attr = spec.partition(":")
-    if not sep or not module_name or not attr:
-        raise ThinTactError(f"--usb-backend needs MODULE:ATTR, got {spec!r}")
-    try:
-        obj = getattr(importlib.import_module(module_name), attr)
-    except (ImportError, AttributeError) as err:
-        raise ThinTactError(f"cannot load USB backend {spec}: {err}") from None
-    return obj() if callable(obj) else obj
-
-
-def usb_devices(backend: Any = None) -> dict[str, Any]:
-    """USB devices as ``{"devices": [...], "error": str | None}``.
-
-    Parameters
-    ----------
-    backend
-        A ``usb.backend.IBackend``; None lets pyusb pick libusb1/libusb0/openusb.
-    """
-    import usb.core
-    import usb.util
-
-    try:
-        found = list(usb.core.find(find_all=True, backend=backend) or [])
-    except usb.core.NoBackendError:
-        return {"devices": [], "error": "no USB backend available (install libusb-1.0)"}
-    except (usb.core.USBError, OSError) as err:
-        return {"devices": [], "error": f"USB enumeration failed: {err}"}
-    devices = []
-    for dev in found:
-        entry: dict[str, Any] = {
-            "bus": dev.bus, "address": dev.address,
-            "vid_pid": f"{dev.idVendor:04x}:{dev.idProduct:04x}",
-            "class": dev.bDeviceClass,
-        }
-        for key, index in (("manufacturer", dev.iManufacturer), ("product", dev.iProduct),
-                           ("serial", dev.iSerialNumber)):
-            entry[key] = ""
-            if index:
-                try:
-                    entry[key] = usb.util.get_string(dev, index) or ""
-                except (usb.core.USBError, ValueError, NotImplementedError, OSError):
-                    entry[key] = ""  # no permission to open the device, or no string support
-        usb.util.dispose_resources(dev)
-        devices.append(entry)
-    return {"devices": devices, "error": None}
-
-
 def collect(args: argparse.Namespace, usb_backend: Any = None,
             sections: dict[str, tuple[Any, list[str]]] | None = None) -> dict[str, Any]:
-    """Every section as plain data (what ``--json`` prints): each lister's under its name
-    (from ``sections`` when given, else :func:`lister_sections`), then ``uvc``, ``serial``
-    and ``usb``."""
+    """Every section as plain data (what ``--json`` prints): the listers' (``sections``, else
+    :func:`lister_sections`) and :func:`thintact_sdk.device.host_devices.list_devices`'s."""
     if usb_backend is None and args.usb_backend:
         usb_backend = load_usb_backend(args.usb_backend)
     if sections is None:
         sections = lister_sections(args)
-    return {name: data for name, (data, _) in sections.items()} | {
-        "uvc": uvc_devices(),
-        "serial": serial_ports(),
-        "usb": usb_devices(usb_backend),
-    }
+    return list_devices({name: data for name, (data, _) in sections.items()}, usb_backend)
 
 
 # -- output ----------------------------------------------------------------------------
