@@ -3,9 +3,11 @@
 
 Runs each measuring source below as a child process (or reads its JSON output from an
 earlier run, ``--from NAME=FILE``), then writes the page: the host (CPU model, cores, SIMD
-flags, BLAS, torch, load averages before and after), the date (UTC), one section of figures
-per source, and the page's history section carried over verbatim (the older hand-measured
-figures, each with its host). Nothing else on the page is written by hand.
+flags, GPU, the load the runs saw), the date (UTC), one section of figures per source (with
+the machine line its run reported), a section per other host whose runs kept their JSON
+outputs under ``docs/measurements/HOST/`` (``doctor.txt`` describing the host), and the
+page's history section carried over verbatim (the older hand-measured figures, each with its
+host). Nothing else on the page is written by hand.
 
 ==============  =====================================================================
 source          what runs (the smallest sizes, except ``reconstruct`` at paper size)
@@ -93,11 +95,17 @@ def reported_loads(data: Any) -> list[float]:
 
 
 def _last_json(stdout: str) -> str:
-    """The JSON document a tool printed last (tools may print progress lines before it)."""
-    start = stdout.find("{")
-    if start < 0:
-        raise SystemExit(f"no JSON in the output: {stdout[-500:]!r}")
-    return stdout[start:]
+    """The JSON document a tool printed (tools may print progress lines before it): the text
+    from the first line that opens an object or a list."""
+    for i, line in enumerate(stdout.splitlines(keepends=True)):
+        if line.startswith(("{", "[")):
+            return "".join(stdout.splitlines(keepends=True)[i:])
+    raise SystemExit(f"no JSON in the output: {stdout[-500:]!r}")
+
+
+def load_json(path: Path) -> Any:
+    """A JSON output kept in a file, progress lines before it allowed."""
+    return json.loads(_last_json(path.read_text(encoding="utf-8")))
 
 
 def shown_command(name: str) -> str:
@@ -171,6 +179,14 @@ def render_reconstruct(d: dict[str, Any]) -> list[str]:
         lines += _table(("mask", "decoder", "white dB", "USAF dB", "GelSight dB", "white CV"), rows)
         lines.append("")
     lines.append(f"- two-term fit error against the simulator: {d['two_term_fit_relative_error']:.2%}")
+    acc = d.get("accelerator")
+    if acc:
+        lines += ["", "Accelerator backends, one frame apart (ms; roofline against the device's own "
+                  "float32 GEMM rate):", ""]
+        rows = [(f"`{k}`", v.get("input", ""), v.get("upload_ms"), v.get("device_ms"), v.get("download_ms"),
+                 v.get("solve_ms"), v.get("gemm_gflops"), v.get("roofline")) for k, v in acc.items()]
+        lines += _table(("decoder [backend]", "input", "upload", "device", "download", "solve",
+                         "GEMM GFLOP/s", "roofline"), rows)
     return lines
 
 
@@ -217,6 +233,8 @@ def render_generic(d: Any) -> list[str]:
     def walk(prefix: str, v: Any) -> None:
         if isinstance(v, dict):
             for k, x in v.items():
+                if not prefix and k == "machine":
+                    continue  # shown above the table
                 walk(f"{prefix}.{k}" if prefix else str(k), x)
         elif isinstance(v, list) and v and all(isinstance(x, dict) for x in v):
             for i, x in enumerate(v):
@@ -237,6 +255,37 @@ TITLE = {
     "calibration": "`thintact bench calibration`: calibration robustness (baseline case)",
     "sensor-binning": "`tools/bench_sensor_binning.py`: `t2s-closed-form` unbinned and binned 2 × 2",
 }
+
+
+def kept_outputs(root: Path) -> list[str]:
+    """Sections for the JSON outputs other hosts' runs left under ``root`` (one folder per
+    host: ``doctor.txt`` describes it, each ``*.json`` is one run; files named ``*before*``
+    are comparisons kept beside them and only listed)."""
+    lines: list[str] = []
+    for folder in sorted(p for p in root.glob("*") if p.is_dir()):
+        runs = sorted(f for f in folder.glob("*.json") if "before" not in f.name)
+        if not runs:
+            continue
+        rel = folder.relative_to(ROOT)
+        lines += [f"### `{rel}`", ""]
+        doctor = folder / "doctor.txt"
+        if doctor.is_file():
+            lines += ["The host, as `thintact doctor` described it:", "", "```text",
+                      *doctor.read_text(encoding="utf-8").strip().splitlines(), "```", ""]
+        for f in runs:
+            data = load_json(f)
+            kind = "reconstruct" if f.name.startswith("bench_reconstruct") else \
+                "tactile" if f.name.startswith("bench_tactile") else ""
+            lines += [f"#### `{f.name}`", ""]
+            if isinstance(data, dict) and isinstance(data.get("machine"), str):
+                lines += [f"Machine as the run reported it: {data['machine']}", ""]
+            lines += RENDER.get(kind, render_generic)(data)
+            lines.append("")
+        others = sorted(f.name for f in folder.iterdir() if f.is_file() and f not in runs
+                        and f.name != "doctor.txt")
+        if others:
+            lines += [f"Also kept there: {', '.join(f'`{n}`' for n in others)}.", ""]
+    return lines
 
 
 def history(page: Path) -> list[str]:
@@ -268,7 +317,8 @@ def host_lines(loads: list[float]) -> list[str]:
                                 "inflated and vary run to run" if busy else "")]
 
 
-def write_page(out: Path, found: dict[str, tuple[Any, str]], loads: list[float], note: str) -> None:
+def write_page(out: Path, found: dict[str, tuple[Any, str]], loads: list[float], note: str,
+               kept: list[str]) -> None:
     now = dt.datetime.now(dt.UTC).strftime("%Y-%m-%d %H:%M UTC")
     old_history = history(out)
     lines = ["# Benchmarks", "",
@@ -287,6 +337,8 @@ def write_page(out: Path, found: dict[str, tuple[Any, str]], loads: list[float],
             lines += [f"Machine as the run reported it: {data['machine']}", ""]
         lines += RENDER.get(name, render_generic)(data)
         lines.append("")
+    if kept:
+        lines += ["## Other hosts: the outputs their runs kept in the repository", ""] + kept
     lines += ["## History: figures measured by hand on other hosts", ""]
     lines += old_history or [HISTORY_BEGIN, "", "(none yet)", "", HISTORY_END]
     out.write_text("\n".join(lines).rstrip() + "\n", encoding="utf-8")
@@ -300,6 +352,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--skip", action="append", default=[], choices=sorted(SOURCES))
     ap.add_argument("--keep-json", type=Path, metavar="DIR", help="also keep each run's JSON here")
     ap.add_argument("--note", default="", help="one line about the conditions, printed on the page")
+    ap.add_argument("--measurements", type=Path, default=ROOT / "docs" / "measurements",
+                    help="folder of other hosts' kept JSON outputs, one subfolder per host")
     args = ap.parse_args(argv)
     given: dict[str, Path] = {}
     for item in args.given:
@@ -314,7 +368,7 @@ def main(argv: list[str] | None = None) -> int:
             continue
         if name in given:
             mtime = dt.datetime.fromtimestamp(given[name].stat().st_mtime, dt.UTC)
-            data = json.loads(given[name].read_text())
+            data = load_json(given[name])
             loads += reported_loads(data)
             found[name] = (data,
                            f"`{shown_command(name)}`, read from {given[name].name} "
@@ -324,7 +378,8 @@ def main(argv: list[str] | None = None) -> int:
             loads += seen + reported_loads(data)
             found[name] = (data, f"`{shown_command(name)}`, run {dt.datetime.now(dt.UTC):%Y-%m-%d %H:%M} UTC, "
                                  f"{seconds:.0f} s")
-    write_page(args.out, found, loads, args.note)
+    kept = kept_outputs(args.measurements) if args.measurements.is_dir() else []
+    write_page(args.out, found, loads, args.note, kept)
     print(f"wrote {args.out}", file=sys.stderr)
     return 0
 
