@@ -3,7 +3,9 @@
 Frames are read one at a time: the dark level is subtracted, exposure differences named in
 the frame metadata (``exposure_us``) are normalised to the reference exposure, and every
 slit channel is compressed (:func:`thintact_sdk.calibration.lowrank.compress`) before the
-next frame is read, so memory stays at one frame plus ``(R + S)·k`` numbers per slit.
+next frame is read, so memory stays at one frame plus ``(R + S)·k`` numbers per slit (the
+recording keeps what it read, mapped beyond a small budget, so that the later stages take the
+same frames without reading their files again: :class:`~thintact_sdk.formats.recording.Recording`).
 """
 
 from __future__ import annotations

@@ -28,15 +28,21 @@ measurements must be finite, non-negative numbers (not bool or text), ``R × S �
 profile's channels, scenes finite display values in [0, 1], and per-frame metadata
 (``frame_id``, ``timestamp_ns``, ``exposure_us`` ...) of the right type and sign. Each
 violation is a :class:`~thintact_sdk.errors.RecordingError` naming the frame and field.
+
+Each frame file is read and checked once per :class:`Recording`: a command opens one and hands
+it to every stage, which all see the same cached, read-only arrays (:meth:`Recording.measurement`).
+Every read goes through :func:`read_frame_file`.
 """
 
 from __future__ import annotations
 
 import json
 import math
+import mmap
 import os
 import tempfile
-from collections.abc import Iterator
+from collections import OrderedDict
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -61,6 +67,19 @@ _COUNT_FIELDS = ("frame_id", "timestamp_ns", "device_timestamp_ns", "dropped_bef
 """Per-frame metadata that must be a non-negative integer when present."""
 SCENE_TOLERANCE = 1e-6
 """Scene values may exceed [0, 1] by this much (float rounding), no more."""
+MAP_FROM_BYTES = 4096
+"""An ``.npy`` frame file of at least this many bytes (one page) is memory-mapped read-only
+after its header is checked (:func:`~thintact_sdk.formats.safe_arrays.read_npy`) instead of
+read into memory."""
+HELD_BYTES = 64 * 2**20
+"""Bytes of decoded frames (PNG, TIFF, JPEG, video, linearised, converted) one
+:class:`Recording` keeps in memory; beyond it they are kept in a temporary ``.npy`` file of
+the Recording's own (removed with it) and mapped from there."""
+MAX_OPEN_MAPS = 128
+"""Mapped frames one :class:`Recording` keeps open at once (each mapping holds a file
+descriptor, and a paper-size calibration has about two thousand frame files). A frame whose
+mapping was let go is mapped again when asked for, after checking that its file is the one
+read (same inode, size and modification time); it is not read or checked again."""
 
 
 @dataclass
@@ -159,9 +178,10 @@ def read_video_frame(path: Path, index: int, gray: bool) -> np.ndarray:
     return np.ascontiguousarray(img[..., ::-1])
 
 
-def read_array(path: Path, is_scene: bool) -> np.ndarray:
+def read_array(path: Path, is_scene: bool, *, mmap: bool = False) -> np.ndarray:
     """Read a scene (→ float32 in [0, 1]) or measurement (→ as stored) from .npy/.png/.tif
-    (measurements also .jpg/.jpeg)."""
+    (measurements also .jpg/.jpeg); with ``mmap`` an ``.npy`` file is mapped read-only after
+    its header is checked (a scene stored as float32 stays mapped)."""
     if not path.is_file():
         raise RecordingError(f"missing file {path}")
     if path.suffix.lower() in _JPEG_SUFFIXES:
@@ -171,7 +191,7 @@ def read_array(path: Path, is_scene: bool) -> np.ndarray:
         return _read_image_file(path, is_scene)
     if path.suffix.lower() == ".npy":
         arr = read_npy(path, what="scene" if is_scene else "measurement", error=RecordingError,
-                       kinds=_NUMERIC_KINDS)
+                       kinds=_NUMERIC_KINDS, mmap=mmap)
         if is_scene:
             arr = arr.astype(np.float32, copy=False)
         return arr
@@ -183,8 +203,58 @@ def read_array(path: Path, is_scene: bool) -> np.ndarray:
                          "measurements also jpg and MJPEG video)")
 
 
+def read_frame_file(path: Path, *, is_scene: bool, video_frame: int | None = None, gray: bool = False,
+                    mmap: bool = False) -> np.ndarray:
+    """One scene or measurement file of a recording, as stored (nothing checked but the file).
+
+    The only function through which :class:`Recording` reads a frame file. ``video_frame``
+    names the frame of a video file (``gray``: of a monochrome sensor,
+    :func:`read_video_frame`); otherwise :func:`read_array` (``mmap``: map an ``.npy`` file).
+
+    Raises
+    ------
+    RecordingError
+        The file is missing, unreadable or damaged (named).
+    """
+    if video_frame is not None:
+        return read_video_frame(path, video_frame, gray)
+    return read_array(path, is_scene, mmap=mmap)
+
+
+@dataclass(frozen=True)
+class _Mapped:
+    """A kept frame that lives in a mapped ``.npy`` file (see :data:`MAX_OPEN_MAPS`)."""
+
+    path: Path
+    stamp: tuple[int, int, int]
+    shape: tuple[int, ...]
+    dtype: np.dtype
+
+
+def _stamp(path: Path) -> tuple[int, int, int]:
+    """``(inode, size, mtime_ns)`` of ``path``: what tells a replaced or changed file."""
+    st = path.stat()
+    return st.st_ino, st.st_size, st.st_mtime_ns
+
+
+def _is_mapped(arr: np.ndarray) -> bool:
+    """Whether ``arr`` is (a view of) a memory-mapped file."""
+    base: object = arr
+    while isinstance(base, np.ndarray):
+        base = base.base
+    return isinstance(base, mmap.mmap)
+
+
 class Recording:
     """A ``thintact-recording/1`` directory opened for reading.
+
+    The one object a command opens on a recording and hands to every stage: each frame's
+    files are read and checked on first use (:meth:`measurement`, :meth:`scene`) and kept, so
+    every file is read once however many stages look at the frame. The arrays returned are
+    read-only and shared; copy before changing one. Memory: ``.npy`` frames (from
+    :data:`MAP_FROM_BYTES`) are memory-mapped, so the page cache holds them, not the process;
+    decoded frames are held up to :data:`HELD_BYTES`, then mapped from a temporary file; at
+    most :data:`MAX_OPEN_MAPS` mappings are open at once.
 
     Parameters
     ----------
@@ -238,6 +308,10 @@ class Recording:
         if not frames and not allow_empty:
             raise RecordingError(f"recording {self.root} holds no frames")
         self.frames: list[RecordingFrame] = [self._frame(i, fr, mpath) for i, fr in enumerate(frames)]
+        self._kept: dict[tuple[str, int], np.ndarray | _Mapped | None] = {}
+        self._open_maps: OrderedDict[tuple[str, int], np.ndarray] = OrderedDict()
+        self._held_bytes = 0
+        self._spill: tempfile.TemporaryDirectory[str] | None = None
 
     def _inside(self, rel: str, what: str) -> Path:
         """``root / rel`` after checking that it stays inside the recording directory."""
@@ -306,12 +380,81 @@ class Recording:
         flag = fr.extra.get(TONE_MAPPED_FIELD)
         return bool(flag) if flag is not None else is_encoded(Path(fr.measurement))
 
+    def _map(self, path: Path) -> bool:
+        """Whether to memory-map frame file ``path`` (see the class docstring)."""
+        if path.suffix.lower() != ".npy":
+            return False
+        try:
+            return path.stat().st_size >= MAP_FROM_BYTES
+        except OSError:
+            return False  # the read names the file
+
+    def _frame_array(self, key: tuple[str, int],
+                     read: Callable[[int], tuple[np.ndarray, Path] | None]) -> np.ndarray | None:
+        """Frame ``key``'s kept array, read (``read(index)``: the checked array and its file)
+        on first use; see the class docstring."""
+        if key not in self._kept:
+            got = read(key[1])
+            self._kept[key] = None if got is None else self._keep(key, *got)
+        kept = self._kept[key]
+        if isinstance(kept, _Mapped):
+            return self._mapping(key, kept)
+        return kept
+
+    def _keep(self, key: tuple[str, int], arr: np.ndarray, path: Path) -> np.ndarray | _Mapped:
+        """``arr`` (read from ``path``) as the Recording keeps it: held, or mapped."""
+        if not _is_mapped(arr):
+            if self._held_bytes + arr.nbytes <= HELD_BYTES:
+                self._held_bytes += arr.nbytes
+                arr.flags.writeable = False
+                return arr
+            if self._spill is None:
+                self._spill = tempfile.TemporaryDirectory(prefix="thintact-frames-")
+            path = Path(self._spill.name) / f"{key[0]}{key[1]}.npy"
+            np.save(path, np.ascontiguousarray(arr), allow_pickle=False)
+            arr = np.load(path, mmap_mode="r", allow_pickle=False)
+        view = np.asarray(arr)  # a plain view of the read-only map
+        self._remember(key, view)
+        return _Mapped(path, _stamp(path), view.shape, view.dtype)
+
+    def _remember(self, key: tuple[str, int], view: np.ndarray) -> None:
+        """Keep ``view`` among the open mappings, letting the oldest go beyond :data:`MAX_OPEN_MAPS`."""
+        view.flags.writeable = False
+        self._open_maps[key] = view
+        while len(self._open_maps) > MAX_OPEN_MAPS:
+            self._open_maps.popitem(last=False)
+
+    def _mapping(self, key: tuple[str, int], kept: _Mapped) -> np.ndarray:
+        """The open mapping of a kept frame, mapped again (not read) if it was let go.
+
+        Raises
+        ------
+        RecordingError
+            The file changed or went away since it was read and checked (the frame is named).
+        """
+        view = self._open_maps.get(key)
+        if view is not None:
+            self._open_maps.move_to_end(key)
+            return view
+        what = f"{self._name(key[1])}: {kept.path}"
+        try:
+            if _stamp(kept.path) != kept.stamp:
+                raise RecordingError(f"{what} changed on disk after it was read; open the recording again")
+            view = np.asarray(np.load(kept.path, mmap_mode="r", allow_pickle=False))
+        except (OSError, ValueError) as err:
+            raise RecordingError(f"{what}: cannot map it again ({err}); open the recording again") from None
+        if view.shape != kept.shape or view.dtype != kept.dtype:
+            raise RecordingError(f"{what} changed on disk after it was read; open the recording again")
+        self._remember(key, view)
+        return view
+
     def measurement(self, i: int) -> np.ndarray:
-        """Frame ``i``'s measurement, ``R × S × C`` raw DN (black level not removed).
+        """Frame ``i``'s measurement, ``R × S × C`` raw DN (black level not removed), read-only.
 
         As stored (uint16, uint8 or float32), except for a tone-mapped frame
         (:meth:`tone_mapped`) of a profile declaring ``sensor.tone_curve``: its curve is undone
-        and the result is float32 linear DN.
+        and the result is float32 linear DN. Read and checked on the first call, the same
+        array on every later one.
 
         Raises
         ------
@@ -320,15 +463,20 @@ class Recording:
             or holds NaN, Inf or negative values (the frame is named), or a frame marked
             ``tone_mapped: true`` has no ``sensor.tone_curve`` to undo.
         """
+        arr = self._frame_array(("measurement", i), self._read_measurement)
+        assert arr is not None
+        return arr
+
+    def _read_measurement(self, i: int) -> tuple[np.ndarray, Path]:
+        """Frame ``i``'s measurement read and checked (:meth:`measurement`)."""
         fr = self.frames[i]
         rel = fr.measurement
         path = self._inside(rel, f"frame {i} 'measurement'")
         sensor = self.profile.sensor
         try:
-            if path.suffix.lower() in _VIDEO_SUFFIXES:
-                arr = read_video_frame(path, int(fr.extra[VIDEO_FRAME_FIELD]), gray=len(sensor.channels) == 1)
-            else:
-                arr = read_array(path, is_scene=False)
+            video = int(fr.extra[VIDEO_FRAME_FIELD]) if path.suffix.lower() in _VIDEO_SUFFIXES else None
+            arr = read_frame_file(path, is_scene=False, video_frame=video, gray=len(sensor.channels) == 1,
+                                  mmap=self._map(path))
         except RecordingError as err:
             raise RecordingError(f"{self._name(i)}: {err}") from None
         exp = (sensor.rows, sensor.cols)
@@ -347,7 +495,7 @@ class Recording:
         _check_values(arr, f"{self._name(i)}: {rel}", low=0.0, high=None)
         if self.tone_mapped(i):
             arr = self._linearize(i, arr)
-        return arr
+        return arr, path
 
     def _linearize(self, i: int, arr: np.ndarray) -> np.ndarray:
         """Undo the profile's tone curve on frame ``i``'s stored values."""
@@ -367,7 +515,8 @@ class Recording:
         return out
 
     def scene(self, i: int) -> np.ndarray | None:
-        """Frame ``i``'s scene, ``N × M × C`` float32 in [0, 1], or None for unknown scenes.
+        """Frame ``i``'s scene, ``N × M × C`` float32 in [0, 1] (read-only), or None for unknown
+        scenes. Read and checked on the first call, the same array on every later one.
 
         Raises
         ------
@@ -375,12 +524,16 @@ class Recording:
             When the file is unreadable, not numeric, of the wrong shape, or holds values
             outside [0, 1] (NaN and Inf included); the frame is named.
         """
+        return self._frame_array(("scene", i), self._read_scene)
+
+    def _read_scene(self, i: int) -> tuple[np.ndarray, Path] | None:
+        """Frame ``i``'s scene read and checked (:meth:`scene`)."""
         s = self.frames[i].scene
         if s is None:
             return None
         path = self._inside(s, f"frame {i} 'scene'")
         try:
-            arr = read_array(path, is_scene=True)
+            arr = read_frame_file(path, is_scene=True, mmap=self._map(path))
         except RecordingError as err:
             raise RecordingError(f"{self._name(i)}: {err}") from None
         exp = (self.profile.scene.rows, self.profile.scene.cols)
@@ -393,10 +546,11 @@ class Recording:
                 f"{exp[0]}×{exp[1]} with {' or '.join(map(str, allowed))} channel(s)"
             )
         _check_values(arr, f"{self._name(i)}: {s}", low=0.0, high=1.0 + SCENE_TOLERANCE)
-        return arr
+        return arr, path
 
     def check_frames(self) -> None:
-        """Read every frame once so that a bad one is refused before any output is written."""
+        """Read and check every frame (kept for the stages that follow), so that a bad one is
+        refused before any output is written."""
         for i in range(len(self)):
             self.scene(i)
             self.measurement(i)
