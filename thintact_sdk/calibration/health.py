@@ -1,7 +1,9 @@
 """The unit's health: slit-fit residuals against the noise, measured noise, located defects.
 
-After the solve every slit frame is read once more and compared with the calibrated model
-``Po X Qoᵀ + Pc X Qcᵀ`` of its own scene. The residual ``r`` of a healthy unit is noise:
+After the solve every slit frame is taken from the recording again (its kept, read-only
+frame: :class:`~thintact_sdk.formats.recording.Recording` reads each file once) and compared
+with the calibrated model ``Po X Qoᵀ + Pc X Qcᵀ`` of its own scene. The residual ``r`` of a
+healthy unit is noise:
 
 * **noise measured**: ``E[r²] = a + b·signal`` fitted over signal-level bins (read noise
   ``√(a − 1/12)``, ``1/b`` electrons per DN, divided by the frames averaged) and compared with
@@ -321,7 +323,8 @@ def _kept_lines(defects: list[Defect], shape: tuple[int, int]) -> tuple[np.ndarr
 
 
 class SlitFrames:
-    """The recording's slit frames, read again from the recording on every iteration.
+    """The recording's slit frames, taken from the recording (its kept frames, each file read
+    once per :class:`~thintact_sdk.formats.recording.Recording`) on every iteration.
 
     Iterating yields ``(signal, horizontal)`` per slit frame: its ``R × S × C`` signal (DN above
     dark at the reference exposure, float64) and whether it is a horizontal slit. Only one
@@ -413,10 +416,12 @@ def assess(recording: Recording, collection: SlitCollection, sm: SystemMatrices,
     """Residuals of every slit frame against the calibrated model; noise; defects.
 
     The slit frames are streamed from the recording, never held together: pass 1 gathers what
-    the noise fit needs (:func:`_noise_samples`, bounded by ``NOISE_FIT_CAP``), pass 2 reads each
+    the noise fit needs (:func:`_noise_samples`, bounded by ``NOISE_FIT_CAP``), pass 2 takes each
     frame again, recomputes its prediction and adds it to the χ² map, and the ghost search
-    reads them a third time (:class:`SlitFrames`). Memory: a few frames plus the noise-fit
-    entries, independent of the number of slits.
+    takes them a third time (:class:`SlitFrames`); every pass gets the recording's kept frame
+    (each file is read once). Memory: a few frames' float64 signals plus the noise-fit entries,
+    independent of the number of slits (the recording maps its frames beyond a small budget,
+    :data:`~thintact_sdk.formats.recording.HELD_BYTES`).
 
     Parameters
     ----------
