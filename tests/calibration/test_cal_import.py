@@ -3,6 +3,7 @@ shape errors, and a bundle that the τ selection, the decoders and `reconstruct`
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -96,3 +97,25 @@ def test_import_and_export_through_the_cli(unit, tmp_path: Path, capsys: pytest.
                  "--out", str(tmp_path / "cal2")]) == 2
     err = capsys.readouterr().err
     assert "wrong.npz: Po is 1×10×24, expected 64×24" in err and "\n" not in err.strip()
+
+
+def test_the_library_import_is_the_commands(unit, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:  # type: ignore[no-untyped-def]
+    """``import_calibration`` writes the bundle ``thintact calibrate-import`` writes."""
+    from thintact_sdk.calibration.matrices_bundle import import_calibration
+    from thintact_sdk.formats.profiles import write_profile
+
+    profile, rec, sm = unit
+    write_profile(profile, tmp_path / "p.json")
+    export_matrices(sm, tmp_path / "m.npz")
+    assert main(["calibrate-import", str(tmp_path / "m.npz"), "--profile", str(tmp_path / "p.json"),
+                 "--out", str(tmp_path / "cli"), "--recording", str(rec.root), "--filter-steps", "0"]) == 0
+    printed = capsys.readouterr().out
+    got, bundle = import_calibration(tmp_path / "m.npz", profile, tmp_path / "lib",
+                                     CalibrationOptions(filter_steps=0), Recording(rec.root))
+    cli, lib = CalibrationBundle.load(tmp_path / "cli"), CalibrationBundle.load(tmp_path / "lib")
+    for name in ("Po", "Qo", "Pc", "Qc"):
+        np.testing.assert_array_equal(getattr(cli.system_matrices, name), getattr(lib.system_matrices, name))
+    assert cli.tau == lib.tau == bundle.tau
+    same = [json.dumps(b.meta["metrics"]["tau_selection"], sort_keys=True) for b in (cli, lib)]  # NaN-safe
+    assert same[0] == same[1]
+    assert f"imported {got.meta['model']} matrices" in printed and f"tau {bundle.tau:.4g} DN²" in printed

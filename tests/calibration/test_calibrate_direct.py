@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -46,3 +47,34 @@ def test_enough_validation_scenes_choose_tau_on_the_unit(tmp_path: Path, capsys)
     cap = capsys.readouterr()
     assert "warning:" not in cap.err and "cross-validation" in cap.out
     assert CalibrationBundle.load(out).meta["metrics"]["tau_selection"]["criterion"] == "cross-validation"
+
+
+def _same_bundle(a: CalibrationBundle, b: CalibrationBundle) -> None:
+    for name in ("Po", "Qo", "Pc", "Qc"):
+        np.testing.assert_array_equal(getattr(a.system_matrices, name), getattr(b.system_matrices, name))
+    assert a.tau == b.tau and a.meta.get("decoder") == b.meta.get("decoder")
+    sel = [json.dumps(x.meta["metrics"]["tau_selection"], sort_keys=True) for x in (a, b)]  # NaN-safe
+    assert sel[0] == sel[1]
+
+
+def test_the_library_calibration_is_the_commands(tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]
+    """``direct_calibration`` writes the bundle ``thintact calibrate-direct`` writes, and the
+    command prints the library's scale and validation counts."""
+    from thintact_sdk.calibration.matrices_bundle import direct_calibration
+    from thintact_sdk.calibration.pipeline import CalibrationOptions
+    from thintact_sdk.formats.recording import Recording
+
+    profile = small_profile(("mono",), rows=32, cols=40, scene=(12, 16), k=48)
+    prof = write_profile(profile, tmp_path / "unit.yaml")
+    write_recording(tmp_path / "rec", profile, seed=1, physics={})
+    assert main(["calibrate-direct", "--profile", str(prof), "--recording", str(tmp_path / "rec"),
+                 "--out", str(tmp_path / "cli"), "--filter-steps", "0"]) == 0
+    out = capsys.readouterr().out
+    stages: list[str] = []
+    made = direct_calibration(profile, Recording(tmp_path / "rec"), tmp_path / "lib",
+                              CalibrationOptions(filter_steps=0), stage=stages.append)
+    assert [s[:5] for s in stages] == ["[1/2]", "[2/2]"]
+    _same_bundle(CalibrationBundle.load(tmp_path / "cli"), CalibrationBundle.load(tmp_path / "lib"))
+    assert made.bundle.tau == CalibrationBundle.load(tmp_path / "lib").tau
+    assert f"scale {made.scale_dn:.4g} DN ({made.scale_source})" in out
+    assert made.chosen_on_the_unit and made.distinct_scenes >= made.scenes_needed

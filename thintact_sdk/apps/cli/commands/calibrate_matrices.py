@@ -2,6 +2,9 @@
 
     thintact calibrate-import MATRICES.(npz|mat) --profile P --out CAL [--recording REC]
     thintact calibrate-export CAL --out MATRICES.(npz|mat)
+
+The library is :func:`thintact_sdk.calibration.matrices_bundle.import_calibration`; this module
+parses and prints.
 """
 
 from __future__ import annotations
@@ -39,32 +42,30 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run_import(args: argparse.Namespace) -> int:
-    from thintact_sdk.formats.matrices import import_matrices
+    from thintact_sdk.calibration.matrices_bundle import import_calibration
+    from thintact_sdk.calibration.pipeline import CalibrationOptions
     from thintact_sdk.formats.profiles import load_profile
     from thintact_sdk.formats.recording import Recording
 
     claim_output(args.out, "directory", force=args.force,
                  inputs=(args.matrices, args.recording, file_input(args.profile)))
     profile = load_profile(args.profile)
-    sm = import_matrices(args.matrices, profile)
-    rec = Recording(args.recording) if args.recording else None
+    sm, bundle = import_calibration(
+        args.matrices, profile, args.out,
+        CalibrationOptions(tau=args.tau, filter_steps=args.filter_steps),
+        Recording(args.recording) if args.recording else None)
     print(f"imported {sm.meta['model']} matrices from {args.matrices}")
-    write_bundle(profile, sm, args, rec)
+    print_bundle(bundle, args.out)
     return 0
 
 
-def write_bundle(profile: Any, sm: Any, args: argparse.Namespace, rec: Any) -> Any:
-    """Filter training, τ and decoder choice and the bundle at ``args.out`` around matrices
-    made elsewhere (``calibrate-import``, ``calibrate-direct``); prints where it went."""
-    from thintact_sdk.calibration.pipeline import CalibrationOptions, bundle_from_matrices
+def print_bundle(bundle: Any, out: Path) -> None:
+    """The line naming the bundle written at ``out``: its decoder, τ and how τ was chosen."""
     from thintact_sdk.calibration.validation import default_decoder
 
-    bundle = bundle_from_matrices(profile, sm, args.out,
-                                  CalibrationOptions(tau=args.tau, filter_steps=args.filter_steps), rec)
     sel = bundle.meta["metrics"].get("tau_selection", {})
-    print(f"calibration bundle: {args.out} (decoder {bundle.meta.get('decoder') or default_decoder()}, "
+    print(f"calibration bundle: {out} (decoder {bundle.meta.get('decoder') or default_decoder()}, "
           f"tau {bundle.tau:.4g} DN², {sel.get('criterion')})")
-    return bundle
 
 
 def run_export(args: argparse.Namespace) -> int:
