@@ -171,6 +171,26 @@ def test_cli_depth_of_a_recording(tmp_path, capsys):
     assert sorted(p.name for p in out.glob("depth_*.npy")) == [f"depth_{k:04d}.npy" for k in range(4)]
 
 
+def test_the_library_depth_maps_are_the_commands(tmp_path, capsys):
+    """``interpret_frames`` (and ``write_depth_maps``) give the frames and maps that
+    ``thintact tactile depth --recording`` writes."""
+    from thintact_sdk.formats.profiles import load_profile
+    from thintact_sdk.tactile.interpretation.depth_maps import frame_entry, interpret_frames
+
+    rec = _gelsight_recording(tmp_path, 2)
+    out = tmp_path / "out"
+    assert main(["tactile", "depth", "--recording", str(rec), "--profile", "gelsight-mini",
+                 "--out", str(out), "--quiet"]) == 0
+    assert "3 depth maps (2 in contact)" in capsys.readouterr().out
+    written = json.loads((out / "frames.json").read_text())
+    assert written["format"] == "thintact-depth-frames/1"
+    lib = list(interpret_frames(recording=rec, profile=load_profile("gelsight-mini")))
+    assert [frame_entry(k, name, frame) for k, name, frame, _ in lib] == written["frames"]
+    for k, _, frame, n in lib:
+        assert n == 3
+        np.testing.assert_array_equal(np.load(out / f"depth_{k:04d}.npy"), frame.depth_mm.astype(np.float32))
+
+
 def test_calibrate_tactile_prints_the_press_report(tmp_path, capsys):
     rec = _gelsight_recording(tmp_path, 4)
     out = tmp_path / "lut.npz"

@@ -1,4 +1,9 @@
-"""``thintact tactile import | depth | evaluate``: press packs, depth maps and ball-press figures."""
+"""``thintact tactile import | depth | evaluate``: press packs, depth maps and ball-press figures.
+
+The libraries: :func:`thintact_sdk.tactile.calibration.press_pack.import_folder`,
+:func:`thintact_sdk.tactile.interpretation.depth_maps.write_depth_maps` and
+:func:`thintact_sdk.tactile.calibration.press_pack.evaluate_pack`; this module parses and prints.
+"""
 
 from __future__ import annotations
 
@@ -101,98 +106,18 @@ def _number(value: Any, what: str, option: str) -> float:
     return float(value)
 
 
-def _frames_json(frames: list[dict[str, Any]], out: Path) -> Path:
-    p = out / "frames.json"
-    p.write_text(json.dumps({"format": "thintact-depth-frames/1", "frames": frames}, indent=1)
-                 + "\n")
-    return p
-
-
-def _write_depth(out: Path, k: int, depth: Any) -> None:
-    import cv2
-    import numpy as np
-
-    np.save(out / f"depth_{k:04d}.npy", np.asarray(depth, np.float32), allow_pickle=False)
-    um = np.clip(np.round(np.asarray(depth, np.float64) * 1000.0), 0, 65535).astype(np.uint16)
-    cv2.imwrite(str(out / f"depth_{k:04d}.png"), um)
-
-
-def _frame_entry(k: int, name: str, frame: Any) -> dict[str, Any]:
-    import math
-
-    force = [None if not math.isfinite(v) else round(float(v), 5) for v in frame.force_n]
-    return {"frame": k, "name": name, "contact": bool(frame.contact),
-            "contact_area_mm2": round(float(frame.contact_area_mm2), 4),
-            "peak_depth_mm": round(float(frame.depth_mm.max()), 4), "force_n": force}
-
-
 def run_depth(args: argparse.Namespace) -> int:
-    from thintact_sdk.errors import ThinTactError
     from thintact_sdk.formats.profiles import load_profile
     from thintact_sdk.host.progress import stage_reporter
-    from thintact_sdk.tactile.interpretation.interpreter import TactileInterpreter
-    from thintact_sdk.tactile.interpretation.photometric import PhotometricLUT
+    from thintact_sdk.tactile.interpretation.depth_maps import write_depth_maps
 
-    inputs = [args.pack, args.recording, args.lut]
-    out = claim_output(args.out, "directory", force=args.force, inputs=inputs)
-    frames: list[dict[str, Any]] = []
+    out = claim_output(args.out, "directory", force=args.force, inputs=[args.pack, args.recording, args.lut])
     with stage_reporter(args.quiet) as say:
-        if args.pack is not None:
-            from thintact_sdk.tactile.calibration.press_pack import load_press_pack, pack_profile
-
-            pack = load_press_pack(args.pack)
-            if args.profile is not None:
-                profile = load_profile(args.profile)
-                lut = PhotometricLUT.load(args.lut) if args.lut is not None else None
-                interp = (TactileInterpreter(profile, lut) if lut is not None
-                          else TactileInterpreter.for_profile(profile))
-            else:
-                if args.lut is None:
-                    raise ThinTactError("a pack without --profile needs --lut (a tactile LUT "
-                                        "from calibrate-tactile or tactile evaluate --json)")
-                mm = _number(args.mm_per_px or pack.mm_per_px, "pixel size", "--mm-per-px")
-                profile = pack_profile(pack.reference.shape[:2], mm)
-                interp = TactileInterpreter(profile, PhotometricLUT.load(args.lut))
-            interp.set_reference(pack.reference_image())
-            out.mkdir(parents=True, exist_ok=True)
-            for k in range(len(pack.images)):
-                frame = interp.interpret(pack.image(k), frame_id=k)
-                _write_depth(out, k, frame.depth_mm)
-                frames.append(_frame_entry(k, pack.names[k], frame))
-                say(f"press {k + 1}/{len(pack.images)}")
-        else:
-            from thintact_sdk.device.sensor import Sensor
-            from thintact_sdk.formats.recording import Recording
-            from thintact_sdk.frames import Measurement
-
-            if args.profile is None:
-                raise ThinTactError("--recording needs --profile (the device that recorded it)")
-            profile = load_profile(args.profile)
-            sensor = Sensor(profile)
-            rec = Recording(args.recording, profile)
-            interp = TactileInterpreter(profile, PhotometricLUT.load(args.lut)) \
-                if args.lut is not None else TactileInterpreter.for_profile(profile)
-            labels = [f.label for f in rec.frames]
-            ref_i = labels.index("reference") if "reference" in labels else 0
-            black = float(profile.noise.black_level_dn)
-
-            def image(i: int) -> Any:
-                import numpy as np
-
-                m = Measurement(rec.measurement(i).astype(np.float32), black)
-                return np.asarray(sensor.reconstruct(m), np.float32)
-
-            interp.set_reference(image(ref_i))
-            out.mkdir(parents=True, exist_ok=True)
-            for k in range(len(rec)):
-                frame = interp.interpret(image(k), frame_id=k)
-                _write_depth(out, k, frame.depth_mm)
-                frames.append(_frame_entry(k, labels[k] or f"frame_{k}", frame))
-                say(f"frame {k + 1}/{len(rec)}")
-    path = _frames_json(frames, out)
-    touching = sum(f["contact"] for f in frames)
-    print(f"{len(frames)} depth maps ({touching} in contact) in {out}; per-frame figures in "
-          f"{path.name}")
+        maps = write_depth_maps(
+            out, pack=args.pack, recording=args.recording, lut=args.lut, mm_per_px=args.mm_per_px,
+            profile=None if args.profile is None else load_profile(args.profile), progress=say)
+    print(f"{len(maps.frames)} depth maps ({maps.in_contact} in contact) in {out}; per-frame figures in "
+          f"{maps.frames_json.name}")
     return 0
 
 
