@@ -167,3 +167,23 @@ def test_calibrate_pose_cli_turned_by_90_and_refusal(nominal: Profile, tmp_path,
     np.save(tmp_path / "flat.npy", turned + nominal.noise.black_level_dn)
     assert main(args) == 2
     assert "-20." in capsys.readouterr().err
+
+
+def test_the_library_pose_is_the_commands(nominal: Profile, tmp_path, capsys) -> None:  # type: ignore[no-untyped-def]
+    """``pose_from_flat_field`` finds the pose ``thintact calibrate-pose`` writes and prints."""
+    from thintact_sdk.apps.cli.main import main
+    from thintact_sdk.calibration.flat_field import pose_from_flat_field
+    from thintact_sdk.formats.profiles import load_profile, write_profile
+
+    write_profile(nominal, tmp_path / "nominal.json")
+    np.save(tmp_path / "flat.npy", _flat(_mounted(nominal, Orientation.turned(1), 0.0))
+            + nominal.noise.black_level_dn)
+    assert main(["calibrate-pose", str(tmp_path / "flat.npy"), "--profile", str(tmp_path / "nominal.json"),
+                 "--out", str(tmp_path / "posed.json"), "--quiet"]) == 0
+    out = capsys.readouterr().out
+    found = pose_from_flat_field(tmp_path / "flat.npy", nominal)
+    assert f"flat field: {found.source}\n" in out and found.source == "flat.npy minus the black level"
+    assert f"residual rotation {found.estimate.angle_deg:+.4f}°" in out
+    assert load_profile(tmp_path / "posed.json").contract_dict() == found.estimate.apply(nominal).contract_dict()
+    with pytest.raises(CalibrationError, match="--bounds"):
+        pose_from_flat_field(tmp_path / "flat.npy", nominal, bounds=(2.0, 1.0))

@@ -1,4 +1,8 @@
-"""``thintact calibrate-pose FLAT --profile P --out PROFILE``: the mask's pose from a flat field."""
+"""``thintact calibrate-pose FLAT --profile P --out PROFILE``: the mask's pose from a flat field.
+
+The library is :func:`thintact_sdk.calibration.flat_field.pose_from_flat_field`; this module
+parses, prints the estimate and writes the profile.
+"""
 
 from __future__ import annotations
 
@@ -45,35 +49,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def _flat_signal(path: Path, profile: object) -> tuple[object, str]:
-    import numpy as np
-
-    from thintact_sdk.calibration.collect import white_frame_signal
-    from thintact_sdk.errors import CalibrationError
-    from thintact_sdk.formats.recording import Recording
-
-    if path.is_dir():
-        white = white_frame_signal(Recording(path))
-        if white is None:
-            raise CalibrationError(f"recording {path} has no all-white frame to use as a flat field")
-        return white[0], white[2]
-    if path.suffix != ".npy" or not path.is_file():
-        raise CalibrationError(f"flat field {path}: expected a recording directory or an existing .npy file")
-    from thintact_sdk.formats.safe_arrays import (
-        read_npy,  # header first: no pickle, no huge allocation
-    )
-
-    raw = read_npy(path, what="flat field", error=CalibrationError, kinds="uif").astype(np.float64)
-    return raw - profile.noise.black_level_dn, f"{path.name} minus the black level"  # type: ignore[attr-defined]
-
-
 def run(args: argparse.Namespace) -> int:
     import json
     import sys
     import time
 
-    from thintact_sdk.calibration.pose import FLOOR_SIGMA, MARGIN_SIGMA, estimate_pose
-    from thintact_sdk.errors import CalibrationError
+    from thintact_sdk.calibration.flat_field import pose_from_flat_field
+    from thintact_sdk.calibration.pose import FLOOR_SIGMA, MARGIN_SIGMA
     from thintact_sdk.formats.profiles import load_profile, write_profile
 
     profile = load_profile(args.profile)
@@ -83,13 +65,10 @@ def run(args: argparse.Namespace) -> int:
         if not args.quiet:
             print(f"[pose {time.perf_counter() - t0:6.1f} s] {msg}", file=sys.stderr, flush=True)
 
-    if args.bounds is not None and not 0 < args.bounds[0] <= args.bounds[1]:
-        raise CalibrationError(f"--bounds: need 0 < LOW <= HIGH, got {args.bounds[0]} {args.bounds[1]}")
-    signal, source = _flat_signal(args.flat, profile)
-    progress(f"read the flat field {args.flat}")
-    est = estimate_pose(signal, profile, unknown=args.unknown,  # type: ignore[arg-type]
-                        bounds=tuple(args.bounds) if args.bounds else None, progress=progress)
-    print(f"flat field: {source}")
+    found = pose_from_flat_field(args.flat, profile, args.unknown,
+                                 tuple(args.bounds) if args.bounds else None, progress=progress)
+    est = found.estimate
+    print(f"flat field: {found.source}")
     o = est.orientation
     rewritten = "" if o == type(o)() else " (phi and phi_rows rewritten as mounted)"
     best = est.hypotheses[0]
