@@ -55,6 +55,26 @@ def test_cli_simulate_irradiance_and_dn(tmp_path, capsys):
     assert np.all(dn == np.round(dn))
 
 
+def test_the_library_frames_are_the_commands(tmp_path, capsys):
+    """``simulate_scenes`` returns the frames ``thintact simulate --noise`` writes (same seed),
+    and its default gain is the one the command prints."""
+    from thintact_sdk.simulation.scene_batch import simulate_scenes
+
+    prof = load_profile("virtual-mini")
+    np.save(tmp_path / "s.npy", _scenes(prof))
+    assert main(["simulate", "--profile", "virtual-mini", "--scenes", str(tmp_path / "s.npy"),
+                 "--out", str(tmp_path / "dn.npy"), "--noise", "--seed", "5"]) == 0
+    printed = capsys.readouterr().out
+    steps: list[tuple[int, int]] = []
+    made = simulate_scenes(prof, tmp_path / "s.npy", noise=True, seed=5,
+                           progress=lambda done, total: steps.append((done, total)))
+    np.testing.assert_array_equal(np.load(tmp_path / "dn.npy"), made.frames)
+    assert made.gain is not None and f"gain: {made.gain:.6g} DN" in printed
+    assert steps == [(1, 2), (2, 2)]
+    plain = simulate_scenes(prof, _scenes(prof))
+    assert plain.gain is None and plain.frames.shape == (2, 128, 160, 3)
+
+
 def test_cli_default_gain_puts_white_at_60_percent(tmp_path, capsys):
     prof = load_profile("virtual-mini")
     np.save(tmp_path / "w.npy", np.ones((1, prof.scene.rows, prof.scene.cols, 3)))
