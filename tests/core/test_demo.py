@@ -30,3 +30,26 @@ def test_demo_refuses_a_real_camera_profile(capsys: pytest.CaptureFixture[str], 
     # its own --out: `make demo` leaves ./demo-output behind, which the demo refuses first
     assert main(["demo", "--profile", "thintact-paper", "--out", str(tmp_path / "demo")]) == 2
     assert "virtual" in capsys.readouterr().err
+
+
+def test_the_library_demo_is_the_commands(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``run_demo`` measures what ``thintact demo`` writes to demo.json (the virtual camera's
+    noise is seeded; only the wall-clock latency differs), and ``demo_figure`` draws it."""
+    from thintact_sdk.apps.viewer.demo_figure import demo_figure
+    from thintact_sdk.device.virtual_demo import run_demo
+    from thintact_sdk.errors import ThinTactError
+    from thintact_sdk.formats.profiles import load_profile
+
+    assert main(["demo", "--profile", "virtual-mini", "--out", str(tmp_path / "cli")]) == 0
+    printed = capsys.readouterr().out
+    written = json.loads((tmp_path / "cli" / "demo.json").read_text())
+    profile = load_profile("virtual-mini")
+    demo = run_demo(profile)
+    lib = json.loads(json.dumps(demo.summary))
+    for summary in (written, lib):
+        summary.pop("raw_to_tactile_latency_ms")
+    assert lib == written
+    assert f"scaled by {demo.scale:.3f}, depth {demo.depth_mm:.2f} mm" in printed
+    assert demo_figure(tmp_path / "lib.png", demo, profile).stat().st_size > 10_000
+    with pytest.raises(ThinTactError, match="--depth-mm"):
+        run_demo(profile, depth_mm=3.0)

@@ -17,7 +17,10 @@ from typing import Any
 
 from thintact_sdk.errors import ThinTactError
 
-__all__ = ["list_devices", "load_usb_backend", "serial_ports", "usb_devices", "uvc_devices"]
+__all__ = ["UVC_SECTION", "list_devices", "load_usb_backend", "serial_ports", "usb_devices", "uvc_devices"]
+
+UVC_SECTION = "uvc"
+"""The key of :func:`uvc_devices`'s section in :func:`list_devices` (``--json``)."""
 
 
 def uvc_devices() -> list[dict[str, str]]:
@@ -114,7 +117,7 @@ def list_devices(lister_data: Mapping[str, Any] | None = None, usb_backend: Any 
     (:func:`uvc_devices`), ``serial`` (:func:`serial_ports`) and ``usb``
     (:func:`usb_devices` through ``usb_backend``)."""
     return dict(lister_data or {}) | {
-        "uvc": uvc_devices(),
+        UVC_SECTION: uvc_devices(),
         "serial": serial_ports(),
         "usb": usb_devices(usb_backend),
     }

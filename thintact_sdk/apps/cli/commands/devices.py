@@ -31,7 +31,7 @@ from collections.abc import Callable
 from typing import Any
 
 from thintact_sdk.apps.cli.argtypes import positive_float
-from thintact_sdk.device.host_devices import list_devices, load_usb_backend
+from thintact_sdk.device.host_devices import UVC_SECTION, list_devices, load_usb_backend
 from thintact_sdk.device.registry import get_registry
 from thintact_sdk.errors import ThinTactError
 
@@ -104,9 +104,9 @@ def _print_text(found: dict[str, Any], lister_lines: list[str]) -> None:
     for line in lister_lines:
         print(line)
     print("UVC / V4L2")
-    if not found["uvc"]:
+    if not found[UVC_SECTION]:
         print("  no /dev/video* device")
-    for d in found["uvc"]:
+    for d in found[UVC_SECTION]:
         extra = f"  {d['by_id']}" if d["by_id"] else ""
         print(f"  {d['path']}  {d['name']}{extra}")
     print("Serial ports")
