@@ -59,7 +59,7 @@ class Measurement:
         Copied from the raw frame.
     sensor_bin
         ``b``: ``data`` holds the ``b × b`` block means of the profile's ``R × S`` measurement,
-        ``R/b × S/b × C`` (made for a :class:`~thintact_sdk.interfaces.BinnedInputDecoder`,
+        ``R/b × S/b × C`` (made for a decoder declaring ``input = "binned"``, :class:`~thintact_sdk.interfaces.Decoder`,
         see :func:`thintact_sdk.device.cameras.to_measurement`); 1 for the measurement itself.
     """
 

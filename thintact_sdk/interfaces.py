@@ -4,7 +4,7 @@
 ``LightController``  the sensor's LED intensities.
 ``Mask``             a mask design (φ vectors, feature size) and how it was made.
 ``ImagingModel``     forward model scene → measurement (simulator or calibrated T2S).
-``Decoder``          measurement → scene (reconstruction algorithms).
+``Decoder``          measurement → scene (reconstruction algorithms), one entry point ``decode``.
 ``Display``          shows calibration patterns on an LCD (real or virtual).
 
 Concrete classes come from plugins (see :mod:`thintact_sdk.device.registry`).
@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import abc
 from dataclasses import dataclass, field
-from typing import Any, Protocol, runtime_checkable
+from typing import Any, Literal, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -187,54 +187,99 @@ class ImagingModel(abc.ABC):
         """Noiseless signal for one scene, ``R × S × C`` float64 (model units)."""
 
 
+DecoderInputKind = Literal["signal", "raw", "binned"]
+"""What a decoder takes from a :class:`~thintact_sdk.device.sensor.Sensor` (:attr:`Decoder.input`)."""
+
+DECODER_INPUTS: tuple[str, ...] = ("signal", "raw", "binned")
+
+
 class Decoder(abc.ABC):
-    """Reconstruction: measurement signal (``R × S × C``, DN above black) → scene."""
+    """Reconstruction: one sensor frame in DN → one scene, through the one entry point :meth:`decode`.
 
-    name: str = "decoder"
+    A decoder declares what it takes in two class (or instance) attributes, and the
+    :class:`~thintact_sdk.device.sensor.Sensor` makes exactly that in one place
+    (:meth:`~thintact_sdk.device.sensor.Sensor.decoder_input` and
+    :meth:`~thintact_sdk.device.sensor.Sensor.reconstruct`):
 
-    @abc.abstractmethod
-    def decode(self, signal: np.ndarray) -> np.ndarray:
-        """Reconstruct one scene, ``N × M × C`` float32."""
+    ``input = "signal"`` (the default)
+        ``decode(signal)``: the profile's ``R × S × C`` float32 measurement in DN *above* black
+        (the Sensor subtracts the black level; ``black_level_dn`` is left at 0).
+    ``input = "raw"``
+        ``decode(frame, black_level_dn)``: the ``R × S × C`` measurement in DN *with* the black
+        level (float32 or integer), and that black level in DN; the decoder folds it into its
+        solve (no per-frame subtraction).
+    ``input = "binned"`` with ``sensor_bin = b`` > 1
+        ``decode(frame, black_level_dn)``: the ``b × b`` block means of the measurement,
+        ``R/b × S/b × C`` DN with the black level, binned from the camera's Bayer mosaic in one
+        pass (``2b × 2b`` cells per colour site, :func:`thintact_sdk.pixels.bayer.bin_sites`),
+        and the black level in DN. Callers holding the full ``R × S × C`` frame (calibration,
+        benchmarks) may hand that instead; such a decoder tells the two apart by their shape
+        and bins a full frame itself (:func:`thintact_sdk.pixels.bayer.block_mean`).
 
-
-@runtime_checkable
-class RawDecoder(Protocol):
-    """A decoder that also takes raw binned DN and folds the black level into the solve
-    (no per-frame subtraction); :meth:`thintact_sdk.device.sensor.Sensor.reconstruct` prefers it."""
-
-    def decode_raw(self, raw: np.ndarray, black_level_dn: float) -> np.ndarray:
-        """``R × S × C`` DN with the black level included → ``N × M × C`` float32."""
-        ...
-
-
-@runtime_checkable
-class BinnedInputDecoder(Protocol):
-    """A decoder that solves on the sensor binned ``b × b`` (``sensor_bin`` = b > 1) and so
-    takes the binned frame directly.
-
-    :meth:`thintact_sdk.device.sensor.Sensor.process` and :meth:`~thintact_sdk.device.sensor.Sensor.stream`
-    then bin the camera's Bayer mosaic ``2b × 2b`` per colour site in one pass
-    (:func:`thintact_sdk.pixels.bayer.bin_bayer` with ``block=b``) instead of ``2 × 2`` and then
-    ``b × b`` again in the decoder, and hand the result, a :class:`~thintact_sdk.frames.Measurement`
-    with ``sensor_bin = b``, to :meth:`decode_binned`. ``decode`` and ``decode_raw`` still take
-    the profile's full ``R × S × C`` measurement; a decoder without this capability (or with
-    ``sensor_bin`` 1) gets exactly that.
+    Outside a Sensor, ``decode(signal)`` (``black_level_dn`` 0: DN above black) works on
+    every decoder: that is how calibration and the ``reconstruct`` command call it.
     """
 
-    sensor_bin: int
-    """Block side ``b`` (sensor pixels) of the binning the decoder solves on."""
+    name: str = "decoder"
+    input: DecoderInputKind = "signal"
+    """What :meth:`decode` takes from a Sensor: ``"signal"``, ``"raw"`` or ``"binned"`` (above)."""
+    sensor_bin: int = 1
+    """Block side ``b`` (sensor pixels) of the binned frames an ``input = "binned"`` decoder
+    solves on; 1 for the other kinds."""
 
-    def decode_binned(self, binned: np.ndarray, black_level_dn: float) -> np.ndarray:
-        """``R/b × S/b × C`` block means of the measurement in DN, black level included →
-        ``N × M × C`` float32."""
-        ...
+    @abc.abstractmethod
+    def decode(self, frame: np.ndarray, black_level_dn: float = 0.0) -> np.ndarray:
+        """Reconstruct one scene, ``N × M × C`` float32 (display units).
+
+        Parameters
+        ----------
+        frame
+            ``R × S × C`` DN (``R/b × S/b × C`` block means for a binned decoder), holding
+            ``black_level_dn``.
+        black_level_dn
+            The black level ``frame`` includes, DN; 0 for a signal above black.
+        """
 
 
-def binned_input(decoder: object) -> int:
-    """The ``b`` of a :class:`BinnedInputDecoder` that solves on a binned sensor (> 1), else 1."""
-    if isinstance(decoder, BinnedInputDecoder):
-        return max(1, int(decoder.sensor_bin))
-    return 1
+@dataclass(frozen=True)
+class DecoderInput:
+    """What a decoder declared it takes (:attr:`Decoder.input`, :attr:`Decoder.sensor_bin`),
+    read and checked once; a decoder that is not a :class:`Decoder` subclass but has a
+    ``decode`` method takes the signal.
+
+    Attributes
+    ----------
+    kind
+        ``"signal"``, ``"raw"`` or ``"binned"``.
+    sensor_bin
+        ``b`` of a ``"binned"`` decoder (> 1); 1 for the other kinds.
+    """
+
+    kind: DecoderInputKind = "signal"
+    sensor_bin: int = 1
+
+    @classmethod
+    def of(cls, decoder: object) -> DecoderInput:
+        """The declaration of ``decoder``.
+
+        Raises
+        ------
+        InvalidValueError
+            For an ``input`` other than the three kinds, or a ``"binned"`` decoder whose
+            ``sensor_bin`` is not an integer > 1 (the error names the decoder and the field).
+        """
+        from thintact_sdk.errors import InvalidValueError
+
+        kind: DecoderInputKind = getattr(decoder, "input", "signal")
+        who = f"decoder {getattr(decoder, 'name', type(decoder).__name__)!r}"
+        if kind not in DECODER_INPUTS:
+            raise InvalidValueError(f"{who}: input must be one of {', '.join(DECODER_INPUTS)}, got {kind!r}")
+        if kind != "binned":
+            return cls(kind, 1)
+        b = getattr(decoder, "sensor_bin", 1)
+        if isinstance(b, bool) or not isinstance(b, int | np.integer) or b < 2:
+            raise InvalidValueError(f"{who}: input 'binned' needs sensor_bin an integer > 1, got {b!r}")
+        return cls("binned", int(b))
 
 
 @runtime_checkable
@@ -246,8 +291,8 @@ class TunableDecoder(Protocol):
         """Use ``tau`` (DN², > 0) from the next decode on."""
         ...
 
-    def decode(self, signal: np.ndarray) -> np.ndarray:
-        """Reconstruct one scene, ``N × M × C`` float32."""
+    def decode(self, frame: np.ndarray, black_level_dn: float = 0.0) -> np.ndarray:
+        """Reconstruct one scene, ``N × M × C`` float32 (:meth:`Decoder.decode`)."""
         ...
 
 

@@ -3,9 +3,9 @@ binned 2 × 2, for two source trees in alternating rounds (same load for both).
 
 Each round runs one short child process per tree (``--base`` and this checkout, in
 alternating order), which builds the decoders, measures the float32 GEMM rate at the
-largest product shape and times ``decode_raw`` (unbinned: the measurement; binned: the
-already-binned frame a Sensor hands a ``BinnedInputDecoder``, and the unbinned frame binned
-by the decoder) with two kernel threads and with one. Prints one JSON object: per tree,
+largest product shape and times ``decode(frame, black_level_dn)`` (unbinned: the measurement;
+binned: the already-binned frame a Sensor hands a decoder declaring ``input = "binned"``, and
+the unbinned frame binned by the decoder) with two kernel threads and with one. Prints one JSON object: per tree,
 per case, the median frame time and roofline ratio (frame time / GEMM FLOPs at the GEMM rate
 measured in the same child), and the per-round ratios new / base. Usage::
 
@@ -49,9 +49,10 @@ binned = SensorBinnedDecoder(inner, sm.sensor_shape, c)
 frame = planar_frame(r, s, c)
 frame[...] = np.random.default_rng(0).integers(64, 4000, (r, s, c))
 small = bin_frame(frame).copy()
-cases = {"unbinned": (lambda: full.decode_raw(frame, 64.0), full.gemm_flops()),
-         "bin2_binned_input": (lambda: inner.decode_raw(small, 64.0), inner.gemm_flops()),
-         "bin2_from_full_frame": (lambda: binned.decode_raw(frame, 64.0), inner.gemm_flops())}
+raw = lambda d: getattr(d, "decode_raw", d.decode)  # a base tree from before the one entry point
+cases = {"unbinned": (lambda: raw(full)(frame, 64.0), full.gemm_flops()),
+         "bin2_binned_input": (lambda: raw(inner)(small, 64.0), inner.gemm_flops()),
+         "bin2_from_full_frame": (lambda: raw(binned)(frame, 64.0), inner.gemm_flops())}
 out = {}
 for threads in ("2", "1"):
     ctx = single_threaded_kernels() if threads == "1" else contextlib.nullcontext()

@@ -4,7 +4,7 @@
 It also times raw Bayer mosaic → decoded frame with the binned decoder both ways the Sensor
 can take (``raw_two_pass``: binned 2 × 2 into the measurement, then again 2 × 2 by the decoder;
 ``raw_one_pass``: the mosaic binned 4 × 4 per colour site straight to the decoder's input,
-:class:`thintact_sdk.interfaces.BinnedInputDecoder`), in the same rounds.
+a decoder declaring ``input = "binned"``, :class:`thintact_sdk.interfaces.Decoder`), in the same rounds.
 
 The operator is the directly generated one (the frame time depends only on the shapes and the
 kept modes, not on how the matrices were obtained); τ is the bench's (0.3 × the coding power
@@ -72,11 +72,11 @@ def main() -> int:
 
     def two_pass() -> None:
         m = to_measurement(raw, profile)
-        binned.decode_raw(m.data, m.black_level_dn)
+        binned.decode(m.data, m.black_level_dn)
 
     def one_pass() -> None:
         m = to_measurement(raw, profile, sensor_bin=binned.sensor_bin)
-        binned.decode_binned(m.data, m.black_level_dn)
+        binned.decode(m.data, m.black_level_dn)
 
     def time_ms(fn: Callable[[], object]) -> float:
         ts = []
@@ -97,11 +97,11 @@ def main() -> int:
             ctx.__enter__()
         try:
             for dec in (full, binned):
-                dec.decode_raw(frame, 64.0)  # warm
+                dec.decode(frame, 64.0)  # warm
             for _ in range(args.rounds):
                 rows["sgemm_gflops"].append(measure_sgemm_gflops(c, n, r, s))
-                rows["unbinned"].append(time_ms(lambda: full.decode_raw(frame, 64.0)))
-                rows["bin2"].append(time_ms(lambda: binned.decode_raw(frame, 64.0)))
+                rows["unbinned"].append(time_ms(lambda: full.decode(frame, 64.0)))
+                rows["bin2"].append(time_ms(lambda: binned.decode(frame, 64.0)))
                 rows["raw_before"].append(time_ms(before))
                 rows["raw_two_pass"].append(time_ms(two_pass))
                 rows["raw_one_pass"].append(time_ms(one_pass))

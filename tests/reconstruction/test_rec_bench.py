@@ -86,5 +86,5 @@ def test_decoders_take_the_binned_planes_without_a_copy_and_decode_them_alike() 
                         rng.standard_normal((3, 16, 12)), rng.standard_normal((3, 20, 14)))
     dec = T2SClosedFormDecoder(sm, 2.0)
     interleaved = np.ascontiguousarray(frame)
-    np.testing.assert_allclose(dec.decode_raw(frame, 64.0), dec.decode_raw(interleaved, 64.0), rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(dec.decode(frame, 64.0), dec.decode(interleaved, 64.0), rtol=1e-5, atol=1e-6)
     assert frame.base is not None and np.array_equal(frame, interleaved)  # the input was not written to

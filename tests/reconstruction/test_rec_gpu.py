@@ -25,8 +25,8 @@ def test_cuda_is_a_candidate_and_decodes_like_numpy() -> None:
     x = np.random.default_rng(0).random((20, 24, 3)).astype(np.float32)
     raw = np.round(sm.forward(x) + 64.0).astype(np.uint16)
     for make in (lambda be: NonIterativeDecoder(sm, jf, 1e-3, be), lambda be: T2SClosedFormDecoder(sm, 1e-3, be)):
-        ref = make(ArrayBackend("numpy", "float64")).decode_raw(raw, 64.0)
-        gpu = make(ArrayBackend("torch", "float32", device="cuda")).decode_raw(raw, 64.0)
+        ref = make(ArrayBackend("numpy", "float64")).decode(raw, 64.0)
+        gpu = make(ArrayBackend("torch", "float32", device="cuda")).decode(raw, 64.0)
         assert np.abs(gpu - ref).max() <= 1e-3 * np.abs(ref).max()
 
 

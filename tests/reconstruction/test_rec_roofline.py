@@ -87,7 +87,7 @@ def test_roofline_ratio() -> None:
 @pytest.mark.parametrize("rtol", [0.0, 1e-2])
 def test_black_level_folds_in_exactly_with_modes_dropped_and_after_a_new_tau(rtol) -> None:
     """The T2S closed form carries the pedestal as a rank-one term (no unit frame decoded):
-    ``decode_raw(y + b, b) == decode(y)`` whatever modes are kept, also after ``set_tau``.
+    ``decode(y + b, b) == decode(y)`` whatever modes are kept, also after ``set_tau``.
     Positive coding matrices (a binary mask's), so the coding term sees the pedestal."""
     rng = np.random.default_rng(5)
     sm = SystemMatrices(0.2 * rng.random((3, 64, 20)), 0.2 * rng.random((3, 72, 24)),
@@ -101,4 +101,4 @@ def test_black_level_folds_in_exactly_with_modes_dropped_and_after_a_new_tau(rto
         assert dec.kept_modes == fresh.kept_modes
         want = fresh.decode(y)
         # float64 solve, float32 result: equal to the result's rounding
-        np.testing.assert_allclose(dec.decode_raw(y + 64.0, 64.0), want, rtol=1e-5, atol=1e-6 * np.abs(want).max())
+        np.testing.assert_allclose(dec.decode(y + 64.0, 64.0), want, rtol=1e-5, atol=1e-6 * np.abs(want).max())

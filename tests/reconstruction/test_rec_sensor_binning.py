@@ -83,7 +83,7 @@ def test_wrapper_speaks_the_unbinned_tau_and_decodes_like_its_inner_solve() -> N
     x = np.random.default_rng(2).random((20, 24, 3))
     y = sm.forward(x)
     np.testing.assert_allclose(dec.decode(y), inner.decode(bin_frame(y.astype(np.float32))), atol=1e-5)
-    np.testing.assert_allclose(dec.decode_raw((y + 10.0).astype(np.float32), 10.0), dec.decode(y), atol=1e-4)
+    np.testing.assert_allclose(dec.decode((y + 10.0).astype(np.float32), 10.0), dec.decode(y), atol=1e-4)
     dec.set_tau(8 * tau)
     assert inner.tau == pytest.approx(2 * tau) and dec.tau == pytest.approx(8 * tau)
     assert dec.info["sensor_bin"] == 2 and dec.gemm_flops() == inner.gemm_flops()
@@ -217,7 +217,7 @@ def test_sensor_bins_the_mosaic_once_for_a_binned_decoder(pixel_format: str) -> 
     from thintact_sdk.device.cameras import to_measurement
     from thintact_sdk.device.sensor import _InFlight
     from thintact_sdk.frames import RawFrame
-    from thintact_sdk.interfaces import BinnedInputDecoder, binned_input
+    from thintact_sdk.interfaces import DecoderInput
     from thintact_sdk.pixels.bayer import mosaic_from_rgb
     from thintact_sdk.reconstruction.decoders.sensor_binning import binnable_build
 
@@ -225,8 +225,7 @@ def test_sensor_bins_the_mosaic_once_for_a_binned_decoder(pixel_format: str) -> 
     sm = _operator(128, 160, 50, 64)
     build = binnable_build(sm, 40.0, lambda s, t, xp: T2SClosedFormDecoder(s, t, xp))
     dec = build(ArrayBackend("numpy", "float32"), 2)
-    as_object: object = dec
-    assert isinstance(as_object, BinnedInputDecoder) and binned_input(dec) == 2
+    assert DecoderInput.of(dec) == DecoderInput("binned", 2)
     x = np.random.default_rng(4).random((50, 64, 3))
     pattern = {"BayerRG12": "RGGB", "BayerGB12": "GBRG"}[pixel_format]
     mosaic = mosaic_from_rgb(sm.forward(x) * 300.0 + 64.0, pattern)  # per-site noise: the two G differ
@@ -254,11 +253,11 @@ def test_a_decoder_without_the_capability_gets_the_full_measurement() -> None:
     from thintact_sdk.device.sensor import _InFlight
     from thintact_sdk.errors import InvalidValueError
     from thintact_sdk.frames import RawFrame
-    from thintact_sdk.interfaces import binned_input
+    from thintact_sdk.interfaces import DecoderInput
 
     profile = load_profile("virtual-mini")
     dec = T2SClosedFormDecoder(_operator(128, 160, 50, 64), 40.0, ArrayBackend("numpy", "float32"))
-    assert binned_input(dec) == 1
+    assert DecoderInput.of(dec) == DecoderInput("raw", 1)
     raw = RawFrame(np.random.default_rng(6).integers(64, 4000, (256, 320)).astype(np.uint16), 0, 3, "BayerRG12")
     sensor = _mini_sensor(dec)
     m, full = sensor.decoder_input(raw), to_measurement(raw, profile)
@@ -267,7 +266,7 @@ def test_a_decoder_without_the_capability_gets_the_full_measurement() -> None:
     item = _InFlight(raw, 0)
     sensor._bin_stage(item)
     sensor._decode_stage(item)
-    np.testing.assert_array_equal(item.image, dec.decode_raw(full.data, 64.0))
+    np.testing.assert_array_equal(item.image, dec.decode(full.data, 64.0))
     # a measurement binned for another decoder is refused, never decoded as if it were whole
     with pytest.raises(InvalidValueError, match="frame 3 was binned 2×2"):
         sensor.reconstruct(to_measurement(raw, profile, sensor_bin=2))

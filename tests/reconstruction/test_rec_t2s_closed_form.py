@@ -65,7 +65,7 @@ def test_scene_prior_matches_the_dense_generalised_tikhonov(prior) -> None:
     assert np.abs(exact - plain).max() > 0.05 * np.abs(exact).max()  # the prior changes the answer
     dec = T2SClosedFormDecoder(sm, tau, ArrayBackend("numpy", "float64"), prior=prior)
     np.testing.assert_allclose(dec.decode(y), exact, atol=1e-5 * np.abs(exact).max())
-    np.testing.assert_allclose(dec.decode_raw(y + 64.0, 64.0), exact, atol=1e-5 * np.abs(exact).max())
+    np.testing.assert_allclose(dec.decode(y + 64.0, 64.0), exact, atol=1e-5 * np.abs(exact).max())
     dec.set_tau(0.5)  # set_tau keeps the prior
     np.testing.assert_allclose(dec.decode(y), _dense_generalised(sm, y, 0.5, prior),
                                atol=1e-5 * np.abs(exact).max())
@@ -98,7 +98,7 @@ def test_matches_the_dense_minimiser(tau) -> None:
     for be in (ArrayBackend("numpy"), ArrayBackend("torch")):
         d32 = T2SClosedFormDecoder(sm, tau, be)
         np.testing.assert_allclose(d32.decode(y.astype(np.float32)), exact, atol=1e-2 * np.abs(exact).max())
-        np.testing.assert_allclose(d32.decode_raw((y + 64).astype(np.float32), 64.0), exact,
+        np.testing.assert_allclose(d32.decode((y + 64).astype(np.float32), 64.0), exact,
                                    atol=1e-2 * np.abs(exact).max())
 
 
@@ -217,6 +217,6 @@ def test_blocked_numpy_solve_is_the_generic_solve(monkeypatch: pytest.MonkeyPatc
         generic = T2SClosedFormDecoder(sm, 3000.0, ArrayBackend("torch", dtype), mode_rtol=0.2)
         assert blocked.kept_modes == generic.kept_modes == (10, 11)  # of 12 × 14: zero padding
         assert t2s._block_rows(2, 14, 8) == (8 if block_bytes == 200 else (1 << 18) // 224)
-        for out_b, out_g in ((blocked.decode_raw(y.astype(dtype), 64.0), generic.decode_raw(y.astype(dtype), 64.0)),
+        for out_b, out_g in ((blocked.decode(y.astype(dtype), 64.0), generic.decode(y.astype(dtype), 64.0)),
                              (blocked.decode(y.astype(dtype) - 64), generic.decode(y.astype(dtype) - 64))):
             np.testing.assert_allclose(out_b, out_g, rtol=0, atol=tol * np.abs(out_g).max())

@@ -165,7 +165,7 @@ def to_measurement(
         (``Measurement.sensor_bin = b``), binned from the mosaic in one pass
         (:func:`thintact_sdk.pixels.bayer.bin_sites`: each pixel averages a ``2b × 2b`` cell per colour
         site), for a decoder that solves on the binned sensor
-        (:class:`~thintact_sdk.interfaces.BinnedInputDecoder`). The same numbers as binning
+        (``input = "binned"``, :class:`~thintact_sdk.interfaces.Decoder`). The same numbers as binning
         the measurement afterwards, up to float32 rounding.
 
     Returns

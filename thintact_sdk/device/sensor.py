@@ -44,14 +44,7 @@ from thintact_sdk.host.compute_threads import (
     single_threaded_kernels,
     usable_cores,
 )
-from thintact_sdk.interfaces import (
-    BinnedInputDecoder,
-    Camera,
-    Decoder,
-    LightController,
-    RawDecoder,
-    binned_input,
-)
+from thintact_sdk.interfaces import Camera, Decoder, DecoderInput, LightController
 from thintact_sdk.pixels.bayer import planes_to_rgb
 from thintact_sdk.tactile.calibration.store import lut_for_profile
 from thintact_sdk.tactile.interpretation.interpreter import TactileInterpreter
@@ -348,28 +341,30 @@ class Sensor:
         per sensor channel (4 planes R, Gr, Gb, B for a per-site profile; the tactile stage gets
         them combined to RGB by :func:`thintact_sdk.pixels.bayer.planes_to_rgb`).
 
-        Uses the decoder's ``decode_raw(data, black_level_dn)`` when it has one (the black
-        level folded into the solve), else ``decode(signal)``. A measurement binned for the
-        decoder (``sensor_bin`` > 1, made by :meth:`process` and :meth:`stream` for a
-        :class:`~thintact_sdk.interfaces.BinnedInputDecoder`) goes to its ``decode_binned``.
+        The decoder gets what it declared (:class:`~thintact_sdk.interfaces.DecoderInput`):
+        ``decode(measurement.signal())`` for ``input = "signal"``, ``decode(data,
+        black_level_dn)`` (the black level folded into the solve) for ``"raw"`` and ``"binned"``.
+        A measurement binned for the decoder (``sensor_bin`` = b > 1, made by
+        :meth:`decoder_input` for a decoder declaring ``input = "binned"``) holds the ``b × b``
+        block means; a binned decoder handed the full measurement bins it itself.
 
         Raises
         ------
         InvalidValueError
-            For a binned measurement the decoder does not solve on (another ``sensor_bin``).
+            For a binned measurement the decoder does not solve on (another ``sensor_bin``),
+            or a decoder declaring an unknown ``input``.
         """
         decoder = self.decoder
-        if measurement.sensor_bin != 1:
-            if binned_input(decoder) != measurement.sensor_bin or not isinstance(decoder, BinnedInputDecoder):
-                raise InvalidValueError(
-                    f"frame {measurement.frame_id} was binned {measurement.sensor_bin}×{measurement.sensor_bin} "
-                    f"but decoder {getattr(decoder, 'name', type(decoder).__name__)!r} solves on sensor_bin "
-                    f"{binned_input(decoder)}; bin it with to_measurement(..., sensor_bin={binned_input(decoder)})")
-            out = decoder.decode_binned(measurement.data, measurement.black_level_dn)
-        elif isinstance(decoder, RawDecoder):
-            out = decoder.decode_raw(measurement.data, measurement.black_level_dn)
-        else:
+        takes = DecoderInput.of(decoder)
+        if measurement.sensor_bin not in (1, takes.sensor_bin):
+            raise InvalidValueError(
+                f"frame {measurement.frame_id} was binned {measurement.sensor_bin}×{measurement.sensor_bin} "
+                f"but decoder {getattr(decoder, 'name', type(decoder).__name__)!r} solves on sensor_bin "
+                f"{takes.sensor_bin}; bin it with to_measurement(..., sensor_bin={takes.sensor_bin})")
+        if takes.kind == "signal":
             out = decoder.decode(measurement.signal())
+        else:
+            out = decoder.decode(measurement.data, measurement.black_level_dn)
         return np.asarray(out, np.float32)
 
     def read_image(self) -> np.ndarray:
@@ -429,11 +424,14 @@ class Sensor:
 
     # -- the stages of process() and stream() --------------------------------------------
     def decoder_input(self, raw: RawFrame) -> Measurement:
-        """Raw frame → what :meth:`reconstruct` decodes: the measurement
-        (:func:`~thintact_sdk.device.cameras.to_measurement`), or, for a decoder that solves on the
-        sensor binned ``b × b`` (:class:`~thintact_sdk.interfaces.BinnedInputDecoder`), its
-        ``b × b`` block means binned straight from the mosaic in one pass
-        (``Measurement.sensor_bin = b``). :meth:`read_measurement` always gives the measurement."""
+        """Raw frame → what the decoder declared it takes (:class:`~thintact_sdk.interfaces.DecoderInput`),
+        in DN with the black level, for :meth:`reconstruct`: the measurement
+        (:func:`~thintact_sdk.device.cameras.to_measurement`), or, for a decoder declaring
+        ``input = "binned"`` with ``sensor_bin = b``, its ``b × b`` block means binned straight
+        from the mosaic in one pass (``Measurement.sensor_bin = b``). All binning is
+        :mod:`thintact_sdk.pixels.bayer`'s. :meth:`reconstruct` then subtracts the black level
+        for a ``"signal"`` decoder and hands it to the others.
+        :meth:`read_measurement` always gives the measurement."""
         return to_measurement(raw, self.profile, sensor_bin=self._input_bin())
 
     def _bin_stage(self, item: _InFlight) -> None:
@@ -443,7 +441,7 @@ class Sensor:
 
     def _input_bin(self) -> int:
         """The ``b`` to bin raw frames to for this sensor's decoder (1: the measurement)."""
-        b = binned_input(self.decoder)
+        b = DecoderInput.of(self.decoder).sensor_bin
         s = self.profile.sensor
         return b if s.rows % b == 0 and s.cols % b == 0 else 1
 

@@ -7,6 +7,12 @@ on the blue row; each plane is calibrated and decoded on its own and :func:`plan
 combines Gr and Gb after decoding where RGB is needed (the tactile pipeline).
 Every camera frame goes through :func:`thintact_sdk.device.cameras.to_measurement`, which picks
 one of these, so binning is done one way only.
+
+This module is where all binning lives: the ``2 × 2`` Bayer cell, the ``2b × 2b`` cell per colour
+site of a decoder declaring ``input = "binned"`` with ``sensor_bin = b`` (:func:`bin_sites`, in
+one pass; :meth:`thintact_sdk.device.sensor.Sensor.decoder_input` asks for it), and the
+``b × b`` block means of a measurement (:func:`block_mean`, which such a decoder uses on a full
+frame handed to it outside a Sensor).
 """
 
 from __future__ import annotations

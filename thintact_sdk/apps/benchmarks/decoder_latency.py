@@ -116,26 +116,26 @@ def _as_binned(raw: np.ndarray) -> np.ndarray:
 
 
 def _raw_call(dec: Any, raw: np.ndarray, black: float) -> Callable[[], np.ndarray]:
-    """A zero-argument call decoding one uint16 raw frame (what is timed)."""
-    return lambda: dec.decode_raw(raw, black)
+    """A zero-argument call decoding one uint16 raw frame (what is timed), black level folded in."""
+    return lambda: dec.decode(raw, black)
 
 
 def _sensor_call(dec: Any, frame: np.ndarray, black: float, b: int) -> Callable[[], np.ndarray]:
     """A zero-argument call decoding ``frame`` (``R × S × C`` float32 planar) as the Sensor
-    feeds ``dec``: through ``decode_binned`` on the ``b × b`` block means for a
-    sensor-binning decoder (``b > 1``, the binning done here once, as the Bayer stage does
-    it), else through ``decode_raw``."""
+    feeds ``dec`` (``Decoder.decode(frame, black_level_dn)``): the ``b × b`` block means for a
+    decoder declaring ``input = "binned"`` (``b > 1``, the binning done here once, as the Bayer
+    stage does it), else the frame itself."""
     if b == 1:
         return _raw_call(dec, frame, black)
     from thintact_sdk.pixels.bayer import block_mean
 
     small = block_mean(frame, b)
-    return lambda: dec.decode_binned(small, black)
+    return lambda: dec.decode(small, black)
 
 
 def _from_signal(dec: Any, black: float) -> Callable[[np.ndarray], np.ndarray]:
     """Decode a noisy signal (DN above black) through the raw path: add black, round to uint16."""
-    return lambda y: dec.decode_raw(np.clip(np.round(y + black), 0, 65535).astype(np.uint16), black)
+    return lambda y: dec.decode(np.clip(np.round(y + black), 0, 65535).astype(np.uint16), black)
 
 
 def _quality(decode: Callable[[np.ndarray], np.ndarray], dev: _Device,

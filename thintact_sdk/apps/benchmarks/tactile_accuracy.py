@@ -344,11 +344,11 @@ def latency(args: argparse.Namespace, out: dict[str, Any]) -> None:
 
 def _decoder_summary(decoder: Any) -> str:
     """Decoder name, the backend the selection chose and the sensor binning it solves on."""
-    from thintact_sdk.interfaces import binned_input
+    from thintact_sdk.interfaces import DecoderInput
 
     choice = getattr(decoder, "backend_choice", None)
     backend = getattr(choice, "chosen", None) or repr(getattr(decoder, "xp", ""))
-    return f"{getattr(decoder, 'name', type(decoder).__name__)} [{backend}] sensor_bin {binned_input(decoder)}"
+    return f"{getattr(decoder, 'name', type(decoder).__name__)} [{backend}] sensor_bin {DecoderInput.of(decoder).sensor_bin}"
 
 
 def _streamed_fps(profile: Any, raws: list[Any], sensor: Any, frames: int,

@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from thintact_sdk.formats.profiles import NoiseSpec
-from thintact_sdk.interfaces import Decoder
+from thintact_sdk.interfaces import Decoder, DecoderInput
 from thintact_sdk.reconstruction.decoders.backend import ArrayBackend
 from thintact_sdk.reconstruction.decoders.backend_cache import BackendCache
 from thintact_sdk.reconstruction.decoders.backend_candidates import BackendSpec
@@ -74,7 +74,7 @@ class BackendChoice:
     chosen
         Key of the backend in use (``numpy-float32``, …).
     measured_ms
-        Median ms per frame of every candidate measured (``decode_raw`` of a probe frame).
+        Median ms per frame of every candidate measured (``decode(raw, black_level_dn)`` of a probe frame).
     psnr_cost_db
         PSNR below the float64 reconstruction, worst probe scene, per candidate (dB).
     unavailable
@@ -145,9 +145,11 @@ def decide(
 
 
 def _decode_fn(decoder: Decoder, probe: Probe) -> Callable[[], np.ndarray]:
-    decode_raw = getattr(decoder, "decode_raw", None)
-    if decode_raw is not None:
-        return lambda: decode_raw(probe.raw, probe.black_dn)
+    """What a Sensor would call: the raw probe frame and its black level for a decoder
+    declaring ``input`` ``"raw"`` or ``"binned"`` (which bins the full frame itself), the
+    signal above black otherwise."""
+    if DecoderInput.of(decoder).kind != "signal":
+        return lambda: decoder.decode(probe.raw, probe.black_dn)
     signal = probe.raw.astype(np.float32) - np.float32(probe.black_dn)
     return lambda: decoder.decode(signal)
 

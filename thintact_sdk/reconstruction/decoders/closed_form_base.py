@@ -1,6 +1,7 @@
-"""What the closed-form decoders share: shape checks and the two entry points, ``decode``
-(signal above black) and ``decode_raw`` (raw binned DN, the black level folded into the solve as a
-precomputed constant, so the only per-pixel work before the products is one conversion)."""
+"""What the closed-form decoders share: shape checks and the one entry point ``decode(frame,
+black_level_dn)`` of a decoder declaring ``input = "raw"``: ``R × S × C`` DN with the black level
+(a signal above black with ``black_level_dn`` 0), the black level folded into the solve as a
+precomputed constant, so the only per-pixel work before the products is one conversion."""
 
 from __future__ import annotations
 
@@ -19,6 +20,7 @@ class ClosedFormDecoder(Decoder):
     implement ``_solve``.
     """
 
+    input = "raw"
     sensor_shape: tuple[int, int]
     channels: int
     xp: Any
@@ -29,12 +31,8 @@ class ClosedFormDecoder(Decoder):
     def _check(self, signal: np.ndarray) -> None:
         check_measurement_shape(signal, self.sensor_shape, self.channels)
 
-    def decode(self, signal: np.ndarray) -> np.ndarray:
-        """Reconstruct ``N × M × C`` float32 (display units) from ``R × S × C`` DN above black."""
-        self._check(signal)
-        return self._solve(self.xp.channels_first(signal, gemm=True))
-
-    def decode_raw(self, raw: np.ndarray, black_level_dn: float) -> np.ndarray:
-        """Reconstruct from raw binned DN (``R × S × C``, e.g. uint16, black level included)."""
-        self._check(raw)
-        return self._solve(self.xp.channels_first(raw, gemm=True), float(black_level_dn))
+    def decode(self, frame: np.ndarray, black_level_dn: float = 0.0) -> np.ndarray:
+        """Reconstruct ``N × M × C`` float32 (display units) from ``R × S × C`` DN (float or
+        e.g. uint16) holding the black level ``black_level_dn`` DN (0: a signal above black)."""
+        self._check(frame)
+        return self._solve(self.xp.channels_first(frame, gemm=True), float(black_level_dn))

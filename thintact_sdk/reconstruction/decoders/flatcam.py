@@ -67,9 +67,11 @@ class FlatCamDecoder(Decoder):
         (r, s), (n, m), (kp, kq) = self.sensor_shape, self.scene_shape, self.kept_modes
         return 2 * self.channels * (kp * r * s + kp * s * kq + synthesis_macs(n, kp, kq, m))
 
-    def decode(self, signal: np.ndarray) -> np.ndarray:
-        """Reconstruct ``N × M × C`` float32 from ``R × S × C`` DN above black."""
-        check_measurement_shape(signal, self.sensor_shape, self.channels)
+    def decode(self, frame: np.ndarray, black_level_dn: float = 0.0) -> np.ndarray:
+        """Reconstruct ``N × M × C`` float32 from an ``R × S × C`` signal, DN above black
+        (``input = "signal"``: ``black_level_dn`` is subtracted first where not 0)."""
+        check_measurement_shape(frame, self.sensor_shape, self.channels)
+        signal = frame if not black_level_dn else np.asarray(frame, np.float32) - np.float32(black_level_dn)
         xp = self.xp
         y = xp.channels_first(signal, gemm=True)
         core = xp.cast(self._left @ y @ self._right, gemm=False) * self._inv_denom

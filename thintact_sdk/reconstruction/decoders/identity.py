@@ -55,9 +55,13 @@ class IdentityDecoder(Decoder):
         self.white_level_dn = float(white_level_dn)
         self.flip = FLIPS[flip]
 
-    def decode(self, signal: np.ndarray) -> np.ndarray:
-        """``R × S × 3`` DN above black → ``N × M × 3`` float32 display units (≥ 0)."""
-        img: np.ndarray = np.ascontiguousarray(signal, np.float32) / np.float32(self.white_level_dn)
+    def decode(self, frame: np.ndarray, black_level_dn: float = 0.0) -> np.ndarray:
+        """``R × S × 3`` signal, DN above black (``input = "signal"``; ``black_level_dn`` is
+        subtracted first where not 0) → ``N × M × 3`` float32 display units (≥ 0)."""
+        img: np.ndarray = np.ascontiguousarray(frame, np.float32)
+        if black_level_dn:
+            img = img - np.float32(black_level_dn)
+        img = img / np.float32(self.white_level_dn)
         n, m = self.scene_shape
         if img.shape[:2] != (n, m):
             shrinking = img.shape[0] >= n and img.shape[1] >= m

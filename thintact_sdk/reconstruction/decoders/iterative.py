@@ -106,7 +106,9 @@ class T2SIterativeDecoder(Decoder):
         return nesterov(gradient, self.xp.zeros_like(b), 1.0 / self.lipschitz,
                         self.iterations if iterations is None else iterations)
 
-    def decode(self, signal: np.ndarray) -> np.ndarray:
-        """Reconstruct ``N × M × C`` float32 from ``R × S × C`` DN above black."""
-        check_measurement_shape(signal, self.sensor_shape, self.channels)
+    def decode(self, frame: np.ndarray, black_level_dn: float = 0.0) -> np.ndarray:
+        """Reconstruct ``N × M × C`` float32 from an ``R × S × C`` signal, DN above black
+        (``input = "signal"``: ``black_level_dn`` is subtracted first where not 0)."""
+        check_measurement_shape(frame, self.sensor_shape, self.channels)
+        signal = frame if not black_level_dn else np.asarray(frame, np.float32) - np.float32(black_level_dn)
         return self.xp.channels_last(self.solve(self.xp.channels_first(signal)))

@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 
 from thintact_sdk.errors import InvalidShapeError, InvalidValueError
-from thintact_sdk.interfaces import Decoder, RawDecoder
+from thintact_sdk.interfaces import Decoder, DecoderInput
 from thintact_sdk.pixels.bayer import block_mean, planar_frame
 from thintact_sdk.reconstruction.decoders.modes import TauSpec, channel_taus
 from thintact_sdk.reconstruction.decoders.shapes import check_measurement_shape
@@ -134,9 +134,10 @@ class SensorBinnedDecoder(Decoder):
     """A decoder built on the binned operator (:func:`bin_system_matrices`) that bins each
     frame itself; it takes and reports the unbinned τ.
 
-    It is a :class:`~thintact_sdk.interfaces.BinnedInputDecoder` (``sensor_bin = b``): the
-    Sensor bins the camera's mosaic straight to ``R/b × S/b`` in one pass and calls
-    :meth:`decode_binned`, so the frame is not binned twice.
+    It declares ``input = "binned"`` and ``sensor_bin = b`` (:class:`~thintact_sdk.interfaces.Decoder`):
+    the Sensor bins the camera's mosaic straight to ``R/b × S/b`` in one pass
+    (:meth:`thintact_sdk.device.sensor.Sensor.decoder_input`) and hands that to :meth:`decode`,
+    so the frame is not binned twice; a full ``R × S`` frame (calibration) is binned here.
 
     Parameters
     ----------
@@ -150,18 +151,17 @@ class SensorBinnedDecoder(Decoder):
         Block side.
     """
 
+    input = "binned"
+
     def __init__(self, inner: Any, sensor_shape: tuple[int, int], channels: int, b: int = SENSOR_BIN) -> None:
         self.inner, self.b = inner, b
+        self.sensor_bin = b
+        """Block side ``b`` the inner decoder solves on."""
         self.name = str(getattr(inner, "name", "decoder"))
         self.sensor_shape, self.channels = sensor_shape, channels
         self.scene_shape = getattr(inner, "scene_shape", None)
         self.xp = getattr(inner, "xp", None)
         self._local = threading.local()
-
-    @property
-    def sensor_bin(self) -> int:
-        """Block side ``b`` the inner decoder solves on (:class:`~thintact_sdk.interfaces.BinnedInputDecoder`)."""
-        return self.b
 
     @property
     def tau(self) -> float:
@@ -199,27 +199,23 @@ class SensorBinnedDecoder(Decoder):
                                                  self.channels)
         return out
 
-    def decode(self, signal: np.ndarray) -> np.ndarray:
-        """``R × S × C`` DN above black → ``N × M × C`` float32."""
-        check_measurement_shape(signal, self.sensor_shape, self.channels)
-        return np.asarray(self.inner.decode(bin_frame(signal, self.b, self._buffer())))
-
-    def decode_raw(self, raw: np.ndarray, black_level_dn: float) -> np.ndarray:
-        """Raw ``R × S × C`` DN with the black level included → ``N × M × C`` float32."""
-        check_measurement_shape(raw, self.sensor_shape, self.channels)
-        return self._decode_binned(bin_frame(raw, self.b, self._buffer()), black_level_dn)
-
-    def decode_binned(self, binned: np.ndarray, black_level_dn: float) -> np.ndarray:
-        """``R/b × S/b × C`` block means of the raw frame (DN, black level included, e.g.
-        :func:`thintact_sdk.device.cameras.to_measurement` with ``sensor_bin = b``) → ``N × M × C``
-        float32; the same as :meth:`decode_raw` on the unbinned frame up to float32 rounding."""
-        check_measurement_shape(binned, (self.sensor_shape[0] // self.b, self.sensor_shape[1] // self.b),
-                                self.channels)
-        return self._decode_binned(binned, black_level_dn)
+    def decode(self, frame: np.ndarray, black_level_dn: float = 0.0) -> np.ndarray:
+        """``R/b × S/b × C`` block means of the measurement (what a Sensor hands a binned
+        decoder: :func:`thintact_sdk.device.cameras.to_measurement` with ``sensor_bin = b``), or
+        the full ``R × S × C`` measurement, which is binned here first (told apart by shape);
+        DN holding the black level ``black_level_dn`` (0: a signal above black) → ``N × M × C``
+        float32. Both give the same scene up to float32 rounding."""
+        r, s = self.sensor_shape
+        if frame.shape == (r // self.b, s // self.b, self.channels):
+            binned = frame
+        else:
+            check_measurement_shape(frame, self.sensor_shape, self.channels)
+            binned = bin_frame(frame, self.b, self._buffer())
+        return self._decode_binned(binned, float(black_level_dn))
 
     def _decode_binned(self, binned: np.ndarray, black_level_dn: float) -> np.ndarray:
         """The inner solve with the black level folded in where it can (no full-size pass)."""
-        if isinstance(self.inner, RawDecoder):
-            return np.asarray(self.inner.decode_raw(binned, float(black_level_dn)))
+        if DecoderInput.of(self.inner).kind != "signal":
+            return np.asarray(self.inner.decode(binned, black_level_dn))
         signal = np.subtract(binned, np.float32(black_level_dn), out=self._buffer(), dtype=np.float32)
         return np.asarray(self.inner.decode(signal))
