@@ -27,3 +27,18 @@ def test_doctor_remeasures_and_explains_a_missing_bundle(capsys) -> None:
     assert json.loads(capsys.readouterr().out)["backend"]["from_cache"] is True
     assert main(["doctor", "--profile", "no-such-profile"]) == 2
     assert "no-such-profile" in capsys.readouterr().err
+
+
+def test_the_library_report_is_the_commands(capsys) -> None:
+    """``host_report`` gives what ``thintact doctor --json`` prints, the GEMM rate (measured
+    anew each time) aside."""
+    from thintact_sdk.apps.benchmarks.host_report import host_report
+    from thintact_sdk.formats.profiles import load_profile
+
+    host_report(load_profile("virtual-mini"))  # this host's backend record cached for both below
+    assert main(["doctor", "--profile", "virtual-mini", "--json"]) == 0
+    printed = json.loads(capsys.readouterr().out)
+    report = host_report(load_profile("virtual-mini"))
+    lib = json.loads(json.dumps(report.data))
+    assert printed.pop("sgemm_gflops") > 0 and lib.pop("sgemm_gflops") == round(report.sgemm_gflops, 1)
+    assert lib == printed
