@@ -1,4 +1,4 @@
-"""The tiny device of the mask tests (a module of its own: two test folders have a conftest.py,
+"""The tiny device of the mask tests (a module of its own: several test folders have a conftest.py,
 so importing "conftest" by name picks whichever was imported first)."""
 
 from __future__ import annotations

@@ -7,15 +7,35 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from mask_profiles import make_profile
 
-from thintact_sdk.formats.profiles import read_profile_file
+from thintact_sdk.formats.profiles import Profile, profile_from_dict, read_profile_file
 from thintact_sdk.reconstruction.direct_generation import (
     SIGMOID_SOFTNESS,
     AxisGeometry,
     DirectGenerator,
     direct_system_matrices,
 )
+
+
+def make_profile(rows: int = 24, cols: int = 30, n: int = 10, m: int = 12, K: int = 40,  # noqa: N803
+                 pitch_um: float = 40.0, scene_pitch_um: float = 126.0,
+                 feature_um: float = 60.0) -> Profile:
+    """A small device with the paper's distances (z = 4.8 mm, d = 1 mm); the masks plugin's
+    tests use the same one (plugins/thintact_masks/tests/mask_profiles.py)."""
+    return profile_from_dict({
+        "format": "thintact-profile/1", "name": "mask-tiny",
+        "sensor": {"rows": rows, "cols": cols, "pixel_pitch_um": pitch_um},
+        "scene": {"rows": n, "cols": m, "pixel_pitch_um": scene_pitch_um},
+        "mask": {"feature_um": feature_um, "phi": [1 if i % 3 else -1 for i in range(K)]},
+        "geometry": {"scene_to_mask_mm": 4.8, "mask_to_sensor_mm": 1.0},
+        "noise": {"black_level_dn": 64.0, "read_noise_dn": 2.0, "electrons_per_dn": 4.0,
+                  "saturation_dn": 4095.0},
+    })
+
+
+@pytest.fixture
+def tiny_profile() -> Profile:
+    return make_profile()
 
 
 def test_shapes_and_signs(tiny_profile) -> None:
