@@ -58,3 +58,42 @@ def test_cli_errors_are_one_line(tmp_path: Path, calibrated: tuple[Path, Path],
     assert main(["calibrate", "--from-recording", str(rec_dir)]) == 2
     assert "--out" in capsys.readouterr().err
     assert main(["calibrate", "--from-recording", str(tmp_path / "missing"), "--out", str(tmp_path / "c")]) == 2
+
+
+def test_the_library_calibration_is_the_commands(calibrated: tuple[Path, Path], tmp_path: Path) -> None:
+    """``calibrate_from_recording`` writes the bundle ``thintact calibrate --from-recording``
+    wrote (same matrices, τ, decoder and verdict), with the stage lines going to ``status``."""
+    from thintact_sdk.calibration.pipeline import CalibrationOptions
+    from thintact_sdk.calibration.sessions import calibrate_from_recording
+    from thintact_sdk.reconstruction.bundle import CalibrationBundle
+
+    rec_dir, cal = calibrated
+    lines: list[str] = []
+    outcome = calibrate_from_recording(rec_dir, tmp_path / "lib", CalibrationOptions(filter_steps=0),
+                                       status=lines.append)
+    cli, lib = CalibrationBundle.load(cal), CalibrationBundle.load(tmp_path / "lib")
+    for name in ("Po", "Qo", "Pc", "Qc"):
+        np.testing.assert_array_equal(getattr(cli.system_matrices, name), getattr(lib.system_matrices, name))
+    assert cli.tau == lib.tau and cli.meta.get("decoder") == lib.meta.get("decoder")
+    keep = ("mean_psnr_db", "mean_ssim", "verdict")
+    assert json.dumps({k: cli.meta["metrics"].get(k) for k in keep}, sort_keys=True) == \
+        json.dumps({k: lib.meta["metrics"].get(k) for k in keep}, sort_keys=True)
+    assert outcome.path == tmp_path / "lib" and lines
+
+
+def test_the_wizard_bundle_directory_resumes_or_starts_anew(tmp_path: Path) -> None:
+    """``wizard_bundle_dir``: the newest unfinished run is resumed, ``restart`` starts a new
+    one, and ``restart`` into a directory holding a capture is refused."""
+    from thintact_sdk.calibration.sessions import wizard_bundle_dir
+    from thintact_sdk.errors import ProfileError
+
+    prof = synthetic_profile()
+    unfinished = tmp_path / "calibrations" / prof.name / "20260101T000000"
+    (unfinished / "capture").mkdir(parents=True)
+    (unfinished / "capture" / "manifest.json").write_text("{}")
+    assert wizard_bundle_dir(prof, None, base=tmp_path) == (unfinished, True)
+    fresh, resumed = wizard_bundle_dir(prof, None, restart=True, base=tmp_path)
+    assert not resumed and fresh.parent == unfinished.parent and fresh != unfinished
+    assert wizard_bundle_dir(prof, tmp_path / "mine", restart=True) == (tmp_path / "mine", False)
+    with pytest.raises(ProfileError, match="--restart"):
+        wizard_bundle_dir(prof, unfinished, restart=True)

@@ -2,6 +2,9 @@
 
     thintact calibrate --profile thintact-paper            # wizard (resumes an unfinished run)
     thintact calibrate --from-recording REC --out CAL       # offline, same solve
+
+The library is :mod:`thintact_sdk.calibration.sessions` (``calibrate_from_recording``,
+``calibrate_with_wizard``); this module parses, shows progress and prints the outcome.
 """
 
 from __future__ import annotations
@@ -34,10 +37,6 @@ from thintact_sdk.apps.cli.output_path import (
     claim_output,
     file_input,
 )
-from thintact_sdk.errors import ThinTactError
-
-REFERENCE_EXPOSURE_US = 10_000.0
-"""The virtual camera's reference exposure (its two-term fit is expressed at it)."""
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -125,41 +124,33 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _offline(args: argparse.Namespace, options: Any, console: Console) -> Any:
-    from thintact_sdk.calibration.pipeline import calibrate_recording
+    from thintact_sdk.calibration.sessions import calibrate_from_recording
     from thintact_sdk.errors import CalibrationError
-    from thintact_sdk.formats.recording import Recording
 
     if args.out is None:
         raise CalibrationError("--from-recording needs --out DIR (the bundle directory to write)")
     out = claim_output(args.out, "directory", force=args.force, inputs=(args.from_recording,))
-    rec = Recording(args.from_recording)
-    rec.check_frames()  # a NaN, negative or unreadable frame is named before any work
-    with _progress(args.no_progress, console) as prog:
-        task = prog.add_task("slit frames", total=None, label="")
-
-        def on_frame(done: int, total: int, label: str) -> None:
-            prog.update(task, completed=done, total=total, label=label)
-
-        return calibrate_recording(
-            rec, out, options, source="recording", progress=on_frame,
-            status=lambda s: console.print(f"[dim]{s}[/dim]"),
-            reference=_reference(rec.profile, {}) if args.compare_reference else None,
-            reference_exposure_us=REFERENCE_EXPOSURE_US,
-        )
-
-
-def _reference(profile: Any, camera_settings: dict[str, Any]) -> Any:
-    from thintact_sdk.errors import PluginError
-    from thintact_sdk.reconstruction.t2s import SystemMatrices
-    from thintact_sdk.simulation.simulator import Simulator
-
+    prog, on_frame = _lazy_bar(args.no_progress, console, "slit frames")
     try:
-        from thintact_sdk.device.virtual_bench import signal_scale_dn
-    except ImportError:
-        raise PluginError("--compare-reference needs the virtual sensor plugin (thintact-virtual)") from None
-    settings = dict(profile.camera.settings) if profile.camera is not None else {}
-    settings.update(camera_settings)
-    return SystemMatrices.two_term_fit(Simulator(profile), scale_dn=signal_scale_dn(profile, settings))
+        return calibrate_from_recording(
+            args.from_recording, out, options, compare_reference=args.compare_reference,
+            progress=on_frame, status=lambda s: prog.console.print(f"[dim]{s}[/dim]"))
+    finally:
+        prog.stop()
+
+
+def _lazy_bar(disabled: bool, console: Console, what: str) -> tuple[Progress, Any]:
+    """A progress bar that appears at its first step (an input refused before any work is
+    one error line, no bar) and its step callback ``(done, total, label)``."""
+    prog = _progress(disabled, console)
+    task = prog.add_task(what, total=None, label="")
+
+    def on_step(done: int, total: int, label: str) -> None:
+        if not prog.live.is_started:
+            prog.start()
+        prog.update(task, completed=done, total=total, label=label)
+
+    return prog, on_step
 
 
 def _wizard_out(args: argparse.Namespace) -> Path:
@@ -180,62 +171,20 @@ def _wizard_out(args: argparse.Namespace) -> Path:
 
 
 def _wizard(args: argparse.Namespace, options: Any, console: Console) -> Any:
-    from thintact_sdk.calibration.wizard import (
-        WizardSettings,
-        find_unfinished,
-        new_bundle_dir,
-        run_wizard,
-    )
-    from thintact_sdk.device.cameras import camera_is_simulated, create_camera
-    from thintact_sdk.device.registry import get_registry
-    from thintact_sdk.errors import ProfileError
+    from thintact_sdk.calibration.sessions import calibrate_with_wizard, wizard_bundle_dir
     from thintact_sdk.formats.profiles import load_profile
 
     profile = load_profile(args.profile)
-    if profile.camera is None:
-        raise ProfileError(f"profile {profile.name!r} has no camera section: the wizard needs a camera")
-    if profile.display is None:
-        raise ProfileError(
-            f"profile {profile.name!r} has no display section: add display.plugin (pygame or "
-            "virtual), display_index, origin_px and pixel_pitch_um"
-        )
-    cam_settings = key_values(args.camera_set)
-    if args.out is not None:
-        bundle_dir = _wizard_out(args)
-    else:
-        unfinished = None if args.restart else find_unfinished(Path.cwd() / "calibrations" / profile.name)
-        bundle_dir = unfinished or new_bundle_dir(profile)
-        if unfinished is not None:
-            console.print(f"resuming the unfinished calibration in {unfinished} (--restart for a new one)")
-    if args.restart and (bundle_dir / "capture").exists():
-        raise ProfileError(f"--restart: {bundle_dir} already holds a capture; choose another --out")
-    virtual = camera_is_simulated(profile)
-    frames = args.frames if args.frames is not None else (8 if virtual else 100)
-    camera = create_camera(profile, settings=cam_settings)
-    display = get_registry().create("display", profile.display.plugin, profile, dict(profile.display.settings))
-    reference = _reference(profile, cam_settings) if args.compare_reference else None
-    with _progress(args.no_progress, console) as prog:
-        task = prog.add_task("patterns", total=None, label="")
-
-        def on_step(done: int, total: int, label: str) -> None:
-            prog.update(task, completed=done, total=total, label=label)
-
-        def status(s: str) -> None:
-            prog.console.print(f"[dim]{s}[/dim]")
-
-        try:
-            return run_wizard(
-                profile, bundle_dir, camera, display,
-                WizardSettings(frames=frames, flush=args.flush, check_registration=not args.no_registration_check),
-                options, progress=on_step, status=status, reference=reference,
-                reference_exposure_us=REFERENCE_EXPOSURE_US,
-            )
-        except ThinTactError as err:
-            if not (bundle_dir / "capture" / "manifest.json").is_file():
-                raise
-            hint = f"{err} (captured frames are kept in {bundle_dir / 'capture'}; run again to resume)"
-            try:
-                wrapped = type(err)(hint)
-            except TypeError:
-                raise err from None
-            raise wrapped from None
+    out = _wizard_out(args) if args.out is not None else None
+    bundle_dir, resumed = wizard_bundle_dir(profile, out, restart=args.restart)
+    if resumed:
+        console.print(f"resuming the unfinished calibration in {bundle_dir} (--restart for a new one)")
+    prog, on_step = _lazy_bar(args.no_progress, console, "patterns")
+    try:
+        return calibrate_with_wizard(
+            profile, bundle_dir, options, frames=args.frames, flush=args.flush,
+            check_registration=not args.no_registration_check, camera_settings=key_values(args.camera_set),
+            compare_reference=args.compare_reference, progress=on_step,
+            status=lambda s: prog.console.print(f"[dim]{s}[/dim]"))
+    finally:
+        prog.stop()
