@@ -306,9 +306,17 @@ def test_refraction_is_held_on_the_wide_device_where_a_fit_would_rebuild_it():
     refraction's one-axis family is far above the screening limit. The simulator can build it
     block by block for ``simulate``, but a fit rebuilds the kernel at every step, so the
     diagnosis drops it and names it beside a geometry finding it could stand behind."""
-    from tests.masks.mask_profiles import make_profile
+    from thintact_sdk.formats.profiles import profile_from_dict
 
-    wide = make_profile(rows=128, cols=160, n=50, m=64, K=127)
+    wide = profile_from_dict({  # the masks plugin's test device (mask_profiles.make_profile) made wide
+        "format": "thintact-profile/1", "name": "mask-tiny",
+        "sensor": {"rows": 128, "cols": 160, "pixel_pitch_um": 40.0},
+        "scene": {"rows": 50, "cols": 64, "pixel_pitch_um": 126.0},
+        "mask": {"feature_um": 60.0, "phi": [1 if i % 3 else -1 for i in range(127)]},
+        "geometry": {"scene_to_mask_mm": 4.8, "mask_to_sensor_mm": 1.0},
+        "noise": {"black_level_dn": 64.0, "read_noise_dn": 2.0, "electrons_per_dn": 4.0,
+                  "saturation_dn": 4095.0},
+    })
     kp = kernel_params(wide, resolve_physics({"refraction": {"n_scene_side": 1.41}}))
     from thintact_sdk.simulation import refracted as sim_refracted
 
