@@ -228,3 +228,18 @@ def test_crop_option_is_parsed_or_refused(text):
     else:
         assert len(crop) == 4 and min(crop) >= 0
         assert crop == tuple(int(v) for v in text.split(","))
+
+
+def test_calibrate_tactile_ball_model_option(tmp_path, capsys):
+    """--ball-model sink-in with 4 presses (too few to choose the length on held-out
+    presses): the middle candidate length, stored; no 'not physical' warning."""
+    rec = _gelsight_recording(tmp_path, 4)
+    out = tmp_path / "lut.npz"
+    assert main(["calibrate-tactile", "--profile", "gelsight-mini", "--recording", str(rec),
+                 "--ball-radius-mm", "2", "--model", "lut", "--ball-model", "sink-in",
+                 "--quiet", "--out", str(out)]) == 0
+    assert "warning: circle radius" not in capsys.readouterr().out
+    meta = json.loads(out.with_suffix(".json").read_text())
+    assert meta["ball_model"]["model"] == "sink-in"
+    assert meta["ball_model"]["skirt_length_mm"] == pytest.approx(0.9)
+    assert all("sink_in_mm" in e for e in meta["press_report"])

@@ -20,6 +20,7 @@ from typing import Any
 import cv2
 import numpy as np
 from scipy.ndimage import gaussian_filter
+from scipy.special import k0e, k1e
 
 from thintact_sdk.errors import CalibrationError
 from thintact_sdk.formats.profiles import Profile
@@ -227,6 +228,97 @@ def find_press_circle(
     return centre, float(np.sqrt(area / np.pi))
 
 
+BALL_MODELS = ("auto", "rigid", "sink-in")
+"""Ball-press models of :func:`calibrate_from_presses` (``auto``: chosen per sensor)."""
+MIN_PRESSES_TO_CHOOSE_BALL = 8
+"""``ball_model="auto"`` chooses between the models from this many ball presses on (every
+fourth press validates: two at least); below it the rigid cap is kept."""
+SKIRT_LENGTHS_RADII = (0.1, 0.2, 0.3, 0.45, 0.65, 0.9)
+"""Candidate sink-in decay lengths ``L`` tried by ``ball_model="auto"``, in ball radii."""
+_MAX_CONTACT_RADII = 0.95
+"""The sink-in model's contact radius stays below this many ball radii (the cap's slope at
+the rim, ``a/√(R² − a²)``, is 3 there: steeper than a membrane image resolves)."""
+_DEPTH_STEP_MM = 0.025
+
+
+@dataclass(frozen=True)
+class BallModel:
+    """The shape a ball of known radius ``R`` presses into the gel, fitted per press.
+
+    ``kind == "rigid"``: the rigid cap ``d(r) = √(R² − r²) − (R − p)`` for ``r < a``, 0
+    outside (``p`` the press depth, the per-press parameter, ``a = √(2Rp − p²)``).
+
+    ``kind == "sink-in"``: the gel outside the contact dips too. Inside the contact radius
+    ``a`` the surface is the ball, ``d(r) = s + √(R² − r²) − (R − h)``; outside it is the
+    skirt ``d(r) = g·L·K₀(r/L)/K₁(a/L)``, ``K₀``, ``K₁`` the modified Bessel functions of
+    the second kind, ``g = a/√(R² − a²)`` the cap's slope at the rim and
+    ``s = g·L·K₀(a/L)/K₁(a/L)`` the skirt's depth there, so depth and slope are continuous
+    at ``r = a``. The per-press parameter is the cap height ``h`` (``a = √(2Rh − h²)``); the
+    press depth is ``h + s``. Form: a thin elastic layer bonded to a rigid base (a gel on
+    glass) behaves outside the load as a membrane on an elastic (Winkler–Pasternak)
+    foundation, ``∇²d = d/L²``, whose axisymmetric decaying solution is ``K₀(r/L)``: the
+    dip falls off as ``e^{−r/L}/√r`` over ``L`` ~ the layer's thickness, where an elastic
+    half-space (Hertz) decays as ``1/r``. ``skirt_mm`` is ``L`` in mm (> 0), one value per
+    sensor, chosen by :func:`calibrate_from_presses`.
+
+    Both are then smoothed by the elastomer Gaussian (``params.elastomer_sigma_mm``).
+    """
+
+    kind: str = "rigid"
+    skirt_mm: float = 0.0
+
+    def __post_init__(self) -> None:
+        if self.kind not in ("rigid", "sink-in"):
+            raise CalibrationError(f"ball model must be 'rigid' or 'sink-in', not {self.kind!r}")
+        if self.kind == "sink-in" and not (np.isfinite(self.skirt_mm) and self.skirt_mm > 0):
+            raise CalibrationError(
+                f"the sink-in model needs a skirt length > 0 mm, got {self.skirt_mm!r}")
+
+    @property
+    def label(self) -> str:
+        return "rigid" if self.kind == "rigid" else f"sink-in L={self.skirt_mm:.3g} mm"
+
+    def parameters(self, ball_radius_mm: float) -> np.ndarray:
+        """The per-press parameter's grid (mm): rigid, press depths up to 0.95 R; sink-in,
+        cap heights up to that of a contact radius of :data:`_MAX_CONTACT_RADII` R."""
+        r = float(ball_radius_mm)
+        top = 0.95 * r if self.kind == "rigid" else r * (1 - np.sqrt(1 - _MAX_CONTACT_RADII**2))
+        return np.arange(0.05, top + 1e-9, _DEPTH_STEP_MM)
+
+    def rigid_depth(self, dist_mm: np.ndarray, param_mm: float, ball_radius_mm: float
+                    ) -> tuple[np.ndarray, float, float]:
+        """``(depth, press_mm, contact_radius_mm)`` before the elastomer blur, at the
+        distances ``dist_mm`` (mm) from the centre, for the per-press parameter."""
+        big_r = float(ball_radius_mm)
+        h = min(float(param_mm), big_r)
+        a = float(np.sqrt(max(2 * big_r * h - h * h, 0.0)))
+        cap = np.sqrt(np.clip(big_r**2 - dist_mm**2, 0.0, None)) - (big_r - h)
+        if self.kind == "rigid" or a <= 0:
+            return np.clip(cap, 0.0, None), h, a
+        length = self.skirt_mm
+        g = a / np.sqrt(max(big_r**2 - a * a, 1e-12))
+        scale = g * length / float(k1e(a / length))  # K(x) = k·e(x)·e^{−x}: no underflow
+        r = np.maximum(dist_mm, a) / length
+        skirt = scale * k0e(r) * np.exp(a / length - r)
+        sink = float(scale * k0e(a / length))
+        return np.where(dist_mm < a, cap + sink, skirt), h + sink, a
+
+    def depth(self, shape: tuple[int, int], center_rc: tuple[float, float], param_mm: float,
+              ball_radius_mm: float, params: TactileParams) -> np.ndarray:
+        """Model depth (mm, ``N × M``) of one press, smoothed by the elastomer."""
+        rr, cc = np.mgrid[0 : shape[0], 0 : shape[1]].astype(np.float64)
+        dist = np.hypot(rr - center_rc[0], cc - center_rc[1]) * params.mm_per_px
+        sharp, _, _ = self.rigid_depth(dist, param_mm, ball_radius_mm)
+        sigma_px = params.elastomer_sigma_mm / params.mm_per_px
+        return gaussian_filter(sharp, sigma_px, mode="constant") if sigma_px > 0 else sharp
+
+    def as_meta(self) -> dict[str, Any]:
+        return {"model": self.kind, "skirt_length_mm": self.skirt_mm}
+
+
+RIGID = BallModel()
+
+
 def calibrate_from_presses(
     profile: Profile,
     reference: np.ndarray,
@@ -240,6 +332,7 @@ def calibrate_from_presses(
     model: str = "lut",
     mlp_steps: int = 1500,
     stage: Callable[[str], None] | None = None,
+    ball_model: str | BallModel = "auto",
 ) -> PhotometricLUT:
     """Calibrate a LUT from ball presses against a no-contact reference image.
 
@@ -261,9 +354,8 @@ def calibrate_from_presses(
         Work on the grid binned and smoothed as the interpreter does (same defaults).
     refine_rounds
         Ball-model presses only: rounds of self-consistent refinement. Each round integrates
-        the current LUT's slopes to depth, fits the press depth of a ball cap smoothed by the
-        elastomer (``tactile.elastomer_sigma_mm``) to it, and recalibrates with that model's
-        slopes over the whole image (the ideal cap ignores the smoothing and the rim).
+        the current LUT's slopes to depth, fits the press of the ball model to it, and
+        recalibrates with that model's slopes over the whole image.
     model
         The gradient model: ``"lut"`` (colour change → slope table), ``"mlp"`` (the colour +
         position network of :mod:`~thintact_sdk.tactile.interpretation.gradient_model`, the table kept
@@ -278,16 +370,33 @@ def calibrate_from_presses(
         Training steps of the network.
     stage
         Called with a short message as each stage starts (progress for long runs).
+    ball_model
+        Ball-model presses only: the shape the ball presses into the gel (:class:`BallModel`):
+        ``"rigid"`` (the elastomer-smoothed cap), ``"sink-in"`` or a :class:`BallModel`
+        (fixed skirt length), or ``"auto"`` (default): the rigid cap and the sink-in model
+        with each skirt length of :data:`SKIRT_LENGTHS_RADII` compete on the calibration
+        presses alone: a table calibrated on all presses but every fourth, with each
+        candidate, reconstructs the held-out fourth, scored by the annotation-free figures
+        of :mod:`~thintact_sdk.tactile.calibration.ball_eval`,
+        ``√((sphere/R − 1)² + (contact ratio − 1)²)`` (medians); the lowest score wins.
+        ``"sink-in"`` chooses the skirt length the same way among the sink-in candidates.
+        Fewer than :data:`MIN_PRESSES_TO_CHOOSE_BALL` presses: the rigid cap (``"auto"``)
+        or the middle candidate length (``"sink-in"``). Stored as ``meta["ball_model"]``
+        (model, skirt length in mm, how chosen, each candidate's figures).
 
     The result's ``meta["press_report"]`` holds, per ball-model press, the circle found
-    (centre px, radius mm), the fitted press depth and contact radius (mm), and warnings:
-    a circle at least as wide as the ball (``radius ≥ ball radius``: the ball radius or
-    ``tactile.mm_per_px`` is wrong, or the press deeper than the ball model holds), a press
-    depth at the fit's limit, a press touching the frame's edge.
+    (centre px, radius mm), the press depth, contact radius and (sink-in) skirt depth at the
+    contact's rim of the model fit the table was calibrated with (mm), and warnings: a
+    circle at least as wide as the ball with the rigid model (``radius ≥ ball radius``: the
+    ball radius or ``tactile.mm_per_px`` is wrong, or the gel sinks in beyond the contact),
+    a fitted press at a bound of the model's range, a press touching the frame's edge.
     """
     say = stage or (lambda _msg: None)
     if model not in ("lut", "mlp", "auto"):
         raise CalibrationError(f"gradient model must be 'lut', 'mlp' or 'auto', not {model!r}")
+    if not isinstance(ball_model, BallModel) and ball_model not in BALL_MODELS:
+        raise CalibrationError(
+            f"ball model must be one of {', '.join(BALL_MODELS)}, not {ball_model!r}")
     full = TactileParams.from_profile(profile)
     factor = working_factor(full, max_work_mm)
     params = binned_params(full, factor)
@@ -300,8 +409,7 @@ def calibrate_from_presses(
     gys: list[np.ndarray] = []
     valids: list[np.ndarray] = []
     images: list[np.ndarray] = []
-    ball: list[tuple[int, tuple[float, float], np.ndarray]] = []
-    report: list[dict[str, Any]] = []
+    ball: list[_BallFit] = []
     rng = np.random.default_rng(0)
     say(f"{len(presses)} presses: finding the ball in each")
     for n_press, press in enumerate(presses):
@@ -313,17 +421,13 @@ def calibrate_from_presses(
                 center, radius_px = find_press_circle(change, det.mask)
             except CalibrationError as err:
                 raise CalibrationError(f"press {n_press}: {err}") from None
-            cap = fit_ball_to_change(change, center, ball_radius_mm, params, smooth_px)
-            report.append(_press_entry(n_press, center, radius_px, cap, ball_radius_mm, params))
-            gy, gx = np.gradient(cap, params.mm_per_px)
-            if smooth_px > 0:
-                gx = cv2.GaussianBlur(gx.astype(np.float32), (0, 0), smooth_px)
-                gy = cv2.GaussianBlur(gy.astype(np.float32), (0, 0), smooth_px)
             rr, cc = np.mgrid[0 : img.shape[0], 0 : img.shape[1]]
             far = (rr - center[0]) ** 2 + (cc - center[1]) ** 2 > (1.6 * radius_px) ** 2
             flat = far & (rng.random(far.shape) < 0.1)
             valid = ~det.mask & (~far | flat)
-            ball.append((len(feats), center, valid))
+            ball.append(_BallFit(n_press, len(feats), center, radius_px, valid))
+            gx: np.ndarray = np.zeros(img.shape[:2], np.float32)  # set by the ball model
+            gy: np.ndarray = gx
         else:
             gx, gy = bin_image(press.grad_x, factor), bin_image(press.grad_y, factor)
             if smooth_px > 0:  # the slopes the smoothed colours stand for
@@ -345,27 +449,233 @@ def calibrate_from_presses(
         "work_mm_per_px": params.mm_per_px,
     }
     info.update(meta or {})
-    if report:
-        info["press_report"] = report
+    fitter = _BallFitter(feats, gxs, gys, valids, ball, ball_radius_mm, params, bins,
+                         smooth_px, refine_rounds)
+    chosen = RIGID
+    if ball:
+        chosen, choice = _choose_ball_model(fitter, ball_model, say)
+        info["ball_model"] = {**chosen.as_meta(), **choice}
+        say(f"ball model {chosen.label}: fitting each press")
+        fitter.first_fit(chosen, range(len(ball)))
     say("fitting the colour → slope table")
     lut = calibrate_lut(feats, gxs, gys, valids, bins=bins, meta=info)
     for _ in range(refine_rounds if ball else 0):
         say("refining the ball fits through the table")
-        for k, center, trusted in ball:
-            gx, gy = lut.lookup(feats[k])
-            depth = integrate_gradients(gx, gy, params.mm_per_px)
-            refit = fit_smoothed_ball(depth, center, ball_radius_mm, params)
-            my, mx = np.gradient(refit, params.mm_per_px)
-            if smooth_px > 0:
-                mx = cv2.GaussianBlur(mx.astype(np.float32), (0, 0), smooth_px)
-                my = cv2.GaussianBlur(my.astype(np.float32), (0, 0), smooth_px)
-            gxs[k], gys[k], valids[k] = mx, my, trusted
+        fitter.refine(lut, chosen, range(len(ball)))
         lut = calibrate_lut(feats, gxs, gys, valids, bins=bins, meta=info)
         lut.meta["refine_rounds"] = refine_rounds
+    if ball:
+        lut.meta["press_report"] = [fitter.entry(k, chosen) for k in range(len(ball))]
     if model == "lut" or (model == "auto" and len(presses) < MIN_PRESSES_TO_CHOOSE):
         lut.meta["gradient_model"] = "lut"
         return lut
     return _attach_network(lut, model, feats, images, gxs, gys, valids, bins, mlp_steps, say)
+
+
+@dataclass
+class _BallFit:
+    """A ball-model press of :func:`calibrate_from_presses`: its index among the presses and
+    in the feature lists, the circle found (px), the trusted pixels and the current fit."""
+
+    press: int
+    slot: int
+    center: tuple[float, float]
+    radius_px: float
+    trusted: np.ndarray
+    param_mm: float = float("nan")
+
+
+class _BallFitter:
+    """Fits a :class:`BallModel` to the ball presses and writes its slopes into the target
+    lists of :func:`calibrate_from_presses` (in place)."""
+
+    def __init__(self, feats: list[np.ndarray], gxs: list[np.ndarray], gys: list[np.ndarray],
+                 valids: list[np.ndarray], ball: list[_BallFit], ball_radius_mm: float,
+                 params: TactileParams, bins: int, smooth_px: float, refine_rounds: int) -> None:
+        self.feats, self.gxs, self.gys, self.valids, self.ball = feats, gxs, gys, valids, ball
+        self.radius, self.params, self.bins = ball_radius_mm, params, bins
+        self.smooth_px, self.rounds = smooth_px, refine_rounds
+
+    def _set(self, fit: _BallFit, depth: np.ndarray, valid: np.ndarray) -> None:
+        gy, gx = np.gradient(depth, self.params.mm_per_px)
+        if self.smooth_px > 0:
+            gx = cv2.GaussianBlur(gx.astype(np.float32), (0, 0), self.smooth_px)
+            gy = cv2.GaussianBlur(gy.astype(np.float32), (0, 0), self.smooth_px)
+        self.gxs[fit.slot], self.gys[fit.slot], self.valids[fit.slot] = gx, gy, valid
+
+    def first_fit(self, bm: BallModel, which: Any) -> None:
+        """Fit the model to the colour change of the presses ``which`` (indices of ``ball``)."""
+        for k in which:
+            fit = self.ball[k]
+            fit.param_mm, cap = _fit_model_to_change(
+                self.feats[fit.slot], fit.center, fit.radius_px, self.radius, self.params,
+                self.smooth_px, bm)
+            self._set(fit, cap, fit.trusted)
+
+    def refine(self, lut: PhotometricLUT, bm: BallModel, which: Any) -> None:
+        """Refit the model to the depth ``lut`` reconstructs for the presses ``which``."""
+        for k in which:
+            fit = self.ball[k]
+            gx, gy = lut.lookup(self.feats[fit.slot])
+            depth = integrate_gradients(gx, gy, self.params.mm_per_px)
+            fit.param_mm, refit = _fit_model_to_depth(depth, fit.center, fit.radius_px,
+                                                      self.radius, self.params, bm)
+            self._set(fit, refit, fit.trusted)
+
+    def calibrate(self, bm: BallModel, which: list[int]) -> PhotometricLUT:
+        """A table calibrated on the presses ``which`` only, with ``bm`` (first fit, then the
+        refinement rounds)."""
+        self.first_fit(bm, which)
+        slots = [self.ball[k].slot for k in which]
+
+        def table() -> PhotometricLUT:
+            return calibrate_lut([self.feats[s] for s in slots], [self.gxs[s] for s in slots],
+                                 [self.gys[s] for s in slots], [self.valids[s] for s in slots],
+                                 bins=self.bins)
+
+        lut = table()
+        for _ in range(self.rounds):
+            self.refine(lut, bm, which)
+            lut = table()
+        return lut
+
+    def score(self, lut: PhotometricLUT, which: list[int]) -> dict[str, Any]:
+        """The figures of the presses ``which`` reconstructed with ``lut`` (as the
+        interpreter does: table slopes, free-boundary integration, depth ≥ 0)."""
+        from thintact_sdk.tactile.calibration.ball_eval import press_figures, summarise
+
+        figs = []
+        for k in which:
+            gx, gy = lut.lookup(self.feats[self.ball[k].slot])
+            depth = np.clip(integrate_gradients(gx, gy, self.params.mm_per_px), 0.0, None)
+            figs.append(press_figures(depth, gx, gy, self.radius, self.params.mm_per_px,
+                                      self.params.contact_threshold_mm))
+        s = summarise(figs, self.radius)
+        sphere = s["sphere_radius_median_mm"] / self.radius
+        contact = s["contact_ratio_median"]
+        score = (float(np.hypot(sphere - 1.0, contact - 1.0))
+                 if contact is not None and np.isfinite(sphere) else float("inf"))
+        return {"sphere_over_radius": round(float(sphere), 4),
+                "contact_ratio": None if contact is None else round(float(contact), 4),
+                "depth_rms_mm": s["depth_rms_mm"], "slope_rms": s["slope_rms"],
+                "score": score}
+
+    def entry(self, k: int, bm: BallModel) -> dict[str, Any]:
+        """One press of the calibration report (see :func:`calibrate_from_presses`)."""
+        fit = self.ball[k]
+        mm = self.params.mm_per_px
+        _, press, contact = bm.rigid_depth(np.zeros(1), fit.param_mm, self.radius)
+        grid = bm.parameters(self.radius)
+        warnings = []
+        if bm.kind == "rigid" and fit.radius_px * mm >= self.radius:
+            warnings.append(
+                f"circle radius {fit.radius_px * mm:.2f} mm >= ball radius {self.radius:g} mm: "
+                "not physical for this ball (check --ball-radius-mm and tactile.mm_per_px, or "
+                "a gel that sinks in: --ball-model sink-in)")
+        if fit.param_mm >= float(grid[-1]) - 1e-9:
+            warnings.append(f"press depth at the fit's upper bound ({press:.2f} mm, contact "
+                            f"radius {contact:.2f} mm of a {self.radius:g} mm ball)")
+        elif fit.param_mm <= float(grid[0]) + 1e-9:
+            warnings.append(f"press depth at the fit's lower bound ({press:.2f} mm)")
+        rows, cols = self.feats[fit.slot].shape[:2]
+        c, r = fit.center, fit.radius_px
+        if c[0] - r <= 0 or c[1] - r <= 0 or c[0] + r >= rows - 1 or c[1] + r >= cols - 1:
+            warnings.append("the press touches the frame's edge")
+        out = {"press": fit.press, "centre_rc": [round(c[0], 2), round(c[1], 2)],
+               "circle_radius_mm": round(r * mm, 4), "press_mm": round(press, 4),
+               "contact_radius_mm": round(contact, 4)}
+        if bm.kind == "sink-in":
+            out["sink_in_mm"] = round(press - fit.param_mm, 4)
+        out["warnings"] = warnings
+        return out
+
+
+def _choose_ball_model(fitter: _BallFitter, ball_model: str | BallModel,
+                       say: Callable[[str], None]) -> tuple[BallModel, dict[str, Any]]:
+    """The ball model of :func:`calibrate_from_presses` and how it was chosen."""
+    if isinstance(ball_model, BallModel):
+        return ball_model, {"chosen_by": "given"}
+    if ball_model == "rigid":
+        return RIGID, {"chosen_by": "given"}
+    lengths = [round(f * fitter.radius, 4) for f in SKIRT_LENGTHS_RADII]
+    sink = [BallModel("sink-in", L) for L in lengths]
+    n = len(fitter.ball)
+    if n < MIN_PRESSES_TO_CHOOSE_BALL:
+        default = RIGID if ball_model == "auto" else sink[len(sink) // 2]
+        return default, {"chosen_by": f"default (fewer than {MIN_PRESSES_TO_CHOOSE_BALL} presses)"}
+    candidates = ([RIGID] if ball_model == "auto" else []) + sink
+    val = [k for k in range(n) if k % 4 == 3]
+    fit = [k for k in range(n) if k % 4 != 3]
+    rows: list[dict[str, Any]] = []
+    for bm in candidates:
+        say(f"ball model {bm.label}: table on {len(fit)} presses, scored on {len(val)}")
+        rows.append({**bm.as_meta(), **fitter.score(fitter.calibrate(bm, fit), val)})
+    best = int(np.argmin([r["score"] for r in rows]))
+    return candidates[best], {"chosen_by": "validation", "score": rows[best]["score"],
+                              "validation_presses": [fitter.ball[k].press for k in val],
+                              "candidates": rows}
+
+
+def _window(dist_mm: np.ndarray, bm: BallModel, param_mm: float, radius_px: float,
+            ball_radius_mm: float, params: TactileParams, rims: float, blurs: float
+            ) -> np.ndarray:
+    """Pixels a fit compares: the rigid cap within ``rims`` contact radii (as before), the
+    sink-in model within ``rims`` radii of the circle found in the image (the skirt is where
+    the colour changes), plus ``blurs`` elastomer sigmas."""
+    if bm.kind == "rigid":
+        extent = np.sqrt(max(2 * ball_radius_mm * param_mm - param_mm**2, 1e-6))
+    else:
+        extent = radius_px * params.mm_per_px
+    return dist_mm < rims * extent + blurs * params.elastomer_sigma_mm
+
+
+def _fit_model_to_change(
+    change: np.ndarray, center_rc: tuple[float, float], radius_px: float, ball_radius_mm: float,
+    params: TactileParams, smooth_px: float, bm: BallModel,
+) -> tuple[float, np.ndarray]:
+    """``(parameter_mm, depth)``: the model press whose slope magnitude, times a free scale,
+    best matches the colour-change magnitude (for moderate slopes the colour change grows
+    about linearly with the slope)."""
+    mag = np.linalg.norm(change, axis=2)
+    rr, cc = np.mgrid[0 : mag.shape[0], 0 : mag.shape[1]]
+    dist_mm = np.hypot(rr - center_rc[0], cc - center_rc[1]) * params.mm_per_px
+    best: tuple[float, float, np.ndarray] | None = None
+    for press in bm.parameters(ball_radius_mm):
+        model = bm.depth(mag.shape, center_rc, float(press), ball_radius_mm, params)
+        gy, gx = np.gradient(model, params.mm_per_px)
+        slope = np.hypot(gx, gy).astype(np.float32)
+        if smooth_px > 0:
+            slope = cv2.GaussianBlur(slope, (0, 0), smooth_px)
+        w = _window(dist_mm, bm, float(press), radius_px, ball_radius_mm, params, 2.0, 3.0)
+        ss = float((slope[w] ** 2).sum())
+        if ss <= 0:
+            continue
+        k = float((slope[w] * mag[w]).sum()) / ss
+        err = float(((mag[w] - k * slope[w]) ** 2).sum()) / max(int(w.sum()), 1)
+        if best is None or err < best[0]:
+            best = (err, float(press), model)
+    if best is None:
+        raise CalibrationError("cannot fit the ball press: press the ball deeper")
+    return best[1], best[2]
+
+
+def _fit_model_to_depth(
+    depth_mm: np.ndarray, center_rc: tuple[float, float], radius_px: float,
+    ball_radius_mm: float, params: TactileParams, bm: BallModel,
+) -> tuple[float, np.ndarray]:
+    """``(parameter_mm, depth)``: the model press that best fits ``depth_mm`` (least
+    squares within 2.5 contact radii, or circle radii for the sink-in model)."""
+    best: tuple[float, float, np.ndarray] | None = None
+    rr, cc = np.mgrid[0 : depth_mm.shape[0], 0 : depth_mm.shape[1]]
+    dist_mm = np.hypot(rr - center_rc[0], cc - center_rc[1]) * params.mm_per_px
+    for press in bm.parameters(ball_radius_mm):
+        model = bm.depth(depth_mm.shape, center_rc, float(press), ball_radius_mm, params)
+        window = _window(dist_mm, bm, float(press), radius_px, ball_radius_mm, params, 2.5, 2.0)
+        err = float(np.mean((model[window] - depth_mm[window]) ** 2))
+        if best is None or err < best[0]:
+            best = (err, float(press), model)
+    assert best is not None
+    return best[1], best[2]
 
 
 def _attach_network(
@@ -410,108 +720,41 @@ def _attach_network(
     return lut
 
 
-def _press_entry(
-    index: int, center: tuple[float, float], radius_px: float, cap: np.ndarray,
-    ball_radius_mm: float, params: TactileParams,
-) -> dict[str, Any]:
-    """One press of the calibration report (see :func:`calibrate_from_presses`)."""
-    mm = params.mm_per_px
-    depths = _press_depths(ball_radius_mm)
-    # the press depth of the fitted cap: its smoothed peak is below the press depth, so take
-    # the grid value whose smoothed peak is nearest
-    peaks = [float(smoothed_ball_depth(cap.shape, center, float(p), ball_radius_mm,
-                                       params).max()) for p in depths]
-    press = float(depths[int(np.argmin(np.abs(np.array(peaks) - float(cap.max()))))])
-    contact = float(np.sqrt(max(2 * ball_radius_mm * press - press**2, 0.0)))
-    warnings = []
-    if radius_px * mm >= ball_radius_mm:
-        warnings.append(
-            f"circle radius {radius_px * mm:.2f} mm >= ball radius {ball_radius_mm:g} mm: not "
-            "physical for this ball (check --ball-radius-mm and tactile.mm_per_px)")
-    if press >= float(depths[-1]) - 1e-9:
-        warnings.append(f"press depth at the fit's limit ({press:.2f} mm)")
-    rows, cols = cap.shape
-    if (center[0] - radius_px <= 0 or center[1] - radius_px <= 0
-            or center[0] + radius_px >= rows - 1 or center[1] + radius_px >= cols - 1):
-        warnings.append("the press touches the frame's edge")
-    return {"press": index, "centre_rc": [round(center[0], 2), round(center[1], 2)],
-            "circle_radius_mm": round(radius_px * mm, 4), "press_mm": round(press, 4),
-            "contact_radius_mm": round(contact, 4), "warnings": warnings}
-
-
 def smoothed_ball_depth(
     shape: tuple[int, int], center_rc: tuple[float, float], press_mm: float,
     ball_radius_mm: float, params: TactileParams,
 ) -> np.ndarray:
     """Depth (mm, ``N × M``) of a ball pressed ``press_mm`` at ``center_rc`` (px), smoothed by
     the elastomer Gaussian (``params.elastomer_sigma_mm``), as the tactile simulator does."""
-    rr, cc = np.mgrid[0 : shape[0], 0 : shape[1]].astype(np.float64)
-    r2 = ((rr - center_rc[0]) ** 2 + (cc - center_rc[1]) ** 2) * params.mm_per_px**2
-    cap = np.sqrt(np.clip(ball_radius_mm**2 - r2, 0.0, None)) - (ball_radius_mm - press_mm)
-    rigid = np.clip(cap, 0.0, None)
-    sigma_px = params.elastomer_sigma_mm / params.mm_per_px
-    return gaussian_filter(rigid, sigma_px, mode="constant") if sigma_px > 0 else rigid
-
-
-def _press_depths(ball_radius_mm: float) -> np.ndarray:
-    return np.arange(0.05, min(1.5, 0.95 * ball_radius_mm) + 1e-9, 0.025)
+    return RIGID.depth(shape, center_rc, press_mm, ball_radius_mm, params)
 
 
 def fit_ball_to_change(
     change: np.ndarray, center_rc: tuple[float, float], ball_radius_mm: float,
     params: TactileParams, smooth_px: float = 1.0,
 ) -> np.ndarray:
-    """First estimate of a ball press from the image alone: the smoothed ball cap whose
-    slope magnitude, times a free scale, best matches the colour-change magnitude (for
-    moderate slopes the colour change grows about linearly with the slope).
+    """First estimate of a ball press from the image alone: the smoothed rigid ball cap
+    whose slope magnitude, times a free scale, best matches the colour-change magnitude (for
+    moderate slopes the colour change grows about linearly with the slope; press depths
+    0.05 mm to 0.95 ball radii in 0.025 mm steps).
 
     Returns
     -------
     numpy.ndarray
         ``N × M`` model depth in mm.
     """
-    mag = np.linalg.norm(change, axis=2)
-    rr, cc = np.mgrid[0 : mag.shape[0], 0 : mag.shape[1]]
-    dist_mm = np.hypot(rr - center_rc[0], cc - center_rc[1]) * params.mm_per_px
-    best: tuple[float, np.ndarray] | None = None
-    for press in _press_depths(ball_radius_mm):
-        model = smoothed_ball_depth(mag.shape, center_rc, float(press), ball_radius_mm, params)
-        gy, gx = np.gradient(model, params.mm_per_px)
-        slope = np.hypot(gx, gy).astype(np.float32)
-        if smooth_px > 0:
-            slope = cv2.GaussianBlur(slope, (0, 0), smooth_px)
-        a = np.sqrt(max(2 * ball_radius_mm * press - press**2, 1e-6))
-        w = dist_mm < 2.0 * a + 3 * params.elastomer_sigma_mm
-        ss = float((slope[w] ** 2).sum())
-        if ss <= 0:
-            continue
-        k = float((slope[w] * mag[w]).sum()) / ss
-        err = float(((mag[w] - k * slope[w]) ** 2).sum()) / max(int(w.sum()), 1)
-        if best is None or err < best[0]:
-            best = (err, model)
-    if best is None:
-        raise CalibrationError("cannot fit the ball press: press the ball deeper")
-    return best[1]
+    return _fit_model_to_change(change, center_rc, 0.0, ball_radius_mm, params, smooth_px,
+                                RIGID)[1]
 
 
 def fit_smoothed_ball(
     depth_mm: np.ndarray, center_rc: tuple[float, float], ball_radius_mm: float,
     params: TactileParams,
 ) -> np.ndarray:
-    """The smoothed ball-cap depth map whose press depth best fits ``depth_mm`` (least squares
-    within 2.5 contact radii of the centre; press depths 0.05-1.5 mm in 0.025 mm steps)."""
-    best: tuple[float, np.ndarray] | None = None
-    rr, cc = np.mgrid[0 : depth_mm.shape[0], 0 : depth_mm.shape[1]]
-    dist_mm = np.hypot(rr - center_rc[0], cc - center_rc[1]) * params.mm_per_px
-    for press in _press_depths(ball_radius_mm):
-        model = smoothed_ball_depth(depth_mm.shape, center_rc, float(press), ball_radius_mm, params)
-        a = np.sqrt(max(2 * ball_radius_mm * press - press**2, 1e-6))
-        window = dist_mm < 2.5 * a + 2 * params.elastomer_sigma_mm
-        err = float(np.mean((model[window] - depth_mm[window]) ** 2))
-        if best is None or err < best[0]:
-            best = (err, model)
-    assert best is not None
-    return best[1]
+    """The smoothed rigid ball-cap depth map whose press depth best fits ``depth_mm`` (least
+    squares within 2.5 contact radii of the centre; press depths 0.05 mm to 0.95 ball radii
+    in 0.025 mm steps)."""
+    return _fit_model_to_depth(depth_mm, center_rc, 0.0, ball_radius_mm, params, RIGID)[1]
 
 
 def scene_level_lut(profile: Profile, presses: int = 12, seed: int = 0) -> PhotometricLUT:

@@ -113,9 +113,10 @@ def calibrate_recording(
     progress: Progress | None = None,
     model: str = "lut",
     stage: Callable[[str], None] | None = None,
+    ball_model: str = "auto",
 ) -> PhotometricLUT:
     """Calibrate from a recording of ball presses (reference frame + press frames);
-    ``model`` and ``stage`` as in
+    ``model``, ``stage`` and ``ball_model`` as in
     :func:`~thintact_sdk.tactile.calibration.ball_press.calibrate_from_presses`."""
     from thintact_sdk.formats.recording import Recording
 
@@ -143,6 +144,7 @@ def calibrate_recording(
     return calibrate_from_presses(
         sensor.profile, reference, items, ball_radius_mm, bins,
         meta={"source": "recording", "recording": str(recording_dir)}, model=model, stage=stage,
+        ball_model=ball_model,
     )
 
 
@@ -157,9 +159,12 @@ def calibrate_live(
     reference_frames: int = 4,
     model: str = "lut",
     stage: Callable[[str], None] | None = None,
+    ball_model: str = "auto",
 ) -> PhotometricLUT:
     """Calibrate a live sensor: the user keeps the membrane free, then presses the ball
-    (press images are single frames, like the frames the LUT will see)."""
+    (press images are single frames, like the frames the LUT will see); ``model``,
+    ``stage`` and ``ball_model`` as in
+    :func:`~thintact_sdk.tactile.calibration.ball_press.calibrate_from_presses`."""
     prompt(
         f"Keep the membrane of {sensor.profile.name!r} free of contact and press Enter: "
     )
@@ -175,5 +180,5 @@ def calibrate_live(
             progress(i + 1, presses)
     return calibrate_from_presses(
         sensor.profile, reference, items, ball_radius_mm, bins, meta={"source": "live"},
-        model=model, stage=stage,
+        model=model, stage=stage, ball_model=ball_model,
     )

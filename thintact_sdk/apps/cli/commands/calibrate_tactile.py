@@ -34,6 +34,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="gradient model for ball-model presses (recording, live): auto (the "
                    "table or the colour + position network, whichever predicts held-out "
                    "validation presses better; default), lut, mlp. Virtual sensors: lut")
+    p.add_argument("--ball-model", choices=("auto", "rigid", "sink-in"), default="auto",
+                   help="shape the ball presses into the gel (recording, live): auto (the rigid "
+                   "cap or the cap with a sink-in skirt whose length is fitted to the gel, "
+                   "whichever reconstructs held-out calibration presses as the ball; "
+                   "default), rigid, sink-in. Virtual sensors: not used")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     p.add_argument("--out", help="LUT file (default: the device's folder under "
                    "$THINTACT_CALIBRATION_PATH or ./calibrations, never the checkout's)")
@@ -71,7 +76,7 @@ def run(args: argparse.Namespace) -> int:
             lut = dc.calibrate_recording(
                 sensor, args.recording, args.ball_radius_mm, args.bins,
                 progress=lambda done, total: say(f"press image {done}/{total} reconstructed"),
-                model=args.model, stage=say)
+                model=args.model, stage=say, ball_model=args.ball_model)
         return _report(lut, profile, target)
     with Progress(transient=True, disable=args.quiet) as bar:
         task = bar.add_task("ball presses", total=args.presses)
@@ -87,7 +92,8 @@ def run(args: argparse.Namespace) -> int:
                 bar.stop()
                 lut = dc.calibrate_live(sensor, args.presses, args.ball_radius_mm,
                                         bins=args.bins, progress=progress,
-                                        model=args.model, stage=print)
+                                        model=args.model, stage=print,
+                                        ball_model=args.ball_model)
     return _report(lut, profile, target)
 
 
@@ -100,6 +106,14 @@ def _report(lut: Any, profile: Any, target: Path) -> int:
               f"{entry['contact_radius_mm']:.2f} mm")
         for w in entry["warnings"]:
             print(f"  warning: {w}")
+    bm = lut.meta.get("ball_model")
+    if bm and bm.get("chosen_by") == "validation":
+        def name(m: dict[str, Any]) -> str:
+            return "rigid" if m["model"] == "rigid" else f"sink-in L={m['skirt_length_mm']:g} mm"
+
+        scores = ", ".join(f"{name(c)} {c['score']:.3f}" for c in bm["candidates"])
+        print(f"ball model {name(bm)}: validation presses {bm['validation_presses']}, "
+              f"score |sphere/R - 1|, |contact ratio - 1|: {scores}")
     val = lut.meta.get("validation")
     if val:
         print(f"gradient model {lut.meta.get('gradient_model')}: validation presses "
