@@ -30,8 +30,6 @@ ALLOWED = {
     ("thintact_sdk/simulation/scenes.py", "random"): "the scene library's random scene, not the mask designer",
     ("thintact_sdk/tactile/calibration/device.py", "virtual"): "a LUT's provenance label (calibrated on the "
                                                                "virtual sensor), not a component choice",
-    ("thintact_sdk/device/host_devices.py", "uvc"): "KNOWN, to move: the V4L2 section of `thintact "
-                                                "devices` belongs in the uvc plugin's device lister",
 }
 """``(core module, constant)`` pairs that equal a plugin component's name, and why allowed."""
 

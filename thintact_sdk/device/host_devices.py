@@ -1,4 +1,5 @@
-"""What this machine can see: ``/dev/video*`` nodes, serial ports and USB devices.
+"""What this machine can see: serial ports and USB devices (cameras come from the plugins'
+device listers, e.g. the uvc plugin's ``/dev/video*`` section).
 
 The library behind ``thintact devices``: :func:`list_devices` returns every section as plain
 data (the command's ``--json``); the command only parses, builds the plugins' device listers
@@ -8,35 +9,13 @@ without that kind of device; none raises for a missing bus.
 
 from __future__ import annotations
 
-import glob
 import importlib
-import os
 from collections.abc import Mapping
-from pathlib import Path
 from typing import Any
 
 from thintact_sdk.errors import ThinTactError
 
-__all__ = ["UVC_SECTION", "list_devices", "load_usb_backend", "serial_ports", "usb_devices", "uvc_devices"]
-
-UVC_SECTION = "uvc"
-"""The key of :func:`uvc_devices`'s section in :func:`list_devices` (``--json``)."""
-
-
-def uvc_devices() -> list[dict[str, str]]:
-    """``/dev/video*`` nodes, sorted by path: ``path``, ``by_id`` (its ``/dev/v4l/by-id`` link,
-    ``""`` without one) and ``name`` (the V4L2 card name from sysfs, ``""`` when unreadable)."""
-    by_id = {os.path.realpath(link): link for link in sorted(glob.glob("/dev/v4l/by-id/*"))}
-    out = []
-    for node in sorted(glob.glob("/dev/video*")):
-        try:
-            card = (Path("/sys/class/video4linux") / Path(node).name / "name").read_text(
-                encoding="utf-8").strip()
-        except OSError:
-            card = ""
-        out.append({"path": node, "by_id": by_id.get(os.path.realpath(node), ""), "name": card})
-    return out
-
+__all__ = ["list_devices", "load_usb_backend", "serial_ports", "usb_devices"]
 
 def serial_ports() -> list[dict[str, Any]]:
     """Serial ports (``serial.tools.list_ports``), sorted by device: ``device``,
@@ -113,11 +92,10 @@ def usb_devices(backend: Any = None) -> dict[str, Any]:
 
 def list_devices(lister_data: Mapping[str, Any] | None = None, usb_backend: Any = None) -> dict[str, Any]:
     """Every section as plain data (what ``thintact devices --json`` prints): each device
-    lister's data under its name (``lister_data``, in its order), then ``uvc``
-    (:func:`uvc_devices`), ``serial`` (:func:`serial_ports`) and ``usb``
+    lister's data under its name (``lister_data``, in its order), then ``serial``
+    (:func:`serial_ports`) and ``usb``
     (:func:`usb_devices` through ``usb_backend``)."""
     return dict(lister_data or {}) | {
-        UVC_SECTION: uvc_devices(),
         "serial": serial_ports(),
         "usb": usb_devices(usb_backend),
     }

@@ -1,6 +1,6 @@
 """``thintact devices``: the cameras, serial ports and USB devices this machine can see.
 
-The UVC, serial and USB sections come from :mod:`thintact_sdk.device.host_devices`
+The serial and USB sections come from :mod:`thintact_sdk.device.host_devices`
 (:func:`~thintact_sdk.device.host_devices.list_devices`); this module parses, builds the
 plugins' device listers and prints.
 
@@ -11,8 +11,7 @@ one per device lister (the ``thintact_device_listers`` hook), first
     (``--json`` prints it under the lister's name) and as text lines. The GenICam plugin's
     lister ``genicam`` lists the GenTL producers that profiles, ``--cti`` and
     ``GENICAM_GENTL64_PATH`` name, and their devices. ``--timeout`` is the longest wait,
-    in seconds, a lister gives one enumeration.
-UVC
+    in seconds, a lister gives one enumeration. The uvc plugin's lister ``uvc`` lists the
     ``/dev/video*`` nodes with their ``/dev/v4l/by-id`` names.
 Serial
     Serial ports (``serial.tools.list_ports``) with USB VID:PID where known; use one as a
@@ -31,15 +30,15 @@ from collections.abc import Callable
 from typing import Any
 
 from thintact_sdk.apps.cli.argtypes import positive_float
-from thintact_sdk.device.host_devices import UVC_SECTION, list_devices, load_usb_backend
+from thintact_sdk.device.host_devices import list_devices, load_usb_backend
 from thintact_sdk.device.registry import get_registry
 from thintact_sdk.errors import ThinTactError
 
 CLI_DESCRIPTION = """\
 List what this machine can see:
   plugins  each device lister's section (GenICam: the devices of each GenTL producer
-           named by a profile's camera.settings.cti, by --cti, or by GENICAM_GENTL64_PATH)
-  UVC      /dev/video* nodes with their /dev/v4l/by-id names
+           named by a profile's camera.settings.cti, by --cti, or by GENICAM_GENTL64_PATH;
+           UVC: /dev/video* nodes with their /dev/v4l/by-id names)
   Serial   serial ports with USB VID:PID (use one as a profile's light.port)
   USB      every USB device by VID:PID with its strings (pyusb; --usb-backend injects one)
 """
@@ -49,7 +48,7 @@ Lister = Callable[[argparse.Namespace], tuple[Any, list[str]]]
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("devices", help="list cameras (plugins' listers, UVC), serial ports and USB devices",
+    p = sub.add_parser("devices", help="list cameras (plugins' device listers), serial ports and USB devices",
                        description=CLI_DESCRIPTION,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--usb-backend", metavar="MODULE:ATTR",
@@ -100,15 +99,9 @@ def collect(args: argparse.Namespace, usb_backend: Any = None,
 
 # -- output ----------------------------------------------------------------------------
 def _print_text(found: dict[str, Any], lister_lines: list[str]) -> None:
-    """The listers' lines, then the UVC, serial and USB sections of ``found``."""
+    """The listers' lines, then the serial and USB sections of ``found``."""
     for line in lister_lines:
         print(line)
-    print("UVC / V4L2")
-    if not found[UVC_SECTION]:
-        print("  no /dev/video* device")
-    for d in found[UVC_SECTION]:
-        extra = f"  {d['by_id']}" if d["by_id"] else ""
-        print(f"  {d['path']}  {d['name']}{extra}")
     print("Serial ports")
     if not found["serial"]:
         print("  no serial port")
