@@ -23,18 +23,21 @@ def _stretch(img: np.ndarray) -> np.ndarray:
     return np.clip((img - lo) / max(hi - lo, 1e-9), 0, 1)
 
 
-def demo_figure(path: str | Path, result: DemoResult, profile: Profile) -> Path:
-    """Draw ``result`` (made on ``profile``) and save it as a PNG at ``path`` (90 dpi,
-    matplotlib's Agg backend unless one is chosen); returns ``path``."""
+def demo_figure(path: str | Path, result: DemoResult, profile: Profile, show: bool = False) -> Path:
+    """Draw ``result`` (made on ``profile``) and save it as a PNG at ``path`` (90 dpi); returns
+    ``path``. Without ``show`` it draws off screen (matplotlib's Agg backend); with ``show`` it
+    keeps matplotlib's interactive backend and opens the figure in a window after saving,
+    returning once the window is closed."""
     return _figure(Path(path), result.raw, result.signal, result.frame, result.press, profile,
-                   result.summary)
+                   result.summary, show)
 
 
 def _figure(path: Path, raw: np.ndarray, signal: np.ndarray, frame: Any, press: Any,
-            profile: Profile, summary: dict[str, Any]) -> Path:
+            profile: Profile, summary: dict[str, Any], show: bool = False) -> Path:
     import matplotlib
 
-    matplotlib.use("Agg", force=False)
+    if not show:
+        matplotlib.use("Agg", force=False)
     import matplotlib.pyplot as plt
 
     mm = profile.scene.pixel_pitch_um / 1000.0
@@ -88,5 +91,7 @@ def _figure(path: Path, raw: np.ndarray, signal: np.ndarray, frame: Any, press: 
                  f"ball press, contact={summary['contact']}")
     fig.tight_layout()
     fig.savefig(path, dpi=90)
+    if show:
+        plt.show()
     plt.close(fig)
     return path

@@ -52,7 +52,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"[demo] the field is small for a {args.radius_mm:g} mm ball: ball, place and shear "
               f"scaled by {demo.scale:.3f}, depth {demo.depth_mm:.2f} mm")
     out.mkdir(parents=True, exist_ok=True)
-    fig_path = demo_figure(out / "demo.png", demo, profile)
+    fig_path = demo_figure(out / "demo.png", demo, profile, show=args.show)
     (out / "demo.json").write_text(json.dumps(summary, indent=1) + "\n")
     contact_rms = summary["depth_rms_error_in_contact_mm"]
     print(f"[demo] reconstruction PSNR {summary['psnr_db']:.1f} dB, SSIM {summary['ssim']:.3f}")
@@ -66,8 +66,4 @@ def run(args: argparse.Namespace) -> int:
           f"{summary['marker_displacement_rms_error_mm']:.3f} mm; raw → tactile frame "
           f"{summary['raw_to_tactile_latency_ms']:.0f} ms")
     print(f"[demo] figure: {fig_path.resolve()}")
-    if args.show:
-        import matplotlib.pyplot as plt
-
-        plt.show()
     return 0
