@@ -1,9 +1,12 @@
-"""Shared fixtures: paths to the repository, ../shared, and the golden profiles."""
+"""Shared fixtures: paths to the repository, ../shared, and the golden profiles; calibration
+reports' figures built but not rasterised outside the tests marked ``report_figures``."""
 
 from __future__ import annotations
 
 import os
+from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -35,3 +38,46 @@ def _private_user_cache(tmp_path_factory: pytest.TempPathFactory) -> None:
     os.environ["XDG_CACHE_HOME"] = str(tmp_path_factory.mktemp("xdg-cache"))
     os.environ.pop("THINTACT_CACHE_DIR", None)
     os.environ.pop("THINTACT_BACKEND", None)
+
+
+
+_PLACEHOLDER_PNG = ("data:image/png;base64,iVBORw0KGgoAAAANSUhEUgAAAAEAAAABCAYAAAAfFcSJAAAADUlEQVR42mNkYPhfDwAChwGA"
+                    "60e6kgAAAABJRU5ErkJggg==")
+"""A 1×1 PNG standing in for a calibration report figure."""
+_RASTERISE: list[Any] = []
+"""``unit_report._png`` as shipped, kept while the session replaces it."""
+
+
+def _unrasterised_png(fig: Any) -> str:
+    """``unit_report._png`` without ``savefig``: the figure is built (every plotting call runs)
+    and closed, and a 1×1 PNG stands in for it. Rasterising the report's figures is most of a
+    small test device's calibration; the tests marked ``report_figures`` rasterise them."""
+    import matplotlib.pyplot as plt
+
+    plt.close(fig)
+    return _PLACEHOLDER_PNG
+
+
+@pytest.fixture(scope="session", autouse=True)
+def _report_figures_unrasterised() -> Iterator[None]:
+    """For the whole session, module fixtures included (they calibrate before any
+    function-scoped fixture runs)."""
+    from thintact_sdk.calibration import unit_report
+
+    _RASTERISE[:] = [unit_report._png]
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(unit_report, "_png", _unrasterised_png)
+        yield
+
+
+@pytest.fixture(autouse=True)
+def _report_figures_rasterised_when_marked(request: pytest.FixtureRequest) -> Iterator[None]:
+    """A test marked ``report_figures`` writes the calibration report's real figures."""
+    if request.node.get_closest_marker("report_figures") is None:
+        yield
+        return
+    from thintact_sdk.calibration import unit_report
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(unit_report, "_png", _RASTERISE[0])
+        yield

@@ -4,6 +4,7 @@ validation, bundle and report."""
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -36,6 +37,7 @@ def _op_errors(rec: Recording, sm_true) -> list[float]:  # type: ignore[no-untyp
     return [operator_error(channel(sm, c), channel(sm_true, c)) for c in range(3)]
 
 
+@pytest.mark.report_figures
 def test_recording_calibration_matches_the_truth_and_writes_a_bundle(tmp_path: Path) -> None:
     prof = synthetic_profile()
     sm_true = synthetic_matrices()
@@ -56,6 +58,8 @@ def test_recording_calibration_matches_the_truth_and_writes_a_bundle(tmp_path: P
     assert len(out.validation) == 2 and out.passed == m["passed"]
     html = (tmp_path / "cal" / "report.html").read_text()
     assert html.count("data:image/png;base64,") >= 3 and ("PASS" in html or "FAIL" in html)
+    figures = re.findall(r"data:image/png;base64,([A-Za-z0-9+/=]+)", html)
+    assert min(len(f) for f in figures) > 1000  # rasterised figures, not stand-ins
 
 
 def test_slits_are_found_from_scenes_not_labels(tmp_path: Path) -> None:
