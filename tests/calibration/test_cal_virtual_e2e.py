@@ -12,7 +12,7 @@ from thintact_sdk.calibration.pipeline import CalibrationOptions
 from thintact_sdk.calibration.wizard import WizardSettings, run_wizard
 from thintact_sdk.device.cameras import create_camera
 from thintact_sdk.device.registry import get_registry
-from thintact_sdk.formats.profiles import load_profile
+from thintact_sdk.formats.profiles import Profile, load_profile
 from thintact_sdk.reconstruction.bundle import CalibrationBundle
 from thintact_sdk.reconstruction.t2s import SystemMatrices
 
@@ -22,7 +22,9 @@ bench = pytest.importorskip("thintact_virtual.bench", reason="virtual sensor plu
 def test_wizard_calibrates_virtual_mini(tmp_path: Path) -> None:
     from thintact_sdk.simulation.simulator import Simulator
 
-    prof = load_profile("virtual-mini")
+    d = load_profile("virtual-mini").contract_dict()
+    d["display"] = {**d["display"], "settle_s": 0.0}  # the virtual display shows a scene at once
+    prof = Profile.model_validate(d)
     cam_settings = {"fps": 0, "seed": 3}
     camera = create_camera(prof, settings=cam_settings)
     display = get_registry().create("display", "virtual", prof, {})
