@@ -108,7 +108,7 @@ def test_sensor_blur_and_glare(mini, scenes, base):
     sim = Simulator(mini.with_physics({"sensor_blur": {"sigma_um": 15.0},
                                        "veiling_glare": {"fraction": 0.1}}))
     y = sim.forward_batch(scenes)
-    b = pixel_blur_brute_force(base, 1.5)
+    b = pixel_blur_brute_force(base, 1.5, up=8)  # 8× already within 2e-4 of 16× here, far inside the tolerance
     expect = b + 0.1 * b.mean(axis=(1, 2), keepdims=True)
     assert np.allclose(y, expect, rtol=2e-3, atol=2e-3 * np.abs(expect).max())
     terms = sim.separable_terms(2)
