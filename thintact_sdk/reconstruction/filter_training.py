@@ -25,7 +25,7 @@ import numpy as np
 from scipy.ndimage import gaussian_filter
 
 from thintact_sdk.errors import InvalidShapeError, InvalidValueError
-from thintact_sdk.reconstruction.dct import SeparableDCT, dct2
+from thintact_sdk.reconstruction.dct import SeparableDCT, dct2, idct2
 from thintact_sdk.reconstruction.joint_filter import JointFilter, joint_filter_open
 from thintact_sdk.reconstruction.t2s import SystemMatrices
 from thintact_sdk.simulation.noise import signal_variance_dn
@@ -271,6 +271,81 @@ def _refine_torch(
     return best[1], best[2], history
 
 
+ADAM_BETAS = (0.9, 0.999)
+ADAM_EPS = 1e-8
+"""Adam's moment decays and denominator guard (``torch.optim.Adam``'s defaults, used by both
+refinements)."""
+
+
+def _loss_and_gradient(zy: Sequence[np.ndarray], y_open: np.ndarray, pf: np.ndarray, ps: np.ndarray,
+                       norm: float) -> tuple[float, list[np.ndarray]]:
+    """The relative loss ``Σ‖Φs ⊙ IDCT(Φf ⊙ Z_f) − Yo_f‖² / norm`` and its gradients
+    ``[∂/∂Φf, ∂/∂Φs]`` (float32, ``C × R × S``) for spectra ``zy`` (``F × C × R × S``); see
+    :func:`_refine_fft`."""
+    gf, gs = np.zeros_like(pf), np.zeros_like(ps)
+    err = 0.0
+    for f, z in enumerate(zy):
+        g = idct2(pf * z, workers=-1)
+        e = ps * g
+        e -= y_open[f]
+        err += float(np.sum(np.square(e, dtype=np.float64)))
+        gs += e * g
+        gf += z * dct2(ps * e, workers=-1)
+    scale = np.float32(2.0 / norm)
+    gf *= scale
+    gs *= scale
+    return err / norm, [gf, gs]
+
+
+def _refine_fft(
+    data: TrainingData,
+    phi_f: np.ndarray,
+    phi_s: np.ndarray,
+    steps: int,
+    lr: float,
+    progress: Callable[[int, float], None] | None,
+    start_loss: float,
+) -> tuple[np.ndarray, np.ndarray, list[float]]:
+    """:func:`_refine_torch` for a full-size Φf and an unconstrained Φs, with the gradient
+    written out and scipy's fast DCT instead of dense DCT matrices (``O(R·S·log)`` per frame
+    instead of ``O(R·S·(R + S))``).
+
+    With ``G_f = IDCT(Φf ⊙ Z_f)`` (``Z_f = DCT(Y_f)``) and the residual
+    ``E_f = Φs ⊙ G_f − Yo_f``, the loss ``Σ‖E_f‖² / ‖Yo‖²`` has the gradients
+    ``∂/∂Φs = 2 Σ E_f ⊙ G_f / ‖Yo‖²`` and ``∂/∂Φf = 2 Σ Z_f ⊙ DCT(Φs ⊙ E_f) / ‖Yo‖²`` (the DCT
+    is orthonormal: the adjoint of its inverse is itself). Adam's update is torch's (same
+    betas, ε, per-parameter learning rate ``lr × mean|p|``), in float32 as there; frames are
+    taken one at a time, so memory is the data set plus a few ``C × R × S`` arrays.
+    """
+
+    y_open = data.y_open
+    norm = float(np.sum(y_open.astype(np.float64) ** 2))
+    zy = [dct2(y, workers=-1) for y in data.y]  # fixed spectra, float32
+    params = [phi_f.astype(np.float32), phi_s.astype(np.float32)]
+    lrs = [lr * (float(np.mean(np.abs(p))) + 1e-12) for p in params]
+    m1 = [np.zeros_like(p) for p in params]
+    m2 = [np.zeros_like(p) for p in params]
+    b1, b2 = ADAM_BETAS
+    history: list[float] = []
+    best = (start_loss, phi_f, phi_s)
+    for step in range(steps):
+        val, grads = _loss_and_gradient(zy, y_open, params[0], params[1], norm)
+        t = step + 1
+        for p, gr, a, b, rate in zip(params, grads, m1, m2, lrs, strict=True):
+            a *= np.float32(b1)
+            a += np.float32(1.0 - b1) * gr
+            b *= np.float32(b2)
+            b += np.float32(1.0 - b2) * gr * gr
+            denom = np.sqrt(b) / np.float32(np.sqrt(1.0 - b2**t)) + np.float32(ADAM_EPS)
+            p -= np.float32(rate / (1.0 - b1**t)) * a / denom
+        history.append(val)
+        if val < best[0]:  # as the torch loop: the loss before the step, the parameters after it
+            best = (val, params[0].astype(np.float64), params[1].astype(np.float64))
+        if progress is not None:
+            progress(step, val)
+    return best[1], best[2], history
+
+
 def auto_low_block(data: TrainingData, energy: float = 0.99999) -> tuple[int, int]:
     """Smallest low-frequency DCT block (same fraction of R and S) holding ``energy`` of ``Yo``."""
     zo = np.sum(np.stack([dct2(yo) for yo in data.y_open]).astype(np.float64) ** 2, axis=(0, 1))
@@ -348,7 +423,9 @@ def train_joint_filter(
     tr = _transform((r, s), block)
     phi_f, phi_s, hist_cf = _closed_form(data, tr, phi_s_rank, max(1, closed_form_rounds))
     hist_gd: list[float] = []
-    if steps > 0:
+    if steps > 0 and block is None and phi_s_rank is None:
+        phi_f, phi_s, hist_gd = _refine_fft(data, phi_f, phi_s, steps, lr, progress, min(hist_cf))
+    elif steps > 0:
         phi_f, phi_s, hist_gd = _refine_torch(
             data, block, phi_f, phi_s, phi_s_rank, steps, lr, progress, min(hist_cf)
         )
