@@ -7,13 +7,14 @@ and display; one frame per pattern, the profile's noise) with the sensor and the
 divided by ``--scale`` per axis (1: the paper's 1024 × 1280 sensor and 400 × 512 scene, every
 pattern of the wizard's plan), then runs ``calibrate_recording`` on it in a child process and
 reads the per-stage wall time and peak memory the calibration writes (``metrics.stages``) and
-the child's own peak resident memory (``VmHWM``). ``--baseline`` runs a second child with the
-design prediction's slits imaged by a forward pass of the simulator per slit (the code before
-issue 36), in the same invocation, so the two are compared on the same host load.
+the child's own peak resident memory (``VmHWM``). ``--baseline DIR`` runs a second child on
+the ``thintact_sdk`` of another source tree (e.g. the previous commit's, written by
+``git archive <rev> thintact_sdk | tar -x -C DIR``), in the same invocation, so the two are
+compared on the same host load.
 
 Usage::
 
-    python tools/bench_calibration_paper.py --out /tmp/bench --scale 4 --baseline
+    python tools/bench_calibration_paper.py --out /tmp/bench --scale 4 --baseline /tmp/base
     python tools/bench_calibration_paper.py --out /tmp/bench --scale 2 --docs docs/calibration.md
 
 With ``--docs`` the table replaces the text between the markers
@@ -75,14 +76,11 @@ def render(out: Path, scale: int) -> float:
     return time.monotonic() - t
 
 
-def child(rec: Path, out: Path, baseline: bool, result: Path) -> None:
+def child(rec: Path, out: Path, result: Path) -> None:
     """Calibrate ``rec`` into ``out`` and write the stages and figures to ``result`` (JSON)."""
-    from thintact_sdk.calibration import prediction
     from thintact_sdk.calibration.pipeline import CalibrationOptions, calibrate_recording
     from thintact_sdk.formats.recording import Recording
 
-    if baseline:
-        prediction.slit_factors = lambda sim, channels: None  # type: ignore[assignment]
     t = time.monotonic()
     o = calibrate_recording(Recording(rec), out, CalibrationOptions(),
                             status=lambda s: print("  " + s, file=sys.stderr, flush=True))
@@ -94,10 +92,14 @@ def child(rec: Path, out: Path, baseline: bool, result: Path) -> None:
         "psnr_db": m["psnr_db"], "predicted_psnr_db": m["predicted_psnr_db"]}))
 
 
-def _run_child(rec: Path, out: Path, baseline: bool) -> dict[str, Any]:
+def _run_child(rec: Path, out: Path, tree: Path | None) -> dict[str, Any]:
+    """Run :func:`child` in a fresh interpreter; ``tree``: import ``thintact_sdk`` from there."""
     result = out.with_suffix(".json")
-    cmd = [sys.executable, __file__, "--child", str(rec), str(out), str(result)] + (["--baseline"] if baseline else [])
-    subprocess.run(cmd, check=True)
+    cmd = [sys.executable, __file__, "--child", str(rec), str(out), str(result)]
+    env = dict(os.environ)
+    if tree is not None:
+        env["PYTHONPATH"] = os.pathsep.join([str(tree.resolve())] + [p for p in [env.get("PYTHONPATH")] if p])
+    subprocess.run(cmd, check=True, env=env)
     return dict(json.loads(result.read_text()))
 
 
@@ -137,12 +139,13 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", type=Path, help="working directory (recording and bundles)")
     ap.add_argument("--scale", type=int, default=4, help="divide the paper's sensor and scene by this per axis")
-    ap.add_argument("--baseline", action="store_true", help="also run the pre-issue-36 prediction slits")
+    ap.add_argument("--baseline", type=Path, metavar="DIR",
+                    help="also run the thintact_sdk of this source tree (the code to compare with)")
     ap.add_argument("--docs", type=Path, help="write the table into this markdown file between the markers")
     ap.add_argument("--child", nargs=3, metavar=("REC", "OUT", "RESULT"), help=argparse.SUPPRESS)
     a = ap.parse_args()
     if a.child:
-        child(Path(a.child[0]), Path(a.child[1]), a.baseline, Path(a.child[2]))
+        child(Path(a.child[0]), Path(a.child[1]), Path(a.child[2]))
         return 0
     if a.out is None or a.scale < 1 or 400 % a.scale or 512 % a.scale or 1024 % a.scale or 1280 % a.scale:
         print("--out is needed, and --scale must divide 400, 512, 1024 and 1280", file=sys.stderr)
@@ -151,9 +154,9 @@ def main() -> int:
     rec = a.out / f"rec_div{a.scale}"
     render_s = 0.0 if (rec / "manifest.json").is_file() else render(rec, a.scale)
     load0 = os.getloadavg()[0]
-    runs = {"this code": _run_child(rec, a.out / f"cal_div{a.scale}", False)}
-    if a.baseline:
-        runs["baseline prediction"] = _run_child(rec, a.out / f"cal_div{a.scale}_base", True)
+    runs = {"this code": _run_child(rec, a.out / f"cal_div{a.scale}", None)}
+    if a.baseline is not None:
+        runs["baseline"] = _run_child(rec, a.out / f"cal_div{a.scale}_base", a.baseline)
     text = table(a.scale, runs, render_s, (load0, os.getloadavg()[0]))
     print(text)
     if a.docs is not None:
