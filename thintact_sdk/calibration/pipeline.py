@@ -14,12 +14,12 @@ import numpy as np
 
 from thintact_sdk.calibration.collect import Progress, SlitCollection, collect_slits, signal_of
 from thintact_sdk.calibration.gauge import operator_error, term_errors
-from thintact_sdk.calibration.health import NoiseEstimate, assess
+from thintact_sdk.calibration.health import HealthReport, NoiseEstimate, assess
 from thintact_sdk.calibration.lowrank import DEFAULT_RANK
 from thintact_sdk.calibration.outcome import CalibrationOutcome
 from thintact_sdk.calibration.prediction import Prediction, predict_validation
 from thintact_sdk.calibration.registration import RegistrationResult
-from thintact_sdk.calibration.selection import select, validation_frames
+from thintact_sdk.calibration.selection import TauSelection, select, validation_frames
 from thintact_sdk.calibration.solver import ChannelMatrices, Method, SolveReport, solve_channel
 from thintact_sdk.calibration.stages import STAGE_DIR, Checkpoints, StageLog, fingerprint
 from thintact_sdk.calibration.tau import TauCurve
@@ -317,12 +317,22 @@ def calibrate_recording(
         else:
             bundle, tau_table = build_bundle(profile, sm, opts, k, source, collection.exposure_us)
             checkpoints.save_filter(bundle.filter, tau_table, float(bundle.meta["tau"]))
-    with log.stage("health", "checking the unit's health (slit residuals, noise, defects)"):
-        health = assess(recording, collection, sm, k)
-    with log.stage("decoder and tau", "choosing the decoder and tau on the validation frames"):
+    with log.stage("health", "checking the unit's health (slit residuals, noise, defects)") as st:
+        health = checkpoints.load_object("health")
+        if isinstance(health, HealthReport):
+            st["resumed"] = True
+        else:
+            health = assess(recording, collection, sm, k)
+            checkpoints.save_object("health", health)
+    with log.stage("decoder and tau", "choosing the decoder and tau on the validation frames") as st:
         frames = validation_frames(recording, collection, profile.noise.saturation_dn)
-        selection = select(profile, bundle, frames, health.noise, decoder=opts.decoder, tau=opts.tau,
-                           simulated=_simulated_curve(tau_table))
+        selection = checkpoints.load_object("selection")
+        if isinstance(selection, TauSelection):
+            st["resumed"] = True
+        else:
+            selection = select(profile, bundle, frames, health.noise, decoder=opts.decoder, tau=opts.tau,
+                               simulated=_simulated_curve(tau_table))
+            checkpoints.save_object("selection", selection)
         selection.write_taus(bundle.meta)
         bundle.meta["decoder"] = selection.decoder
     val = selection.validation

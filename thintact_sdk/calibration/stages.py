@@ -9,8 +9,9 @@ process's peak resident memory (MiB) at its end (``calibration.json`` → ``metr
 the report).
 
 Checkpoints (``<bundle>/stages/``, removed once the bundle is written): the slit collection
-and the solved matrices (``solve.npz`` + ``solve.json``), the joint filter (``filter.npz``) and
-the prediction (``prediction.json``). Each carries a fingerprint of the recording's manifest,
+and the solved matrices (``solve.npz`` + ``solve.json``), the joint filter (``filter.npz``),
+the health report (``health.json`` + ``health.npz``), the decoder and τ selection
+(``selection.json`` + ``selection.npz``) and the prediction (``prediction.json``). Each carries a fingerprint of the recording's manifest,
 the profile and the options that shape it; a killed run restarted on the same recording
 (wizard resume, or ``--from-recording`` with the same ``--out`` and ``--force``) loads them
 instead of recomputing, and a checkpoint whose fingerprint differs is ignored. Files are written
@@ -19,8 +20,11 @@ atomically (temporary name, then rename) and read without pickles.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
+import importlib
 import json
+import math
 import os
 import resource
 import shutil
@@ -56,6 +60,88 @@ STAGE_WEIGHTS: dict[str, float] = {
 }
 """Relative work of each stage, for the estimate of what is left (no stage is known to be
 cheaper than another at every size, so all weigh the same but the final writing)."""
+
+
+CHECKPOINT_CLASSES: frozenset[str] = frozenset({
+    "thintact_sdk.calibration.health:HealthReport",
+    "thintact_sdk.calibration.health:NoiseEstimate",
+    "thintact_sdk.calibration.health:Defect",
+    "thintact_sdk.calibration.ghost:GhostScan",
+    "thintact_sdk.calibration.selection:TauSelection",
+    "thintact_sdk.calibration.tau:TauCurve",
+    "thintact_sdk.calibration.tau:CrossValidation",
+    "thintact_sdk.calibration.validation:ValidationResult",
+    "thintact_sdk.reconstruction.scene_prior:ScenePrior",
+})
+"""The dataclasses a checkpoint may hold (:func:`encode_object`); a file naming any other
+class is refused, so a checkpoint never makes the reader import or build anything else."""
+
+
+def encode_object(obj: Any, arrays: dict[str, np.ndarray]) -> Any:
+    """``obj`` (a tree of the :data:`CHECKPOINT_CLASSES` dataclasses, lists, tuples, dicts with
+    any hashable keys, numpy arrays and scalars) as JSON-able data; arrays go into ``arrays``
+    (for an npz) under the names the data refers to. Non-finite floats are tagged (JSON has
+    none). Inverse: :func:`decode_object`."""
+    if obj is None or isinstance(obj, bool | str):
+        return obj
+    if isinstance(obj, int | np.integer):
+        return int(obj)
+    if isinstance(obj, float | np.floating):
+        v = float(obj)
+        return v if math.isfinite(v) else {"float": repr(v)}
+    if isinstance(obj, np.ndarray):
+        key = f"a{len(arrays)}"
+        arrays[key] = obj
+        return {"array": key}
+    if isinstance(obj, list):
+        return [encode_object(v, arrays) for v in obj]
+    if isinstance(obj, tuple):
+        return {"tuple": [encode_object(v, arrays) for v in obj]}
+    if isinstance(obj, dict):
+        return {"dict": [[encode_object(k, arrays), encode_object(v, arrays)] for k, v in obj.items()]}
+    name = f"{type(obj).__module__}:{type(obj).__qualname__}"
+    if dataclasses.is_dataclass(obj) and name in CHECKPOINT_CLASSES:
+        return {"class": name, "fields": {f.name: encode_object(getattr(obj, f.name), arrays)
+                                          for f in dataclasses.fields(obj)}}
+    raise CalibrationError(f"cannot checkpoint a {name} (not one of the checkpoint classes)")
+
+
+def decode_object(data: Any, arrays: dict[str, np.ndarray]) -> Any:
+    """The object :func:`encode_object` encoded (``arrays``: the npz's arrays).
+
+    Raises
+    ------
+    CalibrationError
+        A class outside :data:`CHECKPOINT_CLASSES`, an unknown tag or a missing array.
+    """
+    if data is None or isinstance(data, bool | int | float | str):
+        return data
+    if isinstance(data, list):
+        return [decode_object(v, arrays) for v in data]
+    if not isinstance(data, dict) or len(data) not in (1, 2):
+        raise CalibrationError(f"checkpoint: unexpected value {str(data)[:80]}")
+    if "float" in data:
+        return float(str(data["float"]))
+    if "array" in data:
+        if str(data["array"]) not in arrays:
+            raise CalibrationError(f"checkpoint: array {data['array']} missing")
+        return arrays[str(data["array"])]
+    if "tuple" in data:
+        return tuple(decode_object(v, arrays) for v in data["tuple"])
+    if "dict" in data:
+        return {decode_object(k, arrays): decode_object(v, arrays) for k, v in data["dict"]}
+    name = str(data.get("class"))
+    if name not in CHECKPOINT_CLASSES:
+        raise CalibrationError(f"checkpoint: class {name} refused (not one of the checkpoint classes)")
+    module, _, qualname = name.partition(":")
+    cls = getattr(importlib.import_module(module), qualname)
+    values = {k: decode_object(v, arrays) for k, v in dict(data["fields"]).items()}
+    init = {f.name for f in dataclasses.fields(cls) if f.init}
+    obj = cls(**{k: v for k, v in values.items() if k in init})
+    for k, v in values.items():
+        if k not in init:
+            object.__setattr__(obj, k, v)
+    return obj
 
 
 def peak_rss_mib() -> float:
@@ -218,6 +304,26 @@ class Checkpoints:
                 a = read_npz(self.directory / "filter.npz", what="calibration checkpoint")
                 jf = JointFilter(a["phi_f"], a["phi_s"], dict(meta["meta"]))
             return jf, {str(k): float(v) for k, v in meta["tau_table"].items()}, float(meta["tau"])
+        except Exception:  # noqa: BLE001 - a damaged checkpoint is recomputed
+            return None
+
+    # -- health, decoder and τ -------------------------------------------------------------
+    def save_object(self, name: str, obj: Any) -> None:
+        """``<name>.npz`` (its arrays) + ``<name>.json`` (the rest, :func:`encode_object`)."""
+        arrays: dict[str, np.ndarray] = {}
+        body = encode_object(obj, arrays)
+        _atomic_write(self.directory / f"{name}.npz", lambda f: np.savez(f, **arrays))  # type: ignore[arg-type]
+        self._meta(name, {"object": body})
+
+    def load_object(self, name: str) -> Any | None:
+        """The object :meth:`save_object` stored as ``name``, or None (absent, of another
+        recording or options, or damaged: then the stage is recomputed)."""
+        meta = self._valid(name)
+        if meta is None or "object" not in meta:
+            return None
+        try:
+            a = read_npz(self.directory / f"{name}.npz", what="calibration checkpoint")
+            return decode_object(meta["object"], dict(a))
         except Exception:  # noqa: BLE001 - a damaged checkpoint is recomputed
             return None
 

@@ -1,0 +1,79 @@
+"""Issue 36: health and the decoder/τ choice are checkpointed like the solve and the filter: a
+run killed in a later stage resumes without recomputing them, with the same figures; the
+checkpoint codec restores the objects exactly and refuses any class it does not know."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from thintact_sdk.calibration.stages import Checkpoints, decode_object, encode_object
+from thintact_sdk.calibration.tau import TauCurve
+from thintact_sdk.errors import CalibrationError
+from thintact_sdk.reconstruction.scene_prior import ScenePrior
+
+
+def test_the_codec_restores_nested_objects_and_refuses_other_classes(tmp_path: Path) -> None:
+    prior = ScenePrior(1.0, 4.0)
+    curve = TauCurve("gcv", [1e-3, 1e-2], [float("nan"), 2.5], 1e-2, "mean PSNR dB", "why")
+    obj = {"curves": [(prior, curve)], prior: float("-inf"), "x": np.arange(6.0).reshape(2, 3),
+           "t": (1, "a", None, True)}
+    cp = Checkpoints(tmp_path, "key")
+    cp.save_object("thing", obj)
+    back = cp.load_object("thing")
+    assert back[prior] == float("-inf") and back["t"] == (1, "a", None, True)
+    np.testing.assert_array_equal(back["x"], obj["x"])
+    p2, c2 = back["curves"][0]
+    assert p2 == prior and c2.taus == curve.taus and np.isnan(c2.values[0]) and c2.values[1] == 2.5
+    assert Checkpoints(tmp_path, "other key").load_object("thing") is None
+    with pytest.raises(CalibrationError, match="checkpoint"):
+        encode_object(Path("/x"), {})
+    with pytest.raises(CalibrationError, match="refused"):
+        decode_object({"class": "subprocess:Popen", "fields": {"args": "true"}}, {})
+
+
+def test_a_crash_in_the_prediction_resumes_without_recomputing_health_or_the_choice(tmp_path, monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    from cal_testkit import synthetic_matrices, synthetic_profile, write_slit_recording
+
+    from thintact_sdk.calibration import pipeline
+    from thintact_sdk.calibration.pipeline import CalibrationOptions, calibrate_recording
+    from thintact_sdk.formats.recording import Recording
+    from thintact_sdk.simulation.scenes import make_scene
+
+    opts = CalibrationOptions(filter_steps=0, filter_scenes=8)
+    write_slit_recording(tmp_path / "rec", synthetic_profile(), synthetic_matrices(), np.random.default_rng(0),
+                         [make_scene("gelsight", 24, 32, 2), make_scene("smooth_color", 24, 32)])
+    rec = Recording(tmp_path / "rec")
+    whole = calibrate_recording(rec, tmp_path / "whole", opts, report=False)
+    real_predict = pipeline.predict_validation
+
+    def crash(*a, **k):  # type: ignore[no-untyped-def]
+        raise RuntimeError("killed in the prediction stage")
+
+    monkeypatch.setattr(pipeline, "predict_validation", crash)
+    with pytest.raises(RuntimeError):
+        calibrate_recording(rec, tmp_path / "cal", opts, report=False)
+    assert (tmp_path / "cal" / "stages" / "health.npz").is_file()
+    assert (tmp_path / "cal" / "stages" / "selection.json").is_file()
+
+    def never(*a, **k):  # type: ignore[no-untyped-def]
+        raise AssertionError("recomputed a finished stage")
+
+    monkeypatch.setattr(pipeline, "predict_validation", real_predict)
+    for name in ("collect_slits", "solve_matrices", "build_bundle", "assess", "select"):
+        monkeypatch.setattr(pipeline, name, never)
+    again = calibrate_recording(rec, tmp_path / "cal", opts, report=False)
+    assert not (tmp_path / "cal" / "stages").exists()
+    meta = {d: json.loads((tmp_path / d / "calibration.json").read_text()) for d in ("whole", "cal")}
+    stages = {s["stage"]: s for s in meta["cal"]["metrics"]["stages"]}
+    assert stages["health"].get("resumed") and stages["decoder and tau"].get("resumed")
+    assert "resumed" not in stages["prediction"]
+    for key in ("health", "tau_selection", "psnr_db", "judged_psnr_db", "verdict", "predicted_psnr_db"):
+        assert meta["cal"]["metrics"][key] == meta["whole"]["metrics"][key], key
+    assert meta["cal"]["decoder"] == meta["whole"]["decoder"]
+    np.testing.assert_array_equal(again.health.chi2_map, whole.health.chi2_map)
+    for v0, v1 in zip(whole.validation, again.validation, strict=True):
+        np.testing.assert_array_equal(v0.estimate, v1.estimate)
