@@ -46,7 +46,7 @@ def _held(rec: Recording, collection: SlitCollection, sm: SystemMatrices
         if not is_slit(roles):
             continue
         signal, scale = signal_of(rec, i, collection.dark_dn, collection.exposure_us)
-        pred = sm.forward(scene_for_channels(scene, c).astype(np.float64))
+        pred = health._forward_lit(sm, scene_for_channels(scene, c))  # assess's own forward (issue 36)
         ok = np.asarray(rec.measurement(i)).reshape(signal.shape) < nz.saturation_dn - 1.0
         residuals.append((rec.frames[i].label or str(i), (signal[..., :c] - pred) / scale, pred / scale, ok[..., :c]))
     pred_all = np.concatenate([p[m] for _, _, p, m in residuals])

@@ -14,6 +14,7 @@ from thintact_sdk.calibration.stages import Checkpoints, decode_object, encode_o
 from thintact_sdk.calibration.tau import TauCurve
 from thintact_sdk.errors import CalibrationError
 from thintact_sdk.reconstruction.scene_prior import ScenePrior
+from thintact_sdk.reconstruction.t2s import SystemMatrices
 
 
 def test_the_codec_restores_nested_objects_and_refuses_other_classes(tmp_path: Path) -> None:
@@ -77,3 +78,17 @@ def test_a_crash_in_the_prediction_resumes_without_recomputing_health_or_the_cho
     np.testing.assert_array_equal(again.health.chi2_map, whole.health.chi2_map)
     for v0, v1 in zip(whole.validation, again.validation, strict=True):
         np.testing.assert_array_equal(v0.estimate, v1.estimate)
+
+
+def test_the_health_forward_over_lit_rows_or_columns_is_the_forward() -> None:
+    from thintact_sdk.calibration.health import _forward_lit
+
+    rng = np.random.default_rng(0)
+    c, r, s, n, m = 3, 20, 24, 9, 11
+    sm = SystemMatrices(*(rng.standard_normal(shape) for shape in ((c, r, n), (c, s, m), (c, r, n), (c, s, m))), {})
+    row, col, dense = np.zeros((n, m, c)), np.zeros((n, m, c)), rng.random((n, m, c))
+    row[4] = 0.8
+    col[:, 7, 1] = 0.5
+    for x in (row, col, dense, np.zeros((n, m, c))):
+        want = sm.forward(x)
+        np.testing.assert_allclose(_forward_lit(sm, x), want, rtol=0, atol=1e-12 * max(1.0, np.abs(want).max()))
