@@ -51,15 +51,17 @@ STAGE_DIR = "stages"
 CHECKPOINT_FORMAT = "thintact-calibration-stage/1"
 
 STAGE_WEIGHTS: dict[str, float] = {
-    "slit frames and solve": 1.0,
+    "slit frames and solve": 0.2,
     "joint filter": 1.0,
-    "health": 1.0,
-    "decoder and tau": 1.0,
-    "prediction": 1.0,
-    "bundle and report": 0.2,
+    "health": 0.5,
+    "decoder and tau": 1.5,
+    "prediction": 0.5,
+    "bundle and report": 0.1,
 }
-"""Relative work of each stage, for the estimate of what is left (no stage is known to be
-cheaper than another at every size, so all weigh the same but the final writing)."""
+"""Relative work of each stage, for the estimate of what is left: the shares of the stages'
+wall time in ``tools/bench_calibration_paper.py``'s largest run (docs/calibration.md, section
+"Paper-size calibration time"), rounded; the shares move with the sensor and scene size, so
+the estimate is a guide, refined as each stage finishes."""
 
 
 CHECKPOINT_CLASSES: frozenset[str] = frozenset({
