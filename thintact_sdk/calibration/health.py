@@ -453,8 +453,8 @@ def assess(recording: Recording, collection: SlitCollection, sm: SystemMatrices,
         Frames averaged per pattern (the noise of the measurements is divided by it).
 
     OpenBLAS is held at one thread throughout: the products are small (one frame's
-    prediction is ``R × N`` by ``N × M`` by ``M × S``) and on a busy two-core host two
-    threads made a 256 × 320 × 3 prediction 3-30× slower (0.05-0.14 s against 4-14 ms).
+    prediction is ``R × N`` by ``N × M`` by ``M × S``) and on a busy host two threads only
+    spin-wait for each other (many times slower).
     """
     with blas_threads(1):
         return _assess(recording, collection, sm, frames_averaged)
