@@ -59,9 +59,9 @@ def run(args: argparse.Namespace) -> int:
             with thintact.open(args.profile, camera_settings=settings) as sensor, LiveServer(
                     sensor.profile, host=args.host, port=args.port,
                     image_encoding=args.image_encoding) as server:
+                stop.serving = True  # before the URL: a signal after it must end the serving
                 print(f"streaming {sensor.profile.name} on {server.url} "
                       "(Foxglove: Open connection -> Foxglove WebSocket; Ctrl-C stops)", flush=True)
-                stop.serving = True
                 deadline = None if args.duration is None else time.monotonic() + args.duration
                 while not stop.event.is_set() and (args.frames is None or sent < args.frames) and (
                         deadline is None or time.monotonic() < deadline):

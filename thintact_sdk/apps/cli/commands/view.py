@@ -75,9 +75,9 @@ def run(args: argparse.Namespace) -> int:
                          for sensor, (title, label) in zip(opened, _names(opened), strict=True)]
                 server.start(lives)  # stops them before the sensors close
                 names = ", ".join(sensor.profile.name for sensor in opened)
+                stop.serving = True  # before the URL: a signal after it must end the serving
                 print(f"viewing {names} at {server.url} "
                       "(keep the membranes free for the first frame; Ctrl-C stops)", flush=True)
-                stop.serving = True
                 try:
                     _serve(lives, args.duration, stop.event)
                 finally:
