@@ -31,14 +31,6 @@ def golden_dir(shared_dir: Path) -> Path:
     return shared_dir / "golden" / "baseline"
 
 
-@pytest.fixture(scope="session", autouse=True)
-def _private_user_cache(tmp_path_factory: pytest.TempPathFactory) -> None:
-    """Per-host caches (e.g. the decoders' measured backends) go to a session directory,
-    never to the user's ~/.cache."""
-    os.environ["XDG_CACHE_HOME"] = str(tmp_path_factory.mktemp("xdg-cache"))
-    os.environ.pop("THINTACT_CACHE_DIR", None)
-    os.environ.pop("THINTACT_BACKEND", None)
-
 
 
 _PLACEHOLDER_PNG = ("data:image/png;base64,iVBORw0KGgoAAAANSUhEUgAAAAEAAAABCAYAAAAfFcSJAAAADUlEQVR42mNkYPhfDwAChwGA"

@@ -1,7 +1,8 @@
 """Where the tests live, as docs/architecture.md draws it (issue 31).
 
 The core's tests are under ``tests/``; each plugin's tests are beside the plugin, in
-``plugins/<plugin>/tests/`` with a ``conftest.py`` of their own, so a plugin is tested alone
+``plugins/<plugin>/tests/`` (fixtures of their own in a ``conftest.py`` there; the private
+cache every test shares in the repository's root ``conftest.py``), so a plugin is tested alone
 (``python -m pytest plugins/<plugin>/tests``) and ``make test`` (pytest's ``testpaths``) still
 runs everything. These tests fail when a plugin or a test folder is added, moved or removed
 without the drawing, when a plugin's tests lean on the core's test helpers, or when two test
@@ -68,7 +69,6 @@ def test_the_drawing_is_the_tree() -> None:
 def test_every_plugin_has_its_tests_beside_it() -> None:
     for name in sorted(_plugins_on_disk()):
         tests = ROOT / "plugins" / name / "tests"
-        assert (tests / "conftest.py").is_file(), f"{tests}: no conftest.py (the plugin's tests run alone)"
         assert list(tests.glob("test_*.py")), f"{tests}: no test modules"
         assert not (tests / "__init__.py").exists(), f"{tests}: a package would be shipped with the plugin"
 
@@ -106,3 +106,12 @@ def test_the_drawing_is_read() -> None:
     test_dirs, plugins = _drawing()
     assert {"architecture", "calibration", "viewer"} <= test_dirs
     assert {"thintact_uvc", "thintact_masks"} <= plugins
+
+
+def test_every_test_gets_the_private_cache() -> None:
+    """The root conftest.py (loaded for ``tests/`` and every ``plugins/*/tests``, alone or
+    together) sends the per-host caches to a session directory."""
+    text = (ROOT / "conftest.py").read_text(encoding="utf-8")
+    assert "autouse=True" in text and "def _private_user_cache" in text
+    assert not any("def _private_user_cache" in p.read_text(encoding="utf-8")
+                   for p in [*TESTS.rglob("conftest.py"), *(ROOT / "plugins").glob("*/tests/conftest.py")])

@@ -1,5 +1,5 @@
-"""Fixtures of the thintact_uvc plugin's tests, which run alone from the repository root
-(``python -m pytest plugins/thintact_uvc/tests``) as well as in the whole suite."""
+"""What every test of the repository shares, the core's (``tests/``) and each plugin's
+(``plugins/<plugin>/tests/``, also when run alone from the repository root): a private cache."""
 
 from __future__ import annotations
 
@@ -10,8 +10,8 @@ import pytest
 
 @pytest.fixture(scope="session", autouse=True)
 def _private_user_cache(tmp_path_factory: pytest.TempPathFactory) -> None:
-    """Per-host caches (e.g. the decoders' measured backends) go to a session directory,
-    never to the user's ~/.cache."""
+    """Per-host caches (e.g. the decoders' measured backends) go to a session directory (one
+    per test process), never to the user's ~/.cache."""
     os.environ["XDG_CACHE_HOME"] = str(tmp_path_factory.mktemp("xdg-cache"))
     os.environ.pop("THINTACT_CACHE_DIR", None)
     os.environ.pop("THINTACT_BACKEND", None)
