@@ -3,10 +3,7 @@ Xvfb, a camera that sees what X shows at ``origin_px``."""
 
 from __future__ import annotations
 
-import os
-import shutil
-import subprocess
-from collections.abc import Iterator
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -20,45 +17,11 @@ PANEL = (320, 200)
 pytest.importorskip("thintact_displays", reason="display plugin not installed")
 
 
-@pytest.fixture(scope="module")
-def xvfb() -> Iterator[str]:
-    exe = shutil.which("Xvfb")
-    if exe is None:
-        pytest.skip("Xvfb binary not installed (Debian package xvfb); cannot test the pygame display")
-    r, w = os.pipe()
-    proc = subprocess.Popen(
-        [exe, "-displayfd", str(w), "-screen", "0", f"{PANEL[0]}x{PANEL[1]}x24", "-nolisten", "tcp"],
-        pass_fds=(w,), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-    )
-    os.close(w)
-    try:
-        with os.fdopen(r) as f:
-            number = f.readline().strip()
-        if not number:
-            pytest.fail("Xvfb started but did not report its display number")
-        yield f":{number}"
-    finally:
-        proc.terminate()
-        proc.wait(timeout=10)
-
-
-def _read_root(display_name: str) -> np.ndarray:
-    from Xlib import X
-    from Xlib import display as xdisplay
-
-    d = xdisplay.Display(display_name)
-    try:
-        root = d.screen().root
-        geom = root.get_geometry()
-        raw = root.get_image(0, 0, geom.width, geom.height, X.ZPixmap, 0xFFFFFFFF).data
-        img = np.frombuffer(raw, np.uint8).reshape(geom.height, geom.width, 4)
-        return img[..., [2, 1, 0]].copy()  # BGRX → RGB
-    finally:
-        d.close()
 
 
 @pytest.mark.display
-def test_wizard_through_the_pygame_display(xvfb: str, monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+def test_wizard_through_the_pygame_display(xvfb: str, x_screen: Callable[[str], np.ndarray],
+                                           monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
     """The whole wizard on the real display path: the camera sees what X shows at origin_px."""
     from cal_testkit import FakeCamera, FakeDisplay, channel, synthetic_matrices, synthetic_profile
 
@@ -75,7 +38,7 @@ def test_wizard_through_the_pygame_display(xvfb: str, monkeypatch: pytest.Monkey
         """Renders the sensing area read back from the X server (8-bit panel values)."""
 
         def read(self, timeout_s: float = 2.0) -> RawFrame:
-            panel = _read_root(xvfb)
+            panel = x_screen(xvfb)
             self.display.current = panel[7:7 + 24, 13:13 + 32].astype(np.float32) / 255.0
             return super().read(timeout_s)
 

@@ -4,11 +4,8 @@ tests/calibration/test_cal_wizard_pygame.py)."""
 
 from __future__ import annotations
 
-import os
-import shutil
-import subprocess
 import time
-from collections.abc import Iterator
+from collections.abc import Callable
 
 import numpy as np
 import pytest
@@ -29,46 +26,11 @@ def _profile(origin: tuple[int, int], scene_pitch_um: float = 31.5, index: int =
     return Profile.model_validate(base)
 
 
-@pytest.fixture(scope="module")
-def xvfb() -> Iterator[str]:
-    exe = shutil.which("Xvfb")
-    if exe is None:
-        pytest.skip("Xvfb binary not installed (Debian package xvfb); cannot test the pygame display")
-    r, w = os.pipe()
-    proc = subprocess.Popen(
-        [exe, "-displayfd", str(w), "-screen", "0", f"{PANEL[0]}x{PANEL[1]}x24", "-nolisten", "tcp"],
-        pass_fds=(w,), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-    )
-    os.close(w)
-    try:
-        with os.fdopen(r) as f:
-            number = f.readline().strip()
-        if not number:
-            pytest.fail("Xvfb started but did not report its display number")
-        yield f":{number}"
-    finally:
-        proc.terminate()
-        proc.wait(timeout=10)
-
-
-def _read_root(display_name: str) -> np.ndarray:
-    from Xlib import X
-    from Xlib import display as xdisplay
-
-    d = xdisplay.Display(display_name)
-    try:
-        root = d.screen().root
-        geom = root.get_geometry()
-        raw = root.get_image(0, 0, geom.width, geom.height, X.ZPixmap, 0xFFFFFFFF).data
-        img = np.frombuffer(raw, np.uint8).reshape(geom.height, geom.width, 4)
-        return img[..., [2, 1, 0]].copy()  # BGRX → RGB
-    finally:
-        d.close()
 
 
 @pytest.mark.display
 @pytest.mark.parametrize(("origin", "pitch"), [((37, 21), 31.5), ((5, 150), 63.0)])
-def test_pygame_display_is_pixel_exact(xvfb: str, monkeypatch: pytest.MonkeyPatch,
+def test_pygame_display_is_pixel_exact(xvfb: str, x_screen: Callable[[str], np.ndarray], monkeypatch: pytest.MonkeyPatch,
                                        origin: tuple[int, int], pitch: float) -> None:
     monkeypatch.setenv("DISPLAY", xvfb)
     monkeypatch.setenv("SDL_VIDEODRIVER", "x11")
@@ -84,10 +46,10 @@ def test_pygame_display_is_pixel_exact(xvfb: str, monkeypatch: pytest.MonkeyPatc
         block = scene_to_rgb8(scene, panel_layout(prof).block_px)
         want[origin[1]:origin[1] + block.shape[0], origin[0]:origin[0] + block.shape[1]] = block
         deadline = time.monotonic() + 5.0
-        got = _read_root(xvfb)
+        got = x_screen(xvfb)
         while not np.array_equal(got, want) and time.monotonic() < deadline:
             time.sleep(0.05)
-            got = _read_root(xvfb)
+            got = x_screen(xvfb)
         np.testing.assert_array_equal(got, want)
         assert tuple(got[origin[1], origin[0]]) == (255, 0, 128)
     finally:
