@@ -97,3 +97,21 @@ def test_the_wizard_bundle_directory_resumes_or_starts_anew(tmp_path: Path) -> N
     assert wizard_bundle_dir(prof, tmp_path / "mine", restart=True) == (tmp_path / "mine", False)
     with pytest.raises(ProfileError, match="--restart"):
         wizard_bundle_dir(prof, unfinished, restart=True)
+
+
+def test_the_library_reconstruction_is_the_commands(calibrated: tuple[Path, Path], tmp_path: Path) -> None:
+    """``reconstruct_recording`` writes what ``thintact reconstruct`` writes, file for file and
+    bit for bit, and says what it subtracted and which decoder ran."""
+    from thintact_sdk.calibration.estimates import reconstruct_recording
+
+    rec_dir, cal = calibrated
+    assert main(["reconstruct", str(rec_dir), "--calibration", str(cal), "--out", str(tmp_path / "cli"),
+                 "--no-progress"]) == 0
+    steps: list[int] = []
+    run = reconstruct_recording(rec_dir, cal, tmp_path / "lib", advance=lambda: steps.append(1))
+    assert [p.name for p in run.written] == [Path(f.measurement).stem + ".npy"
+                                            for f in Recording(rec_dir).frames]
+    assert len(steps) == len(run.written) and run.decoder and run.profile_warning is None
+    assert "dark" in run.dark_source or "black" in run.dark_source
+    for p in run.written:
+        np.testing.assert_array_equal(np.load(p), np.load(tmp_path / "cli" / p.name))

@@ -1,28 +1,23 @@
 """``thintact reconstruct RECORDING --calibration CAL --out DIR``: one scene estimate per frame.
 
-Each frame's measurement (raw DN) minus the dark level (the recording's dark frames, i.e.
-all-zero scenes, when it has any, else the profile's black level), normalised to the
-bundle's exposure when both are known, goes through the decoder; the estimate is written
-as ``DIR/<measurement file stem>.npy`` (``N × M × 3`` float32, display units).
-
-Every frame is checked before anything is written (a NaN, Inf or negative measurement is
-refused naming the frame), ``DIR`` must be new or empty unless ``--force``, and an estimate
-that is not finite is an error, never a silent all-NaN file.
+Parses, claims ``DIR`` (new or empty unless ``--force``), calls
+:func:`thintact_sdk.calibration.estimates.reconstruct_recording` (the dark level, the exposure
+normalisation, the checks and the ``DIR/<measurement file stem>.npy`` files are described
+there) and prints.
 """
 
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
+import contextlib
+from collections.abc import Callable
 from typing import Any
 
-import numpy as np
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
 from thintact_sdk.apps.cli.argtypes import positive_float
 from thintact_sdk.apps.cli.output_path import add_force_argument, claim_output
-from thintact_sdk.errors import RecordingError
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -43,66 +38,28 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def _check_unique_outputs(rec: Any) -> None:
-    """Refuse frames whose estimates would land in the same ``DIR/<stem>.npy`` file."""
-    seen: dict[str, int] = {}
-    for i, fr in enumerate(rec.frames):
-        stem = Path(fr.measurement).stem
-        if stem in seen:
-            raise RecordingError(
-                f"recording {rec.root}: frames {seen[stem]} and {i} would both be written as "
-                f"{stem}.npy (their measurement files share a name); one would overwrite the other"
-            )
-        seen[stem] = i
-
-
 def run(args: argparse.Namespace) -> int:
-    from thintact_sdk.calibration.collect import dark_level, frame_exposure_us
-    from thintact_sdk.calibration.validation import make_decoder
-    from thintact_sdk.errors import CalibrationError
+    from thintact_sdk.calibration.estimates import reconstruct_recording
     from thintact_sdk.formats.recording import Recording
-    from thintact_sdk.reconstruction.bundle import CalibrationBundle
 
     console = Console(stderr=True)
     out = claim_output(args.out, "directory", force=args.force, inputs=(args.recording, args.calibration))
     rec = Recording(args.recording)
-    _check_unique_outputs(rec)
-    rec.check_frames()
-    profile = rec.profile
-    bundle = CalibrationBundle.load(args.calibration)
-    bundle.check_shapes(profile)
-    if not bundle.matches_profile(profile):
-        console.print(
-            f"[yellow]warning: the calibration was made for profile {bundle.meta.get('profile')!r} with "
-            "other physics fields than this recording's profile[/yellow]"
-        )
-    settings = {} if args.tau is None else {"tau": args.tau}
-    decoder_name = args.decoder or bundle.meta.get("decoder") or None
-    decoder = make_decoder(profile, bundle, None if decoder_name is None else str(decoder_name), **settings)
-    ref_exposure = bundle.meta.get("exposure_us")
-    out.mkdir(parents=True, exist_ok=True)
-    dark, dark_source = dark_level(rec, use_dark_frames=args.dark == "auto")
-    dark32 = dark.astype(np.float32)
-    console.print(f"[dim]subtracting {dark_source}[/dim]")
-    with Progress(TextColumn("reconstructing"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
-                  console=console, disable=args.no_progress) as prog:
-        task = prog.add_task("frames", total=len(rec))
-        for i, fr in enumerate(rec.frames):
-            meas = np.asarray(rec.measurement(i), np.float32)
-            if meas.ndim == 2:
-                meas = meas[..., None]
-            signal = meas - dark32[..., : meas.shape[2]]
-            exposure = frame_exposure_us(rec, i)
-            if isinstance(ref_exposure, int | float) and exposure is not None:
-                signal *= np.float32(ref_exposure / exposure)
-            estimate = np.asarray(decoder.decode(signal), np.float32)
-            if not np.isfinite(estimate).all():
-                raise CalibrationError(
-                    f"frame {i} ({fr.label or fr.measurement}): the decoder returned NaN/Inf "
-                    f"values (measurement {float(meas.min()):.4g}..{float(meas.max()):.4g} DN, "
-                    f"calibration {args.calibration}); nothing was written for it"
-                )
-            np.save(out / f"{Path(fr.measurement).stem}.npy", estimate)
-            prog.advance(task)
-    print(f"{len(rec)} reconstructions written to {out}")
+    with contextlib.ExitStack() as stack:
+        steps: list[Callable[[], None]] = []
+
+        def started(run: Any) -> None:  # everything checked: say what runs, then the bar
+            if run.profile_warning:
+                console.print(f"[yellow]warning: {run.profile_warning}[/yellow]")
+            console.print(f"[dim]subtracting {run.dark_source}[/dim]")
+            prog = stack.enter_context(Progress(
+                TextColumn("reconstructing"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
+                console=console, disable=args.no_progress))
+            task = prog.add_task("frames", total=len(rec))
+            steps.append(lambda: prog.advance(task))
+
+        result = reconstruct_recording(rec, args.calibration, out, decoder=args.decoder, tau=args.tau,
+                                       dark_frames=args.dark == "auto", on_start=started,
+                                       advance=lambda: steps[0]())
+    print(f"{len(result.written)} reconstructions written to {out}")
     return 0
