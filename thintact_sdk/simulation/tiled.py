@@ -223,8 +223,8 @@ def plan_windows(kp: KernelParams, family_bytes: Callable[[KernelParams], float]
             f"physics: a mask rotated by {kp.angle_deg:g}° on this device ({kp.rows}×{kp.cols} "
             f"sensor, {kp.scene_rows}×{kp.scene_cols} scene) needs {len(spans)} sensor windows whose "
             f"displacement families sum to {total / 1024**3:.1f} GiB (limit "
-            f"{total_limit / 1024**3:.1f} GiB, about {total_limit / 1024**3 * 40:.0f} s of building on "
-            "a 2-core host): bin the sensor (e.g. the diagnosis's binned profile) to simulate it")
+            f"{total_limit / 1024**3:.1f} GiB: the build's time grows with their size): bin the "
+            "sensor (e.g. the diagnosis's binned profile) to simulate it")
     return spans
 
 
