@@ -206,6 +206,20 @@ def weighted_mean(table: np.ndarray, weights: np.ndarray) -> np.ndarray:
     return np.asarray((weights[:, None] * table).sum(axis=0) / weights.sum())
 
 
+def shared_decode(decoder: Any, signals: Sequence[np.ndarray]) -> Callable[[int], np.ndarray]:
+    """``decode(i)``: ``decoder.decode(signals[i])`` at the decoder's current τ.
+
+    A decoder with ``project`` / ``decode_projected`` (the τ-free first big product and the
+    rest of the solve, e.g. :class:`~thintact_sdk.reconstruction.decoders.t2s_closed_form.T2SClosedFormDecoder`)
+    has every signal projected once here, so a sweep over τ decodes each frame from its
+    projection instead of repeating that product per τ (the same figures up to float rounding).
+    """
+    if hasattr(decoder, "project") and hasattr(decoder, "decode_projected"):
+        projected = [decoder.project(y) for y in signals]
+        return lambda i: np.asarray(decoder.decode_projected(projected[i]))
+    return lambda i: np.asarray(decoder.decode(signals[i]))
+
+
 def _mse_table(decoder: Any, signals: Sequence[np.ndarray], truths: Sequence[np.ndarray],
                taus: np.ndarray) -> np.ndarray:
     """Mean squared error of every signal at every τ, per channel: ``scenes × τ × C``
@@ -213,10 +227,11 @@ def _mse_table(decoder: Any, signals: Sequence[np.ndarray], truths: Sequence[np.
     channels = np.asarray(decoder.decode(signals[0])).shape[-1] if signals else 1
     tru = [scene_for_channels(np.asarray(x, np.float32), channels).astype(np.float64) for x in truths]
     table = np.empty((len(signals), len(taus), channels))
+    decode = shared_decode(decoder, signals)
     for j, tau in enumerate(taus):
         decoder.set_tau(float(tau))
-        for i, (y, x) in enumerate(zip(signals, tru, strict=True)):
-            est = np.clip(np.asarray(decoder.decode(y), np.float64), 0.0, 1.0).reshape(x.shape)
+        for i, x in enumerate(tru):
+            est = np.clip(np.asarray(decode(i), np.float64), 0.0, 1.0).reshape(x.shape)
             table[i, j] = np.mean((est - x) ** 2, axis=(0, 1))
     return table
 
@@ -472,16 +487,17 @@ def noise_criteria(decoder: Any, sm: SystemMatrices, signals: Sequence[np.ndarra
     zs = [rng.choice(np.array([-1.0, 1.0], np.float32), size=shape) for _ in range(probes)]
     chi2 = np.empty(len(taus))
     gcv = np.empty(len(taus))
+    decode = shared_decode(decoder, list(signals) + zs)
     for j, tau in enumerate(taus):
         decoder.set_tau(float(tau))
         acc, count = 0.0, 0
-        for y, w in zip(signals, inv_var, strict=True):
-            r = y - sm.forward(np.asarray(decoder.decode(y), np.float64))
+        for i, (y, w) in enumerate(zip(signals, inv_var, strict=True)):
+            r = y - sm.forward(np.asarray(decode(i), np.float64))
             acc += float(np.sum(r * r * w))
             count += r.size
         chi2[j] = acc / count
-        trace = float(np.mean([np.sum(z * sm.forward(np.asarray(decoder.decode(z), np.float64)))
-                               for z in zs]))
+        trace = float(np.mean([np.sum(z * sm.forward(np.asarray(decode(len(signals) + i), np.float64)))
+                               for i, z in enumerate(zs)]))
         gcv[j] = chi2[j] / (1.0 - min(trace, n - 1.0) / n) ** 2
     grid = [float(t) for t in taus]
     k = int(np.argmin(gcv))

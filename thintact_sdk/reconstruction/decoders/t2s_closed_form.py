@@ -123,6 +123,7 @@ class T2SClosedFormDecoder(ClosedFormDecoder):
             "left", "up_t", "right", "sp", "sq", "den", "vp", "vqt", "uq", "scale", "a", "b", "a2", "b2", "small", "sig2")}
         self.info: dict[str, Any] = {"open_rank": [], "dropped_open_sv": []}
         self._parts: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
+        self._grams: list[_GramFactors] = []  # τ-free factors of the small system, per channel
         for c in range(sm.channels):
             up, sp, vpo = _pad(*svds[c][:3], kp)
             uq, sq, vqo = _pad(*svds[c][3:], kq)
@@ -133,7 +134,8 @@ class T2SClosedFormDecoder(ClosedFormDecoder):
             sig2 = np.outer(sol.singular_values_p**2, sol.singular_values_q**2)
             part = (np.concatenate([a, a2], 1), np.concatenate([b, b2], 1), np.outer(sp**2, sq**2), sig2)
             self._parts.append(part)
-            per["small"].append(_small_inverse(part, kp, kq, float(self.channel_tau[c])))
+            self._grams.append(_GramFactors(part, kp, kq))
+            per["small"].append(self._grams[c].small_inverse(float(self.channel_tau[c])))
             per["left"].append(sol.left)  # kP × R
             per["up_t"].append(up.T)  # kp × R
             per["right"].append(sol.right)
@@ -158,6 +160,7 @@ class T2SClosedFormDecoder(ClosedFormDecoder):
         self._coding_right = np.stack(per["right"])
         self._sp, self._sq = np.stack(per["sp"]), np.stack(per["sq"])  # C × kP, C × kQ
         self._full_modes = (self._coding_left.shape[1], self._coding_right.shape[2])
+        self._left_all: Any = None  # every coding mode and E's rows, placed by :meth:`project`
         self.kept_modes = (0, 0)
         self._place(*kept_mode_counts(self._sp, self._sq, self.channel_tau, self.mode_rtol))
         self._uq = xp.asarray(np.stack(per["uq"]), gemm=True)  # C × S × kq
@@ -194,8 +197,13 @@ class T2SClosedFormDecoder(ClosedFormDecoder):
         return 2 * self.channels * (big + woodbury + synthesis_macs(n, big_p, big_q, m))
 
     def set_tau(self, tau: TauSpec) -> None:
-        """Change τ (one value, or one per channel) without recomputing any SVD (only the
-        2K × 2K system and ``1/(σ² + τ)``; the coding modes kept follow the new τ)."""
+        """Change τ (one value, or one per channel) without recomputing any SVD.
+
+        Per channel the work is ``1/(σ² + τ)`` (elementwise, ``kP × kQ``), the 2K × 2K Gram
+        ``Wᵀ Hc⁻¹ W`` as two matrix products with τ-free factors precomputed at construction
+        (:class:`_GramFactors`), and the inverse of the 2K × 2K small system; the coding
+        modes kept follow the new τ. Decoding after ``set_tau(τ)`` equals a decoder built at
+        ``τ`` up to float rounding."""
         self.channel_tau = channel_taus(tau, self.channels)
         self.tau = representative_tau(self.channel_tau)
         kept = kept_mode_counts(self._sp, self._sq, self.channel_tau, self.mode_rtol)
@@ -204,8 +212,7 @@ class T2SClosedFormDecoder(ClosedFormDecoder):
         xp = self.xp
         taus = [float(t) for t in self.channel_tau]
         self._den = xp.asarray(np.stack([1.0 / (p[3] + t) for p, t in zip(self._parts, taus, strict=True)]))
-        self._small = xp.asarray(np.stack([_small_inverse(p, self._kp, self._kq, t)
-                                           for p, t in zip(self._parts, taus, strict=True)]))
+        self._small = xp.asarray(np.stack([g.small_inverse(t) for g, t in zip(self._grams, taus, strict=True)]))
         self._refresh_frame_constants()
 
     def _refresh_frame_constants(self) -> None:
@@ -238,10 +245,9 @@ class T2SClosedFormDecoder(ClosedFormDecoder):
         coef_e, black_coef = [], []
         for c in range(self.channels):
             a_all, b_all = self._a_all64[c], self._b_all64[c]
-            # [aᵀ Z b; a2ᵀ Z b2] for Z = Hc⁻¹ (a_i b_jᵀ): the (i, j) column of the map
-            t = np.einsum("ab,ai,ak,bj,bl->ijkl", den[c], a_all, a_all[:, :kp], b_all, b_all[:, :kq],
-                          optimize=True)
-            cols = np.concatenate([t[:kp, :kq].reshape(k, k), t[kp:, kq:].reshape(k, k)])
+            # [aᵀ Z b; a2ᵀ Z b2] for Z = Hc⁻¹ (a_i b_jᵀ): the (i, j) column of the map, i.e. the
+            # first K columns of the Gram Wᵀ Hc⁻¹ W the small system was inverted from
+            cols = self._grams[c].last_gram[:, :k]
             zb = den[c] * np.outer(p[c], q[c])
             proj_b = np.concatenate([(a_all[:, :kp].T @ zb @ b_all[:, :kq]).ravel(),
                                      (a_all[:, kp:].T @ zb @ b_all[:, kq:]).ravel()])
@@ -254,23 +260,54 @@ class T2SClosedFormDecoder(ClosedFormDecoder):
         self._lr_left = xp.asarray(np.concatenate([self._a_all64, p[..., None]], axis=2))  # C × kP × (2kp+1)
         self._lr_right_t = xp.asarray(np.swapaxes(np.concatenate([self._b_all64, q[..., None]], axis=2), 1, 2))
 
+    def project(self, frame: np.ndarray) -> tuple[Any, Any]:
+        """The τ-free first big product of ``frame`` (``R × S × C`` DN above black), for
+        decoding it at several τ with :meth:`decode_projected`.
+
+        Returns ``(T_c, T_o)``: ``U_Pᵀ Y`` for every coding mode (``C × kP × S``) and the open
+        term's rows (``C × kp × S``), GEMM precision, on the backend. Which coding modes a
+        decode uses depends on τ (``mode_rtol``); it takes the leading rows it needs.
+        """
+        self._check(frame)
+        xp = self.xp
+        if self._left_all is None:
+            self._left_all = xp.asarray(np.concatenate([self._coding_left, self._up_t], axis=1), gemm=True)
+        t = self._left_all @ xp.channels_first(frame, gemm=True)
+        big_p = self._full_modes[0]
+        return t[:, :big_p], t[:, big_p:]
+
+    def decode_projected(self, projected: tuple[Any, Any]) -> np.ndarray:
+        """:meth:`decode` of the frame :meth:`project` returned ``projected`` for, at the
+        current τ (the same figures up to float rounding; black level 0)."""
+        t_c, t_o = projected
+        return self._solve_projected(t_c[:, : self.k_p], t_o, 0.0)
+
     def _linear(self, y: Any) -> tuple[Any, Any]:
         """``(Σ_P U_Pᵀ Y U_Q Σ_Q, Eᵀ Y)`` for channel-first ``y`` (GEMM precision)."""
-        xp = self.xp
         t = self._left @ y  # C × (kept kP + kp) × S
-        core = xp.pad_to(xp.cast(t[:, : self.k_p] @ self._right, gemm=False), *self._full_modes)
-        e = xp.cast(t[:, self.k_p :] @ self._uq, gemm=False) * self._scale  # C × kp × kq
+        return self._linear_projected(t[:, : self.k_p], t[:, self.k_p :])
+
+    def _linear_projected(self, t_c: Any, t_o: Any) -> tuple[Any, Any]:
+        """:meth:`_linear` from the first product's coding rows ``t_c`` (the kept modes) and
+        open rows ``t_o``."""
+        xp = self.xp
+        core = xp.pad_to(xp.cast(t_c @ self._right, gemm=False), *self._full_modes)
+        e = xp.cast(t_o @ self._uq, gemm=False) * self._scale  # C × kp × kq
         return core, e
 
     def _solve(self, y: Any, black_dn: float = 0.0) -> np.ndarray:
+        t = self._left @ y  # C × (kept kP + kp) × S
+        return self._solve_projected(t[:, : self.k_p], t[:, self.k_p :], black_dn)
+
+    def _solve_projected(self, t_c: Any, t_o: Any, black_dn: float) -> np.ndarray:
         """One frame: ``ξ = Hc⁻¹ (core + a E bᵀ) − Hc⁻¹ W (…)⁻¹ Wᵀ(…)`` written as
         ``Hc⁻¹ ⊙ core + Hc⁻¹ ⊙ (A M Bᵀ)`` with one rank-(2kp+1) product ``A M Bᵀ``: four
         full-size passes between the big products (scale, project, add, scale) instead of
         a dozen; on numpy, fewer still (:meth:`_solve_blocked`)."""
         xp = self.xp
         if xp.name == "numpy" and xp.gemm_dtype == xp.dtype:
-            return self._solve_blocked(y, black_dn)
-        core, e = self._linear(y)
+            return self._solve_blocked(t_c, t_o, black_dn)
+        core, e = self._linear_projected(t_c, t_o)
         if black_dn:
             e = e - black_dn * self._e_unit
         core *= self._den  # Hc⁻¹ ⊙ core (core is this frame's own array)
@@ -297,7 +334,7 @@ class T2SClosedFormDecoder(ClosedFormDecoder):
         mid[:, 2 * kp, 2 * kq] = -black_dn
         return mid
 
-    def _solve_blocked(self, y: np.ndarray, black_dn: float) -> np.ndarray:
+    def _solve_blocked(self, t_c: np.ndarray, t_o: np.ndarray, black_dn: float) -> np.ndarray:
         """:meth:`_solve` on numpy with the full-size passes between the big products done in
         cache-sized blocks of coefficient rows: the second big product writes straight into
         the zero-padded coefficient array (no padding copy), each block is scaled by ``Hc⁻¹``
@@ -307,13 +344,12 @@ class T2SClosedFormDecoder(ClosedFormDecoder):
         path, and no padding pass."""
         c = self.channels
         (big_p, big_q), kept_p, kp = self._full_modes, self.k_p, self._kp
-        t = self._left @ y  # C × (kept kP + kp) × S
         kept_q = self._right.shape[2]
         core = np.empty((c, big_p, big_q), self.xp.dtype)
-        np.matmul(t[:, :kept_p], self._right, out=core[:, :kept_p, :kept_q])
+        np.matmul(t_c, self._right, out=core[:, :kept_p, :kept_q])
         core[:, :kept_p, kept_q:] = 0
         core[:, kept_p:] = 0
-        e = (t[:, kept_p:] @ self._uq) * self._scale  # C × kp × kq
+        e = (t_o @ self._uq) * self._scale  # C × kp × kq
         if black_dn:
             e = e - black_dn * self._e_unit
         den, a_all = self._den, self._a_all
@@ -402,24 +438,49 @@ def _dropped_fraction(sv: np.ndarray, kept: int) -> float:
     return float(sv[kept:].max(initial=0) / sv[0]) if sv[0] > 0 else 0.0
 
 
-def _small_inverse(
-    part: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray], kp: int, kq: int, tau: float
-) -> np.ndarray:
-    """``(Mmid⁻¹ + Wᵀ Hc⁻¹ W)⁻¹`` for one channel from its separable coefficient images.
+class _GramFactors:
+    """The τ-free factors of one channel's small system ``(Mmid⁻¹ + Wᵀ Hc⁻¹ W)⁻¹``.
+
+    In the SVD bases of Pc, Qc, ``Hc⁻¹ = 1/(σ_P² σ_Qᵀ² + τ)`` is diagonal (``kP × kQ``) and
+    the columns of ``W`` are separable, ``ω_ij = a_i b_jᵀ``, so the Gram entry
+    ``⟨ω_ij, Hc⁻¹ ω_kl⟩ = Σ_ab a_ai a_ak Hc⁻¹_ab b_bj b_bl``. Its τ-free factors — the
+    products ``a_i ⊙ a_k`` (``kP × 4kp²``) and ``b_j ⊙ b_l`` (``kQ × 4kq²``) of the column
+    pairs the four blocks of the Gram use — are formed once; for each τ the Gram is two
+    matrix products ``(a⊙a)ᵀ Hc⁻¹ (b⊙b)`` (``O(kP·kQ·4kp² + kp²·kQ·4kq²)``) instead of an
+    ``einsum`` over the five indices, and the 2K × 2K inverse follows. ``Hc⁻¹`` is not
+    diagonal in any small basis of ``W``, so the sum over the ``kP × kQ`` modes stays.
 
     ``part = (A_all: kP × 2kp, B_all: kQ × 2kq, D: kp × kq, σ²: kP × kQ)``.
     """
-    a_all, b_all, d, sig2 = part
-    k = kp * kq
-    inv_denom = 1.0 / (sig2 + tau)
-    x1 = np.einsum("ab,bj,bl->ajl", inv_denom, b_all, b_all, optimize=True)
-    t = np.einsum("ai,ak,ajl->ijkl", a_all, a_all, x1, optimize=True)  # ⟨ω_ij, Hc⁻¹ ω_kl⟩
-    blocks = [[t[:kp, :kq, :kp, :kq], t[:kp, :kq, kp:, kq:]],
-              [t[kp:, kq:, :kp, :kq], t[kp:, kq:, kp:, kq:]]]
-    gram = np.block([[blk.reshape(k, k) for blk in row] for row in blocks])
-    eye = np.eye(k)
-    mmid_inv = np.block([[np.zeros((k, k)), eye], [eye, -np.diag(d.ravel())]])
-    return np.linalg.inv(mmid_inv + gram)
+
+    def __init__(self, part: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray], kp: int, kq: int) -> None:
+        a_all, b_all, d, sig2 = part
+        self.kp, self.kq, self.sig2 = kp, kq, sig2
+        a_f, a_g, b_f, b_g = a_all[:, :kp], a_all[:, kp:], b_all[:, :kq], b_all[:, kq:]
+        # rows: (i, k) pairs of the blocks FF, FG, GF, GG; each kp² (resp. kq²) long
+        self._aa = np.concatenate([np.einsum("ai,ak->ika", x, y).reshape(kp * kp, -1)
+                                   for x, y in ((a_f, a_f), (a_f, a_g), (a_g, a_f), (a_g, a_g))])
+        self._bb = [np.einsum("bj,bl->bjl", x, y).reshape(-1, kq * kq)
+                    for x, y in ((b_f, b_f), (b_f, b_g), (b_g, b_f), (b_g, b_g))]
+        k = kp * kq
+        eye = np.eye(k)
+        self._mmid_inv = np.block([[np.zeros((k, k)), eye], [eye, -np.diag(d.ravel())]])
+        self.last_gram = np.zeros((2 * k, 2 * k))
+
+    def gram(self, tau: float) -> np.ndarray:
+        """``Wᵀ Hc⁻¹ W`` (2K × 2K, float64) at ``τ``."""
+        kp, kq, k = self.kp, self.kq, self.kp * self.kq
+        x = self._aa @ (1.0 / (self.sig2 + tau))  # 4kp² × kQ
+        blocks = []
+        for n, bb in enumerate(self._bb):
+            t = x[n * kp * kp : (n + 1) * kp * kp] @ bb  # (i k) × (j l)
+            blocks.append(t.reshape(kp, kp, kq, kq).transpose(0, 2, 1, 3).reshape(k, k))
+        return np.block([[blocks[0], blocks[1]], [blocks[2], blocks[3]]])
+
+    def small_inverse(self, tau: float) -> np.ndarray:
+        """``(Mmid⁻¹ + Wᵀ Hc⁻¹ W)⁻¹`` at ``τ``; the Gram is kept in :attr:`last_gram`."""
+        self.last_gram = self.gram(tau)
+        return np.asarray(np.linalg.inv(self._mmid_inv + self.last_gram))
 
 
 def _pad(u: np.ndarray, s: np.ndarray, v: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
