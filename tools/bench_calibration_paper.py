@@ -130,7 +130,7 @@ def table(scale: int, runs: dict[str, dict[str, Any]], render_s: float, load: tu
                        f"predicted mean {np.mean(list(pred.values())) if pred else float('nan'):.3f} dB")
     return (f"Sensor {1024 // scale} × {1280 // scale}, scene {400 // scale} × {512 // scale} "
             f"(the paper's divided by {scale} per axis), {400 // scale + 512 // scale} slits, one frame per "
-            f"pattern; recording rendered in {render_s:.0f} s. Host: {_host()}; load average "
+            f"pattern; {f'recording rendered in {render_s:.0f} s' if render_s else 'recording of an earlier run'}. Host: {_host()}; load average "
             f"{load[0]:.1f} before, {load[1]:.1f} after.\n\n" + head + "\n".join(rows) + "\n\n"
             + "; ".join(figures) + ".\n")
 
