@@ -64,7 +64,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--frame-gains", choices=["off", "auto", "on"], default="off",
                    help="per-slit-frame gains from the white frame (unrecorded exposure or "
                    "brightness drift); only for well-averaged recordings (noise leaks in)")
-    p.add_argument("--filter-steps", type=non_negative_int, default=100, help="Adam steps of the filter training")
+    p.add_argument("--filter-steps", type=non_negative_int, default=0,
+                   help="Adam steps of the joint-filter training after its closed form (default 0: "
+                   "the closed form only; see docs/calibration.md, 'Filter steps')")
     p.add_argument("--camera-set", action="append", default=[], metavar="KEY=VALUE", type=key_value,
                    help="override a camera setting (" + KEY_VALUE_HELP + ")")
     p.add_argument("--no-registration-check", action="store_true",
