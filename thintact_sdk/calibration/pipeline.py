@@ -60,7 +60,9 @@ class CalibrationOptions:
         Tikhonov τ stored in the bundle (DN²); None chooses it on the unit's own validation
         frames (:mod:`thintact_sdk.calibration.selection`).
     filter_steps
-        Adam steps of the joint-filter training (0: closed form only).
+        Adam steps of the joint-filter training after its closed form (default 0, the
+        closed form only, as ``thintact calibrate --filter-steps``: docs/calibration.md shows
+        the held-out figures of 0, 25 and 100 steps).
     filter_scenes
         Number of training scenes for the filter.
     decoder
@@ -80,7 +82,7 @@ class CalibrationOptions:
     rank: int = DEFAULT_RANK
     frame_gains: str = "off"
     tau: float | None = None
-    filter_steps: int = 100
+    filter_steps: int = 0
     filter_scenes: int = 32
     decoder: str | None = None
     frames_averaged: int | None = None

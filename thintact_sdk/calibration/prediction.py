@@ -206,7 +206,7 @@ def predict_validation(
     decoder: str,
     frames_averaged: int,
     *,
-    filter_steps: int = 100,
+    filter_steps: int = 0,
     filter_scenes: int = 32,
     method: Method = "lsq",
     max_iter: int = 50,
