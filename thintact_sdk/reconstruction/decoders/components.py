@@ -56,7 +56,7 @@ from thintact_sdk.reconstruction.decoders.backend_selection import (
     select_backend,
 )
 from thintact_sdk.reconstruction.decoders.flatcam import FlatCamDecoder
-from thintact_sdk.reconstruction.decoders.identity import IdentityDecoder, make_identity
+from thintact_sdk.reconstruction.decoders.identity import make_identity
 from thintact_sdk.reconstruction.decoders.iterative import T2SIterativeDecoder
 from thintact_sdk.reconstruction.decoders.loading import resolve_bundle
 from thintact_sdk.reconstruction.decoders.modes import DEFAULT_MODE_RTOL, TauSpec
@@ -71,12 +71,13 @@ EMULATED_BF16 = ("bfloat16 is emulated in software on this CPU (no AVX512-BF16, 
                  "about 100x slower than float32")
 
 __all__ = [
-    "ArrayBackend",
-    "FlatCamDecoder",
-    "IdentityDecoder",
-    "NonIterativeDecoder",
-    "T2SClosedFormDecoder",
-    "T2SIterativeDecoder",
+    "EMULATED_BF16",
+    "REMEASURE_ENV",
+    "make_flatcam",
+    "make_iterative",
+    "make_noniterative",
+    "make_t2s_closed_form",
+    "thintact_decoders",
 ]
 
 
