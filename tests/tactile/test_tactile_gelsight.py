@@ -18,8 +18,12 @@ def test_lut_from_real_presses_predicts_held_out_slopes(shared_dir):
     assert ev.depth_rms_mm < 0.5 * ev.depth_peak_mm
 
 
+@pytest.mark.slow
 def test_image_only_ball_calibration_on_real_presses(shared_dir):
-    """What `thintact calibrate-tactile` does with a recording: no annotations used."""
+    """What `thintact calibrate-tactile` does with a recording: no annotations used. On the
+    whole shared pack, with the ball model chosen among its candidates: heavy, so behind
+    ``slow``; the default suite calibrates annotation-free on the vendored presses
+    (tests/tactile/test_tactile_depth_real.py::test_vendored_real_presses_figures_and_report)."""
     from thintact_sdk.tactile.calibration.gelsight_eval import evaluate_gelsight_image_only
 
     pack = shared_dir / "data" / "taxim_gelsight_ball_small" / "dataPack_small.npz"
