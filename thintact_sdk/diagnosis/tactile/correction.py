@@ -69,6 +69,26 @@ def fitted_presses(model: TactileModel, shape: tuple[int, int], ball_radius_mm: 
     return shades, gxs, gys
 
 
+def fitted_images(model: TactileModel, reference: np.ndarray, ball_radius_mm: float,
+                  mm_per_px: float, count: int = 48, depth_range_mm: tuple[float, float] = (0.2, 1.8),
+                  seed: int = 1) -> tuple[np.ndarray, list[np.ndarray], list[np.ndarray], list[np.ndarray]]:
+    """The fitted simulation's camera images: its no-contact frame and ``count`` ball presses
+    (:func:`fitted_presses`), each the camera response to background × shading, in display
+    units (``H × W × 3``, [0, 1] before clipping), with the presses' exact slopes.
+
+    ``reference`` (``H × W × 3``, display units) is the real no-contact frame the fitted
+    background's texture comes from.
+
+    Returns
+    -------
+    (flat, images, grad_x, grad_y)
+    """
+    bg = _background(model, reference)
+    shades, gxs, gys = fitted_presses(model, reference.shape[:2], ball_radius_mm, mm_per_px,
+                                      count, depth_range_mm, seed)
+    return model.respond(bg), [model.respond(bg * s) for s in shades], gxs, gys
+
+
 def _lut(changes: list[np.ndarray], gxs: list[np.ndarray], gys: list[np.ndarray], bins: int,
          source: str, seed: int = 0) -> PhotometricLUT:
     rng = np.random.default_rng(seed)
@@ -79,11 +99,8 @@ def _lut(changes: list[np.ndarray], gxs: list[np.ndarray], gys: list[np.ndarray]
 def fitted_simulation_lut(model: TactileModel, reference: np.ndarray, ball_radius_mm: float,
                           mm_per_px: float, bins: int = 24) -> PhotometricLUT:
     """LUT of the fitted simulation's full images (colour change against its flat frame)."""
-    bg = _background(model, reference)
-    flat = model.respond(bg)
-    shades, gxs, gys = fitted_presses(model, reference.shape[:2], ball_radius_mm, mm_per_px)
-    changes = [model.respond(bg * s) - flat for s in shades]
-    return _lut(changes, gxs, gys, bins, "fitted tactile simulation")
+    flat, images, gxs, gys = fitted_images(model, reference, ball_radius_mm, mm_per_px)
+    return _lut([im - flat for im in images], gxs, gys, bins, "fitted tactile simulation")
 
 
 def shading_lut(model: TactileModel, shape: tuple[int, int], ball_radius_mm: float,

@@ -271,11 +271,16 @@ def evaluate_pack(
     mlp_steps: int = 1500,
     boundary: str = "free",
     stage: Callable[[str], None] | None = None,
+    lut: Any = None,
 ) -> dict[str, Any]:
     """Calibrate on the ``train`` presses from the images and the ball radius alone (what
     ``thintact calibrate-tactile`` does) and measure the other presses through the
     interpreter (:mod:`~thintact_sdk.tactile.calibration.ball_eval` figures; against the annotated
     circles too when the pack has them).
+
+    With ``lut`` (a :class:`~thintact_sdk.tactile.interpretation.photometric.PhotometricLUT`
+    calibrated elsewhere, e.g. on a fitted simulation) nothing is calibrated: the ``train``
+    presses are left out and the others measured with it.
 
     Returns
     -------
@@ -291,12 +296,14 @@ def evaluate_pack(
     say = stage or (lambda _m: None)
     train, test = split(len(pack.images), train)
     profile = pack_profile(pack.reference.shape[:2], mm_per_px, elastomer_sigma_mm)
-    try:
-        lut = calibrate_from_presses(profile, pack.reference_image(),
-                                     [BallPress(pack.image(i)) for i in train], ball_radius_mm,
-                                     bins, model=model, mlp_steps=mlp_steps, stage=say)
-    except CalibrationError as err:  # "press k" counts the training presses
-        raise CalibrationError(f"{err} (training presses, in order: {train})") from None
+    if lut is None:
+        try:
+            lut = calibrate_from_presses(profile, pack.reference_image(),
+                                         [BallPress(pack.image(i)) for i in train],
+                                         ball_radius_mm, bins, model=model, mlp_steps=mlp_steps,
+                                         stage=say)
+        except CalibrationError as err:  # "press k" counts the training presses
+            raise CalibrationError(f"{err} (training presses, in order: {train})") from None
     interp = TactileInterpreter(profile, lut, boundary=boundary)  # type: ignore[arg-type]
     interp.set_reference(pack.reference_image())
     figs = []

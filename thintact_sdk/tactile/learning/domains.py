@@ -140,3 +140,4 @@ def simulated_presses(
     images = np.stack([flat.scene] + [p.scene for p in presses]).astype(np.float64)
     images += noise_std * rng.standard_normal(images.shape)
     return np.clip(images, 0.0, 1.0).astype(np.float32)
+

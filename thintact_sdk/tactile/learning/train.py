@@ -262,3 +262,60 @@ class Real2SimTrainer:
         (self.out_dir / "training.json").write_text(
             json.dumps({**info, "history": self.history}, indent=1) + "\n")
         return TrainResult(path, self.iteration, self.seconds, str(self.device), self.history)
+
+
+def train_from_pack(
+    real_pack: str | Path,
+    out_dir: str | Path,
+    train: list[int] | None = None,
+    iterations: int = 3000,
+    sim_presses: int = 48,
+    mm_per_px: float = 0.1245,
+    ball_radius_mm: float = 2.0,
+    sim_model: str | Path | None = None,
+    device: str = "auto",
+    seed: int = 0,
+    fresh: bool = False,
+    on_step: Callable[[int, int, dict[str, float], float], None] | None = None,
+) -> tuple[TrainResult, int, list[int]]:
+    """``thintact real2sim train``: Real2Sim between a press pack's ``train`` presses (default
+    the even ones) plus its no-contact frame and the sim domain
+    (:func:`~thintact_sdk.tactile.learning.domains.sim_domain`: the nominal tactile simulation,
+    or the one ``diagnose-tactile`` fitted when ``sim_model`` names its ``fitted_tactile.yaml``),
+    resuming from ``out_dir``'s checkpoint unless ``fresh``.
+
+    ``on_step(iteration, total, losses, seconds)`` is called after every iteration.
+
+    Returns
+    -------
+    (result, resumed_at, test)
+        The finished run, the iteration it resumed from (0 when fresh) and the presses kept
+        unseen (stored in the generator file with the training presses).
+    """
+    from thintact_sdk.tactile.calibration.gelsight_eval import split_presses
+    from thintact_sdk.tactile.learning.domains import RealPresses
+    from thintact_sdk.tactile.learning.fitted_domain import fitted_section, sim_domain
+
+    real = RealPresses.from_pack(real_pack)
+    train, test = split_presses(len(real.images), train)
+    if not train or max(train) >= len(real.images) or min(train) < 0:
+        raise ThinTactError(f"--train: press indices must lie in 0..{len(real.images) - 1}")
+    sim = sim_domain(real, sim_presses, ball_radius_mm, mm_per_px, seed, sim_model)
+    section = None if sim_model is None else fitted_section(sim_model)
+    trainer = Real2SimTrainer(np.concatenate([real.subset(train), real.reference[None]]), sim,
+                              out_dir, TrainConfig(iterations=iterations, seed=seed), device)
+    if fresh:
+        trainer.checkpoint_path.unlink(missing_ok=True)
+    resumed_at = trainer.iteration if not fresh and trainer.resume() else 0
+    rows, cols = real.reference.shape[:2]
+    meta = {"real_source": str(real_pack), "train_presses": train, "test_presses": test,
+            "real_shape": [rows, cols, 3], "mm_per_px": mm_per_px,
+            "ball_radius_mm": ball_radius_mm, "sim_presses": sim_presses,
+            "sim_model": None if sim_model is None else str(sim_model),
+            "sim_model_section": section}
+
+    def step(i: int, losses: dict[str, float]) -> None:
+        if on_step is not None:
+            on_step(i, iterations, losses, trainer.seconds)
+
+    return trainer.run(step, meta), resumed_at, test

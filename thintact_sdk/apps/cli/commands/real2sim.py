@@ -42,15 +42,23 @@ def register(sub: argparse._SubParsersAction) -> None:
     t.add_argument("--mm-per-px", type=float_range(MIN_PITCH_UM / 1000, MAX_PITCH_UM / 1000), default=0.1245,
                    help="real image pixel size, mm (a tactile pixel: 0.0001 to 10)")
     t.add_argument("--ball-radius-mm", type=positive_float, default=2.0)
+    t.add_argument("--sim-model", type=Path, default=None, metavar="FITTED.yaml",
+                   help="the sim domain: the simulation `thintact diagnose-tactile` fitted to this "
+                   "sensor (its fitted_tactile.yaml); default the SDK's nominal tactile simulation")
     t.add_argument("--device", default="auto", choices=("auto", "cpu", "cuda"))
     t.add_argument("--seed", type=seed, default=0)
     t.add_argument("--fresh", action="store_true",
                    help="ignore an existing checkpoint in --out (default: resume from it)")
+    t.add_argument("--quiet", action="store_true", help="no progress lines")
     t.set_defaults(func=run_train)
     e = sp.add_parser("evaluate", help="the real-data table on presses the generator never saw")
     e.add_argument("--generator", type=Path, required=True, help="generator.pt from train")
     e.add_argument("--real", type=Path, required=True)
-    e.add_argument("--json", type=Path, help="also write the table as JSON here")
+    e.add_argument("--json", type=Path, help="also write the tables as JSON here")
+    e.add_argument("--skip-ball-figures", action="store_true",
+                   help="only the annotated-circle table (the annotation-free ball figures "
+                   "calibrate every row from its training presses: minutes)")
+    e.add_argument("--quiet", action="store_true", help="no progress lines")
     e.set_defaults(func=run_evaluate)
     b = sp.add_parser("bench", help="translation time per frame at a profile's working grid")
     b.add_argument("--generator", type=Path, required=True)
@@ -64,42 +72,24 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run_train(args: argparse.Namespace) -> int:
-    import numpy as np
-    from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
-
-    from thintact_sdk.tactile.calibration.gelsight_eval import split_presses
-    from thintact_sdk.tactile.learning.domains import RealPresses, sensor_profile, simulated_presses
-    from thintact_sdk.tactile.learning.train import Real2SimTrainer, TrainConfig
+    from thintact_sdk.host.progress import stage_reporter
+    from thintact_sdk.tactile.learning.train import train_from_pack
 
     if args.sim_presses < 1 or args.mm_per_px <= 0 or args.ball_radius_mm <= 0:
         raise ThinTactError("--sim-presses must be ≥ 1, --mm-per-px and --ball-radius-mm > 0")
-    real = RealPresses.from_pack(args.real)
-    train, test = split_presses(len(real.images), args.train)
-    if not train or max(train) >= len(real.images) or min(train) < 0:
-        raise ThinTactError(f"--train: press indices must lie in 0..{len(real.images) - 1}")
-    rows, cols = real.reference.shape[:2]
-    sim = simulated_presses(sensor_profile(rows, cols, args.mm_per_px), args.sim_presses,
-                            args.ball_radius_mm, seed=args.seed)
-    trainer = Real2SimTrainer(np.concatenate([real.subset(train), real.reference[None]]), sim,
-                              args.out, TrainConfig(iterations=args.iterations, seed=args.seed),
-                              args.device)
-    if args.fresh:
-        trainer.checkpoint_path.unlink(missing_ok=True)
-    elif trainer.resume():
-        print(f"resuming {trainer.checkpoint_path} at iteration {trainer.iteration}")
-    meta = {"real_source": str(args.real), "train_presses": train, "test_presses": test,
-            "real_shape": [rows, cols, 3],
-            "mm_per_px": args.mm_per_px, "ball_radius_mm": args.ball_radius_mm,
-            "sim_presses": args.sim_presses}
-    with Progress(TextColumn("real2sim"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
-                  TextColumn("{task.fields[loss]}"), TimeRemainingColumn()) as bar:
-        task = bar.add_task("train", total=args.iterations, completed=trainer.iteration, loss="")
+    with stage_reporter(args.quiet) as say:
 
-        def on_step(i: int, losses: dict[str, float]) -> None:
-            bar.update(task, completed=i,
-                       loss=f"cycle {losses['cycle']:.3f} adv {losses['g_adv']:.3f}")
+        def on_step(i: int, total: int, losses: dict[str, float], seconds: float) -> None:
+            if i % 50 == 0 or i == total:  # a line per 50 iterations off a terminal
+                left = seconds / max(i, 1) * (total - i)
+                say(f"iteration {i}/{total}: cycle {losses['cycle']:.3f}, adversarial "
+                    f"{losses['g_adv']:.3f}; about {left / 60:.0f} min left")
 
-        result = trainer.run(on_step, meta)
+        result, resumed_at, test = train_from_pack(
+            args.real, args.out, args.train, args.iterations, args.sim_presses, args.mm_per_px,
+            args.ball_radius_mm, args.sim_model, args.device, args.seed, args.fresh, on_step)
+    if resumed_at:
+        print(f"resumed {args.out / 'checkpoint.pt'} at iteration {resumed_at}")
     print(f"trained {result.iterations} iterations in {result.seconds:.0f} s on {result.device}; "
           f"generator {result.generator_path} (test presses kept unseen: {len(test)})")
     return 0
@@ -109,23 +99,47 @@ def run_evaluate(args: argparse.Namespace) -> int:
     from rich.console import Console
     from rich.table import Table
 
-    from thintact_sdk.tactile.learning.evaluate import evaluate_real2sim
+    from thintact_sdk.host.progress import stage_reporter
+    from thintact_sdk.tactile.learning.evaluate import ball_figures, evaluate_real2sim
     from thintact_sdk.tactile.learning.translate import Real2SimTranslator
 
     translator = Real2SimTranslator.load(args.generator)
-    rows, evals = evaluate_real2sim(args.real, translator)
+    with stage_reporter(args.quiet) as say:
+        say("annotated-circle figures")
+        rows, evals = evaluate_real2sim(args.real, translator)
+        balls = {} if args.skip_ball_figures else ball_figures(args.real, translator, stage=say)
     table = Table(title=f"held-out presses: {len(evals['real'].test)} "
-                  f"(trained on {len(evals['real'].train)})")
+                  f"(trained on {len(evals['real'].train)}), inside the annotated circles")
     for col in ("method", "slope RMS (mm/mm)", "depth RMS (mm)"):
         table.add_column(col)
     for r in rows:
         table.add_row(r.method, f"{r.slope_rms:.3f}", f"{r.depth_rms_mm:.3f}")
     Console().print(table)
+    if balls:
+        Console().print(_ball_table(balls))
     if args.json is not None:
         args.json.write_text(json.dumps({
             "train": evals["real"].train, "test": evals["real"].test,
-            "rows": [r.__dict__ for r in rows]}, indent=1) + "\n")
+            "rows": [r.__dict__ for r in rows], "ball_figures": balls}, indent=1, default=float) + "\n")
     return 0
+
+
+def _ball_table(balls: dict) -> object:
+    from rich.table import Table
+
+    t = Table(title="annotation-free figures (issue 29 items 1-2), against the fixed-radius ball")
+    for col in ("method", "gradient model", "sphere radius median (middle half)",
+                "contact / sqrt(2Rp-p^2)", "depth RMS (mm)", "slope RMS (flat)"):
+        t.add_column(col)
+    for name, res in balls.items():
+        s = res["summary"]
+        ratio = s["contact_ratio_median"]
+        t.add_row(name, str(res["gradient_model"] or "lut"),
+                  f"{s['sphere_radius_median_mm']:.2f} mm ({s['sphere_radius_q25_mm']:.2f}-"
+                  f"{s['sphere_radius_q75_mm']:.2f})",
+                  "-" if ratio is None else f"{ratio:.2f}", f"{s['depth_rms_mm']:.3f}",
+                  f"{s['slope_rms']:.3f} ({s['slope_rms_flat']:.2f})")
+    return t
 
 
 def run_bench(args: argparse.Namespace) -> int:
