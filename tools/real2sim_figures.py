@@ -132,7 +132,7 @@ def figures(out: Path, ev: dict[str, Any], translator: Any, pack: Any, section: 
         p = r2s[i]
         sim_press = Press(p["centre_rc"][0] * f, p["centre_rc"][1] * f, p["press_mm"])
         sim = model.respond(bg * model.shading(ball_normals(ref.shape[:2], sim_press, radius, mm,
-                                                            model.sigma_mm)))
+                                                            model.sigma_mm, model.skirt_mm)))
         for ax, img, title in zip(row, (real - pack.reference_image(), trans - ref_t, sim - flat),
                                   (f"real, press {i}", "Real2Sim translation",
                                    f"fitted simulation, {p['press_mm']:.2f} mm"), strict=True):

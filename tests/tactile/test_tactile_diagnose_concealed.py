@@ -37,7 +37,7 @@ def synthetic(model: TactileModel, n: int = 8, seed: int = 0) -> RealPresses:
     for _ in range(n):
         p = Press(float(rng.uniform(r_px, SHAPE[0] - r_px)),
                   float(rng.uniform(r_px, SHAPE[1] - r_px)), float(rng.uniform(0.3, 0.7)))
-        nrm = ball_normals(SHAPE, p, BALL_MM, MM_PER_PX, model.sigma_mm)
+        nrm = ball_normals(SHAPE, p, BALL_MM, MM_PER_PX, model.sigma_mm, model.skirt_mm)
         imgs.append(model.respond(bg * model.shading(nrm)))
     images = np.stack(imgs) + rng.normal(0, SIGMA, (n,) + SHAPE + (3,))
     ref = model.respond(bg) + rng.normal(0, SIGMA, SHAPE + (3,))
@@ -91,3 +91,45 @@ def test_camera_gamma_is_named_and_recovered(gamma: float) -> None:
     d = run(truth_model(gamma=gamma), ("illumination_field", "led_directions", "camera_gamma"))
     assert "camera_gamma" in [f["effect"] for f in d.report["findings"]]
     assert abs(d.final.gamma - gamma) < 0.05
+
+
+SPREAD_EFFECTS = EFFECTS + ("optical_spread",)
+
+
+def test_optical_spread_is_told_from_the_surface_blur_and_recovered() -> None:
+    """Light scattered in the gel blurs the shading, not the surface: the diagnosis names
+    ``optical_spread`` (σ_o within 25 %) and leaves the surface's blur alone."""
+    d = run(truth_model(spread_mm=0.5), SPREAD_EFFECTS)
+    names = [f["effect"] for f in d.report["findings"]]
+    assert "optical_spread" in names
+    assert abs(d.final.spread_mm - 0.5) < 0.125
+    assert abs(d.final.sigma_mm - 0.25) < 0.08  # the surface keeps the profile's blur
+    assert d.report["final"]["chi2_per_dof"] < 1.1
+
+
+def test_surface_blur_is_not_taken_for_optical_spread() -> None:
+    d = run(truth_model(sigma_mm=0.5), SPREAD_EFFECTS)
+    names = [f["effect"] for f in d.report["findings"]]
+    assert "elastomer_blur" in names and "optical_spread" not in names
+    assert abs(d.final.sigma_mm - 0.5) < 0.08
+
+
+def test_fitted_section_keeps_the_optical_spread() -> None:
+    from thintact_sdk.diagnosis.tactile.report import model_from_section, model_section
+
+    m = truth_model(spread_mm=0.42, sigma_mm=0.3)
+    back = model_from_section(model_section(m, MM_PER_PX, "test"))
+    assert back.spread_mm == pytest.approx(0.42) and back.sigma_mm == pytest.approx(0.3)
+    old = model_section(truth_model(), MM_PER_PX, "test")  # written before the effect existed
+    assert "optical_spread_mm" not in old["tactile"]["simulation_effects"]
+    assert model_from_section(old).spread_mm == 0.0
+
+
+def test_gel_sink_in_is_named_and_its_skirt_recovered() -> None:
+    """A gel that sinks in around the ball (a K₀ skirt outside the contact circle): named as
+    ``gel_sink_in`` with its length within 25 %, not as a wider Gaussian of the surface."""
+    d = run(truth_model(skirt_mm=0.6), EFFECTS + ("gel_sink_in",))
+    names = [f["effect"] for f in d.report["findings"]]
+    assert "gel_sink_in" in names
+    assert abs(d.final.skirt_mm - 0.6) < 0.15
+    assert d.report["final"]["chi2_per_dof"] < 1.1

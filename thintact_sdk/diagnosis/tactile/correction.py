@@ -62,7 +62,7 @@ def fitted_presses(model: TactileModel, shape: tuple[int, int], ball_radius_mm: 
     for _ in range(count):
         p = Press(float(rng.uniform(r_px, shape[0] - r_px)), float(rng.uniform(r_px, shape[1] - r_px)),
                   float(rng.uniform(*depth_range_mm)))
-        nrm = ball_normals(shape, p, ball_radius_mm, mm_per_px, model.sigma_mm)
+        nrm = ball_normals(shape, p, ball_radius_mm, mm_per_px, model.sigma_mm, model.skirt_mm)
         shades.append(model.shading(nrm))
         gxs.append(nrm.gx)
         gys.append(nrm.gy)

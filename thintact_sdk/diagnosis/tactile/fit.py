@@ -68,9 +68,10 @@ def clipped_mask(images: np.ndarray) -> np.ndarray:
     return (images > 0.5 / 255) & (images < 254.5 / 255)
 
 
-def all_normals(data: PressData, presses: list[Press], sigma_mm: float) -> list[Normals]:
-    """Normals of every press under the current nuisances."""
-    return [ball_normals(data.shape, p, data.ball_radius_mm, data.mm_per_px, sigma_mm)
+def all_normals(data: PressData, presses: list[Press], sigma_mm: float,
+                skirt_mm: float = 0.0) -> list[Normals]:
+    """Normals of every press under the current nuisances (surface blur σ_e, sink-in skirt)."""
+    return [ball_normals(data.shape, p, data.ball_radius_mm, data.mm_per_px, sigma_mm, skirt_mm)
             for p in presses]
 
 
@@ -116,6 +117,8 @@ def n_params(model: TactileModel, n_frames: int) -> int:
     k += 6 if "colour_crosstalk" in eff else 0
     k += 1 if "camera_gamma" in eff else 0
     k += 1 if "elastomer_blur" in eff else 0
+    k += 1 if "optical_spread" in eff else 0
+    k += 1 if "gel_sink_in" in eff else 0
     return k
 
 
@@ -187,13 +190,14 @@ def fit_linear(model: TactileModel, data: PressData, normals: list[Normals],
         z = y / np.where(np.abs(denom) > 1e-6, denom, 1e-6)
         wz = w * denom * denom
         if "led_directions" in eff:
-            nx = np.stack([n.nx for n in normals])
-            ny = np.stack([n.ny for n in normals])
-            nz = np.stack([n.nz for n in normals]) - 1.0
+            # the design columns as the shading sees them (through the optical spread)
+            nx = np.stack([m.spread(n.nx, n) for n in normals])
+            ny = np.stack([m.spread(n.ny, n) for n in normals])
+            nz = np.stack([m.spread(n.nz - 1.0, n) for n in normals])
             cols = [nx, ny, nz]
             lobe = None
             if "specular_lobe" in eff:
-                lobe = np.stack([m.lobe(n) for n in normals])
+                lobe = np.stack([m.spread(m.lobe(n), n) for n in normals])
             light = np.zeros((3, 3)) if m.light is None else m.light
             spec = m.specular.copy()
             for c in range(3):
@@ -229,11 +233,12 @@ def _window(shape: tuple[int, int], press: Press, half: int) -> tuple[slice, sli
 def fit_presses(model: TactileModel, data: PressData, presses: list[Press],
                 max_iter: int = 150) -> list[Press]:
     """Refit each press's centre and depth under ``model`` (Nelder–Mead on a window of
-    ±(ball radius + 4 σ_e + 4 px) around it; centres within ±1 ball radius of the start,
+    ±(ball radius + 4 (σ_e + σ_o + L) + 4 px) around it; centres within ±1 ball radius of the start,
     depths 0.02 mm .. 0.95 ball radius)."""
     bg = model.background(data.basis, data.texture)
     r_px = data.ball_radius_mm / data.mm_per_px
-    half = int(np.ceil(r_px + 4 * model.sigma_mm / data.mm_per_px + 4))
+    half = int(np.ceil(r_px + 4 * (model.sigma_mm + model.spread_mm + model.skirt_mm)
+                       / data.mm_per_px + 4))
     y, w = data.images, np.where(data.valid, 1.0, 0.0) / data.sigma**2
     out = []
     for i, p0 in enumerate(presses):
@@ -249,7 +254,8 @@ def fit_presses(model: TactileModel, data: PressData, presses: list[Press],
                     or not 0.02 <= depth <= 0.95 * data.ball_radius_mm):
                 return 1e30
             nrm = ball_normals(win_shape, Press(row - rs.start, col - cs.start, depth),
-                               data.ball_radius_mm, data.mm_per_px, model.sigma_mm)
+                               data.ball_radius_mm, data.mm_per_px, model.sigma_mm,
+                               model.skirt_mm)
             pred = model.respond(model.linear(model.shading(nrm), bw, i))
             return float(np.sum(ww * (yw - pred) ** 2))
 

@@ -86,7 +86,7 @@ def _fit_with_presses(m: TactileModel, data: PressData, presses: list[Press], pa
                       ) -> tuple[TactileModel, list[Press], list[Normals]]:
     for _ in range(passes):
         presses = fit_presses(m, data, presses)
-        nrm = all_normals(data, presses, m.sigma_mm)
+        nrm = all_normals(data, presses, m.sigma_mm, m.skirt_mm)
         m = fit_linear(m, data, nrm, iterations=5)
     return m, presses, nrm
 
@@ -131,8 +131,9 @@ class _TactileSearch:
             cand = PROPOSERS[name](model, data, self.presses, self.normals)
             if cand is None:
                 continue
-            nrm = self.normals if cand.sigma_mm == model.sigma_mm else all_normals(
-                data, self.presses, cand.sigma_mm)
+            same = (cand.sigma_mm, cand.skirt_mm) == (model.sigma_mm, model.skirt_mm)
+            nrm = self.normals if same else all_normals(data, self.presses, cand.sigma_mm,
+                                                        cand.skirt_mm)
             sc = score(cand, data, nrm)[0]
             tried.append(_Tried(name, cur.neg2loglike - sc.neg2loglike, sc.n_params - cur.n_params,
                                 sc, cand, nrm))
@@ -175,6 +176,72 @@ class _TactileSearch:
         return None
 
 
+# scalar effects that can be taken out again: the attribute and its baseline value
+REMOVABLE = {"elastomer_blur": ("sigma_mm", TactileModel().sigma_mm),
+             "optical_spread": ("spread_mm", 0.0), "gel_sink_in": ("skirt_mm", 0.0),
+             "camera_gamma": ("gamma", 1.0)}
+
+
+def swap_alternatives(search: _TactileSearch) -> None:
+    """Undo a greedy choice the data disown: for every finding of a scalar effect
+    (:data:`REMOVABLE`), take it out and put in its place, in turn, each such effect its round
+    named as explaining the data about as well, or refit each such effect accepted later
+    without it (fitted, the presses refitted under fitted lights); keep the best when the
+    final BIC is lower (a dropped finding leaves the findings; the one that replaces it says so
+    in ``replaces`` and its evidence). Forward
+    selection takes the best effect at the model of its round; two blurs that look alike
+    before the lights are fitted (the surface's and the shading's) are told apart only
+    afterwards."""
+    data = search.data
+    for f in list(search.findings):
+        name = f["effect"]
+        if name not in REMOVABLE or f not in search.findings:
+            continue
+        best: tuple[Score, str, TactileModel, list[Press], list[Normals]] | None = None
+        rivals = [a for a in f["alternatives"] if a in REMOVABLE and a not in search.model.effects]
+        # a scalar effect accepted later may be what this one stood in for: drop this one
+        # and refit that one's scalar without it
+        rivals += [e for e in search.model.effects if e in REMOVABLE and e != name]
+        for alt in rivals:
+            out = search.model.copy()
+            for gone in {name, alt}:
+                attr, base = REMOVABLE[gone]
+                setattr(out, attr, base)
+            out.effects = [e for e in out.effects if e not in {name, alt}]
+            cand = PROPOSERS[alt](out, data, search.presses,
+                                  all_normals(data, search.presses, out.sigma_mm, out.skirt_mm))
+            if cand is None:
+                continue
+            presses = search.presses
+            nrm = all_normals(data, presses, cand.sigma_mm, cand.skirt_mm)
+            if "led_directions" in cand.effects:
+                cand, presses, nrm = _fit_with_presses(cand, data, presses)
+            sc = score(cand, data, nrm)[0]
+            search.say(f"swapping {name} for {alt}: ΔBIC {sc.bic - search.current.bic:+.0f}")
+            if sc.bic < search.current.bic and (best is None or sc.bic < best[0].bic):
+                best = (sc, alt, cand, presses, nrm)
+        if best is None:
+            continue
+        sc, alt, cand, presses, nrm = best
+        if alt in search.model.effects:  # dropped: the later finding now carries it alone
+            later = next(g for g in search.findings if g["effect"] == alt)
+            later.update(params=effect_params(alt, cand, data.mm_per_px),
+                         chi2_per_dof_after=round(sc.chi2_per_dof, 5), replaces=name,
+                         evidence=f"{later['evidence']}; {name} (accepted before it, "
+                         f"{f['params']}) dropped: {alt} refitted without it explains the "
+                         f"data better (ΔBIC {sc.bic - search.current.bic:+.0f})")
+            search.findings.remove(f)
+            search.model, search.presses, search.normals, search.current = cand, presses, nrm, sc
+            continue
+        f.update(effect=alt, params=effect_params(alt, cand, data.mm_per_px),
+                 alternatives=[name], swapped_from=name,
+                 evidence=f"{f['evidence']}; then {name} swapped for {alt} once the other "
+                 f"effects were in (ΔBIC {sc.bic - search.current.bic:+.0f}, χ²/dof "
+                 f"{search.current.chi2_per_dof:.3f} → {sc.chi2_per_dof:.3f})")
+        f["chi2_per_dof_after"] = round(sc.chi2_per_dof, 5)
+        search.model, search.presses, search.normals, search.current = cand, presses, nrm, sc
+
+
 def diagnose_tactile(
     real: RealPresses,
     ball_radius_mm: float,
@@ -211,7 +278,7 @@ def diagnose_tactile(
         valid &= ~np.asarray(exclude, bool)[..., None]
     data = PressData(images, reference, valid, sigma, mm_per_px, ball_radius_mm)
     model = TactileModel()
-    normals = all_normals(data, presses, model.sigma_mm)
+    normals = all_normals(data, presses, model.sigma_mm, model.skirt_mm)
     model = fit_linear(model, data, normals)
     base_score, base_pred = score(model, data, normals)
     baseline = model.copy()
@@ -221,6 +288,7 @@ def diagnose_tactile(
     search = _TactileSearch(data, presses, model, normals, base_score, opts, say)
     forward_select(search, InformationCriterion.for_values(base_score.stats.n_pixels,
                                                            opts.min_delta_bic), opts.max_effects)
+    swap_alternatives(search)
     findings, rounds = search.findings, search.rounds
     model, presses, normals = search.model, search.presses, search.normals
     accepted = {f["effect"] for f in findings}

@@ -5,11 +5,14 @@ For press p, pixel (x, y) and channel c (display units, [0, 1])::
     pred = ( F_c(x, y) · (1 + α_c t_c(x, y)) · E_pc · S_c(n_p(x, y)) ) ^ γ
 
 * ``n_p`` is the membrane normal of a ball of known radius pressed at (row, col) to a depth
-  (the per-press nuisances), its rigid cap smoothed by the elastomer Gaussian of width σ_e;
+  (the per-press nuisances), its rigid cap (with ``gel_sink_in``, the cap plus a sink-in
+  skirt around it) smoothed by the elastomer Gaussian of width σ_e (the surface's own shape);
 * ``S_c`` is the shading relative to the flat membrane (1 where flat): the SDK simulator's
   Phong shading under its 10-LED layout (baseline), or a fitted Lambertian light per channel
   ``1 + u n_x + v n_y + w (n_z − 1)`` (``led_directions``), plus a Phong lobe
-  (``specular_lobe``), mixed between channels (``colour_crosstalk``);
+  (``specular_lobe``), mixed between channels (``colour_crosstalk``); with
+  ``optical_spread`` its departure from 1 is blurred by a Gaussian of width σ_o (light
+  scattered in the gel and the coating spreads the shading, not the surface);
 * ``F_c`` is a polynomial illumination field (a constant gain in the baseline);
 * ``t_c`` is the background texture: what the no-contact frame holds beyond a smooth
   (order-3 polynomial) field; ``α_c`` its strength (0 in the baseline);
@@ -47,22 +50,43 @@ class Normals:
     gx: np.ndarray
     gy: np.ndarray
     depth_mm: np.ndarray
+    mm_per_px: float = 0.0
 
 
 def ball_normals(shape: tuple[int, int], press: Press, ball_radius_mm: float, mm_per_px: float,
-                 sigma_mm: float) -> Normals:
+                 sigma_mm: float, skirt_mm: float = 0.0) -> Normals:
     """Normals of a ball cap pressed ``press.depth_mm`` at ``press`` (smoothed by a Gaussian of
-    ``sigma_mm``), as the SDK's tactile simulator shapes the membrane."""
+    ``sigma_mm``), as the SDK's tactile simulator shapes the membrane. With ``skirt_mm`` > 0
+    the gel sinks in around the contact (``gel_sink_in``): ``press.depth_mm`` is still the press
+    depth, the ball's cap is that much less deep and the surface outside its contact radius a
+    skirt ``∝ K₀(r/L)``, L = ``skirt_mm``,
+    continuous in depth and slope (:class:`~thintact_sdk.tactile.calibration.ball_press.BallModel`),
+    before the Gaussian."""
     rr, cc = np.mgrid[0 : shape[0], 0 : shape[1]].astype(np.float64)
     r2 = ((rr - press.row) ** 2 + (cc - press.col) ** 2) * mm_per_px**2
-    cap = np.sqrt(np.clip(ball_radius_mm**2 - r2, 0.0, None)) - (ball_radius_mm - press.depth_mm)
-    depth = np.clip(cap, 0.0, None)
+    if skirt_mm > 0:
+        from scipy.optimize import brentq
+
+        from thintact_sdk.tactile.calibration.ball_press import BallModel
+
+        model = BallModel("sink-in", skirt_mm)
+        zero = np.zeros(1)
+
+        def total(h: float) -> float:  # the press depth of a cap of height h, skirt included
+            return model.rigid_depth(zero, h, ball_radius_mm)[1] - press.depth_mm
+
+        top = min(press.depth_mm, ball_radius_mm)
+        h = brentq(total, 0.0, top, xtol=1e-6) if top > 0 and total(top) > 0 else top
+        depth, _, _ = model.rigid_depth(np.sqrt(r2), h, ball_radius_mm)
+    else:
+        cap = np.sqrt(np.clip(ball_radius_mm**2 - r2, 0.0, None)) - (ball_radius_mm - press.depth_mm)
+        depth = np.clip(cap, 0.0, None)
     sigma_px = sigma_mm / mm_per_px
     if sigma_px > 0:
         depth = gaussian_filter(depth, sigma_px, mode="constant")
     gy, gx = np.gradient(depth, mm_per_px)
     norm = np.sqrt(1.0 + gx * gx + gy * gy)
-    return Normals(-gx / norm, -gy / norm, 1.0 / norm, gx, gy, depth)
+    return Normals(-gx / norm, -gy / norm, 1.0 / norm, gx, gy, depth, mm_per_px)
 
 
 def polynomial_basis(height: int, width: int, order: int) -> np.ndarray:
@@ -118,7 +142,11 @@ class TactileModel:
     gamma
         Camera response exponent.
     sigma_mm
-        Elastomer blur width σ_e, mm.
+        Elastomer blur width σ_e, mm: smooths the surface (its depth and normals).
+    spread_mm
+        Optical spread σ_o, mm: blurs the shading's departure from the flat level (0: none).
+    skirt_mm
+        Sink-in skirt length L, mm (``gel_sink_in``; 0: the rigid cap).
     """
 
     effects: list[str] = field(default_factory=list)
@@ -131,6 +159,18 @@ class TactileModel:
     crosstalk: np.ndarray = field(default_factory=lambda: np.eye(3))
     gamma: float = 1.0
     sigma_mm: float = 0.25
+    spread_mm: float = 0.0
+    skirt_mm: float = 0.0
+
+    def spread(self, values: np.ndarray, nrm: Normals) -> np.ndarray:
+        """``values`` (``H × W`` or ``H × W × C``, departures from the flat level) blurred by
+        the optical spread σ_o (``nearest`` edges); unchanged when σ_o is 0."""
+        if self.spread_mm <= 0:
+            return values
+        if nrm.mm_per_px <= 0:
+            raise ValueError("optical spread needs the normals' pixel size")
+        s = self.spread_mm / nrm.mm_per_px
+        return gaussian_filter(values, (s, s, 0)[: values.ndim], mode="nearest")
 
     def copy(self) -> TactileModel:
         """A deep copy."""
@@ -165,12 +205,12 @@ class TactileModel:
         """``H × W × 3`` shading before crosstalk: the baseline Phong ratio, or the fitted
         Lambertian light per channel plus its lobe."""
         if self.light is None:
-            return phong_ratio(nrm)
-        base = (1.0 + self.light[:, 0] * nrm.nx[..., None] + self.light[:, 1] * nrm.ny[..., None]
+            return 1.0 + self.spread(phong_ratio(nrm) - 1.0, nrm)
+        base = (self.light[:, 0] * nrm.nx[..., None] + self.light[:, 1] * nrm.ny[..., None]
                 + self.light[:, 2] * (nrm.nz[..., None] - 1.0))
         if np.any(self.specular):
             base = base + self.specular * self.lobe(nrm)
-        return base
+        return 1.0 + self.spread(base, nrm)
 
     def lobe(self, nrm: Normals) -> np.ndarray:
         """``H × W × 3`` Phong lobe ``max(0, r·v)^α`` minus its flat value, per channel light."""

@@ -31,6 +31,10 @@ def model_section(model: TactileModel, mm_per_px: float, source: str) -> dict[st
                            "shininess": round(float(model.shininess), 4)}
     if model.light is not None:
         eff["light"] = model.light.round(6).tolist()
+    if model.spread_mm > 0:
+        eff["optical_spread_mm"] = round(float(model.spread_mm), 5)
+    if model.skirt_mm > 0:
+        eff["sink_in_skirt_mm"] = round(float(model.skirt_mm), 5)
     return {"tactile": {"mm_per_px": mm_per_px, "elastomer_sigma_mm": round(model.sigma_mm, 5),
                         "simulation_effects": eff}}
 
@@ -52,7 +56,9 @@ def model_from_section(section: dict[str, Any]) -> TactileModel:
             light=None if "light" not in e else np.asarray(e["light"], np.float64),
             specular=np.asarray(e["specular"], np.float64), shininess=float(e["shininess"]),
             crosstalk=np.asarray(e["crosstalk"], np.float64), gamma=float(e["gamma"]),
-            sigma_mm=float(t["elastomer_sigma_mm"]))
+            sigma_mm=float(t["elastomer_sigma_mm"]),
+            spread_mm=float(e.get("optical_spread_mm", 0.0)),
+            skirt_mm=float(e.get("sink_in_skirt_mm", 0.0)))
     except (KeyError, TypeError, ValueError) as exc:
         raise ThinTactError(f"not a fitted tactile section (tactile.simulation_effects): {exc}") from None
 

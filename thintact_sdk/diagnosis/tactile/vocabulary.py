@@ -10,6 +10,8 @@ of the forward model (:mod:`.model`) that can be switched on and fitted.
 | ``specular_lobe`` | ``shininess``, ``strength`` per channel | a Phong lobe around each channel's light (non-Lambertian gel) |
 | ``colour_crosstalk`` | ``matrix`` 3×3, diagonal 1 | channels see each other's shading (filters, LED spectra) |
 | ``elastomer_blur`` | ``sigma_mm`` | the gel smooths the indenter by a Gaussian of another width than the profile's |
+| ``optical_spread`` | ``sigma_mm`` | light scattered in the gel spreads the shading (not the surface) by a Gaussian |
+| ``gel_sink_in`` | ``skirt_mm`` | the gel sinks in around the contact: a skirt ``∝ K₀(r/L)`` outside the ball's contact circle (a thin layer on glass) |
 | ``camera_gamma`` | ``gamma`` | the camera's response is a power law, not linear |
 
 Not in the vocabulary (flagged as unexplained when they leave structure): shadowing by the
@@ -33,7 +35,7 @@ from thintact_sdk.diagnosis.tactile.fit import (
 from thintact_sdk.diagnosis.tactile.press_model import Normals, Press, TactileModel
 
 VOCABULARY = ("illumination_field", "background_texture", "exposure_drift", "led_directions",
-              "specular_lobe", "colour_crosstalk", "elastomer_blur", "camera_gamma")
+              "specular_lobe", "colour_crosstalk", "elastomer_blur", "optical_spread", "gel_sink_in", "camera_gamma")
 
 
 def _with(model: TactileModel, name: str) -> TactileModel:
@@ -82,7 +84,7 @@ def _scanned_effect(name: str, attr: str, grid: list[float], needs_light: bool =
         def cost(value: float) -> float:
             m = _with(model, name)
             setattr(m, attr, float(value))
-            nrm = all_normals(data, presses, m.sigma_mm) if reshades else normals
+            nrm = all_normals(data, presses, m.sigma_mm, m.skirt_mm) if reshades else normals
             m = fit_linear(m, data, nrm, iterations=3)
             fits[float(value)] = m
             return score(m, data, nrm)[0].bic
@@ -107,6 +109,8 @@ PROPOSERS: dict[str, Callable[..., TactileModel | None]] = {
     "specular_lobe": _scanned_effect("specular_lobe", "shininess", [2.0, 5.0, 12.0, 30.0], needs_light=True),
     "colour_crosstalk": _crosstalk,
     "elastomer_blur": _scanned_effect("elastomer_blur", "sigma_mm", [0.1, 0.3, 0.6, 1.0, 1.5], reshades=True),
+    "optical_spread": _scanned_effect("optical_spread", "spread_mm", [0.1, 0.3, 0.6, 1.0, 1.5]),
+    "gel_sink_in": _scanned_effect("gel_sink_in", "skirt_mm", [0.2, 0.4, 0.8, 1.2, 1.8], reshades=True),
     "camera_gamma": _scanned_effect("camera_gamma", "gamma", [0.3, 0.45, 0.7, 1.0, 1.5]),
 }
 
@@ -144,6 +148,10 @@ def effect_params(name: str, model: TactileModel, mm_per_px: float) -> dict[str,
         return {"matrix": [[r(v) for v in row] for row in model.crosstalk]}
     if name == "elastomer_blur":
         return {"sigma_mm": r(model.sigma_mm)}
+    if name == "optical_spread":
+        return {"sigma_mm": r(model.spread_mm)}
+    if name == "gel_sink_in":
+        return {"skirt_mm": r(model.skirt_mm)}
     if name == "camera_gamma":
         return {"gamma": r(model.gamma)}
     raise KeyError(name)
