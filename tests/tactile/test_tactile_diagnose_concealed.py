@@ -133,3 +133,17 @@ def test_gel_sink_in_is_named_and_its_skirt_recovered() -> None:
     assert "gel_sink_in" in names
     assert abs(d.final.skirt_mm - 0.6) < 0.15
     assert d.report["final"]["chi2_per_dof"] < 1.1
+
+
+def test_effects_option_adds_the_opt_in_effects_and_refuses_unknown_names(tmp_path, capsys) -> None:
+    from thintact_sdk.apps.cli.commands.diagnose_tactile import _effects
+    from thintact_sdk.apps.cli.main import main
+    from thintact_sdk.diagnosis.tactile.press_engine import TactileDiagnosisOptions
+    from thintact_sdk.diagnosis.tactile.vocabulary import DEFAULT_EFFECTS, VOCABULARY
+
+    assert "gel_sink_in" in VOCABULARY and "gel_sink_in" not in TactileDiagnosisOptions().effects
+    assert _effects("+gel_sink_in") == DEFAULT_EFFECTS + ("gel_sink_in",)
+    assert _effects("led_directions,optical_spread") == ("led_directions", "optical_spread")
+    assert main(["diagnose-tactile", str(tmp_path), "--out", str(tmp_path / "o"),
+                 "--effects", "+sinkin"]) == 2
+    assert "sinkin" in capsys.readouterr().err

@@ -47,7 +47,7 @@ from thintact_sdk.diagnosis.tactile.fit import (
 from thintact_sdk.diagnosis.tactile.press_data import estimate_noise, initial_presses
 from thintact_sdk.diagnosis.tactile.press_model import Normals, Press, TactileModel
 from thintact_sdk.diagnosis.tactile.press_residuals import TactileLocation, locate_residual
-from thintact_sdk.diagnosis.tactile.vocabulary import PROPOSERS, effect_params
+from thintact_sdk.diagnosis.tactile.vocabulary import DEFAULT_EFFECTS, PROPOSERS, effect_params
 from thintact_sdk.tactile.learning.domains import RealPresses
 
 
@@ -59,7 +59,7 @@ class TactileDiagnosisOptions:
     min_delta_bic: float = 10.0
     min_excess_share: float = 0.02
     unexplained_chi2: float = 1.5
-    effects: tuple[str, ...] = tuple(PROPOSERS)
+    effects: tuple[str, ...] = DEFAULT_EFFECTS
 
 
 @dataclass

@@ -20,6 +20,19 @@ def _indices(text: str) -> list[int] | str:
         raise argparse.ArgumentTypeError(f"'all', 'even' or press indices: {text!r}") from exc
 
 
+def _effects(text: str) -> tuple[str, ...]:
+    from thintact_sdk.diagnosis.tactile.vocabulary import DEFAULT_EFFECTS, VOCABULARY
+
+    add = text.startswith("+")
+    names = [t.strip() for t in text.lstrip("+").split(",") if t.strip()]
+    unknown = [n for n in names if n not in VOCABULARY]
+    if unknown or not names:
+        raise argparse.ArgumentTypeError(
+            f"unknown effect(s) {', '.join(unknown) or '(none given)'}; the vocabulary: "
+            f"{', '.join(VOCABULARY)}")
+    return tuple(dict.fromkeys((DEFAULT_EFFECTS if add else ()) + tuple(names)))
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("diagnose-tactile",
                        help="name and fit what the tactile simulation misses on real presses",
@@ -36,6 +49,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="presses to use (default all)")
     p.add_argument("--max-effects", type=int_range(0, 8), default=8,
                    help="accept at most K effects (default 8)")
+    p.add_argument("--effects", type=_effects, default=None, metavar="NAME,…|+NAME,…",
+                   help="effects to try (default: the vocabulary but the opt-in gel_sink_in); "
+                   "'+NAME,…' adds to the default")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     add_force_argument(p, "into an existing non-empty --out")
     p.set_defaults(func=run)
@@ -47,6 +63,7 @@ def run(args: argparse.Namespace) -> int:
     from thintact_sdk.diagnosis.tactile.from_pack import diagnose_tactile_pack
     from thintact_sdk.diagnosis.tactile.press_engine import TactileDiagnosisOptions
     from thintact_sdk.diagnosis.tactile.report import write_tactile_outputs
+    from thintact_sdk.diagnosis.tactile.vocabulary import DEFAULT_EFFECTS
     from thintact_sdk.host.progress import stage_reporter
 
     out = claim_output(args.out, "directory", force=args.force, inputs=(args.pack,))
@@ -54,7 +71,8 @@ def run(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     with stage_reporter(args.quiet) as say:  # lines also when stderr is a file or a pipe
         d = diagnose_tactile_pack(args.pack, args.ball_radius_mm, args.mm_per_px, args.presses,
-                                  TactileDiagnosisOptions(max_effects=args.max_effects),
+                                  TactileDiagnosisOptions(max_effects=args.max_effects,
+                                                          effects=args.effects or DEFAULT_EFFECTS),
                                   progress=say, log=con.print)
     rep = d.report
     paths = write_tactile_outputs(d, out)
