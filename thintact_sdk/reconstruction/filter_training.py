@@ -132,17 +132,23 @@ def make_training_data(
         noise of the sensor's variance ``read² + Y / electrons_per_dn`` (DN²) is added to Y.
     """
     rng = np.random.default_rng(seed)
-    ys, yos = [], []
-    for scene in scenes:
+    ys: np.ndarray | None = None
+    yos: np.ndarray | None = None
+    for f, scene in enumerate(scenes):  # written in place: no list of frames beside the stack
         x = scene_for_channels(scene, system_matrices.channels)
         yo = system_matrices.forward_open(x)
         y = yo + system_matrices.forward_coding(x)
         if noise is not None:
             var = signal_variance_dn(y, noise)
             y = y + rng.standard_normal(y.shape) * np.sqrt(var)
-        ys.append(np.moveaxis(y, -1, 0).astype(np.float32))
-        yos.append(np.moveaxis(yo, -1, 0).astype(np.float32))
-    return TrainingData(np.stack(ys), np.stack(yos))
+        if ys is None or yos is None:
+            ys = np.empty((len(scenes), y.shape[-1], *y.shape[:-1]), np.float32)
+            yos = np.empty_like(ys)
+        ys[f] = np.moveaxis(y, -1, 0)
+        yos[f] = np.moveaxis(yo, -1, 0)
+    if ys is None or yos is None:
+        raise InvalidValueError("the joint filter needs at least one training scene")
+    return TrainingData(ys, yos)
 
 
 def _transform(shape: tuple[int, int], low_block: tuple[int, int] | None) -> SeparableDCT:
@@ -176,26 +182,38 @@ def _fit_phi_s(h: np.ndarray, k: np.ndarray, rank: int | None, iters: int = 30) 
 
 def _loss(data: TrainingData, tr: SeparableDCT, phi_f: np.ndarray, phi_s: np.ndarray) -> float:
     err = 0.0
-    for f in range(data.y.shape[0]):
+    norm = 0.0
+    for f in range(data.y.shape[0]):  # frame by frame: no float64 copy of the data set
         g = joint_filter_open(phi_s, phi_f, data.y[f], tr)
         err += float(np.sum((g - data.y_open[f]) ** 2))
-    return err / float(np.sum(data.y_open.astype(np.float64) ** 2))
+        norm += float(np.sum(data.y_open[f].astype(np.float64) ** 2))
+    return err / norm
 
 
 def _closed_form(
     data: TrainingData, tr: SeparableDCT, rank: int | None, rounds: int
 ) -> tuple[np.ndarray, np.ndarray, list[float]]:
-    zy = np.stack([tr.fwd(y) for y in data.y])  # F × C × (block)
-    zz = np.sum(zy.astype(np.float64) ** 2, axis=0)
+    # sums over the frames are taken a frame at a time: no F-frame temporaries beside the
+    # transformed measurements (at the paper's size each would be 0.5-1 GB)
+    first = tr.fwd(data.y[0])
+    zy = np.empty((data.y.shape[0], *first.shape), first.dtype)  # F × C × (block)
+    zy[0] = first
+    for f in range(1, data.y.shape[0]):
+        zy[f] = tr.fwd(data.y[f])
+    zz = np.zeros(zy.shape[1:])
+    for z in zy:
+        zz += z.astype(np.float64) ** 2
     ridge = 1e-9 * float(np.mean(zz)) + 1e-30
     c, r, s = data.y.shape[1:]
     phi_s = np.ones((c, r, s))
     history: list[float] = []
     best: tuple[float, np.ndarray, np.ndarray] | None = None
     for _ in range(rounds):
-        target = np.stack([tr.fwd(yo / np.where(np.abs(phi_s) > 1e-3, phi_s, 1e-3))
-                           for yo in data.y_open])
-        phi_f = np.sum(zy * target, axis=0, dtype=np.float64) / (zz + ridge)
+        safe = np.where(np.abs(phi_s) > 1e-3, phi_s, 1e-3)
+        num = np.zeros(zy.shape[1:])
+        for z, yo in zip(zy, data.y_open, strict=True):
+            num += z * tr.fwd(yo / safe)
+        phi_f = num / (zz + ridge)
         h = np.zeros((c, r, s))
         k = np.zeros((c, r, s))
         for f in range(data.y.shape[0]):
@@ -319,7 +337,7 @@ def _refine_fft(
     """
 
     y_open = data.y_open
-    norm = float(np.sum(y_open.astype(np.float64) ** 2))
+    norm = sum(float(np.sum(yo.astype(np.float64) ** 2)) for yo in y_open)  # frame by frame
     zy = [dct2(y, workers=-1) for y in data.y]  # fixed spectra, float32
     params = [phi_f.astype(np.float32), phi_s.astype(np.float32)]
     lrs = [lr * (float(np.mean(np.abs(p))) + 1e-12) for p in params]
@@ -348,7 +366,9 @@ def _refine_fft(
 
 def auto_low_block(data: TrainingData, energy: float = 0.99999) -> tuple[int, int]:
     """Smallest low-frequency DCT block (same fraction of R and S) holding ``energy`` of ``Yo``."""
-    zo = np.sum(np.stack([dct2(yo) for yo in data.y_open]).astype(np.float64) ** 2, axis=(0, 1))
+    zo = np.zeros(data.y_open.shape[2:])
+    for yo in data.y_open:  # frame by frame: no float64 copy of the data set
+        zo += np.sum(dct2(yo).astype(np.float64) ** 2, axis=0)
     total = float(zo.sum())
     r, s = zo.shape
     cum = np.cumsum(np.cumsum(zo, axis=0), axis=1)
