@@ -366,11 +366,11 @@ def _refine_fft(
 
 def auto_low_block(data: TrainingData, energy: float = 0.99999) -> tuple[int, int]:
     """Smallest low-frequency DCT block (same fraction of R and S) holding ``energy`` of ``Yo``."""
-    zo = np.zeros(data.y_open.shape[2:])
+    r, s = (int(v) for v in data.y_open.shape[2:])
+    zo = np.zeros((r, s))
     for yo in data.y_open:  # frame by frame: no float64 copy of the data set
         zo += np.sum(dct2(yo).astype(np.float64) ** 2, axis=0)
     total = float(zo.sum())
-    r, s = zo.shape
     cum = np.cumsum(np.cumsum(zo, axis=0), axis=1)
     for frac in np.linspace(0.02, 1.0, 50):
         kr, ks = max(1, int(np.ceil(frac * r))), max(1, int(np.ceil(frac * s)))
