@@ -77,7 +77,7 @@ def test_a_crash_after_the_solve_resumes_without_recomputing_it(tmp_path, monkey
     stages = {s["stage"]: s for s in json.loads((tmp_path / "cal" / "calibration.json").read_text())["metrics"]["stages"]}
     assert stages["slit frames and solve"].get("resumed") and stages["joint filter"].get("resumed")
     assert all(s["seconds"] >= 0 and s["peak_rss_mib"] > 0 for s in stages.values())
-    assert any(line.startswith("[4/") and "left" in line for line in lines)  # estimated from timed stages
+    assert any(line.startswith("[") and "left" in line for line in lines)  # estimated from timed stages
     np.testing.assert_allclose(again.bundle.system_matrices.Po, whole.bundle.system_matrices.Po)
     np.testing.assert_allclose(again.bundle.filter.phi_f, whole.bundle.filter.phi_f)  # type: ignore[union-attr]
     for v0, v1 in zip(whole.validation, again.validation, strict=True):

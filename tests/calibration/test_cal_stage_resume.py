@@ -49,12 +49,12 @@ def test_a_crash_in_the_prediction_resumes_without_recomputing_health_or_the_cho
                          [make_scene("gelsight", 24, 32, 2), make_scene("smooth_color", 24, 32)])
     rec = Recording(tmp_path / "rec")
     whole = calibrate_recording(rec, tmp_path / "whole", opts, report=False)
-    real_predict = pipeline.predict_validation
+    real_predict = pipeline.predict_from_design
 
     def crash(*a, **k):  # type: ignore[no-untyped-def]
         raise RuntimeError("killed in the prediction stage")
 
-    monkeypatch.setattr(pipeline, "predict_validation", crash)
+    monkeypatch.setattr(pipeline, "predict_from_design", crash)
     with pytest.raises(RuntimeError):
         calibrate_recording(rec, tmp_path / "cal", opts, report=False)
     assert (tmp_path / "cal" / "stages" / "health.npz").is_file()
@@ -63,7 +63,7 @@ def test_a_crash_in_the_prediction_resumes_without_recomputing_health_or_the_cho
     def never(*a, **k):  # type: ignore[no-untyped-def]
         raise AssertionError("recomputed a finished stage")
 
-    monkeypatch.setattr(pipeline, "predict_validation", real_predict)
+    monkeypatch.setattr(pipeline, "predict_from_design", real_predict)
     for name in ("collect_slits", "solve_matrices", "build_bundle", "assess", "select"):
         monkeypatch.setattr(pipeline, name, never)
     again = calibrate_recording(rec, tmp_path / "cal", opts, report=False)
@@ -92,3 +92,41 @@ def test_the_health_forward_over_lit_rows_or_columns_is_the_forward() -> None:
     for x in (row, col, dense, np.zeros((n, m, c))):
         want = sm.forward(x)
         np.testing.assert_allclose(_forward_lit(sm, x), want, rtol=0, atol=1e-12 * max(1.0, np.abs(want).max()))
+
+
+def test_health_and_selection_run_side_by_side_and_the_noise_first_changes_nothing(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """The calibration's two lanes: health (its noise measured first) beside the filter and τ
+    selection. Health from the noise measured first equals health in one go, and the stages
+    of the two lanes overlap in time."""
+    from cal_testkit import synthetic_matrices, synthetic_profile, write_slit_recording
+
+    from thintact_sdk.calibration.collect import collect_slits
+    from thintact_sdk.calibration.health import assess, measure_noise
+    from thintact_sdk.calibration.pipeline import (
+        CalibrationOptions,
+        calibrate_recording,
+        solve_matrices,
+    )
+    from thintact_sdk.formats.recording import Recording
+    from thintact_sdk.simulation.scenes import make_scene
+
+    profile = synthetic_profile()
+    write_slit_recording(tmp_path / "rec", profile, synthetic_matrices(), np.random.default_rng(1),
+                         [make_scene("gelsight", 24, 32, 2), make_scene("smooth_color", 24, 32)])
+    rec = Recording(tmp_path / "rec")
+    collection = collect_slits(rec)
+    sm, _ = solve_matrices(collection, CalibrationOptions(), rec.profile)
+    whole = assess(rec, collection, sm, 1)
+    noise = measure_noise(rec, collection, sm, 1)
+    split = assess(rec, collection, sm, 1, noise=noise)
+    assert noise == whole.noise
+    np.testing.assert_array_equal(split.chi2_map, whole.chi2_map)
+    assert split.slit_chi2 == whole.slit_chi2 and split.defects == whole.defects
+
+    out = calibrate_recording(rec, tmp_path / "cal", CalibrationOptions(filter_steps=0, filter_scenes=8),
+                              report=False)
+    stages = {s["stage"]: s for s in out.bundle.meta["metrics"]["stages"]}
+    health, filt = stages["health"], stages["joint filter"]
+    assert health["start_s"] < filt["start_s"] + filt["seconds"]
+    assert filt["start_s"] < health["start_s"] + health["seconds"]
+    assert {"prediction design", "prediction"} <= set(stages)

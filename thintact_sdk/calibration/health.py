@@ -431,8 +431,23 @@ def _noise_samples(recording: Recording, indices: list[int], collection: SlitCol
     return preds[:n], r2s[:n]
 
 
+def measure_noise(recording: Recording, collection: SlitCollection, sm: SystemMatrices,
+                  frames_averaged: int) -> NoiseEstimate:
+    """The unit's noise from its slit frames: :func:`assess`'s first pass alone (what the
+    τ selection needs), so the rest of the health check can run beside the selection."""
+    with blas_threads(1):
+        indices, _horizontal, dark_frames = _slit_indices(recording)
+        if not indices:
+            raise CalibrationError(f"{recording.root}: no slit frame to judge the unit's health by")
+        saturation = recording.profile.noise.saturation_dn - 1.0
+        pred_all, r2_all = _noise_samples(recording, indices, collection, sm, saturation)
+        from_frames = "dark frame" in collection.dark_source
+        return _fit_noise(pred_all, r2_all, recording.profile.noise, max(1, int(frames_averaged)),
+                          dark_frames if from_frames else 0)
+
+
 def assess(recording: Recording, collection: SlitCollection, sm: SystemMatrices,
-           frames_averaged: int) -> HealthReport:
+           frames_averaged: int, noise: NoiseEstimate | None = None) -> HealthReport:
     """Residuals of every slit frame against the calibrated model; noise; defects.
 
     The slit frames are streamed from the recording, never held together: pass 1 gathers what
@@ -451,17 +466,19 @@ def assess(recording: Recording, collection: SlitCollection, sm: SystemMatrices,
         The calibrated matrices (DN above dark per display unit at the reference exposure).
     frames_averaged
         Frames averaged per pattern (the noise of the measurements is divided by it).
+    noise
+        The noise :func:`measure_noise` measured on the same frames (its pass is then skipped).
 
     OpenBLAS is held at one thread throughout: the products are small (one frame's
     prediction is ``R × N`` by ``N × M`` by ``M × S``) and on a busy host two threads only
     spin-wait for each other (many times slower).
     """
     with blas_threads(1):
-        return _assess(recording, collection, sm, frames_averaged)
+        return _assess(recording, collection, sm, frames_averaged, noise)
 
 
 def _assess(recording: Recording, collection: SlitCollection, sm: SystemMatrices,
-            frames_averaged: int) -> HealthReport:
+            frames_averaged: int, noise: NoiseEstimate | None) -> HealthReport:
     profile = recording.profile
     nz = profile.noise
     k = max(1, int(frames_averaged))
@@ -471,10 +488,11 @@ def _assess(recording: Recording, collection: SlitCollection, sm: SystemMatrices
     indices, horizontal, dark_frames = _slit_indices(recording)
     if not indices:
         raise CalibrationError(f"{recording.root}: no slit frame to judge the unit's health by")
-    pred_all, r2_all = _noise_samples(recording, indices, collection, sm, saturation)
-    from_frames = "dark frame" in collection.dark_source
-    noise = _fit_noise(pred_all, r2_all, nz, k, dark_frames if from_frames else 0)
-    del pred_all, r2_all
+    if noise is None:
+        pred_all, r2_all = _noise_samples(recording, indices, collection, sm, saturation)
+        from_frames = "dark frame" in collection.dark_source
+        noise = _fit_noise(pred_all, r2_all, nz, k, dark_frames if from_frames else 0)
+        del pred_all, r2_all
     chi2_sum = np.zeros(shape)
     count = np.zeros(shape)
     slit_chi2: dict[str, float] = {}

@@ -6,6 +6,7 @@ Used by both ``thintact calibrate --from-recording`` and the wizard (which recor
 from __future__ import annotations
 
 from collections.abc import Callable
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -14,10 +15,15 @@ import numpy as np
 
 from thintact_sdk.calibration.collect import Progress, SlitCollection, collect_slits, signal_of
 from thintact_sdk.calibration.gauge import operator_error, term_errors
-from thintact_sdk.calibration.health import HealthReport, NoiseEstimate, assess
+from thintact_sdk.calibration.health import HealthReport, NoiseEstimate, assess, measure_noise
 from thintact_sdk.calibration.lowrank import DEFAULT_RANK
 from thintact_sdk.calibration.outcome import CalibrationOutcome
-from thintact_sdk.calibration.prediction import Prediction, predict_validation
+from thintact_sdk.calibration.prediction import (
+    Prediction,
+    PredictionDesign,
+    design_for_prediction,
+    predict_from_design,
+)
 from thintact_sdk.calibration.registration import RegistrationResult
 from thintact_sdk.calibration.selection import TauSelection, select, validation_frames
 from thintact_sdk.calibration.solver import ChannelMatrices, Method, SolveReport, solve_channel
@@ -35,6 +41,7 @@ from thintact_sdk.calibration.verdict import judge
 from thintact_sdk.errors import CalibrationError
 from thintact_sdk.formats.profiles import CalibrationLimits, Profile
 from thintact_sdk.formats.recording import Recording
+from thintact_sdk.host.blas import blas_threads
 from thintact_sdk.reconstruction.bundle import CalibrationBundle
 from thintact_sdk.reconstruction.t2s import SystemMatrices
 
@@ -292,9 +299,9 @@ def calibrate_recording(
     checkpoints = Checkpoints(out / STAGE_DIR, fingerprint(
         Path(recording.root), profile.content_hash(),
         {k: v for k, v in opts.__dict__.items()} | {"frames_averaged_resolved": _frames_averaged(recording, opts)}))
-    stage_names = ["slit frames and solve", "joint filter", "health", "decoder and tau"]
+    stage_names = ["slit frames and solve", "health", "joint filter", "decoder and tau"]
     if opts.predict:
-        stage_names.append("prediction")
+        stage_names += ["prediction design", "prediction"]
     stage_names.append("bundle and report")
     log = StageLog(stage_names, status)
     k = _frames_averaged(recording, opts)
@@ -309,34 +316,66 @@ def calibrate_recording(
                                        frame_gains=opts.frame_gains)
             sm, reports = solve_matrices(collection, opts, profile)
             checkpoints.save_solve(collection, sm, reports)
-    with log.stage("joint filter", "training the joint filter") as st:
-        trained = checkpoints.load_filter()
-        if trained is not None:
-            jf, tau_table, tau0 = trained
-            bundle = CalibrationBundle.create(profile, sm, jf, tau=tau0, source=source,
-                                              exposure_us=collection.exposure_us)
-            st["resumed"] = True
-        else:
-            bundle, tau_table = build_bundle(profile, sm, opts, k, source, collection.exposure_us)
-            checkpoints.save_filter(bundle.filter, tau_table, float(bundle.meta["tau"]))
-    with log.stage("health", "checking the unit's health (slit residuals, noise, defects)") as st:
-        health = checkpoints.load_object("health")
-        if isinstance(health, HealthReport):
-            st["resumed"] = True
-        else:
-            health = assess(recording, collection, sm, k)
-            checkpoints.save_object("health", health)
-    with log.stage("decoder and tau", "choosing the decoder and tau on the validation frames") as st:
-        frames = validation_frames(recording, collection, profile.noise.saturation_dn)
-        selection = checkpoints.load_object("selection")
-        if isinstance(selection, TauSelection):
-            st["resumed"] = True
-        else:
-            selection = select(profile, bundle, frames, health.noise, decoder=opts.decoder, tau=opts.tau,
-                               simulated=_simulated_curve(tau_table))
-            checkpoints.save_object("selection", selection)
-        selection.write_taus(bundle.meta)
-        bundle.meta["decoder"] = selection.decoder
+    frames = validation_frames(recording, collection, profile.noise.saturation_dn)
+    want_prediction = bool(opts.predict and frames.labels)
+    noise_ready: Future[NoiseEstimate] = Future()
+
+    def health_lane() -> tuple[HealthReport, PredictionDesign | None]:
+        """Health (its noise first, for the τ selection), then the prediction's design part."""
+        try:
+            with log.stage("health", "checking the unit's health (slit residuals, noise, defects)") as st:
+                health = checkpoints.load_object("health")
+                if isinstance(health, HealthReport):
+                    st["resumed"] = True
+                    noise_ready.set_result(health.noise)
+                else:
+                    noise = measure_noise(recording, collection, sm, k)
+                    noise_ready.set_result(noise)
+                    health = assess(recording, collection, sm, k, noise=noise)
+                    checkpoints.save_object("health", health)
+        except BaseException as exc:
+            if not noise_ready.done():
+                noise_ready.set_exception(exc)
+            raise
+        prepared = None
+        if want_prediction and checkpoints.load_json("prediction") is None:
+            with log.stage("prediction design", "simulating the design's own calibration "
+                           "(for the prediction)"):
+                prepared = design_for_prediction(profile, sm, k, method=opts.method,
+                                                 max_iter=opts.max_iter, tol=opts.tol, rank=opts.rank)
+        return health, prepared
+
+    def selection_lane() -> tuple[CalibrationBundle, dict[str, float], TauSelection]:
+        """The joint filter, then the decoder and τ (once the noise is measured)."""
+        with log.stage("joint filter", "training the joint filter") as st:
+            trained = checkpoints.load_filter()
+            if trained is not None:
+                jf, tau_table, tau0 = trained
+                bundle = CalibrationBundle.create(profile, sm, jf, tau=tau0, source=source,
+                                                  exposure_us=collection.exposure_us)
+                st["resumed"] = True
+            else:
+                bundle, tau_table = build_bundle(profile, sm, opts, k, source, collection.exposure_us)
+                checkpoints.save_filter(bundle.filter, tau_table, float(bundle.meta["tau"]))
+        with log.stage("decoder and tau", "choosing the decoder and tau on the validation frames") as st:
+            selection = checkpoints.load_object("selection")
+            if isinstance(selection, TauSelection):
+                st["resumed"] = True
+            else:
+                selection = select(profile, bundle, frames, noise_ready.result(), decoder=opts.decoder,
+                                   tau=opts.tau, simulated=_simulated_curve(tau_table))
+                checkpoints.save_object("selection", selection)
+        return bundle, tau_table, selection
+
+    # two lanes on two cores, each with one BLAS thread: the health check (and the prediction's
+    # simulated design) beside the filter and the τ selection
+    with blas_threads(1), ThreadPoolExecutor(max_workers=2, thread_name_prefix="calibrate") as pool:
+        lane_b = pool.submit(health_lane)
+        lane_a = pool.submit(selection_lane)
+        bundle, tau_table, selection = lane_a.result()
+        health, prepared = lane_b.result()
+    selection.write_taus(bundle.meta)
+    bundle.meta["decoder"] = selection.decoder
     val = selection.validation
     prediction = None
     if opts.predict:
@@ -348,10 +387,13 @@ def calibrate_recording(
                                             float(stored["tau"]), dict(stored["notes"]))
                     st["resumed"] = True
                 else:
-                    prediction = predict_validation(
-                        profile, sm, frames.labels, frames.truths, selection.decoder, k,
-                        filter_steps=opts.filter_steps, filter_scenes=opts.filter_scenes,
-                        method=opts.method, max_iter=opts.max_iter, tol=opts.tol, rank=opts.rank)
+                    if prepared is None:
+                        prepared = design_for_prediction(profile, sm, k, method=opts.method,
+                                                         max_iter=opts.max_iter, tol=opts.tol,
+                                                         rank=opts.rank)
+                    prediction = predict_from_design(
+                        profile, prepared, frames.labels, frames.truths, selection.decoder,
+                        filter_steps=opts.filter_steps, filter_scenes=opts.filter_scenes)
                     checkpoints.save_json("prediction", {
                         "decoder": selection.decoder, "psnr_db": prediction.psnr_db,
                         "gains_dn_per_unit": prediction.gains_dn_per_unit, "tau": prediction.tau,

@@ -198,6 +198,83 @@ def simulated_calibration(profile: Profile, gains: np.ndarray, noise: NoiseSpec,
                           {"source": "simulated calibration of the design"})
 
 
+@dataclass
+class PredictionDesign:
+    """What a prediction needs before the decoder is known: the design's own simulated
+    calibration at the unit's signal level (:func:`design_for_prediction`), the dark capture
+    its validation frames are taken against and the random stream it continues with."""
+
+    sim: Simulator
+    gains: np.ndarray
+    noise: NoiseSpec
+    dark_dn: np.ndarray
+    design: SystemMatrices
+    rng: np.random.Generator
+    seed: int
+
+
+def design_for_prediction(
+    profile: Profile,
+    calibrated: SystemMatrices,
+    frames_averaged: int,
+    *,
+    method: Method = "lsq",
+    max_iter: int = 50,
+    tol: float = 1e-7,
+    rank: int = DEFAULT_RANK,
+    seed: int = 0,
+) -> PredictionDesign:
+    """The decoder-independent part of :func:`predict_validation` (the bulk of its time): the
+    design's slit scan simulated and solved at the unit's signal level. The calibration runs
+    it beside the health check and finishes with :func:`predict_from_design` once the decoder
+    is chosen; the two give exactly what :func:`predict_validation` gives."""
+    sim = Simulator(profile)
+    gains = design_gains(profile, calibrated, sim)
+    noise = averaged_noise(profile.noise, frames_averaged)
+    rng = np.random.default_rng(seed)
+    c = calibrated.channels
+    dark_dn = signal_to_dn(np.zeros((*calibrated.sensor_shape, c)), noise, rng)  # one dark capture
+    design = simulated_calibration(profile, gains, noise, method, max_iter, tol, rank, rng, dark_dn)
+    return PredictionDesign(sim, gains, noise, dark_dn, design, rng, seed)
+
+
+def predict_from_design(
+    profile: Profile,
+    prepared: PredictionDesign,
+    labels: list[str],
+    scenes: list[np.ndarray],
+    decoder: str,
+    *,
+    filter_steps: int = 0,
+    filter_scenes: int = 32,
+) -> Prediction:
+    """Finish a prediction for ``decoder`` (:func:`predict_validation`'s second part)."""
+    design, noise, rng, gains = prepared.design, prepared.noise, prepared.rng, prepared.gains
+    c = design.channels
+    n, m = design.scene_shape
+    jf = None
+    if needs_joint_filter(decoder):
+        jf = train_joint_filter(design, training_scenes(n, m, count=filter_scenes, seed=0),
+                                noise=noise, steps=filter_steps, seed=0)
+    bundle = CalibrationBundle.create(profile, design, jf, tau=1.0, source="simulator")
+    dec = make_decoder(profile, bundle, decoder)
+    signals = []
+    for x in scenes:
+        expected = prepared.sim.predict_signal_dn(scene_for_channels(x, c).astype(np.float64), gains)
+        raw = signal_to_dn(expected, noise, rng)
+        signals.append((raw - prepared.dark_dn).astype(np.float32))
+    grid = tau_grid(design)
+    cv = cross_validate(dec, decoder, signals, scenes, labels, grid)
+    if cv is not None:
+        return Prediction(dict(cv.held_out_psnr), gains.tolist(), cv.curve.tau, {"fold_tau": cv.fold_tau})
+    best: dict[str, float] = {}  # one scene: the best τ in hindsight is the design's potential
+    for tau in grid:
+        dec.set_tau(float(tau))  # type: ignore[attr-defined]
+        for label, y, x in zip(labels, signals, scenes, strict=True):
+            best[label] = max(best.get(label, -np.inf), score(label, dec.decode(y), x).psnr_db)
+    return Prediction(best, gains.tolist(), float("nan"), {"tau": "best in hindsight"})
+
+
 def predict_validation(
     profile: Profile,
     calibrated: SystemMatrices,
@@ -227,32 +304,7 @@ def predict_validation(
     frames_averaged, filter_steps, filter_scenes, method, max_iter, tol, rank
         As for the unit's own calibration.
     """
-    sim = Simulator(profile)
-    gains = design_gains(profile, calibrated, sim)
-    noise = averaged_noise(profile.noise, frames_averaged)
-    rng = np.random.default_rng(seed)
-    c = calibrated.channels
-    n, m = calibrated.scene_shape
-    dark_dn = signal_to_dn(np.zeros((*calibrated.sensor_shape, c)), noise, rng)  # one dark capture
-    design = simulated_calibration(profile, gains, noise, method, max_iter, tol, rank, rng, dark_dn)
-    jf = None
-    if needs_joint_filter(decoder):
-        jf = train_joint_filter(design, training_scenes(n, m, count=filter_scenes, seed=0),
-                                noise=noise, steps=filter_steps, seed=0)
-    bundle = CalibrationBundle.create(profile, design, jf, tau=1.0, source="simulator")
-    dec = make_decoder(profile, bundle, decoder)
-    signals = []
-    for x in scenes:
-        expected = sim.predict_signal_dn(scene_for_channels(x, c).astype(np.float64), gains)
-        raw = signal_to_dn(expected, noise, rng)
-        signals.append((raw - dark_dn).astype(np.float32))
-    grid = tau_grid(design)
-    cv = cross_validate(dec, decoder, signals, scenes, labels, grid)
-    if cv is not None:
-        return Prediction(dict(cv.held_out_psnr), gains.tolist(), cv.curve.tau, {"fold_tau": cv.fold_tau})
-    best: dict[str, float] = {}  # one scene: the best τ in hindsight is the design's potential
-    for tau in grid:
-        dec.set_tau(float(tau))  # type: ignore[attr-defined]
-        for label, y, x in zip(labels, signals, scenes, strict=True):
-            best[label] = max(best.get(label, -np.inf), score(label, dec.decode(y), x).psnr_db)
-    return Prediction(best, gains.tolist(), float("nan"), {"tau": "best in hindsight"})
+    prepared = design_for_prediction(profile, calibrated, frames_averaged, method=method,
+                                     max_iter=max_iter, tol=tol, rank=rank, seed=seed)
+    return predict_from_design(profile, prepared, labels, scenes, decoder,
+                               filter_steps=filter_steps, filter_scenes=filter_scenes)

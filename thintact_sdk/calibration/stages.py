@@ -51,17 +51,19 @@ STAGE_DIR = "stages"
 CHECKPOINT_FORMAT = "thintact-calibration-stage/1"
 
 STAGE_WEIGHTS: dict[str, float] = {
-    "slit frames and solve": 0.2,
-    "joint filter": 1.0,
-    "health": 0.5,
-    "decoder and tau": 1.5,
-    "prediction": 0.5,
-    "bundle and report": 0.1,
+    "slit frames and solve": 0.5,
+    "health": 0.8,
+    "joint filter": 0.1,
+    "decoder and tau": 1.0,
+    "prediction design": 0.8,
+    "prediction": 0.2,
+    "bundle and report": 0.05,
 }
 """Relative work of each stage, for the estimate of what is left: the shares of the stages'
-wall time in ``tools/bench_calibration_paper.py``'s largest run (docs/calibration.md, section
-"Paper-size calibration time"), rounded; the shares move with the sensor and scene size, so
-the estimate is a guide, refined as each stage finishes."""
+wall time in ``tools/bench_calibration_paper.py``'s paper-size run (docs/calibration.md,
+section "Paper-size calibration time"), rounded; the shares move with the sensor and scene
+size, and health with the prediction's design run beside the filter and τ selection, so the
+estimate is a guide, refined as each stage finishes."""
 
 
 CHECKPOINT_CLASSES: frozenset[str] = frozenset({
@@ -180,8 +182,8 @@ class StageLog:
             left = self.estimate_left_s(k)
             est = "" if left is None else f", about {left:.0f} s left"
             self.status(f"[{k + 1}/{len(self.stages)}] {detail or name} ({so_far:.0f} s so far{est})")
-        entry: dict[str, Any] = {"stage": name}
         t0 = time.monotonic()
+        entry: dict[str, Any] = {"stage": name, "start_s": round(t0 - self.start, 3)}
         yield entry
         entry["seconds"] = round(time.monotonic() - t0, 3)
         entry["peak_rss_mib"] = round(peak_rss_mib(), 1)

@@ -41,6 +41,7 @@ import math
 import mmap
 import os
 import tempfile
+import threading
 from collections import OrderedDict
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
@@ -312,6 +313,7 @@ class Recording:
         self._open_maps: OrderedDict[tuple[str, int], np.ndarray] = OrderedDict()
         self._held_bytes = 0
         self._spill: tempfile.TemporaryDirectory[str] | None = None
+        self._lock = threading.RLock()
 
     def _inside(self, rel: str, what: str) -> Path:
         """``root / rel`` after checking that it stays inside the recording directory."""
@@ -392,14 +394,16 @@ class Recording:
     def _frame_array(self, key: tuple[str, int],
                      read: Callable[[int], tuple[np.ndarray, Path] | None]) -> np.ndarray | None:
         """Frame ``key``'s kept array, read (``read(index)``: the checked array and its file)
-        on first use; see the class docstring."""
-        if key not in self._kept:
-            got = read(key[1])
-            self._kept[key] = None if got is None else self._keep(key, *got)
-        kept = self._kept[key]
-        if isinstance(kept, _Mapped):
-            return self._mapping(key, kept)
-        return kept
+        on first use; see the class docstring. Thread-safe: the calibration's stages read one
+        recording from two threads."""
+        with self._lock:
+            if key not in self._kept:
+                got = read(key[1])
+                self._kept[key] = None if got is None else self._keep(key, *got)
+            kept = self._kept[key]
+            if isinstance(kept, _Mapped):
+                return self._mapping(key, kept)
+            return kept
 
     def _keep(self, key: tuple[str, int], arr: np.ndarray, path: Path) -> np.ndarray | _Mapped:
         """``arr`` (read from ``path``) as the Recording keeps it: held, or mapped."""
