@@ -130,3 +130,41 @@ def test_health_and_selection_run_side_by_side_and_the_noise_first_changes_nothi
     assert health["start_s"] < filt["start_s"] + filt["seconds"]
     assert filt["start_s"] < health["start_s"] + health["seconds"]
     assert {"prediction design", "prediction"} <= set(stages)
+
+
+def test_slits_compressed_as_they_arrive_equal_the_collection_of_the_finished_recording(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """The wizard's streaming collection (:class:`SlitCompressor`): frames taken as the
+    recording grows give exactly what :func:`collect_slits` gives on the finished recording;
+    a recording that breaks what streaming assumes is collected again."""
+    from cal_testkit import synthetic_matrices, synthetic_profile, write_slit_recording
+
+    from thintact_sdk.calibration.collect import SlitCompressor, collect_slits
+    from thintact_sdk.calibration.pipeline import CalibrationOptions, solve_matrices
+    from thintact_sdk.formats.recording import Recording
+    from thintact_sdk.simulation.scenes import make_scene
+
+    profile = synthetic_profile()
+    write_slit_recording(tmp_path / "rec", profile, synthetic_matrices(), np.random.default_rng(2),
+                         [make_scene("gelsight", 24, 32, 2)])
+    full = Recording(tmp_path / "rec")
+    streamed = SlitCompressor(full.profile)
+    for i in range(len(full)):  # a fresh view per frame, as the wizard's worker opens them
+        streamed.add(Recording(tmp_path / "rec"), i)
+    assert streamed.broken is None
+    got = streamed.finish(full)
+    want = collect_slits(full)
+    assert got.validation == want.validation and got.slit_frames == want.slit_frames
+    np.testing.assert_array_equal(got.dark_dn, want.dark_dn)
+    a, _ = solve_matrices(got, CalibrationOptions(), full.profile)
+    b, _ = solve_matrices(want, CalibrationOptions(), full.profile)
+    for name in ("Po", "Qo", "Pc", "Qc"):
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+    # a slit before the dark frame breaks the streaming assumption: collected again
+    late = SlitCompressor(full.profile)
+    slit = next(i for i in range(len(full)) if i not in want.validation and full.scene(i).any())
+    late.add(full, slit)
+    for i in range(len(full)):
+        late.add(full, i)
+    assert late.broken is not None
+    again = late.finish(full)
+    np.testing.assert_array_equal(again.dark_dn, want.dark_dn)

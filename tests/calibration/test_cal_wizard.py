@@ -102,3 +102,32 @@ def test_resume_refuses_a_changed_profile(tmp_path: Path) -> None:
     disp = FakeDisplay()
     with pytest.raises(CalibrationError, match="different profile"):
         run_wizard(other, tmp_path / "c", FakeCamera(other, synthetic_matrices(), disp), disp, SETTINGS, FAST)
+
+
+def test_pipelined_wizard_solves_during_the_capture_and_gives_the_same_unit(tmp_path: Path) -> None:
+    """The capture worker compresses and solves the slits while the wizard captures and
+    simulates the prediction's design from the white frame: the bundle is the one the
+    wizard makes without it (matrices, filter, validation), the prediction within 0.05 dB,
+    and the calibration records the time from the last pattern to the bundle."""
+    prof = synthetic_profile()
+    sm = synthetic_matrices(gains_dn=(30.0, 40.0, 25.0))
+    opts = CalibrationOptions(filter_steps=0, filter_scenes=8, predict=True)
+    runs = {}
+    for pipelined in (True, False):
+        disp = FakeDisplay()
+        runs[pipelined] = run_wizard(prof, tmp_path / str(pipelined), FakeCamera(prof, sm, disp, seed=1),
+                                     disp, SETTINGS, opts, pipelined=pipelined)
+    fast, slow = runs[True], runs[False]
+    m = fast.bundle.meta["metrics"]
+    assert m["pipelined"]["solve"] and m["pipelined"]["prediction_design"], m["pipelined"]
+    assert m["after_last_pattern_s"] > 0 and "after_last_pattern_s" in slow.bundle.meta["metrics"]
+    stages = {s["stage"]: s for s in m["stages"]}
+    assert "compress" in stages["slit frames and solve"]["pipelined"]
+    assert "prediction design" not in stages  # done during the capture
+    for name in ("Po", "Qo", "Pc", "Qc"):
+        np.testing.assert_array_equal(getattr(fast.bundle.system_matrices, name),
+                                      getattr(slow.bundle.system_matrices, name))
+    assert [v.psnr_db for v in fast.validation] == [v.psnr_db for v in slow.validation]
+    assert fast.prediction is not None and slow.prediction is not None
+    for label, db in slow.prediction.psnr_db.items():
+        assert abs(fast.prediction.psnr_db[label] - db) < 0.05

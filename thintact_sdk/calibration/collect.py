@@ -33,6 +33,7 @@ from thintact_sdk.calibration.sumrule import (
     unit_slit_frames,
 )
 from thintact_sdk.errors import CalibrationError, InvalidValueError
+from thintact_sdk.formats.profiles import Profile
 from thintact_sdk.formats.recording import Recording
 
 Progress = Callable[[int, int, str], None]
@@ -204,57 +205,153 @@ def collect_slits(
     if not dark_frames and white is not None and same_exposure:
         dark_dn = dark_from_white(recording, white, complete)
         dark_source = "measured from the white frame and the slit sums (no dark frame)"
-    saturation = prof.noise.saturation_dn - 1.0
-    h: list[tuple[list[int], list[np.ndarray], list[LowRankImage]]] = [([], [], []) for _ in range(n_ch)]
-    v: list[tuple[list[int], list[np.ndarray], list[LowRankImage]]] = [([], [], []) for _ in range(n_ch)]
-    out = SlitCollection([], dark_dn, dark_source, reference, validation)
+    acc = _Accumulator(prof, rank, dark_dn, dark_source, reference, validation)
     total = len(roles)
     for done, (i, r) in enumerate(sorted(roles.items()), start=1):
+        acc.compress_frame(recording, i, r)
+        if progress is not None:
+            progress(done, total, recording.frames[i].label or recording.frames[i].measurement)
+    out = acc.collection(frame_gains)
+    if frame_gains != "off" and white is not None:
+        _white_gains(recording, out, white, h_set is not None, v_set is not None, frame_gains)
+    return out
+
+
+class _Accumulator:
+    """The compressed slits of one collection, frame by frame (shared by
+    :func:`collect_slits` and :class:`SlitCompressor`)."""
+
+    def __init__(self, prof: Profile, rank: int, dark_dn: np.ndarray, dark_source: str,
+                 reference: float | None, validation: list[int]) -> None:
+        self.prof, self.rank, self.dark_dn, self.reference = prof, rank, dark_dn, reference
+        self.n_ch = len(prof.sensor.channels)
+        self.saturation = prof.noise.saturation_dn - 1.0
+        self.h: list[tuple[list[int], list[np.ndarray], list[LowRankImage]]] = [
+            ([], [], []) for _ in range(self.n_ch)]
+        self.v: list[tuple[list[int], list[np.ndarray], list[LowRankImage]]] = [
+            ([], [], []) for _ in range(self.n_ch)]
+        self.out = SlitCollection([], dark_dn, dark_source, reference, validation)
+        self.frames = 0
+
+    def compress_frame(self, recording: Recording, i: int, r: list[ChannelRole]) -> None:
+        out = self.out
         raw = np.asarray(recording.measurement(i))
-        sat = float(np.mean(raw >= saturation))
+        sat = float(np.mean(raw >= self.saturation))
         recorded = recording.frames[i].extra.get("saturated_fraction")
         if isinstance(recorded, int | float):  # the wizard's worst single frame of the average
             sat = max(sat, float(recorded))
         if sat > 0:
             out.saturated[i] = sat
-        signal, scale = signal_of(recording, i, dark_dn, reference)
+        signal, scale = signal_of(recording, i, self.dark_dn, self.reference)
         if scale != 1.0:
             out.frame_scale[i] = scale
-        for c in range(min(n_ch, len(r))):
+        for c in range(min(self.n_ch, len(r))):
             role = r[c]
             if role.kind in ("hslit", "vslit") and role.profile is not None:
-                _check_alive(raw, c, i, recording, saturation)
+                _check_alive(raw, c, i, recording, self.saturation)
             if role.kind == "hslit" and role.profile is not None:
-                target = h[c]
-                image = compress(signal[..., c], rank, seed=i)
+                target = self.h[c]
+                image = compress(signal[..., c], self.rank, seed=i)
             elif role.kind == "vslit" and role.profile is not None:
-                target = v[c]
-                image = compress(signal[..., c].T, rank, seed=i)
+                target = self.v[c]
+                image = compress(signal[..., c].T, self.rank, seed=i)
             else:
                 continue
             target[0].append(role.index)
             target[1].append(role.profile)
             target[2].append(image)
-        if progress is not None:
-            progress(done, total, recording.frames[i].label or recording.frames[i].measurement)
-    out.slit_frames = total
-    if frame_gains not in ("auto", "on", "off"):
-        raise InvalidValueError(f"frame_gains must be auto, on or off, got {frame_gains!r}")
-    for c in range(n_ch):
-        if not h[c][0] or not v[c][0]:
-            raise CalibrationError(
-                f"channel {prof.sensor.channels[c]}: the recording needs both horizontal and "
-                f"vertical slits (found {len(h[c][0])} row and {len(v[c][0])} column slits)"
+        self.frames += 1
+
+    def collection(self, frame_gains: str) -> SlitCollection:
+        """The collection of the frames compressed so far (a new one on every call)."""
+        prof, o = self.prof, self.out
+        out = SlitCollection([], o.dark_dn, o.dark_source, o.exposure_us, list(o.validation),
+                             dict(o.saturated), dict(o.frame_scale))
+        out.slit_frames = self.frames
+        if frame_gains not in ("auto", "on", "off"):
+            raise InvalidValueError(f"frame_gains must be auto, on or off, got {frame_gains!r}")
+        for c in range(self.n_ch):
+            h, v = self.h[c], self.v[c]
+            if not h[0] or not v[0]:
+                raise CalibrationError(
+                    f"channel {prof.sensor.channels[c]}: the recording needs both horizontal and "
+                    f"vertical slits (found {len(h[0])} row and {len(v[0])} column slits)"
+                )
+            out.channels.append(
+                ChannelSlits(
+                    SlitStack.from_images(*h), SlitStack.from_images(*v), prof.scene.rows,
+                    prof.scene.cols, meta={"channel": prof.sensor.channels[c]},
+                )
             )
-        out.channels.append(
-            ChannelSlits(
-                SlitStack.from_images(*h[c]), SlitStack.from_images(*v[c]), n_rows, n_cols,
-                meta={"channel": prof.sensor.channels[c]},
-            )
-        )
-    if frame_gains != "off" and white is not None:
-        _white_gains(recording, out, white, h_set is not None, v_set is not None, frame_gains)
-    return out
+        return out
+
+
+class SlitCompressor:
+    """:func:`collect_slits` while the frames are still being recorded (the wizard's capture):
+    :meth:`add` compresses each slit frame as it arrives, :meth:`finish` gives the collection
+    once the recording is complete, exactly what :func:`collect_slits` gives on it.
+
+    Streaming assumes what the wizard's plan guarantees: the dark frames come before the
+    first slit, and every slit frame has the first one's exposure. When the finished
+    recording breaks either (or has no dark frame, or ``frame_gains`` is asked for),
+    :meth:`finish` collects again from the recording instead.
+    """
+
+    def __init__(self, profile: Profile, rank: int = DEFAULT_RANK) -> None:
+        self.profile, self.rank = profile, rank
+        self.n_ch = len(profile.sensor.channels)
+        self.seen: set[int] = set()
+        self.dark_frames: list[int] = []
+        self.validation: list[int] = []
+        self.slits: list[int] = []
+        self.acc: _Accumulator | None = None
+        self.broken: str | None = None
+
+    def add(self, recording: Recording, i: int) -> None:
+        """Take frame ``i`` of ``recording`` (a view that holds it): classify it and compress
+        it when it is a slit. Frames may come in any order after the dark frames; each once."""
+        if i in self.seen:
+            return
+        self.seen.add(i)
+        scene = recording.scene(i)
+        if scene is None:
+            return
+        r = roles_for_channels(classify_scene(scene), self.n_ch)
+        if is_dark(r):
+            if self.acc is not None:
+                self.broken = f"dark frame {i} after the first slit"
+            self.dark_frames.append(i)
+            return
+        if not is_slit(r):
+            self.validation.append(i)
+            return
+        exposure = frame_exposure_us(recording, i)
+        if self.acc is None:
+            if not self.dark_frames:
+                self.broken = "no dark frame before the slits"
+            dark_dn, source = _dark(recording, self.dark_frames)
+            self.acc = _Accumulator(self.profile, self.rank, dark_dn, source, exposure, self.validation)
+        elif exposure != self.acc.reference:
+            self.broken = f"slit frame {i} at another exposure"
+        self.slits.append(i)
+        self.acc.compress_frame(recording, i, r)
+
+    def finish(self, recording: Recording, frame_gains: str = "off",
+               progress: Progress | None = None) -> SlitCollection:
+        """The collection of the complete ``recording`` (frames not yet added are added now)."""
+        for i in range(len(recording)):
+            self.add(recording, i)
+        if self.broken or self.acc is None or frame_gains != "off" or sorted(self.slits) != self.slits:
+            return collect_slits(recording, self.rank, progress, frame_gains)
+        return self.slit_collection()
+
+    def slit_collection(self) -> SlitCollection:
+        """The collection of what was added so far (the solve can start once every slit is
+        in; its ``validation`` lists the other frames seen so far)."""
+        if self.acc is None:
+            raise CalibrationError("no slit frame has been recorded yet")
+        self.acc.out.validation = sorted(self.validation)
+        return self.acc.collection("off")
 
 
 def _check_alive(raw: np.ndarray, c: int, i: int, recording: Recording, saturation_dn: float) -> None:

@@ -5,6 +5,7 @@ Used by both ``thintact calibrate --from-recording`` and the wizard (which recor
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
@@ -13,7 +14,14 @@ from typing import Any
 
 import numpy as np
 
-from thintact_sdk.calibration.collect import Progress, SlitCollection, collect_slits, signal_of
+from thintact_sdk.calibration.capture_worker import Prepared
+from thintact_sdk.calibration.collect import (
+    Progress,
+    SlitCollection,
+    collect_slits,
+    signal_of,
+    white_frame_signal,
+)
 from thintact_sdk.calibration.gauge import operator_error, term_errors
 from thintact_sdk.calibration.health import HealthReport, NoiseEstimate, assess, measure_noise
 from thintact_sdk.calibration.lowrank import DEFAULT_RANK
@@ -26,7 +34,12 @@ from thintact_sdk.calibration.prediction import (
 )
 from thintact_sdk.calibration.registration import RegistrationResult
 from thintact_sdk.calibration.selection import TauSelection, select, validation_frames
-from thintact_sdk.calibration.solver import ChannelMatrices, Method, SolveReport, solve_channel
+from thintact_sdk.calibration.solver import (
+    ChannelMatrices,
+    Method,
+    SolveReport,
+    solve_collection,
+)
 from thintact_sdk.calibration.stages import STAGE_DIR, Checkpoints, StageLog, fingerprint
 from thintact_sdk.calibration.tau import TauCurve
 from thintact_sdk.calibration.validation import (
@@ -106,27 +119,7 @@ def solve_matrices(
     collection: SlitCollection, options: CalibrationOptions, profile: Profile
 ) -> tuple[SystemMatrices, list[SolveReport]]:
     """Algorithms 2-3 for every channel of ``collection``."""
-    mats: list[ChannelMatrices] = []
-    reports: list[SolveReport] = []
-    for slits in collection.channels:
-        m, rep = solve_channel(
-            slits, method=options.method, max_iter=options.max_iter, tol=options.tol
-        )
-        mats.append(m)
-        reports.append(rep)
-    sm = SystemMatrices(
-        np.stack([m.Po for m in mats]), np.stack([m.Qo for m in mats]),
-        np.stack([m.Pc for m in mats]), np.stack([m.Qc for m in mats]),
-        {
-            "source": "calibration",
-            "profile": profile.name,
-            "profile_hash": profile.content_hash(),
-            "method": options.method,
-            "gauge": "open term smoothest; ‖P‖_F = ‖Q‖_F per term",
-            "exposure_us": collection.exposure_us,
-        },
-    )
-    return sm, reports
+    return solve_collection(collection, profile, options.method, options.max_iter, options.tol)
 
 
 def _frames_averaged(recording: Recording, options: CalibrationOptions) -> int:
@@ -268,6 +261,8 @@ def calibrate_recording(
     reference: SystemMatrices | None = None,
     reference_exposure_us: float | None = None,
     report: bool = True,
+    prepared: Prepared | None = None,
+    capture_ended: float | None = None,
 ) -> CalibrationOutcome:
     """Solve, train, validate and save a calibration bundle in ``out_dir``.
 
@@ -292,6 +287,13 @@ def calibrate_recording(
         exposure when both are known (signal is linear in exposure).
     report
         Write ``report.html``.
+    prepared
+        What the wizard's :class:`~thintact_sdk.calibration.capture_worker.CaptureWorker`
+        finished during the capture (the slit collection and solve, the prediction's design):
+        used instead of computing it again (the stage is marked ``pipelined``).
+    capture_ended
+        ``time.monotonic()`` when the wizard wrote its last pattern: ``metrics`` then records
+        ``after_last_pattern_s``, the seconds from it to the bundle on disk.
     """
     opts = options or CalibrationOptions()
     profile = recording.profile
@@ -311,6 +313,10 @@ def calibrate_recording(
         if solved is not None:
             collection, sm, reports = solved
             st["resumed"] = True
+        elif prepared is not None and prepared.solved is not None:
+            collection, sm, reports = prepared.solved
+            st["pipelined"] = prepared.seconds
+            checkpoints.save_solve(collection, sm, reports)
         else:
             collection = collect_slits(recording, rank=opts.rank, progress=progress,
                                        frame_gains=opts.frame_gains)
@@ -318,6 +324,10 @@ def calibrate_recording(
             checkpoints.save_solve(collection, sm, reports)
     frames = validation_frames(recording, collection, profile.noise.saturation_dn)
     want_prediction = bool(opts.predict and frames.labels)
+
+    def white_signal() -> np.ndarray | None:  # the prediction's signal level (as the wizard's)
+        white = white_frame_signal(recording)
+        return None if white is None else white[0]
     noise_ready: Future[NoiseEstimate] = Future()
 
     def health_lane() -> tuple[HealthReport, PredictionDesign | None]:
@@ -337,13 +347,14 @@ def calibrate_recording(
             if not noise_ready.done():
                 noise_ready.set_exception(exc)
             raise
-        prepared = None
-        if want_prediction and checkpoints.load_json("prediction") is None:
+        design = None if prepared is None else prepared.design
+        if want_prediction and design is None and checkpoints.load_json("prediction") is None:
             with log.stage("prediction design", "simulating the design's own calibration "
                            "(for the prediction)"):
-                prepared = design_for_prediction(profile, sm, k, method=opts.method,
-                                                 max_iter=opts.max_iter, tol=opts.tol, rank=opts.rank)
-        return health, prepared
+                design = design_for_prediction(profile, sm, k, white_signal_dn=white_signal(),
+                                               method=opts.method, max_iter=opts.max_iter,
+                                               tol=opts.tol, rank=opts.rank)
+        return health, design
 
     def selection_lane() -> tuple[CalibrationBundle, dict[str, float], TauSelection]:
         """The joint filter, then the decoder and τ (once the noise is measured)."""
@@ -373,7 +384,7 @@ def calibrate_recording(
         lane_b = pool.submit(health_lane)
         lane_a = pool.submit(selection_lane)
         bundle, tau_table, selection = lane_a.result()
-        health, prepared = lane_b.result()
+        health, design = lane_b.result()
     selection.write_taus(bundle.meta)
     bundle.meta["decoder"] = selection.decoder
     val = selection.validation
@@ -387,12 +398,12 @@ def calibrate_recording(
                                             float(stored["tau"]), dict(stored["notes"]))
                     st["resumed"] = True
                 else:
-                    if prepared is None:
-                        prepared = design_for_prediction(profile, sm, k, method=opts.method,
-                                                         max_iter=opts.max_iter, tol=opts.tol,
-                                                         rank=opts.rank)
+                    if design is None:
+                        design = design_for_prediction(profile, sm, k, white_signal_dn=white_signal(),
+                                                       method=opts.method, max_iter=opts.max_iter,
+                                                       tol=opts.tol, rank=opts.rank)
                     prediction = predict_from_design(
-                        profile, prepared, frames.labels, frames.truths, selection.decoder,
+                        profile, design, frames.labels, frames.truths, selection.decoder,
                         filter_steps=opts.filter_steps, filter_scenes=opts.filter_scenes)
                     checkpoints.save_json("prediction", {
                         "decoder": selection.decoder, "psnr_db": prediction.psnr_db,
@@ -466,6 +477,12 @@ def calibrate_recording(
             out.mkdir(parents=True, exist_ok=True)
             write_report(outcome, profile, out / "report.html")
     metrics["stages"] = log.to_json()
+    if prepared is not None:
+        metrics["pipelined"] = {"seconds": prepared.seconds, "errors": prepared.errors,
+                                "solve": prepared.solved is not None,
+                                "prediction_design": prepared.design is not None}
+    if capture_ended is not None:  # written into calibration.json below: its own time not counted
+        metrics["after_last_pattern_s"] = round(time.monotonic() - capture_ended, 3)
     try:
         bundle.save(out)  # calibration.json last: its presence marks the bundle finished
     except OSError as err:

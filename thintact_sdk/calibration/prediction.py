@@ -102,6 +102,17 @@ def design_gains(profile: Profile, calibrated: SystemMatrices, sim: Simulator) -
                      for c in range(calibrated.channels)])
 
 
+def white_gains(profile: Profile, white_signal_dn: np.ndarray, sim: Simulator) -> np.ndarray:
+    """:func:`design_gains` from a measured white frame (``R × S × C`` DN above dark) instead of
+    the calibrated matrices' white response."""
+    n, m = profile.scene.rows, profile.scene.cols
+    got = np.asarray(white_signal_dn, np.float64)
+    got = got if got.ndim == 3 else got[..., None]
+    model = sim.linear_batch(np.ones((1, n, m, got.shape[2])))[0]
+    return np.array([float(np.sum(got[..., c] * model[..., c]) / np.sum(model[..., c] ** 2))
+                     for c in range(got.shape[2])])
+
+
 def slit_scenes(idx: Iterable[int], n: int, m: int, c: int) -> np.ndarray:
     """The slit scenes ``len(idx) × n × m × c`` of slit indices ``idx``: index ``i < n`` lights
     scene row ``i``, index ``n + j`` lights scene column ``j`` (display value 1, the rest 0)."""
@@ -215,9 +226,10 @@ class PredictionDesign:
 
 def design_for_prediction(
     profile: Profile,
-    calibrated: SystemMatrices,
+    calibrated: SystemMatrices | None,
     frames_averaged: int,
     *,
+    white_signal_dn: np.ndarray | None = None,
     method: Method = "lsq",
     max_iter: int = 50,
     tol: float = 1e-7,
@@ -227,13 +239,27 @@ def design_for_prediction(
     """The decoder-independent part of :func:`predict_validation` (the bulk of its time): the
     design's slit scan simulated and solved at the unit's signal level. The calibration runs
     it beside the health check and finishes with :func:`predict_from_design` once the decoder
-    is chosen; the two give exactly what :func:`predict_validation` gives."""
+    is chosen; the two give exactly what :func:`predict_validation` gives.
+
+    The signal level comes from the unit's white frame (``white_signal_dn``, ``R × S × C`` DN
+    above dark) when there is one, else from its matrices (``calibrated``): the design's white
+    response is matched to it in the least-squares sense. The white frame is there before the
+    matrices are solved (the wizard's capture runs this beside the slit scan), and both paths
+    then draw the same noise: a gain that differs by 0.1 % changes every Poisson draw, so two
+    signal levels would give two Monte Carlo realisations of the prediction.
+    """
     sim = Simulator(profile)
-    gains = design_gains(profile, calibrated, sim)
+    if white_signal_dn is not None:
+        gains = white_gains(profile, white_signal_dn, sim)
+        c, sensor_shape = len(gains), white_signal_dn.shape[:2]
+    elif calibrated is not None:
+        gains = design_gains(profile, calibrated, sim)
+        c, sensor_shape = calibrated.channels, calibrated.sensor_shape
+    else:
+        raise ThinTactError("the prediction needs the unit's matrices or its white frame")
     noise = averaged_noise(profile.noise, frames_averaged)
     rng = np.random.default_rng(seed)
-    c = calibrated.channels
-    dark_dn = signal_to_dn(np.zeros((*calibrated.sensor_shape, c)), noise, rng)  # one dark capture
+    dark_dn = signal_to_dn(np.zeros((*sensor_shape, c)), noise, rng)  # one dark capture
     design = simulated_calibration(profile, gains, noise, method, max_iter, tol, rank, rng, dark_dn)
     return PredictionDesign(sim, gains, noise, dark_dn, design, rng, seed)
 

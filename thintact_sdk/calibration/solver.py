@@ -26,9 +26,12 @@ from typing import Literal
 import numpy as np
 
 from thintact_sdk.calibration.channel_matrices import ChannelMatrices
+from thintact_sdk.calibration.collect import SlitCollection
 from thintact_sdk.calibration.gauge import balance_frobenius, fix_gauge
 from thintact_sdk.calibration.slits import ChannelSlits, SlitStack
 from thintact_sdk.errors import CalibrationError
+from thintact_sdk.formats.profiles import Profile
+from thintact_sdk.reconstruction.t2s import SystemMatrices
 
 Method = Literal["lsq", "paper"]
 
@@ -244,3 +247,29 @@ def solve_channel(
     if method == "lsq":
         mats = fix_gauge(mats)
     return mats, report
+
+
+def solve_collection(collection: SlitCollection, profile: Profile, method: Method = "lsq",
+                     max_iter: int = 50, tol: float = 1e-7
+                     ) -> tuple[SystemMatrices, list[SolveReport]]:
+    """Algorithms 2-3 for every channel of ``collection``: the unit's system matrices (DN per
+    display unit at the collection's reference exposure) and each channel's solve report."""
+    mats: list[ChannelMatrices] = []
+    reports: list[SolveReport] = []
+    for slits in collection.channels:
+        m, rep = solve_channel(slits, method=method, max_iter=max_iter, tol=tol)
+        mats.append(m)
+        reports.append(rep)
+    sm = SystemMatrices(
+        np.stack([m.Po for m in mats]), np.stack([m.Qo for m in mats]),
+        np.stack([m.Pc for m in mats]), np.stack([m.Qc for m in mats]),
+        {
+            "source": "calibration",
+            "profile": profile.name,
+            "profile_hash": profile.content_hash(),
+            "method": method,
+            "gauge": "open term smoothest; ‖P‖_F = ‖Q‖_F per term",
+            "exposure_us": collection.exposure_us,
+        },
+    )
+    return sm, reports

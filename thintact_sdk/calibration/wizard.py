@@ -9,6 +9,7 @@ from the recorded white frame, and nothing captured is lost or recorded twice.
 from __future__ import annotations
 
 import json
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -16,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from thintact_sdk.calibration.capture_worker import CaptureWorker
 from thintact_sdk.calibration.pattern_capture import set_exposure_from_white, show_and_capture
 from thintact_sdk.calibration.pipeline import (
     CalibrationOptions,
@@ -114,11 +116,14 @@ def capture_session(
     settings: WizardSettings,
     progress: StepProgress | None = None,
     status: Callable[[str], None] | None = None,
+    on_written: Callable[[], None] | None = None,
 ) -> RegistrationResult:
     """Record every pattern of the plan into ``capture_dir`` (resuming what is there).
 
     ``camera`` and ``display`` must be open. Returns the registration check (raises
     :class:`CalibrationError` when it fails and ``settings.check_registration``).
+    ``on_written()`` is called after each pattern is written (or found, resuming): the
+    pipelined calibration's :class:`~thintact_sdk.calibration.capture_worker.CaptureWorker`.
     """
     plan = build_plan(profile, settings.validation) if settings.validation is not None else build_plan(profile)
     writer = RecordingWriter(capture_dir, profile)
@@ -139,6 +144,8 @@ def capture_session(
                 raise CalibrationError("registration check failed: " + "; ".join(registration.problems))
         if not writer.has_label(step.label):
             _capture_step(step, writer, camera, display, profile, settings, exposure)
+        if on_written is not None:
+            on_written()
         done += 1
         if progress:
             progress(done, total, step.label)
@@ -194,10 +201,14 @@ def run_wizard(
     status: Callable[[str], None] | None = None,
     reference: SystemMatrices | None = None,
     reference_exposure_us: float | None = None,
+    pipelined: bool = True,
 ) -> CalibrationOutcome:
     """Capture (or resume) into ``bundle_dir/capture`` and write the bundle in ``bundle_dir``.
 
-    ``camera`` and ``display`` are opened and closed here.
+    ``camera`` and ``display`` are opened and closed here. ``pipelined``: compress and solve
+    the slits, and simulate the prediction's design, while the capture runs
+    (:mod:`~thintact_sdk.calibration.capture_worker`); the calibration records the seconds
+    from the last pattern to the bundle (``metrics.after_last_pattern_s``).
     """
     ws = settings or WizardSettings()
     capture_dir = bundle_dir / CAPTURE_DIR
@@ -209,10 +220,23 @@ def run_wizard(
         json.dumps({"frames": ws.frames, "flush": ws.flush, "exposure_target": ws.exposure_target}) + "\n",
         encoding="utf-8",
     )
+    opts = options or CalibrationOptions()
+    plan_slits = profile.scene.rows + profile.scene.cols
+    worker = CaptureWorker(profile, capture_dir, opts,
+                           opts.frames_averaged if opts.frames_averaged is not None else ws.frames,
+                           plan_slits) if pipelined else None
     with camera, display:
-        registration = capture_session(profile, capture_dir, camera, display, ws, progress, status)
+        registration = capture_session(profile, capture_dir, camera, display, ws, progress, status,
+                                       None if worker is None else worker.frame_written)
+    captured = time.monotonic()
+    prepared = None
+    if worker is not None:
+        if status:
+            status("finishing the work done during the capture")
+        prepared = worker.finish()
     rec = Recording(capture_dir, profile=profile)
     return calibrate_recording(
-        rec, bundle_dir, options, source="wizard", status=status, registration=registration,
-        reference=reference, reference_exposure_us=reference_exposure_us,
+        rec, bundle_dir, opts, source="wizard", status=status, registration=registration,
+        reference=reference, reference_exposure_us=reference_exposure_us, prepared=prepared,
+        capture_ended=captured,
     )

@@ -1,0 +1,166 @@
+"""Calibration work done while the wizard is still capturing (pipelined calibration).
+
+A production line spends most of a unit's time capturing (the paper's 923 patterns, 100
+frames each at 30 fps: about 51 minutes) while the computer waits. :class:`CaptureWorker`
+takes that time: as each pattern is written it compresses the slit frames
+(:class:`~thintact_sdk.calibration.collect.SlitCompressor`), solves the system matrices as
+soon as the last slit is in (Algorithms 2-3, while the validation scenes are captured), and
+simulates the design's own calibration for the prediction from the white frame's signal
+level (:func:`~thintact_sdk.calibration.prediction.design_for_prediction`). What is left
+after the last pattern is the joint filter, the health check, the decoder and τ choice and the
+end of the prediction (:func:`~thintact_sdk.calibration.pipeline.calibrate_recording` with the
+worker's :class:`Prepared`).
+
+Two threads: one follows the recording (compression, then the solve), one the prediction's
+design. numpy releases the interpreter lock in its kernels, so on two cores they run beside
+the capture. A failure in either is kept and the pipeline computes that part itself after
+the capture (nothing is lost, only the head start).
+"""
+
+from __future__ import annotations
+
+import queue
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from thintact_sdk.calibration.collect import SlitCollection, SlitCompressor
+from thintact_sdk.calibration.prediction import PredictionDesign, design_for_prediction
+from thintact_sdk.calibration.solver import SolveReport, solve_collection
+from thintact_sdk.errors import ThinTactError
+from thintact_sdk.formats.profiles import Profile
+from thintact_sdk.formats.recording import Recording
+from thintact_sdk.reconstruction.t2s import SystemMatrices
+
+
+@dataclass
+class Prepared:
+    """What the capture worker finished before the capture ended (each part None when it
+    did not: the pipeline then computes it).
+
+    Attributes
+    ----------
+    solved
+        ``(collection, matrices, reports)`` of the slit scan, as the pipeline's first stage.
+    design
+        The prediction's simulated design (white-frame signal level).
+    seconds
+        Wall time of each part, measured in the worker (``compress``, ``solve``, ``design``).
+    errors
+        What went wrong in a part that was then left to the pipeline.
+    """
+
+    solved: tuple[SlitCollection, SystemMatrices, list[SolveReport]] | None = None
+    design: PredictionDesign | None = None
+    seconds: dict[str, float] = field(default_factory=dict)
+    errors: dict[str, str] = field(default_factory=dict)
+
+
+class CaptureWorker:
+    """Follows a capture directory as the wizard writes it (module docstring).
+
+    Parameters
+    ----------
+    profile
+        The device profile (the capture's).
+    capture_dir
+        The recording the wizard writes.
+    options
+        The calibration's :class:`~thintact_sdk.calibration.pipeline.CalibrationOptions`.
+    frames_averaged
+        Frames averaged per pattern (the noise of the prediction).
+    slits
+        Slit frames the plan holds (the solve starts when that many are in).
+    """
+
+    def __init__(self, profile: Profile, capture_dir: Path, options: Any, frames_averaged: int,
+                 slits: int) -> None:
+        self.profile, self.capture_dir, self.options = profile, Path(capture_dir), options
+        self.frames_averaged, self.slits = max(1, int(frames_averaged)), int(slits)
+        self.compressor = SlitCompressor(profile, options.rank)
+        self.prepared = Prepared()
+        self._pings: queue.Queue[bool] = queue.Queue()
+        self._done = 0
+        self._design_thread: threading.Thread | None = None
+        self._thread = threading.Thread(target=self._follow, name="calibrate-capture", daemon=True)
+        self._thread.start()
+
+    def frame_written(self) -> None:
+        """The wizard wrote (or found, resuming) another pattern."""
+        self._pings.put(True)
+
+    def finish(self, timeout_s: float | None = None) -> Prepared:
+        """Wait for the worker (the capture is complete) and return what it prepared."""
+        self._pings.put(False)
+        self._thread.join(timeout_s)
+        if self._design_thread is not None:
+            self._design_thread.join(timeout_s)
+        prep, comp = self.prepared, self.compressor
+        if prep.solved is not None:
+            if comp.broken is not None or sorted(comp.slits) != comp.slits:
+                prep.errors["slits"] = f"collected again after the capture: {comp.broken or 'slit order'}"
+                prep.solved = None
+            else:  # the frames after the last slit (the validation scenes) are in now
+                prep.solved[0].validation = sorted(comp.validation)
+        return prep
+
+    def _follow(self) -> None:
+        prep, comp = self.prepared, self.compressor
+        t_compress = 0.0
+        final = False
+        try:
+            while not final:
+                final = not self._pings.get()
+                while not self._pings.empty():  # take every ping that came meanwhile at once
+                    final = (not self._pings.get()) or final
+                t0 = time.monotonic()
+                view = Recording(self.capture_dir, profile=self.profile)
+                for i in range(self._done, len(view)):
+                    comp.add(view, i)
+                    if self._design_thread is None and self.options.predict:
+                        self._maybe_start_design(view)
+                self._done = len(view)
+                t_compress += time.monotonic() - t0
+                if len(comp.slits) >= self.slits and prep.solved is None and comp.broken is None:
+                    prep.seconds["compress"] = round(t_compress, 3)
+                    self._solve(view)
+        except (ThinTactError, OSError, ValueError) as err:
+            prep.errors["slits"] = str(err)
+
+    def _solve(self, view: Recording) -> None:
+        t0 = time.monotonic()
+        collection = self.compressor.slit_collection()
+        o = self.options
+        sm, reports = solve_collection(collection, self.profile, o.method, o.max_iter, o.tol)
+        self.prepared.solved = (collection, sm, reports)
+        self.prepared.seconds["solve"] = round(time.monotonic() - t0, 3)
+
+    def _maybe_start_design(self, view: Recording) -> None:
+        """Start the prediction's design once the white frame (and a dark frame) are in."""
+        from thintact_sdk.calibration.collect import white_frame_signal
+
+        comp = self.compressor
+        if not comp.dark_frames or not comp.validation:
+            return
+        white = white_frame_signal(view)
+        if white is None:
+            return
+        signal = white[0]
+
+        def run() -> None:
+            t0 = time.monotonic()
+            try:
+                self.prepared.design = design_for_prediction(
+                    self.profile, None, self.frames_averaged, white_signal_dn=signal,
+                    method=self.options.method, max_iter=self.options.max_iter,
+                    tol=self.options.tol, rank=self.options.rank)
+            except (ThinTactError, ValueError, np.linalg.LinAlgError) as err:
+                self.prepared.errors["design"] = str(err)
+            self.prepared.seconds["design"] = round(time.monotonic() - t0, 3)
+
+        self._design_thread = threading.Thread(target=run, name="calibrate-design", daemon=True)
+        self._design_thread.start()
