@@ -12,10 +12,17 @@ the ``thintact_sdk`` of another source tree (e.g. the previous commit's, written
 ``git archive <rev> thintact_sdk | tar -x -C DIR``), in the same invocation, so the two are
 compared on the same host load.
 
+``--wizard`` runs the pipelined wizard instead (``calibrate_with_wizard``: virtual camera and
+display rendering every pattern, one frame each; the capture worker compresses and solves the
+slits and simulates the prediction's design while it captures) and reports the capture's time,
+the time from the last pattern to the bundle (``metrics.after_last_pattern_s``) and the stages
+after it; with ``--docs`` its table goes between ``<!-- bench_calibration_wizard -->`` markers.
+
 Usage::
 
     python tools/bench_calibration_paper.py --out /tmp/bench --scale 4 --baseline /tmp/base
     python tools/bench_calibration_paper.py --out /tmp/bench --scale 2 --docs docs/calibration.md
+    python tools/bench_calibration_paper.py --out /tmp/bench --scale 1 --wizard --docs docs/calibration.md
 
 With ``--docs`` the table replaces the text between the markers
 ``<!-- bench_calibration_paper -->`` and ``<!-- /bench_calibration_paper -->`` of that file
@@ -92,6 +99,27 @@ def child(rec: Path, out: Path, result: Path) -> None:
         "psnr_db": m["psnr_db"], "predicted_psnr_db": m["predicted_psnr_db"]}))
 
 
+def wizard_child(scale: int, out: Path, result: Path) -> None:
+    """Run the pipelined wizard (virtual camera and display, one frame per pattern) into
+    ``out`` and write its stages, the capture's time and the time after the last pattern."""
+    from thintact_sdk.calibration.pipeline import CalibrationOptions
+    from thintact_sdk.calibration.sessions import calibrate_with_wizard
+
+    t = time.monotonic()
+    o = calibrate_with_wizard(_profile(scale), out, CalibrationOptions(), frames=1,
+                              status=lambda s: print(f"  [{time.monotonic() - t:.0f} s] " + s,
+                                                     file=sys.stderr, flush=True))
+    total = time.monotonic() - t
+    m = o.bundle.meta["metrics"]
+    with open("/proc/self/status") as f:
+        peak = next(int(line.split()[1]) for line in f if line.startswith("VmHWM:")) / 2**20
+    result.write_text(json.dumps({
+        "seconds": total, "after_last_pattern_s": m["after_last_pattern_s"],
+        "capture_s": total - m["after_last_pattern_s"], "peak_gib": peak, "stages": m["stages"],
+        "pipelined": m.get("pipelined"), "psnr_db": m["psnr_db"],
+        "predicted_psnr_db": m["predicted_psnr_db"]}))
+
+
 def _run_child(rec: Path, out: Path, tree: Path | None) -> dict[str, Any]:
     """Run :func:`child` in a fresh interpreter; ``tree``: import ``thintact_sdk`` from there."""
     result = out.with_suffix(".json")
@@ -135,6 +163,44 @@ def table(scale: int, runs: dict[str, dict[str, Any]], render_s: float, load: tu
             + "; ".join(figures) + ".\n")
 
 
+WIZ_OPEN, WIZ_CLOSE = "<!-- bench_calibration_wizard -->", "<!-- /bench_calibration_wizard -->"
+
+
+def _wizard(a: argparse.Namespace) -> int:
+    out, result = a.out / f"wizard_div{a.scale}", a.out / f"wizard_div{a.scale}.json"
+    load0 = os.getloadavg()[0]
+    subprocess.run([sys.executable, __file__, "--wizard-child", str(a.scale), str(out), str(result)],
+                   check=True)
+    r = json.loads(result.read_text())
+    def name(s: dict[str, Any]) -> str:
+        done = s.get("pipelined")
+        if not isinstance(done, dict):
+            return str(s["stage"])
+        return f"{s['stage']} (during the capture: " + ", ".join(f"{k} {v:.1f} s" for k, v in done.items()) + ")"
+
+    rows = "\n".join(f"| {name(s)} | {s['start_s']:.1f} | {s['seconds']:.1f} | {s['peak_rss_mib']:.0f} |"
+                     for s in r["stages"])
+    pred = r["predicted_psnr_db"] or {}
+    text = (f"Pipelined wizard, sensor {1024 // a.scale} × {1280 // a.scale}, scene {400 // a.scale} × "
+            f"{512 // a.scale}, virtual camera and display, one frame per pattern. Host: {_host()}; load "
+            f"average {load0:.1f} before, {os.getloadavg()[0]:.1f} after. Capture (rendering every "
+            f"pattern) {r['capture_s']:.0f} s; **from the last pattern to the bundle "
+            f"{r['after_last_pattern_s']:.0f} s**; peak memory {r['peak_gib']:.2f} GiB (the whole "
+            f"process, capture included).\n\n| stage after the capture | starts at s | s | peak MiB |\n"
+            f"|---|---|---|---|\n{rows}\n\nheld-out mean {np.mean(list(r['psnr_db'].values())):.3f} dB, "
+            f"predicted mean {np.mean(list(pred.values())) if pred else float('nan'):.3f} dB.\n")
+    print(text)
+    if a.docs is not None:
+        doc = a.docs.read_text(encoding="utf-8")
+        block = f"{WIZ_OPEN}\n{text}{WIZ_CLOSE}"
+        if WIZ_OPEN in doc and WIZ_CLOSE in doc:
+            doc = doc[: doc.index(WIZ_OPEN)] + block + doc[doc.index(WIZ_CLOSE) + len(WIZ_CLOSE):]
+        else:
+            doc = doc.rstrip("\n") + "\n\n" + block + "\n"
+        a.docs.write_text(doc, encoding="utf-8")
+    return 0
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", type=Path, help="working directory (recording and bundles)")
@@ -142,15 +208,24 @@ def main() -> int:
     ap.add_argument("--baseline", type=Path, metavar="DIR",
                     help="also run the thintact_sdk of this source tree (the code to compare with)")
     ap.add_argument("--docs", type=Path, help="write the table into this markdown file between the markers")
+    ap.add_argument("--wizard", action="store_true",
+                    help="run the pipelined wizard (virtual camera and display) instead: the capture's "
+                    "time, the time from the last pattern to the bundle and the stages after it")
     ap.add_argument("--child", nargs=3, metavar=("REC", "OUT", "RESULT"), help=argparse.SUPPRESS)
+    ap.add_argument("--wizard-child", nargs=3, metavar=("SCALE", "OUT", "RESULT"), help=argparse.SUPPRESS)
     a = ap.parse_args()
     if a.child:
         child(Path(a.child[0]), Path(a.child[1]), Path(a.child[2]))
+        return 0
+    if a.wizard_child:
+        wizard_child(int(a.wizard_child[0]), Path(a.wizard_child[1]), Path(a.wizard_child[2]))
         return 0
     if a.out is None or a.scale < 1 or 400 % a.scale or 512 % a.scale or 1024 % a.scale or 1280 % a.scale:
         print("--out is needed, and --scale must divide 400, 512, 1024 and 1280", file=sys.stderr)
         return 2
     a.out.mkdir(parents=True, exist_ok=True)
+    if a.wizard:
+        return _wizard(a)
     rec = a.out / f"rec_div{a.scale}"
     render_s = 0.0 if (rec / "manifest.json").is_file() else render(rec, a.scale)
     load0 = os.getloadavg()[0]
