@@ -42,6 +42,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from docs_block import write_block
 
 MARK_OPEN, MARK_CLOSE = "<!-- bench_calibration_paper -->", "<!-- /bench_calibration_paper -->"
 
@@ -191,13 +192,7 @@ def _wizard(a: argparse.Namespace) -> int:
             f"predicted mean {np.mean(list(pred.values())) if pred else float('nan'):.3f} dB.\n")
     print(text)
     if a.docs is not None:
-        doc = a.docs.read_text(encoding="utf-8")
-        block = f"{WIZ_OPEN}\n{text}{WIZ_CLOSE}"
-        if WIZ_OPEN in doc and WIZ_CLOSE in doc:
-            doc = doc[: doc.index(WIZ_OPEN)] + block + doc[doc.index(WIZ_CLOSE) + len(WIZ_CLOSE):]
-        else:
-            doc = doc.rstrip("\n") + "\n\n" + block + "\n"
-        a.docs.write_text(doc, encoding="utf-8")
+        write_block(a.docs, WIZ_OPEN, WIZ_CLOSE, text)
     return 0
 
 
@@ -235,13 +230,7 @@ def main() -> int:
     text = table(a.scale, runs, render_s, (load0, os.getloadavg()[0]))
     print(text)
     if a.docs is not None:
-        doc = a.docs.read_text(encoding="utf-8")
-        block = f"{MARK_OPEN}\n{text}{MARK_CLOSE}"
-        if MARK_OPEN in doc and MARK_CLOSE in doc:
-            doc = doc[: doc.index(MARK_OPEN)] + block + doc[doc.index(MARK_CLOSE) + len(MARK_CLOSE):]
-        else:
-            doc = doc.rstrip("\n") + "\n\n" + block + "\n"
-        a.docs.write_text(doc, encoding="utf-8")
+        write_block(a.docs, MARK_OPEN, MARK_CLOSE, text)
     return 0
 
 

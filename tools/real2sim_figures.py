@@ -33,6 +33,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from docs_block import write_block
 
 MARK_OPEN, MARK_CLOSE = "<!-- real2sim_fitted -->", "<!-- /real2sim_fitted -->"
 ROWS = {
@@ -200,13 +201,7 @@ def main() -> int:
     print(text)
     print("figures: " + ", ".join(str(p) for p in paths))
     if a.docs is not None:
-        doc = a.docs.read_text(encoding="utf-8")
-        block = f"{MARK_OPEN}\n{text}{MARK_CLOSE}"
-        if MARK_OPEN in doc and MARK_CLOSE in doc:
-            doc = doc[: doc.index(MARK_OPEN)] + block + doc[doc.index(MARK_CLOSE) + len(MARK_CLOSE):]
-        else:
-            doc = doc.rstrip("\n") + "\n\n" + block + "\n"
-        a.docs.write_text(doc, encoding="utf-8")
+        write_block(a.docs, MARK_OPEN, MARK_CLOSE, text)
     return 0
 
 
