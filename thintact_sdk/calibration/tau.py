@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import hashlib
 from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -322,7 +323,8 @@ def default_priors() -> list[ScenePrior]:
 def cross_validate_prior(make: Callable[[ScenePrior | None], Any], name: str, signals: Sequence[np.ndarray],
                          truths: Sequence[np.ndarray], labels: Sequence[str], taus: np.ndarray,
                          priors: Sequence[ScenePrior] | None = None,
-                         min_per_fold: int = MIN_SCENES_PER_FOLD) -> CrossValidation | None:
+                         min_per_fold: int = MIN_SCENES_PER_FOLD,
+                         workers: int = 2) -> CrossValidation | None:
     """Choose a scene prior by cross-validation, as decoders are chosen.
 
     Plain Tikhonov (``make(None)``) and each prior ``p`` (``make(p)``) are cross-validated over
@@ -345,6 +347,8 @@ def cross_validate_prior(make: Callable[[ScenePrior | None], Any], name: str, si
         Candidate priors (default :func:`default_priors`; α = 0 ones are skipped).
     name, signals, truths, labels, taus, min_per_fold
         As for :func:`cross_validate` (``taus`` in DN², searched for every candidate).
+    workers
+        Candidates cross-validated at once (threads; ``make`` must be safe to call from two).
     """
     plain = cross_validate(make(None), name, signals, truths, labels, taus, min_per_fold)
     candidates = [p for p in (default_priors() if priors is None else priors) if not p.is_plain]
@@ -353,8 +357,15 @@ def cross_validate_prior(make: Callable[[ScenePrior | None], Any], name: str, si
     plain.plain_held_out_db = plain.held_out_mean_db
     keys = [_scene_key(x) for x in truths]
     best, curves = plain, []
-    for candidate in candidates:
-        cv = cross_validate(make(candidate), name, signals, truths, labels, taus, min_per_fold)
+
+    def one(candidate: ScenePrior) -> CrossValidation | None:
+        return cross_validate(make(candidate), name, signals, truths, labels, taus, min_per_fold)
+
+    # the candidates are independent: two at a time (numpy's kernels release the interpreter
+    # lock), taken in order below, so the choice is the one a sequential search makes
+    with ThreadPoolExecutor(max_workers=max(1, int(workers)), thread_name_prefix="prior-cv") as pool:
+        results = list(pool.map(one, candidates))
+    for candidate, cv in zip(candidates, results, strict=True):
         if cv is None:
             continue
         cv.prior, cv.fold_prior = candidate, [candidate, candidate]
