@@ -34,7 +34,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import subprocess
 import sys
 import time
@@ -42,7 +41,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from docs_block import write_block
+from docs_block import host_line, write_block
 
 MARK_OPEN, MARK_CLOSE = "<!-- bench_calibration_paper -->", "<!-- /bench_calibration_paper -->"
 
@@ -133,15 +132,7 @@ def _run_child(rec: Path, out: Path, tree: Path | None) -> dict[str, Any]:
 
 
 def _host() -> str:
-    name = platform.processor() or platform.machine()
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                name = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    return f"{name}, {os.cpu_count()} cores"
+    return host_line()
 
 
 def table(scale: int, runs: dict[str, dict[str, Any]], render_s: float, load: tuple[float, float]) -> str:

@@ -15,3 +15,11 @@ def write_block(path: Path, opening: str, closing: str, text: str) -> None:
     else:
         doc = doc.rstrip("\n") + "\n\n" + block + "\n"
     path.write_text(doc, encoding="utf-8")
+
+
+def host_line() -> str:
+    """``"<CPU model>, <n> cores"`` of this host, for the line every measured table carries."""
+    from thintact_sdk.host.machine import host_capabilities
+
+    caps = host_capabilities()
+    return f"{caps.cpu_model}, {caps.cores} cores"

@@ -27,13 +27,12 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import sys
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from docs_block import write_block
+from docs_block import host_line, write_block
 
 MARK_OPEN, MARK_CLOSE = "<!-- real2sim_fitted -->", "<!-- /real2sim_fitted -->"
 ROWS = {
@@ -46,15 +45,7 @@ ROWS = {
 
 
 def _host() -> str:
-    name = platform.machine()
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                name = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    return f"{name}, {os.cpu_count()} cores"
+    return host_line()
 
 
 def in_domain(section: dict[str, Any], reference: np.ndarray, radius: float, mm: float,
