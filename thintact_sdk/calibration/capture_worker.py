@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from thintact_sdk.calibration.collect import SlitCollection, SlitCompressor
+from thintact_sdk.calibration.collect import SlitCollection, SlitCompressor, white_frame_signal
 from thintact_sdk.calibration.prediction import PredictionDesign, design_for_prediction
 from thintact_sdk.calibration.solver import SolveReport, solve_collection
 from thintact_sdk.errors import ThinTactError
@@ -122,16 +122,16 @@ class CaptureWorker:
                 for i in range(self._done, len(view)):
                     comp.add(view, i)
                     if self._design_thread is None and self.options.predict:
-                        self._maybe_start_design(view)
+                        self._maybe_start_design(view, i)
                 self._done = len(view)
                 t_compress += time.monotonic() - t0
                 if len(comp.slits) >= self.slits and prep.solved is None and comp.broken is None:
                     prep.seconds["compress"] = round(t_compress, 3)
-                    self._solve(view)
+                    self._solve()
         except (ThinTactError, OSError, ValueError) as err:
             prep.errors["slits"] = str(err)
 
-    def _solve(self, view: Recording) -> None:
+    def _solve(self) -> None:
         t0 = time.monotonic()
         collection = self.compressor.slit_collection()
         o = self.options
@@ -139,12 +139,11 @@ class CaptureWorker:
         self.prepared.solved = (collection, sm, reports)
         self.prepared.seconds["solve"] = round(time.monotonic() - t0, 3)
 
-    def _maybe_start_design(self, view: Recording) -> None:
-        """Start the prediction's design once the white frame (and a dark frame) are in."""
-        from thintact_sdk.calibration.collect import white_frame_signal
-
-        comp = self.compressor
-        if not comp.dark_frames or not comp.validation:
+    def _maybe_start_design(self, view: Recording, i: int) -> None:
+        """Start the prediction's design when frame ``i`` is the white frame (after a dark
+        frame): each new frame is looked at once, the whole view only then."""
+        scene = view.scene(i)
+        if not self.compressor.dark_frames or scene is None or not scene.size or float(scene.min()) < 0.999:
             return
         white = white_frame_signal(view)
         if white is None:

@@ -325,9 +325,12 @@ def calibrate_recording(
     frames = validation_frames(recording, collection, profile.noise.saturation_dn)
     want_prediction = bool(opts.predict and frames.labels)
 
-    def white_signal() -> np.ndarray | None:  # the prediction's signal level (as the wizard's)
+    def simulate_design() -> PredictionDesign:
+        """The prediction's design at the white frame's signal level (as the wizard's)."""
         white = white_frame_signal(recording)
-        return None if white is None else white[0]
+        return design_for_prediction(profile, sm, k, white_signal_dn=None if white is None else white[0],
+                                     method=opts.method, max_iter=opts.max_iter, tol=opts.tol,
+                                     rank=opts.rank)
     noise_ready: Future[NoiseEstimate] = Future()
 
     def health_lane() -> tuple[HealthReport, PredictionDesign | None]:
@@ -351,9 +354,7 @@ def calibrate_recording(
         if want_prediction and design is None and checkpoints.load_json("prediction") is None:
             with log.stage("prediction design", "simulating the design's own calibration "
                            "(for the prediction)"):
-                design = design_for_prediction(profile, sm, k, white_signal_dn=white_signal(),
-                                               method=opts.method, max_iter=opts.max_iter,
-                                               tol=opts.tol, rank=opts.rank)
+                design = simulate_design()
         return health, design
 
     def selection_lane() -> tuple[CalibrationBundle, dict[str, float], TauSelection]:
@@ -399,9 +400,7 @@ def calibrate_recording(
                     st["resumed"] = True
                 else:
                     if design is None:
-                        design = design_for_prediction(profile, sm, k, white_signal_dn=white_signal(),
-                                                       method=opts.method, max_iter=opts.max_iter,
-                                                       tol=opts.tol, rank=opts.rank)
+                        design = simulate_design()
                     prediction = predict_from_design(
                         profile, design, frames.labels, frames.truths, selection.decoder,
                         filter_steps=opts.filter_steps, filter_scenes=opts.filter_scenes)

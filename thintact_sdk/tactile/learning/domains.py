@@ -137,7 +137,14 @@ def simulated_presses(
     """
     rng = np.random.default_rng(seed)
     flat, presses = ball_presses(profile, count, ball_radius_mm, depth_range_mm, rng)
-    images = np.stack([flat.scene] + [p.scene for p in presses]).astype(np.float64)
-    images += noise_std * rng.standard_normal(images.shape)
-    return np.clip(images, 0.0, 1.0).astype(np.float32)
+    return with_camera_noise([flat.scene] + [p.scene for p in presses], noise_std, rng)
+
+
+def with_camera_noise(images: list[np.ndarray], noise_std: float, rng: np.random.Generator
+                      ) -> np.ndarray:
+    """``images`` stacked, plus Gaussian noise of ``noise_std`` (display units), clipped to
+    [0, 1]: ``N × H × W × 3`` float32."""
+    stack = np.stack(images).astype(np.float64)
+    stack += noise_std * rng.standard_normal(stack.shape)
+    return np.clip(stack, 0.0, 1.0).astype(np.float32)
 

@@ -12,7 +12,12 @@ from pathlib import Path
 import numpy as np
 
 from thintact_sdk.errors import ThinTactError
-from thintact_sdk.tactile.learning.domains import RealPresses, sensor_profile, simulated_presses
+from thintact_sdk.tactile.learning.domains import (
+    RealPresses,
+    sensor_profile,
+    simulated_presses,
+    with_camera_noise,
+)
 
 
 def fitted_section(section_file: str | Path) -> dict:
@@ -77,10 +82,7 @@ def fitted_simulated_presses(
                             f"{mm_per_px:g} mm/px")
     flat, images, _gx, _gy = fitted_images(model, reference.astype(np.float64), ball_radius_mm,
                                            mm_per_px, count, depth_range_mm, seed)
-    rng = np.random.default_rng(seed)
-    stack = np.stack([flat] + images)
-    stack += noise_std * rng.standard_normal(stack.shape)
-    return np.clip(stack, 0.0, 1.0).astype(np.float32)
+    return with_camera_noise([flat] + images, noise_std, np.random.default_rng(seed))
 
 
 def sim_domain(real: RealPresses, count: int, ball_radius_mm: float, mm_per_px: float,
