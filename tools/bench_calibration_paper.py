@@ -7,7 +7,8 @@ and display; one frame per pattern, the profile's noise) with the sensor and the
 divided by ``--scale`` per axis (1: the paper's 1024 × 1280 sensor and 400 × 512 scene, every
 pattern of the wizard's plan), then runs ``calibrate_recording`` on it in a child process and
 reads the per-stage wall time and peak memory the calibration writes (``metrics.stages``) and
-the child's own peak resident memory (``VmHWM``). ``--baseline DIR`` runs a second child on
+the child's own peak resident memory (``VmHWM``). Every child starts with an empty backend
+cache (``THINTACT_CACHE_DIR``), as a station's first unit of a shape does. ``--baseline DIR`` runs a second child on
 the ``thintact_sdk`` of another source tree (e.g. the previous commit's, written by
 ``git archive <rev> thintact_sdk | tar -x -C DIR``), in the same invocation, so the two are
 compared on the same host load.
@@ -34,6 +35,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shutil
 import subprocess
 import sys
 import time
@@ -83,12 +85,41 @@ def render(out: Path, scale: int) -> float:
     return time.monotonic() - t
 
 
+class MemorySampler:
+    """The process's resident memory split, sampled every ``period_s`` on a daemon thread:
+    the peak of its private pages (``RssAnon``: arrays) and of its file-backed pages
+    (``RssFile``: the recording's frames mapped from disk, page cache the kernel can drop),
+    MiB. ``VmHWM`` counts both."""
+
+    def __init__(self, period_s: float = 0.25) -> None:
+        import threading
+
+        self.peak = {"RssAnon": 0.0, "RssFile": 0.0}
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, args=(period_s,), daemon=True)
+        self._thread.start()
+
+    def _run(self, period_s: float) -> None:
+        while not self._stop.wait(period_s):
+            with open("/proc/self/status") as f:
+                for line in f:
+                    key = line.split(":")[0]
+                    if key in self.peak:
+                        self.peak[key] = max(self.peak[key], int(line.split()[1]) / 1024)
+
+    def stop(self) -> dict[str, float]:
+        self._stop.set()
+        self._thread.join()
+        return {"peak_private_mib": round(self.peak["RssAnon"]), "peak_file_mib": round(self.peak["RssFile"])}
+
+
 def child(rec: Path, out: Path, result: Path) -> None:
     """Calibrate ``rec`` into ``out`` and write the stages and figures to ``result`` (JSON)."""
     from thintact_sdk.calibration.pipeline import CalibrationOptions, calibrate_recording
     from thintact_sdk.formats.recording import Recording
 
     t = time.monotonic()
+    sampler = MemorySampler()
     o = calibrate_recording(Recording(rec), out, CalibrationOptions(),
                             status=lambda s: print("  " + s, file=sys.stderr, flush=True))
     m = o.bundle.meta["metrics"]
@@ -96,7 +127,7 @@ def child(rec: Path, out: Path, result: Path) -> None:
         peak = next(int(line.split()[1]) for line in f if line.startswith("VmHWM:")) / 2**20
     result.write_text(json.dumps({
         "seconds": time.monotonic() - t, "peak_gib": peak, "stages": m["stages"],
-        "psnr_db": m["psnr_db"], "predicted_psnr_db": m["predicted_psnr_db"]}))
+        "psnr_db": m["psnr_db"], "predicted_psnr_db": m["predicted_psnr_db"], **sampler.stop()}))
 
 
 def wizard_child(scale: int, out: Path, result: Path) -> None:
@@ -106,6 +137,7 @@ def wizard_child(scale: int, out: Path, result: Path) -> None:
     from thintact_sdk.calibration.sessions import calibrate_with_wizard
 
     t = time.monotonic()
+    sampler = MemorySampler()
     o = calibrate_with_wizard(_profile(scale), out, CalibrationOptions(), frames=1,
                               status=lambda s: print(f"  [{time.monotonic() - t:.0f} s] " + s,
                                                      file=sys.stderr, flush=True))
@@ -117,7 +149,16 @@ def wizard_child(scale: int, out: Path, result: Path) -> None:
         "seconds": total, "after_last_pattern_s": m["after_last_pattern_s"],
         "capture_s": total - m["after_last_pattern_s"], "peak_gib": peak, "stages": m["stages"],
         "pipelined": m.get("pipelined"), "psnr_db": m["psnr_db"],
-        "predicted_psnr_db": m["predicted_psnr_db"]}))
+        "predicted_psnr_db": m["predicted_psnr_db"], **sampler.stop()}))
+
+
+def _fresh_cache(out: Path) -> Path:
+    """An empty cache directory for a child (``THINTACT_CACHE_DIR``): the decoders' backends are
+    measured as on a station's first unit, not taken from an earlier run's cache."""
+    cache = out.with_name(out.name + "_cache")
+    shutil.rmtree(cache, ignore_errors=True)
+    cache.mkdir(parents=True)
+    return cache
 
 
 def _run_child(rec: Path, out: Path, tree: Path | None) -> dict[str, Any]:
@@ -125,6 +166,7 @@ def _run_child(rec: Path, out: Path, tree: Path | None) -> dict[str, Any]:
     result = out.with_suffix(".json")
     cmd = [sys.executable, __file__, "--child", str(rec), str(out), str(result)]
     env = dict(os.environ)
+    env["THINTACT_CACHE_DIR"] = str(_fresh_cache(out))
     if tree is not None:
         env["PYTHONPATH"] = os.pathsep.join([str(tree.resolve())] + [p for p in [env.get("PYTHONPATH")] if p])
     subprocess.run(cmd, check=True, env=env)
@@ -143,6 +185,9 @@ def table(scale: int, runs: dict[str, dict[str, Any]], render_s: float, load: tu
         cells = [f"{r['stages'][i]['seconds']:.1f} ({r['stages'][i]['peak_rss_mib']:.0f})" for r in runs.values()]
         rows.append(f"| {name} | " + " | ".join(cells) + " |")
     rows.append("| **total** | " + " | ".join(f"**{r['seconds']:.1f}** ({1024 * r['peak_gib']:.0f})" for r in runs.values()) + " |")
+    rows.append("| of the peak: private (arrays) / file-backed (mapped frames), MiB | " + " | ".join(
+        f"{r.get('peak_private_mib', float('nan')):.0f} / {r.get('peak_file_mib', float('nan')):.0f}"
+        for r in runs.values()) + " |")
     figures = []
     for k, r in runs.items():
         pred = r["predicted_psnr_db"] or {}
@@ -162,7 +207,7 @@ def _wizard(a: argparse.Namespace) -> int:
     out, result = a.out / f"wizard_div{a.scale}", a.out / f"wizard_div{a.scale}.json"
     load0 = os.getloadavg()[0]
     subprocess.run([sys.executable, __file__, "--wizard-child", str(a.scale), str(out), str(result)],
-                   check=True)
+                   check=True, env=dict(os.environ, THINTACT_CACHE_DIR=str(_fresh_cache(out))))
     r = json.loads(result.read_text())
     def name(s: dict[str, Any]) -> str:
         done = s.get("pipelined")
@@ -178,7 +223,8 @@ def _wizard(a: argparse.Namespace) -> int:
             f"average {load0:.1f} before, {os.getloadavg()[0]:.1f} after. Capture (rendering every "
             f"pattern) {r['capture_s']:.0f} s; **from the last pattern to the bundle "
             f"{r['after_last_pattern_s']:.0f} s**; peak memory {r['peak_gib']:.2f} GiB (the whole "
-            f"process, capture included).\n\n| stage after the capture | starts at s | s | peak MiB |\n"
+            f"process, capture included; sampled peaks: private {r.get('peak_private_mib', float('nan')):.0f} MiB, "
+            f"file-backed {r.get('peak_file_mib', float('nan')):.0f} MiB).\n\n| stage after the capture | starts at s | s | peak MiB |\n"
             f"|---|---|---|---|\n{rows}\n\nheld-out mean {np.mean(list(r['psnr_db'].values())):.3f} dB, "
             f"predicted mean {np.mean(list(pred.values())) if pred else float('nan'):.3f} dB.\n")
     print(text)

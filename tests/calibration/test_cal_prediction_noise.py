@@ -48,3 +48,21 @@ def test_clipped_to_the_sensor_range() -> None:
     noise = NoiseSpec(black_level_dn=64.0, read_noise_dn=2.0, electrons_per_dn=4.0, saturation_dn=4095.0)
     got = slit_dn(np.array([-50.0, 0.0, 5000.0]), noise, np.random.default_rng(5))
     assert got[2] == 4095.0 and 0.0 <= got[0] <= 100.0
+
+
+@pytest.mark.parametrize("read_e", [3.7, 3.84, 3.86, 4.2, 9.0])
+def test_the_skipped_exact_test_would_have_found_nothing(read_e: float) -> None:
+    # where the skewness bound says no pixel can be exact, the elementwise test is skipped
+    # (issue 36: it cost a third of the design's noise draws); it would have found nothing there
+    noise = NoiseSpec(black_level_dn=64.0, read_noise_dn=read_e, electrons_per_dn=1.0, saturation_dn=65535.0)
+    lam = np.geomspace(1e-3, 1e4, 200_001).astype(np.float32)
+    a = np.float32(read_e**2)
+    exact = (lam > 0) & (lam > np.float32(GAUSSIAN_SKEW_LIMIT) * (lam + a) ** np.float32(1.5))
+    got = slit_dn(lam, noise, np.random.default_rng(6))
+    z = np.random.default_rng(6).standard_normal(lam.shape, dtype=np.float32)
+    gaussian = np.clip(np.round(lam + np.sqrt(lam + a) * z + np.float32(64.0)), 0, 65535)
+    if exact.any():  # below the bound: the exact pixels are drawn Poisson, the rest as before
+        assert read_e < 0.385 / GAUSSIAN_SKEW_LIMIT
+        np.testing.assert_array_equal(got[~exact], gaussian[~exact])
+    else:
+        np.testing.assert_array_equal(got, gaussian)

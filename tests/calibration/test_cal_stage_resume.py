@@ -91,7 +91,8 @@ def test_the_health_forward_over_lit_rows_or_columns_is_the_forward() -> None:
     col[:, 7, 1] = 0.5
     for x in (row, col, dense, np.zeros((n, m, c))):
         want = sm.forward(x)
-        np.testing.assert_allclose(_forward_lit(sm, x), want, rtol=0, atol=1e-12 * max(1.0, np.abs(want).max()))
+        got = np.moveaxis(_forward_lit(sm, x), 0, 2)  # channel first (C × R × S)
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-12 * max(1.0, np.abs(want).max()))
 
 
 def test_health_and_selection_run_side_by_side_and_the_noise_first_changes_nothing(tmp_path) -> None:  # type: ignore[no-untyped-def]
@@ -168,3 +169,39 @@ def test_slits_compressed_as_they_arrive_equal_the_collection_of_the_finished_re
     assert late.broken is not None
     again = late.finish(full)
     np.testing.assert_array_equal(again.dark_dn, want.dark_dn)
+
+
+def test_slits_compressed_on_two_threads_equal_one_thread_and_name_the_first_dead_frame(tmp_path, monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    """:func:`collect_slits` compresses frames on ``COLLECT_WORKERS`` threads and adds them in
+    order (issue 36): the collection one thread makes, and the first dead slit in the
+    recording's order is the one a refusal names, wherever the threads were."""
+    from cal_testkit import synthetic_matrices, synthetic_profile, write_slit_recording
+
+    from thintact_sdk.calibration import collect
+    from thintact_sdk.calibration.collect import collect_slits
+    from thintact_sdk.formats.recording import Recording
+    from thintact_sdk.simulation.scenes import make_scene
+
+    write_slit_recording(tmp_path / "rec", synthetic_profile(), synthetic_matrices(), np.random.default_rng(3),
+                         [make_scene("gelsight", 24, 32, 2)])
+    rec = Recording(tmp_path / "rec")
+    seen: list[str] = []
+    two = collect_slits(rec, progress=lambda done, total, what: seen.append(what))
+    monkeypatch.setattr(collect, "COLLECT_WORKERS", 1)
+    one = collect_slits(Recording(tmp_path / "rec"))
+    assert len(seen) == two.slit_frames == one.slit_frames
+    assert seen == sorted(seen, key=lambda w: [fr.label for fr in rec.frames].index(w))  # in order
+    for a, b in zip(two.channels, one.channels, strict=True):
+        for sa, sb in ((a.horizontal, b.horizontal), (a.vertical, b.vertical)):
+            np.testing.assert_array_equal(sa.index, sb.index)
+            np.testing.assert_array_equal(sa.left, sb.left)
+            np.testing.assert_array_equal(sa.right, sb.right)
+    # two dead slits: the first in the recording's order is named
+    manifest = json.loads((tmp_path / "rec" / "manifest.json").read_text())
+    slits = [i for i in range(len(rec)) if i not in one.validation and rec.scene(i).any()]
+    for i in (slits[5], slits[2]):
+        path = tmp_path / "rec" / manifest["frames"][i]["measurement"]
+        np.save(path, np.zeros_like(np.load(path)))
+    monkeypatch.setattr(collect, "COLLECT_WORKERS", 2)
+    with pytest.raises(CalibrationError, match=f"slit frame {slits[2]} "):
+        collect_slits(Recording(tmp_path / "rec"))

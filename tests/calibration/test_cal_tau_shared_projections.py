@@ -6,6 +6,7 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+import pytest
 
 from thintact_sdk.calibration.tau import cross_validate, noise_criteria, shared_decode, tau_grid
 from thintact_sdk.reconstruction.decoders import ArrayBackend, T2SClosedFormDecoder
@@ -68,3 +69,47 @@ def test_shared_decode_falls_back_to_decode() -> None:
     sm, signals, _ = _unit()
     dec = _PlainDecode(T2SClosedFormDecoder(sm, 3.0))
     np.testing.assert_array_equal(shared_decode(dec, signals)(2), dec.decode(signals[2]))
+
+
+def test_noise_criteria_equal_the_float64_definition() -> None:
+    # the residuals and traces are taken in float32, one product per channel (issue 36): the
+    # curves of the float64 definition to far better than their 4 reported digits
+    sm, signals, _ = _unit()
+    inv_var = [np.full(y.shape, 1 / 0.09) for y in signals]
+    grid = tau_grid(sm)[::3]
+    dec = T2SClosedFormDecoder(sm, 1.0, ArrayBackend("numpy", "float64"))
+    gcv, disc = noise_criteria(dec, sm, signals, inv_var, grid)
+    rng = np.random.default_rng(0)
+    zs = [rng.choice(np.array([-1.0, 1.0], np.float32), size=signals[0].shape) for _ in range(4)]
+    n = float(signals[0].size)
+    for j, tau in enumerate(grid):
+        dec.set_tau(float(tau))
+        chi2 = np.mean([np.sum((y - sm.forward(np.asarray(dec.decode(y), np.float64))) ** 2 * w) / y.size
+                        for y, w in zip(signals, inv_var, strict=True)])
+        trace = np.mean([np.sum(z * sm.forward(np.asarray(dec.decode(z), np.float64))) for z in zs])
+        assert disc.values[j] == pytest.approx(chi2, rel=1e-4)
+        assert gcv.values[j] == pytest.approx(chi2 / (1 - min(trace, n - 1) / n) ** 2, rel=1e-4)
+
+
+def test_a_sensor_binned_decoder_sweeps_from_one_projection_too() -> None:
+    # the binned backend (a calibration candidate on oversampling sensors) bins each frame and
+    # projects it once per sweep (issue 36: it binned and projected every frame at every τ)
+    from thintact_sdk.reconstruction.decoders.sensor_binning import (
+        SensorBinnedDecoder,
+        bin_system_matrices,
+    )
+
+    sm, signals, truths = _unit()
+    inner = T2SClosedFormDecoder(bin_system_matrices(sm, 2), 1.0, mode_rtol=0.05)
+    dec = SensorBinnedDecoder(inner, sm.sensor_shape, sm.channels, 2)
+    decode = shared_decode(dec, signals)
+    for tau in tau_grid(sm)[::4]:
+        dec.set_tau(float(tau))
+        for i, y in enumerate(signals):
+            np.testing.assert_allclose(decode(i), dec.decode(y), rtol=1e-4, atol=1e-5)
+    labels = [f"s{i}" for i in range(len(signals))]
+    shared = cross_validate(dec, "t2s", signals, truths, labels, tau_grid(sm))
+    afresh = cross_validate(_PlainDecode(dec), "t2s", signals, truths, labels, tau_grid(sm))  # type: ignore[arg-type]
+    assert shared is not None and afresh is not None
+    np.testing.assert_allclose(shared.curve.values, afresh.curve.values, rtol=1e-5)
+    assert shared.curve.tau == afresh.curve.tau

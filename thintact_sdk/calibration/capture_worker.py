@@ -12,7 +12,7 @@ end of the prediction (:func:`~thintact_sdk.calibration.pipeline.calibrate_recor
 worker's :class:`Prepared`).
 
 Two threads: one follows the recording (compression, then the solve), one the prediction's
-design. numpy releases the interpreter lock in its kernels, so on two cores they run beside
+design and then the decoders' backend measurement on the design's matrices (:func:`warm_backends`). numpy releases the interpreter lock in its kernels, so on two cores they run beside
 the capture. A failure in either is kept and the pipeline computes that part itself after
 the capture (nothing is lost, only the head start).
 """
@@ -31,9 +31,17 @@ import numpy as np
 from thintact_sdk.calibration.collect import SlitCollection, SlitCompressor, white_frame_signal
 from thintact_sdk.calibration.prediction import PredictionDesign, design_for_prediction
 from thintact_sdk.calibration.solver import SolveReport, solve_collection
+from thintact_sdk.calibration.validation import (
+    calibration_decoders,
+    make_decoder,
+    needs_joint_filter,
+    takes_scene_prior,
+)
 from thintact_sdk.errors import ThinTactError
 from thintact_sdk.formats.profiles import Profile
 from thintact_sdk.formats.recording import Recording
+from thintact_sdk.host.blas import blas_threads
+from thintact_sdk.reconstruction.bundle import CalibrationBundle
 from thintact_sdk.reconstruction.t2s import SystemMatrices
 
 
@@ -49,7 +57,8 @@ class Prepared:
     design
         The prediction's simulated design (white-frame signal level).
     seconds
-        Wall time of each part, measured in the worker (``compress``, ``solve``, ``design``).
+        Wall time of each part, measured in the worker (``compress``, ``solve``, ``design``,
+        ``backends``: :func:`warm_backends`).
     errors
         What went wrong in a part that was then left to the pipeline.
     """
@@ -160,6 +169,32 @@ class CaptureWorker:
             except (ThinTactError, ValueError, np.linalg.LinAlgError) as err:
                 self.prepared.errors["design"] = str(err)
             self.prepared.seconds["design"] = round(time.monotonic() - t0, 3)
+            if self.prepared.design is not None:
+                t0 = time.monotonic()
+                try:
+                    warm_backends(self.profile, self.prepared.design.design)
+                except (ThinTactError, ValueError, np.linalg.LinAlgError) as err:
+                    self.prepared.errors["backends"] = str(err)
+                self.prepared.seconds["backends"] = round(time.monotonic() - t0, 3)
 
         self._design_thread = threading.Thread(target=run, name="calibrate-design", daemon=True)
         self._design_thread.start()
+
+
+def warm_backends(profile: Profile, design: SystemMatrices) -> None:
+    """Have the array backend of every calibration decoder that needs no joint filter measured
+    on the design's simulated matrices (the unit's shapes), under the thread settings the
+    calibration decodes with after the capture: one BLAS thread (the τ selection's lanes) and
+    the process's own (the prediction). The measurements are cached per host and shape
+    (:mod:`~thintact_sdk.reconstruction.decoders.backend_selection`), so the decoders built
+    after the last pattern are built directly; the first unit of a shape on a station no
+    longer measures them then. What is measured is speed and accuracy on probe scenes, both
+    set by the shapes and the design, not by this unit's defects."""
+    bundle = CalibrationBundle.create(profile, design, None, tau=1.0, source="simulator")
+    for name in calibration_decoders():
+        if needs_joint_filter(name):
+            continue
+        kwargs: dict[str, Any] = {"prior": None} if takes_scene_prior(name) else {}
+        with blas_threads(1):
+            make_decoder(profile, bundle, name, **kwargs)
+        make_decoder(profile, bundle, name, **kwargs)

@@ -10,7 +10,9 @@ same frames without reading their files again: :class:`~thintact_sdk.formats.rec
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections import deque
+from collections.abc import Callable, Iterator
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -35,9 +37,15 @@ from thintact_sdk.calibration.sumrule import (
 from thintact_sdk.errors import CalibrationError, InvalidValueError
 from thintact_sdk.formats.profiles import Profile
 from thintact_sdk.formats.recording import Recording
+from thintact_sdk.host.blas import blas_threads
+from thintact_sdk.host.compute_threads import usable_cores
 
 Progress = Callable[[int, int, str], None]
 """``progress(done, total, what)``: called after each frame is processed."""
+COLLECT_WORKERS = 2
+"""Threads :func:`collect_slits` compresses slit frames on (fewer where the process may use
+fewer cores): each frame's compression is independent, and the frames are added in order, so
+the collection is the one a single thread makes."""
 
 
 @dataclass
@@ -206,15 +214,50 @@ def collect_slits(
         dark_dn = dark_from_white(recording, white, complete)
         dark_source = "measured from the white frame and the slit sums (no dark frame)"
     acc = _Accumulator(prof, rank, dark_dn, dark_source, reference, validation)
-    total = len(roles)
-    for done, (i, r) in enumerate(sorted(roles.items()), start=1):
-        acc.compress_frame(recording, i, r)
+    items = sorted(roles.items())
+    for done, part in enumerate(_in_order(lambda ir: acc.compressed(recording, *ir), items), start=1):
+        acc.add(part)
         if progress is not None:
-            progress(done, total, recording.frames[i].label or recording.frames[i].measurement)
+            fr = recording.frames[part.index]
+            progress(done, len(items), fr.label or fr.measurement)
     out = acc.collection(frame_gains)
     if frame_gains != "off" and white is not None:
         _white_gains(recording, out, white, h_set is not None, v_set is not None, frame_gains)
     return out
+
+
+@dataclass
+class _Compressed:
+    """One slit frame compressed: its index, saturated fraction, exposure factor and, per
+    channel slit, ``(channel, horizontal, slit index, profile, image)``."""
+
+    index: int
+    saturated: float
+    scale: float
+    parts: list[tuple[int, bool, int, np.ndarray, LowRankImage]]
+
+
+def _in_order(work: Callable[[tuple[int, list[ChannelRole]]], _Compressed],
+              items: list[tuple[int, list[ChannelRole]]]) -> Iterator[_Compressed]:
+    """``work`` of every item, yielded in order, on :data:`COLLECT_WORKERS` threads (one BLAS
+    thread each) with at most twice that many frames in flight; the first error in order is
+    raised and the frames not started are dropped."""
+    workers = min(COLLECT_WORKERS, usable_cores())
+    if workers <= 1 or len(items) < 2:
+        yield from (work(item) for item in items)
+        return
+    with blas_threads(1), ThreadPoolExecutor(max_workers=workers, thread_name_prefix="collect") as pool:
+        pending: deque[Future[_Compressed]] = deque()
+        try:
+            for item in items:
+                pending.append(pool.submit(work, item))
+                if len(pending) >= 2 * workers:
+                    yield pending.popleft().result()
+            while pending:
+                yield pending.popleft().result()
+        finally:
+            for f in pending:
+                f.cancel()
 
 
 class _Accumulator:
@@ -234,31 +277,40 @@ class _Accumulator:
         self.frames = 0
 
     def compress_frame(self, recording: Recording, i: int, r: list[ChannelRole]) -> None:
-        out = self.out
+        """Compress slit frame ``i`` (roles ``r``) and add it."""
+        self.add(self.compressed(recording, i, r))
+
+    def compressed(self, recording: Recording, i: int, r: list[ChannelRole]) -> _Compressed:
+        """Slit frame ``i`` compressed, not yet added (reads the accumulator's settings only,
+        so frames may be compressed on several threads and added in order)."""
         raw = np.asarray(recording.measurement(i))
         sat = float(np.mean(raw >= self.saturation))
         recorded = recording.frames[i].extra.get("saturated_fraction")
         if isinstance(recorded, int | float):  # the wizard's worst single frame of the average
             sat = max(sat, float(recorded))
-        if sat > 0:
-            out.saturated[i] = sat
         signal, scale = signal_of(recording, i, self.dark_dn, self.reference)
-        if scale != 1.0:
-            out.frame_scale[i] = scale
+        parts: list[tuple[int, bool, int, np.ndarray, LowRankImage]] = []
         for c in range(min(self.n_ch, len(r))):
             role = r[c]
             if role.kind in ("hslit", "vslit") and role.profile is not None:
                 _check_alive(raw, c, i, recording, self.saturation)
             if role.kind == "hslit" and role.profile is not None:
-                target = self.h[c]
-                image = compress(signal[..., c], self.rank, seed=i)
+                parts.append((c, True, role.index, role.profile, compress(signal[..., c], self.rank, seed=i)))
             elif role.kind == "vslit" and role.profile is not None:
-                target = self.v[c]
-                image = compress(signal[..., c].T, self.rank, seed=i)
-            else:
-                continue
-            target[0].append(role.index)
-            target[1].append(role.profile)
+                parts.append((c, False, role.index, role.profile, compress(signal[..., c].T, self.rank, seed=i)))
+        return _Compressed(i, sat, scale, parts)
+
+    def add(self, done: _Compressed) -> None:
+        """Add a frame :meth:`compressed` gave (frames in the recording's order)."""
+        out = self.out
+        if done.saturated > 0:
+            out.saturated[done.index] = done.saturated
+        if done.scale != 1.0:
+            out.frame_scale[done.index] = done.scale
+        for c, horizontal, index, profile, image in done.parts:
+            target = self.h[c] if horizontal else self.v[c]
+            target[0].append(index)
+            target[1].append(profile)
             target[2].append(image)
         self.frames += 1
 

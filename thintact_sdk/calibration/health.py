@@ -35,7 +35,7 @@ from scipy import ndimage
 
 from thintact_sdk.calibration.blemish import find_blemishes, ratio_map
 from thintact_sdk.calibration.classify import classify_scene, is_dark, is_slit
-from thintact_sdk.calibration.collect import SlitCollection, signal_of
+from thintact_sdk.calibration.collect import SlitCollection, frame_exposure_us, signal_of
 from thintact_sdk.calibration.ghost import GhostScan, find_ghosts
 from thintact_sdk.errors import CalibrationError
 from thintact_sdk.formats.profiles import NoiseSpec
@@ -368,39 +368,112 @@ def _slit_indices(recording: Recording) -> tuple[list[int], list[bool], int]:
 
 
 def _forward_lit(sm: SystemMatrices, x: np.ndarray) -> np.ndarray:
-    """``sm.forward(x)`` (``N × M × C`` → ``R × S × C`` DN, float64) with the products taken over
-    the scene's lit rows (or columns, whichever are fewer) only and ordered to be cheapest:
-    ``P[:, rows] (X[rows] Qᵀ)`` or ``(P X[:, cols]) Q[:, cols]ᵀ``. For a slit that is ``R·S``
-    operations per term instead of ``R·N·M + R·M·S``; the same values to rounding."""
+    """``sm.forward(x)`` (``N × M × C`` → ``C × R × S`` DN, float64, channel first: each
+    channel's plane contiguous) with the products taken over the scene's lit rows (or columns,
+    whichever are fewer) only and ordered to be cheapest: ``P[:, rows] (X[rows] Qᵀ)`` or
+    ``(P X[:, cols]) Q[:, cols]ᵀ``. For a slit that is ``R·S`` operations per term instead of
+    ``R·N·M + R·M·S``; the same values to rounding."""
     c = x.shape[2]
-    out = np.zeros((*sm.sensor_shape, c))
+    out = np.empty((c, *sm.sensor_shape))
     for ch in range(c):
         xc = np.asarray(x[..., ch], np.float64)
         lit = xc != 0
         rows, cols = np.flatnonzero(lit.any(axis=1)), np.flatnonzero(lit.any(axis=0))
-        for pm, qm in ((sm.Po, sm.Qo), (sm.Pc, sm.Qc)):
+        for t, (pm, qm) in enumerate(((sm.Po, sm.Qo), (sm.Pc, sm.Qc))):
             p, q = pm[ch if pm.shape[0] > 1 else 0], qm[ch if qm.shape[0] > 1 else 0]
-            if len(rows) <= len(cols):
-                out[..., ch] += p[:, rows] @ (xc[rows] @ q.T)
+            term = p[:, rows] @ (xc[rows] @ q.T) if len(rows) <= len(cols) else (p @ xc[:, cols]) @ q[:, cols].T
+            if t == 0:
+                out[ch] = term
             else:
-                out[..., ch] += (p @ xc[:, cols]) @ q[:, cols].T
+                out[ch] += term
     return out
 
 
-def _residual(recording: Recording, i: int, collection: SlitCollection, sm: SystemMatrices,
-              saturation: float) -> tuple[str, np.ndarray, np.ndarray, np.ndarray]:
-    """Slit frame ``i``: its label, residual and prediction (``R × S × C`` DN, float64, the
-    exposure scaling undone) and the unsaturated pixels (boolean, same shape)."""
+def _lit_at(sm: SystemMatrices, x: np.ndarray, rr: np.ndarray, ss: np.ndarray, cc: np.ndarray) -> np.ndarray:
+    """:func:`_forward_lit` at the sensor entries ``(rr[k], ss[k], cc[k])`` only (DN, float64):
+    the lit rows' (or columns') factors at those pixels, ``O(K·lit)`` operations for ``K``
+    entries instead of a whole frame."""
+    out = np.zeros(len(rr))
+    for ch in range(x.shape[2]):
+        at = np.flatnonzero(cc == ch)
+        if at.size == 0:
+            continue
+        xc = np.asarray(x[..., ch], np.float64)
+        lit = xc != 0
+        rows, cols = np.flatnonzero(lit.any(axis=1)), np.flatnonzero(lit.any(axis=0))
+        r_at, s_at = rr[at], ss[at]
+        for pm, qm in ((sm.Po, sm.Qo), (sm.Pc, sm.Qc)):
+            p, q = pm[ch if pm.shape[0] > 1 else 0], qm[ch if qm.shape[0] > 1 else 0]
+            if len(rows) <= len(cols):
+                right = xc[rows] @ q.T  # lit rows × S
+                out[at] += np.einsum("kj,jk->k", p[np.ix_(r_at, rows)], right[:, s_at])
+            else:
+                left = p @ xc[:, cols]  # R × lit columns
+                out[at] += np.einsum("kj,kj->k", left[r_at], q[np.ix_(s_at, cols)])
+    return out
+
+
+def _residual_cf(recording: Recording, i: int, collection: SlitCollection, sm: SystemMatrices,
+                 saturation: float) -> tuple[str, np.ndarray, np.ndarray, np.ndarray]:
+    """Slit frame ``i``: its label, residual and prediction (``C × R × S`` DN, float64, channel
+    first, the exposure scaling undone) and the unsaturated pixels (boolean, same shape)."""
     c = sm.channels
     scene = recording.scene(i)
     if scene is None:  # the recording changed under us: slit frames are classified by their scene
         raise CalibrationError(f"{recording.root}: frame {i} has no scene any more")
-    signal, scale = signal_of(recording, i, collection.dark_dn, collection.exposure_us)
-    pred = _forward_lit(sm, scene_for_channels(scene, c))
     raw = np.asarray(recording.measurement(i))
-    ok = (raw.reshape(signal.shape) < saturation)
+    raw = raw[..., None] if raw.ndim == 2 else raw
+    pred = _forward_lit(sm, scene_for_channels(scene, c))
+    scale = _exposure_scale(recording, i, collection)
+    res = np.empty_like(pred)
+    ok = np.empty(pred.shape, bool)
+    for ch in range(c):
+        res[ch] = raw[..., ch]
+        res[ch] -= collection.dark_dn[..., ch]
+        if scale != 1.0:
+            res[ch] *= scale
+        res[ch] -= pred[ch]
+        np.less(raw[..., ch], saturation, out=ok[ch])
     label = recording.frames[i].label or str(i)
-    return label, (signal[..., :c] - pred) / scale, pred / scale, ok[..., :c]
+    return label, res / scale, pred / scale, ok
+
+
+def _exposure_scale(recording: Recording, i: int, collection: SlitCollection) -> float:
+    """The factor :func:`~thintact_sdk.calibration.collect.signal_of` applies to frame ``i``."""
+    exp = frame_exposure_us(recording, i)
+    ref = collection.exposure_us
+    if ref is not None and exp is not None and abs(exp - ref) > 1e-6 * ref:
+        return ref / exp
+    return 1.0
+
+
+def _residual(recording: Recording, i: int, collection: SlitCollection, sm: SystemMatrices,
+              saturation: float) -> tuple[str, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`_residual_cf` as ``R × S × C`` views (label, residual, prediction, unsaturated)."""
+    label, res, pred, ok = _residual_cf(recording, i, collection, sm, saturation)
+    return label, np.moveaxis(res, 0, 2), np.moveaxis(pred, 0, 2), np.moveaxis(ok, 0, 2)
+
+
+def _sampled_residual(recording: Recording, i: int, collection: SlitCollection, sm: SystemMatrices,
+                      saturation: float, pick: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Prediction and residual (DN, exposure scaling undone) of slit frame ``i`` at the flat
+    ``C × R × S`` entries ``pick``, its saturated entries left out: what :func:`_residual_cf`
+    gives there, without computing the rest of the frame."""
+    scene = recording.scene(i)
+    if scene is None:
+        raise CalibrationError(f"{recording.root}: frame {i} has no scene any more")
+    r, s = sm.sensor_shape
+    cc, rest = np.divmod(pick, r * s)
+    rr, ss = np.divmod(rest, s)
+    raw = np.asarray(recording.measurement(i))
+    raw = raw[..., None] if raw.ndim == 2 else raw
+    got = raw[rr, ss, cc].astype(np.float64)
+    keep = got < saturation
+    rr, ss, cc, got = rr[keep], ss[keep], cc[keep], got[keep]
+    scale = _exposure_scale(recording, i, collection)
+    pred = _lit_at(sm, scene_for_channels(scene, sm.channels), rr, ss, cc)
+    res = (got - collection.dark_dn[rr, ss, cc]) * scale - pred
+    return pred / scale, res / scale
 
 
 def _noise_samples(recording: Recording, indices: list[int], collection: SlitCollection,
@@ -408,23 +481,25 @@ def _noise_samples(recording: Recording, indices: list[int], collection: SlitCol
     """Pass 1: the prediction and ``r²`` of the unsaturated slit-frame pixels the noise fit uses.
 
     All of them while the slit frames hold at most ``NOISE_FIT_CAP`` entries (pixels ×
-    channels); above it ``⌈NOISE_FIT_CAP / slits⌉`` drawn at random from each frame's
-    unsaturated entries (without replacement, seed ``NOISE_FIT_SEED``), so memory stays
-    bounded by the cap whatever the number of slits.
+    channels); above it ``⌈NOISE_FIT_CAP / slits⌉`` entries of each frame drawn at random
+    (without replacement, seed ``NOISE_FIT_SEED``; the saturated among them left out) and only
+    those computed, so memory and time stay bounded by the cap whatever the frame size.
     """
     r, s = sm.sensor_shape
-    total = len(indices) * r * s * sm.channels
+    entries = r * s * sm.channels
+    total = len(indices) * entries
     per_frame = None if total <= NOISE_FIT_CAP else -(-NOISE_FIT_CAP // max(len(indices), 1))
     rng = np.random.default_rng(NOISE_FIT_SEED)
     size = total if per_frame is None else per_frame * len(indices)
     preds, r2s = np.empty(size), np.empty(size)  # filled in place: no second copy to concatenate
     n = 0
     for i in indices:
-        _, res, pred, ok = _residual(recording, i, collection, sm, saturation)
-        p, e = pred[ok], res[ok]
-        if per_frame is not None and p.size > per_frame:
-            pick = rng.choice(p.size, per_frame, replace=False)
-            p, e = p[pick], e[pick]
+        if per_frame is None:
+            _, res, pred, ok = _residual_cf(recording, i, collection, sm, saturation)
+            p, e = pred[ok], res[ok]
+        else:
+            p, e = _sampled_residual(recording, i, collection, sm, saturation,
+                                     np.sort(rng.choice(entries, min(per_frame, entries), replace=False)))
         preds[n : n + p.size] = p
         r2s[n : n + p.size] = e**2
         n += p.size
@@ -496,12 +571,18 @@ def _assess(recording: Recording, collection: SlitCollection, sm: SystemMatrices
     chi2_sum = np.zeros(shape)
     count = np.zeros(shape)
     slit_chi2: dict[str, float] = {}
-    for i in indices:  # pass 2: the χ² map with the measured noise
-        label, r, p, m = _residual(recording, i, collection, sm, saturation)
-        z = np.where(m, r**2 / noise.variance(p), 0.0)
-        chi2_sum += z.sum(axis=2)
-        count += m.sum(axis=2)
-        slit_chi2[label] = float(z.sum() / max(int(m.sum()), 1))
+    for i in indices:  # pass 2: the χ² map with the measured noise, one channel plane at a time
+        label, r, p, m = _residual_cf(recording, i, collection, sm, saturation)
+        z_sum, m_sum = 0.0, 0
+        for ch in range(c):
+            z = r[ch] * r[ch]
+            z /= noise.variance(p[ch])
+            z[~m[ch]] = 0.0
+            chi2_sum += z
+            count += m[ch]
+            z_sum += float(z.sum())
+            m_sum += int(np.count_nonzero(m[ch]))
+        slit_chi2[label] = z_sum / max(m_sum, 1)
     chi2_map = chi2_sum / np.maximum(count, 1)
     slit_frames = SlitFrames(recording, indices, horizontal, collection.dark_dn, collection.exposure_us, c)
     names = list(profile.sensor.channels)

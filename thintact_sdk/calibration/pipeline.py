@@ -33,7 +33,13 @@ from thintact_sdk.calibration.prediction import (
     predict_from_design,
 )
 from thintact_sdk.calibration.registration import RegistrationResult
-from thintact_sdk.calibration.selection import TauSelection, select, validation_frames
+from thintact_sdk.calibration.selection import (
+    TauSelection,
+    add_noise_curves,
+    has_noise_curves,
+    select,
+    validation_frames,
+)
 from thintact_sdk.calibration.solver import (
     ChannelMatrices,
     Method,
@@ -301,7 +307,7 @@ def calibrate_recording(
     checkpoints = Checkpoints(out / STAGE_DIR, fingerprint(
         Path(recording.root), profile.content_hash(),
         {k: v for k, v in opts.__dict__.items()} | {"frames_averaged_resolved": _frames_averaged(recording, opts)}))
-    stage_names = ["slit frames and solve", "health", "joint filter", "decoder and tau"]
+    stage_names = ["slit frames and solve", "health", "joint filter", "decoder and tau", "noise criteria"]
     if opts.predict:
         stage_names += ["prediction design", "prediction"]
     stage_names.append("bundle and report")
@@ -374,18 +380,39 @@ def calibrate_recording(
             if isinstance(selection, TauSelection):
                 st["resumed"] = True
             else:
+                # GCV and discrepancy only where the choice needs them; else they are reported
+                # and computed by noise_curves, on the first core free
                 selection = select(profile, bundle, frames, noise_ready.result(), decoder=opts.decoder,
-                                   tau=opts.tau, simulated=_simulated_curve(tau_table))
+                                   tau=opts.tau, simulated=_simulated_curve(tau_table),
+                                   noise_criteria_curves=False)
                 checkpoints.save_object("selection", selection)
         return bundle, tau_table, selection
 
+    def noise_curves(lane_a: Future[tuple[CalibrationBundle, dict[str, float], TauSelection]]) -> None:
+        """The GCV and discrepancy curves of the chosen decoder (reported beside the choice)."""
+        bundle, _, selection = lane_a.result()
+        if not frames.signals or has_noise_curves(selection):
+            return
+        with log.stage("noise criteria", "GCV and discrepancy curves of the chosen decoder") as st:
+            stored = checkpoints.load_object("noise_criteria")
+            if isinstance(stored, list) and stored and all(isinstance(c, TauCurve) for c in stored):
+                selection.curves += stored
+                st["resumed"] = True
+            else:
+                add_noise_curves(profile, bundle, frames, noise_ready.result(), selection)
+                checkpoints.save_object("noise_criteria", [c for c in selection.curves
+                                                           if c.criterion in ("gcv", "discrepancy")])
+
     # two lanes on two cores, each with one BLAS thread: the health check (and the prediction's
-    # simulated design) beside the filter and the τ selection
+    # simulated design) beside the filter and the τ selection; the reported noise criteria
+    # then run on whichever lane finishes first
     with blas_threads(1), ThreadPoolExecutor(max_workers=2, thread_name_prefix="calibrate") as pool:
         lane_b = pool.submit(health_lane)
         lane_a = pool.submit(selection_lane)
+        lane_c = pool.submit(noise_curves, lane_a)
         bundle, tau_table, selection = lane_a.result()
         health, design = lane_b.result()
+        lane_c.result()
     selection.write_taus(bundle.meta)
     bundle.meta["decoder"] = selection.decoder
     val = selection.validation

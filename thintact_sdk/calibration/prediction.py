@@ -13,6 +13,7 @@ its design.
 from __future__ import annotations
 
 from collections.abc import Iterable
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -41,7 +42,8 @@ from thintact_sdk.simulation.noise import MAX_POISSON_ELECTRONS, signal_to_dn
 from thintact_sdk.simulation.simulator import Simulator
 
 SLIT_BATCH = 16
-"""Slit scenes simulated per batch (bounds memory at paper size: 16 × 1024 × 1280 × 3 float64)."""
+"""Slit scenes simulated per batch (bounds memory at paper size: 16 × 1024 × 1280 × 3 float64,
+and the previous batch's float32 frames while they are compressed)."""
 
 GAUSSIAN_SKEW_LIMIT = 0.1
 """Largest skewness of a pixel's shot + read noise (in electrons: ``λ / (λ + (read·e)²)^1.5``
@@ -64,16 +66,25 @@ def slit_dn(signal_dn: np.ndarray, noise: NoiseSpec, rng: np.random.Generator) -
     """
     e = float(noise.electrons_per_dn)
     read = float(noise.read_noise_dn)
-    lam = np.clip(np.asarray(signal_dn, np.float32) * np.float32(e), 0.0, MAX_POISSON_ELECTRONS)
+    # in place on as few fresh arrays as possible: at paper size each is a quarter GB, and
+    # fresh pages cost more than the arithmetic
+    lam = np.multiply(signal_dn, np.float32(e), dtype=np.float32)
+    np.maximum(lam, np.float32(0.0), out=lam)
+    np.minimum(lam, np.float32(MAX_POISSON_ELECTRONS), out=lam)
     z = rng.standard_normal(lam.shape, dtype=np.float32)
     a = np.float32((read * e) ** 2)
-    exact = lam > np.float32(0.0)
-    exact &= lam > np.float32(GAUSSIAN_SKEW_LIMIT) * (lam + a) ** np.float32(1.5)
-    dn = np.sqrt(lam + a)
+    exact: np.ndarray | None = None
+    # the skewness peaks at 0.385 / (read·e): below the limit (with room for float32 rounding)
+    # no pixel can be drawn exactly, and the elementwise test is skipped
+    if a <= 0 or 2.0 * a / (3.0 * a) ** 1.5 * (1.0 + 1e-4) > GAUSSIAN_SKEW_LIMIT:
+        exact = lam > np.float32(0.0)
+        exact &= lam > np.float32(GAUSSIAN_SKEW_LIMIT) * (lam + a) ** np.float32(1.5)
+    dn = lam + a
+    np.sqrt(dn, out=dn)
     dn *= z
     dn += lam
     dn *= np.float32(1.0 / e)
-    if np.any(exact):
+    if exact is not None and np.any(exact):
         lam_x = lam[exact]
         dn[exact] = (rng.poisson(lam_x) / e + read * z[exact]).astype(np.float32)
     dn += np.float32(noise.black_level_dn)
@@ -159,13 +170,13 @@ def _slit_signal_dn(factors: list[tuple[np.ndarray, np.ndarray]], gains: np.ndar
     r, s = factors[0][0].shape[1], factors[0][1].shape[1]
     out = np.empty((len(idx), r, s, c))
     for ch, (p, q) in enumerate(factors):
-        p1, q1 = p.sum(axis=2), q.sum(axis=2)  # K × R, K × S: the terms times the all-ones vector
+        # K × R, K × S: the terms times the all-ones vector; the gain goes on the small factor
+        p1, q1 = p.sum(axis=2) * gains[ch], q.sum(axis=2) * gains[ch]
         for b, i in enumerate(idx):
             if i < n:
                 out[b, ..., ch] = p[:, :, i].T @ q1
             else:
                 out[b, ..., ch] = p1.T @ q[:, :, i - n]
-        out[..., ch] *= gains[ch]
     return out
 
 
@@ -183,23 +194,41 @@ def simulated_calibration(profile: Profile, gains: np.ndarray, noise: NoiseSpec,
     factors = slit_factors(sim, c)
     h: list[tuple[list[int], list[np.ndarray], list[LowRankImage]]] = [([], [], []) for _ in range(c)]
     v: list[tuple[list[int], list[np.ndarray], list[LowRankImage]]] = [([], [], []) for _ in range(c)]
-    for start in range(0, n + m, SLIT_BATCH):
-        idx = range(start, min(start + SLIT_BATCH, n + m))
-        if factors is None:
-            expected = sim.predict_signal_dn(slit_scenes(idx, n, m, c), gains)
-        else:
-            expected = _slit_signal_dn(factors, np.asarray(gains, float), idx, n)
-        ys = slit_dn(expected, noise, rng) - dark_dn
+
+    def compressed(idx: range, ys: np.ndarray) -> list[list[LowRankImage]]:
+        out = []
         for y, i in zip(ys, idx, strict=True):
-            for ch in range(c):
-                if i < n:
-                    h[ch][0].append(i)
-                    h[ch][1].append(np.ones(m))
-                    h[ch][2].append(compress(y[..., ch], rank, seed=i))
-                else:
-                    v[ch][0].append(i - n)
-                    v[ch][1].append(np.ones(n))
-                    v[ch][2].append(compress(y[..., ch].T, rank, seed=i))
+            y = y - dark_dn
+            out.append([compress(y[..., ch] if i < n else y[..., ch].T, rank, seed=i) for ch in range(c)])
+        return out
+
+    def add(idx: range, images: list[list[LowRankImage]]) -> None:
+        for i, per_channel in zip(idx, images, strict=True):
+            for ch, image in enumerate(per_channel):
+                target, index, ones = (h[ch], i, np.ones(m)) if i < n else (v[ch], i - n, np.ones(n))
+                target[0].append(index)
+                target[1].append(ones)
+                target[2].append(image)
+
+    # the noise is drawn here, batch after batch from the one generator (the same draws as
+    # ever); each batch's compression runs on a worker meanwhile, one batch behind
+    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="design-compress") as pool:
+        pending: Future[list[list[LowRankImage]]] | None = None
+        pending_idx = range(0)
+        for start in range(0, n + m, SLIT_BATCH):
+            idx = range(start, min(start + SLIT_BATCH, n + m))
+            if factors is None:
+                expected = sim.predict_signal_dn(slit_scenes(idx, n, m, c), gains)
+            else:
+                expected = _slit_signal_dn(factors, np.asarray(gains, float), idx, n)
+            ys = slit_dn(expected, noise, rng)
+            del expected
+            if pending is not None:
+                add(pending_idx, pending.result())
+            pending, pending_idx = pool.submit(compressed, idx, ys), idx
+            del ys
+        if pending is not None:
+            add(pending_idx, pending.result())
     mats = []
     for ch in range(c):
         slits = ChannelSlits(SlitStack.from_images(*h[ch]), SlitStack.from_images(*v[ch]), n, m)

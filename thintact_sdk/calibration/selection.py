@@ -40,6 +40,7 @@ from thintact_sdk.formats.profiles import Profile
 from thintact_sdk.formats.recording import Recording
 from thintact_sdk.reconstruction.bundle import CalibrationBundle
 from thintact_sdk.reconstruction.scene_prior import ScenePrior
+from thintact_sdk.reconstruction.t2s import SystemMatrices
 
 
 @dataclass
@@ -150,6 +151,31 @@ def _results(frames: ValidationFrames, estimates: list[np.ndarray]) -> list[Vali
     return out
 
 
+def _noise_curves(decoder: Any, sm: SystemMatrices, frames: ValidationFrames, noise: NoiseEstimate,
+                  grid: np.ndarray) -> tuple[TauCurve, TauCurve]:
+    inv_var = [1.0 / noise.variance(np.asarray(y, np.float64)) for y in frames.signals]
+    return noise_criteria(decoder, sm, frames.signals, inv_var, grid)
+
+
+def has_noise_curves(selection: TauSelection) -> bool:
+    """Whether ``selection`` holds the GCV and discrepancy curves."""
+    return any(c.criterion in ("gcv", "discrepancy") for c in selection.curves)
+
+
+def add_noise_curves(profile: Profile, bundle: CalibrationBundle, frames: ValidationFrames,
+                     noise: NoiseEstimate, selection: TauSelection) -> None:
+    """Append the GCV and discrepancy curves of the chosen decoder to ``selection.curves``,
+    for a selection made with ``noise_criteria_curves=False`` whose choice did not need them
+    (cross-validation chose): the calibration computes them on whichever core is free first.
+    Nothing is done when they are there already or there are no validation frames."""
+    if not frames.signals or has_noise_curves(selection):
+        return
+    name = selection.decoder
+    decoder = make_decoder(profile, bundle, name, **({"prior": None} if takes_scene_prior(name) else {}))
+    sm = bundle.system_matrices
+    selection.curves += list(_noise_curves(decoder, sm, frames, noise, tau_grid(sm)))
+
+
 def select(
     profile: Profile,
     bundle: CalibrationBundle,
@@ -219,8 +245,7 @@ def select(
         chosen = names[0] if decoder else default_decoder()
         criterion, tau_chosen = "gcv", float("nan")
     if frames.signals and (noise_criteria_curves or (not cvs and simulated is None)):
-        inv_var = [1.0 / noise.variance(np.asarray(y, np.float64)) for y in frames.signals]
-        gcv, discrepancy = noise_criteria(decoders[chosen], sm, frames.signals, inv_var, grid)
+        gcv, discrepancy = _noise_curves(decoders[chosen], sm, frames, noise, grid)
         curves += [gcv, discrepancy]
         tau_chosen = gcv.tau if not cvs else tau_chosen
     if not cvs and simulated is not None:

@@ -11,7 +11,8 @@ the report).
 Checkpoints (``<bundle>/stages/``, removed once the bundle is written): the slit collection
 and the solved matrices (``solve.npz`` + ``solve.json``), the joint filter (``filter.npz``),
 the health report (``health.json`` + ``health.npz``), the decoder and τ selection
-(``selection.json`` + ``selection.npz``) and the prediction (``prediction.json``). Each carries a fingerprint of the recording's manifest,
+(``selection.json`` + ``selection.npz``), its reported GCV and discrepancy curves
+(``noise_criteria.json``) and the prediction (``prediction.json``). Each carries a fingerprint of the recording's manifest,
 the profile and the options that shape it; a killed run restarted on the same recording
 (wizard resume, or ``--from-recording`` with the same ``--out`` and ``--force``) loads them
 instead of recomputing, and a checkpoint whose fingerprint differs is ignored. Files are written
@@ -55,6 +56,7 @@ STAGE_WEIGHTS: dict[str, float] = {
     "health": 0.8,
     "joint filter": 0.1,
     "decoder and tau": 1.0,
+    "noise criteria": 0.15,
     "prediction design": 0.8,
     "prediction": 0.2,
     "bundle and report": 0.05,

@@ -213,6 +213,24 @@ class SensorBinnedDecoder(Decoder):
             binned = bin_frame(frame, self.b, self._buffer())
         return self._decode_binned(binned, float(black_level_dn))
 
+    def project(self, frame: np.ndarray) -> Any:
+        """The τ-free first step of :meth:`decode` for a frame decoded at several τ
+        (:func:`~thintact_sdk.calibration.tau.shared_decode`): the frame (``R × S × C`` DN
+        above black) binned, then the inner decoder's own ``project`` where it has one."""
+        check_measurement_shape(frame, self.sensor_shape, self.channels)
+        binned = bin_frame(frame, self.b)
+        if hasattr(self.inner, "project") and DecoderInput.of(self.inner).kind == "signal":
+            return ("inner", self.inner.project(binned))
+        return ("binned", binned)
+
+    def decode_projected(self, projected: Any) -> np.ndarray:
+        """:meth:`decode` (black level 0) of the frame :meth:`project` gave ``projected`` for,
+        at the current τ (the same figures up to float rounding)."""
+        kind, value = projected
+        if kind == "inner":
+            return np.asarray(self.inner.decode_projected(value))
+        return self._decode_binned(value, 0.0)
+
     def _decode_binned(self, binned: np.ndarray, black_level_dn: float) -> np.ndarray:
         """The inner solve with the black level folded in where it can (no full-size pass)."""
         if DecoderInput.of(self.inner).kind != "signal":
