@@ -64,13 +64,18 @@ def test_a_crash_in_the_prediction_resumes_without_recomputing_health_or_the_cho
         raise AssertionError("recomputed a finished stage")
 
     monkeypatch.setattr(pipeline, "predict_from_design", real_predict)
-    for name in ("collect_slits", "solve_matrices", "build_bundle", "assess", "select"):
+    assert (tmp_path / "cal" / "stages" / "design.npz").is_file()
+    for name in ("collect_slits", "solve_matrices", "build_bundle", "assess", "select", "add_noise_curves",
+                 "design_for_prediction"):
         monkeypatch.setattr(pipeline, name, never)
     again = calibrate_recording(rec, tmp_path / "cal", opts, report=False)
     assert not (tmp_path / "cal" / "stages").exists()
     meta = {d: json.loads((tmp_path / d / "calibration.json").read_text()) for d in ("whole", "cal")}
     stages = {s["stage"]: s for s in meta["cal"]["metrics"]["stages"]}
     assert stages["health"].get("resumed") and stages["decoder and tau"].get("resumed")
+    # the prediction's design and the reported noise criteria too (the design with its
+    # generator's state: the prediction's validation frames draw what they drew)
+    assert stages["prediction design"].get("resumed") and stages["noise criteria"].get("resumed")
     assert "resumed" not in stages["prediction"]
     for key in ("health", "tau_selection", "psnr_db", "judged_psnr_db", "verdict", "predicted_psnr_db"):
         assert meta["cal"]["metrics"][key] == meta["whole"]["metrics"][key], key

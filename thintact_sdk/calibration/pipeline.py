@@ -357,10 +357,18 @@ def calibrate_recording(
                 noise_ready.set_exception(exc)
             raise
         design = None if prepared is None else prepared.design
-        if want_prediction and design is None and checkpoints.load_json("prediction") is None:
-            with log.stage("prediction design", "simulating the design's own calibration "
-                           "(for the prediction)"):
-                design = simulate_design()
+        if want_prediction and checkpoints.load_json("prediction") is None:
+            if design is not None:  # the capture's: kept for a resume after the capture
+                checkpoints.save_design(design)
+            else:
+                with log.stage("prediction design", "simulating the design's own calibration "
+                               "(for the prediction)") as st:
+                    design = checkpoints.load_design(profile)
+                    if design is not None:
+                        st["resumed"] = True
+                    else:
+                        design = simulate_design()
+                        checkpoints.save_design(design)
         return health, design
 
     def selection_lane() -> tuple[CalibrationBundle, dict[str, float], TauSelection]:

@@ -41,9 +41,11 @@ from thintact_sdk.reconstruction.t2s import SystemMatrices
 from thintact_sdk.simulation.noise import MAX_POISSON_ELECTRONS, signal_to_dn
 from thintact_sdk.simulation.simulator import Simulator
 
-SLIT_BATCH = 16
-"""Slit scenes simulated per batch (bounds memory at paper size: 16 × 1024 × 1280 × 3 float64,
-and the previous batch's float32 frames while they are compressed)."""
+SLIT_BATCH = 8
+"""Slit scenes simulated per batch: memory at paper size is four float32 batches of
+8 × 1024 × 1280 × 3 (signal, draws, frames; the previous batch's frames while they are
+compressed), 0.5 GB. The Gaussian draws do not depend on it; where exact Poisson draws occur
+(read noise under 3.9 electrons) their interleaving with the Gaussian ones does."""
 
 GAUSSIAN_SKEW_LIMIT = 0.1
 """Largest skewness of a pixel's shot + read noise (in electrons: ``λ / (λ + (read·e)²)^1.5``
@@ -165,10 +167,13 @@ def slit_factors(sim: Simulator, channels: int) -> list[tuple[np.ndarray, np.nda
 def _slit_signal_dn(factors: list[tuple[np.ndarray, np.ndarray]], gains: np.ndarray, idx: range,
                     n: int) -> np.ndarray:
     """Expected signal (DN above black) of the slits ``idx`` (``< n``: row slits, else
-    column ``i − n``) from :func:`slit_factors`: ``len(idx) × R × S × C``."""
+    column ``i − n``) from :func:`slit_factors`: ``len(idx) × R × S × C`` float32 (the products
+    taken in float64)."""
     c = len(factors)
     r, s = factors[0][0].shape[1], factors[0][1].shape[1]
-    out = np.empty((len(idx), r, s, c))
+    # float32: :func:`slit_dn` takes the signal to float32 first, so storing each float64
+    # product's values in float32 here gives the same draws at half the memory
+    out = np.empty((len(idx), r, s, c), np.float32)
     for ch, (p, q) in enumerate(factors):
         # K × R, K × S: the terms times the all-ones vector; the gain goes on the small factor
         p1, q1 = p.sum(axis=2) * gains[ch], q.sum(axis=2) * gains[ch]

@@ -12,7 +12,8 @@ Checkpoints (``<bundle>/stages/``, removed once the bundle is written): the slit
 and the solved matrices (``solve.npz`` + ``solve.json``), the joint filter (``filter.npz``),
 the health report (``health.json`` + ``health.npz``), the decoder and τ selection
 (``selection.json`` + ``selection.npz``), its reported GCV and discrepancy curves
-(``noise_criteria.json``) and the prediction (``prediction.json``). Each carries a fingerprint of the recording's manifest,
+(``noise_criteria.json``), the prediction's simulated design (``design.npz`` + ``design.json``)
+and the prediction (``prediction.json``). Each carries a fingerprint of the recording's manifest,
 the profile and the options that shape it; a killed run restarted on the same recording
 (wizard resume, or ``--from-recording`` with the same ``--out`` and ``--force``) loads them
 instead of recomputing, and a checkpoint whose fingerprint differs is ignored. Files are written
@@ -40,13 +41,16 @@ from typing import Any
 import numpy as np
 
 from thintact_sdk.calibration.collect import SlitCollection
+from thintact_sdk.calibration.prediction import PredictionDesign
 from thintact_sdk.calibration.slits import ChannelSlits, SlitStack
 from thintact_sdk.calibration.solver import SolveReport
 from thintact_sdk.errors import CalibrationError
+from thintact_sdk.formats.profiles import NoiseSpec, Profile
 from thintact_sdk.formats.safe_arrays import read_npz
 from thintact_sdk.formats.safe_json import loads as safe_loads
 from thintact_sdk.reconstruction.joint_filter import JointFilter
 from thintact_sdk.reconstruction.t2s import SystemMatrices
+from thintact_sdk.simulation.simulator import Simulator
 
 STAGE_DIR = "stages"
 CHECKPOINT_FORMAT = "thintact-calibration-stage/1"
@@ -334,6 +338,39 @@ class Checkpoints:
             return None
 
     # -- prediction ------------------------------------------------------------------------
+    def save_design(self, design: PredictionDesign) -> None:
+        """``design.npz`` (the simulated matrices, the gains, the simulated dark capture) +
+        ``design.json`` (seed, averaged noise and the generator's state after the design, so
+        the prediction's validation frames draw what they would have drawn)."""
+        sm = design.design
+        arrays = {"Po": sm.Po, "Qo": sm.Qo, "Pc": sm.Pc, "Qc": sm.Qc, "gains": np.asarray(design.gains),
+                  "dark_dn": design.dark_dn}
+        _atomic_write(self.directory / "design.npz", lambda f: np.savez(f, **arrays))  # type: ignore[arg-type]
+        state = design.rng.bit_generator.state
+        self._meta("design", {"seed": design.seed, "noise": design.noise.model_dump(), "sm_meta": sm.meta,
+                              "bit_generator": str(state["bit_generator"]),
+                              "state": {k: str(v) for k, v in state["state"].items()},
+                              "has_uint32": int(state["has_uint32"]), "uinteger": str(state["uinteger"])})
+
+    def load_design(self, profile: Profile) -> PredictionDesign | None:
+        """The design :meth:`save_design` stored for ``profile``, or None."""
+        meta = self._valid("design")
+        if meta is None:
+            return None
+        try:
+            a = read_npz(self.directory / "design.npz", what="calibration checkpoint")
+            if meta["bit_generator"] != "PCG64":
+                return None
+            rng = np.random.Generator(np.random.PCG64())
+            rng.bit_generator.state = {
+                "bit_generator": "PCG64", "state": {k: int(v) for k, v in meta["state"].items()},
+                "has_uint32": int(meta["has_uint32"]), "uinteger": int(meta["uinteger"])}
+            sm = SystemMatrices(a["Po"], a["Qo"], a["Pc"], a["Qc"], dict(meta["sm_meta"]))
+            return PredictionDesign(Simulator(profile), a["gains"], NoiseSpec.model_validate(meta["noise"]),
+                                    a["dark_dn"], sm, rng, int(meta["seed"]))
+        except Exception:  # noqa: BLE001 - a damaged checkpoint is recomputed
+            return None
+
     def save_json(self, name: str, body: dict[str, Any]) -> None:
         self._meta(name, {"body": body})
 
