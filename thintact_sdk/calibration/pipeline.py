@@ -37,6 +37,7 @@ from thintact_sdk.calibration.selection import (
     TauSelection,
     add_noise_curves,
     has_noise_curves,
+    noise_curves_of,
     select,
     validation_frames,
 )
@@ -53,6 +54,7 @@ from thintact_sdk.calibration.validation import (
     ValidationResult,
     averaged_noise,
     choose_tau,
+    default_decoder,
     make_decoder,
     score,
 )
@@ -338,6 +340,7 @@ def calibrate_recording(
                                      method=opts.method, max_iter=opts.max_iter, tol=opts.tol,
                                      rank=opts.rank)
     noise_ready: Future[NoiseEstimate] = Future()
+    bundle_ready: Future[CalibrationBundle] = Future()
 
     def health_lane() -> tuple[HealthReport, PredictionDesign | None]:
         """Health (its noise first, for the τ selection), then the prediction's design part."""
@@ -373,16 +376,21 @@ def calibrate_recording(
 
     def selection_lane() -> tuple[CalibrationBundle, dict[str, float], TauSelection]:
         """The joint filter, then the decoder and τ (once the noise is measured)."""
-        with log.stage("joint filter", "training the joint filter") as st:
-            trained = checkpoints.load_filter()
-            if trained is not None:
-                jf, tau_table, tau0 = trained
-                bundle = CalibrationBundle.create(profile, sm, jf, tau=tau0, source=source,
-                                                  exposure_us=collection.exposure_us)
-                st["resumed"] = True
-            else:
-                bundle, tau_table = build_bundle(profile, sm, opts, k, source, collection.exposure_us)
-                checkpoints.save_filter(bundle.filter, tau_table, float(bundle.meta["tau"]))
+        try:
+            with log.stage("joint filter", "training the joint filter") as st:
+                trained = checkpoints.load_filter()
+                if trained is not None:
+                    jf, tau_table, tau0 = trained
+                    bundle = CalibrationBundle.create(profile, sm, jf, tau=tau0, source=source,
+                                                      exposure_us=collection.exposure_us)
+                    st["resumed"] = True
+                else:
+                    bundle, tau_table = build_bundle(profile, sm, opts, k, source, collection.exposure_us)
+                    checkpoints.save_filter(bundle.filter, tau_table, float(bundle.meta["tau"]))
+        except BaseException as exc:
+            bundle_ready.set_exception(exc)
+            raise
+        bundle_ready.set_result(bundle)
         with log.stage("decoder and tau", "choosing the decoder and tau on the validation frames") as st:
             selection = checkpoints.load_object("selection")
             if isinstance(selection, TauSelection):
@@ -397,52 +405,77 @@ def calibrate_recording(
         return bundle, tau_table, selection
 
     def noise_curves(lane_a: Future[tuple[CalibrationBundle, dict[str, float], TauSelection]]) -> None:
-        """The GCV and discrepancy curves of the chosen decoder (reported beside the choice)."""
-        bundle, _, selection = lane_a.result()
-        if not frames.signals or has_noise_curves(selection):
+        """The GCV and discrepancy curves of the chosen decoder (reported beside the choice).
+        Started on the first lane free: when that is before the choice, the curves of the
+        default decoder are computed meanwhile (the choice on the paper's design), and used
+        if it is chosen."""
+        if not frames.signals or opts.tau is not None:
             return
         with log.stage("noise criteria", "GCV and discrepancy curves of the chosen decoder") as st:
             stored = checkpoints.load_object("noise_criteria")
             if isinstance(stored, list) and stored and all(isinstance(c, TauCurve) for c in stored):
-                selection.curves += stored
+                bundle, _, selection = lane_a.result()
+                if not has_noise_curves(selection):
+                    selection.curves += stored
                 st["resumed"] = True
+                return
+            guess: tuple[str, list[TauCurve]] | None = None
+            if not lane_a.done():
+                name = opts.decoder or default_decoder()
+                bundle = bundle_ready.result()
+                guess = (name, noise_curves_of(profile, bundle, frames, noise_ready.result(), name))
+            bundle, _, selection = lane_a.result()
+            if has_noise_curves(selection):
+                return
+            if guess is not None and guess[0] == selection.decoder:
+                selection.curves += guess[1]
+                st["speculative"] = True
             else:
                 add_noise_curves(profile, bundle, frames, noise_ready.result(), selection)
-                checkpoints.save_object("noise_criteria", [c for c in selection.curves
-                                                           if c.criterion in ("gcv", "discrepancy")])
+            checkpoints.save_object("noise_criteria", [c for c in selection.curves
+                                                       if c.criterion in ("gcv", "discrepancy")])
+
+    def predict(lane_a: Future[tuple[CalibrationBundle, dict[str, float], TauSelection]],
+                lane_b: Future[tuple[HealthReport, PredictionDesign | None]]) -> Prediction | None:
+        """The prediction for the chosen decoder, beside the noise criteria."""
+        if not opts.predict:
+            return None
+        _, _, selection = lane_a.result()
+        _, design = lane_b.result()
+        with log.stage("prediction", "predicting what this design should reach") as st:
+            if not frames.labels:
+                return None
+            stored = checkpoints.load_json("prediction")
+            if stored is not None and stored.get("decoder") == selection.decoder:
+                st["resumed"] = True
+                return Prediction(dict(stored["psnr_db"]), list(stored["gains_dn_per_unit"]),
+                                  float(stored["tau"]), dict(stored["notes"]))
+            if design is None:
+                design = simulate_design()
+            prediction = predict_from_design(
+                profile, design, frames.labels, frames.truths, selection.decoder,
+                filter_steps=opts.filter_steps, filter_scenes=opts.filter_scenes)
+            checkpoints.save_json("prediction", {
+                "decoder": selection.decoder, "psnr_db": prediction.psnr_db,
+                "gains_dn_per_unit": prediction.gains_dn_per_unit, "tau": prediction.tau,
+                "notes": prediction.notes})
+            return prediction
 
     # two lanes on two cores, each with one BLAS thread: the health check (and the prediction's
-    # simulated design) beside the filter and the τ selection; the reported noise criteria
-    # then run on whichever lane finishes first
+    # simulated design) beside the filter and the τ selection; the reported noise criteria and
+    # the prediction then run on whichever lanes are free
     with blas_threads(1), ThreadPoolExecutor(max_workers=2, thread_name_prefix="calibrate") as pool:
         lane_b = pool.submit(health_lane)
         lane_a = pool.submit(selection_lane)
         lane_c = pool.submit(noise_curves, lane_a)
+        lane_d = pool.submit(predict, lane_a, lane_b)
         bundle, tau_table, selection = lane_a.result()
         health, design = lane_b.result()
         lane_c.result()
+        prediction = lane_d.result()
     selection.write_taus(bundle.meta)
     bundle.meta["decoder"] = selection.decoder
     val = selection.validation
-    prediction = None
-    if opts.predict:
-        with log.stage("prediction", "predicting what this design should reach") as st:
-            if frames.labels:
-                stored = checkpoints.load_json("prediction")
-                if stored is not None and stored.get("decoder") == selection.decoder:
-                    prediction = Prediction(dict(stored["psnr_db"]), list(stored["gains_dn_per_unit"]),
-                                            float(stored["tau"]), dict(stored["notes"]))
-                    st["resumed"] = True
-                else:
-                    if design is None:
-                        design = simulate_design()
-                    prediction = predict_from_design(
-                        profile, design, frames.labels, frames.truths, selection.decoder,
-                        filter_steps=opts.filter_steps, filter_scenes=opts.filter_scenes)
-                    checkpoints.save_json("prediction", {
-                        "decoder": selection.decoder, "psnr_db": prediction.psnr_db,
-                        "gains_dn_per_unit": prediction.gains_dn_per_unit, "tau": prediction.tau,
-                        "notes": prediction.notes})
     lim = limits_of(profile)
     # the unit against its design, both with plain Tikhonov (``TauSelection.verdict_validation``)
     verdict = judge(selection.verdict_validation, prediction, health, lim, registration)

@@ -170,10 +170,16 @@ def add_noise_curves(profile: Profile, bundle: CalibrationBundle, frames: Valida
     Nothing is done when they are there already or there are no validation frames."""
     if not frames.signals or has_noise_curves(selection):
         return
-    name = selection.decoder
+    selection.curves += noise_curves_of(profile, bundle, frames, noise, selection.decoder)
+
+
+def noise_curves_of(profile: Profile, bundle: CalibrationBundle, frames: ValidationFrames,
+                    noise: NoiseEstimate, name: str) -> list[TauCurve]:
+    """The GCV and discrepancy curves of decoder ``name`` (plain Tikhonov where it takes a
+    scene prior, as :func:`select` computes them) on the τ grid of ``bundle``'s matrices."""
     decoder = make_decoder(profile, bundle, name, **({"prior": None} if takes_scene_prior(name) else {}))
     sm = bundle.system_matrices
-    selection.curves += list(_noise_curves(decoder, sm, frames, noise, tau_grid(sm)))
+    return list(_noise_curves(decoder, sm, frames, noise, tau_grid(sm)))
 
 
 def select(

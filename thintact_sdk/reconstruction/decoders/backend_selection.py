@@ -11,6 +11,7 @@ best by more than ``slack`` (20 %); otherwise a :class:`BackendPreferenceWarning
 
 from __future__ import annotations
 
+import threading
 import time
 import warnings
 from collections.abc import Callable, Sequence
@@ -203,6 +204,16 @@ def measure_backends(
     return measured, cost, failed, decoders
 
 
+_KEY_LOCKS: dict[str, threading.Lock] = {}
+_KEY_LOCKS_GUARD = threading.Lock()
+
+
+def _key_lock(cache_key: str) -> threading.Lock:
+    """The lock of one cache key (created on first use)."""
+    with _KEY_LOCKS_GUARD:
+        return _KEY_LOCKS.setdefault(cache_key, threading.Lock())
+
+
 def select_backend(
     build: Callable[..., Decoder], probes: Callable[[], Sequence[Probe]],
     specs: Sequence[BackendSpec], cache_key: str, preferred: BackendSpec | None = None,
@@ -232,22 +243,26 @@ def select_backend(
     cache = cache or BackendCache()
     unavailable = dict(not_candidates or {})
     built: dict[str, Decoder] = {}
-    record = None if remeasure else cache.get(cache_key)
-    from_cache = record is not None and {s.key for s in specs} <= (
-        set(record.get("measured_ms", {})) | set(record.get("unavailable", {})))
-    if record is not None and from_cache:
-        # Only today's candidates may be chosen: a cached entry can hold a backend that is not
-        # one here now (e.g. bfloat16 measured before the host lost native support).
-        keys = {s.key for s in specs}
-        measured = {k: float(v) for k, v in record["measured_ms"].items() if k in keys}
-        cost = {k: float(v) for k, v in record["psnr_cost_db"].items() if k in keys}
-        unavailable.update({k: v for k, v in record.get("unavailable", {}).items() if k in keys})
-    else:
-        measured, cost, failed, built = measure_backends(build, probes(), specs, repeats)
-        unavailable.update(failed)
-        cache.put(cache_key, {"measured_ms": measured, "psnr_cost_db": cost, "unavailable": failed,
-                              "bound_db": bound_db,
-                              "measured_at": datetime.now(UTC).isoformat(timespec="seconds")})
+    # one measurement per key at a time: two threads building the same decoder (the
+    # calibration's lanes) would each time the candidates against the other's load and could
+    # choose differently; the second waits and takes the first's record
+    with _key_lock(cache_key):
+        record = None if remeasure else cache.get(cache_key)
+        from_cache = record is not None and {s.key for s in specs} <= (
+            set(record.get("measured_ms", {})) | set(record.get("unavailable", {})))
+        if record is not None and from_cache:
+            # Only today's candidates may be chosen: a cached entry can hold a backend that is
+            # not one here now (e.g. bfloat16 measured before the host lost native support).
+            keys = {s.key for s in specs}
+            measured = {k: float(v) for k, v in record["measured_ms"].items() if k in keys}
+            cost = {k: float(v) for k, v in record["psnr_cost_db"].items() if k in keys}
+            unavailable.update({k: v for k, v in record.get("unavailable", {}).items() if k in keys})
+        else:
+            measured, cost, failed, built = measure_backends(build, probes(), specs, repeats)
+            unavailable.update(failed)
+            cache.put(cache_key, {"measured_ms": measured, "psnr_cost_db": cost, "unavailable": failed,
+                                  "bound_db": bound_db,
+                                  "measured_at": datetime.now(UTC).isoformat(timespec="seconds")})
     chosen, note = decide(measured, cost, preferred.key if preferred else None, bound_db, slack,
                           unavailable, preferred_from)
     if note is not None:
