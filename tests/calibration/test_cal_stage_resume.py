@@ -211,37 +211,3 @@ def test_slits_compressed_on_two_threads_equal_one_thread_and_name_the_first_dea
     with pytest.raises(CalibrationError, match=f"slit frame {slits[2]} "):
         collect_slits(Recording(tmp_path / "rec"))
 
-
-def test_noise_criteria_computed_before_the_choice_are_those_of_the_chosen_decoder(tmp_path, monkeypatch) -> None:  # type: ignore[no-untyped-def]
-    """A lane free before the τ choice computes the default decoder's GCV and discrepancy
-    curves meanwhile (issue 36: they were on the critical path after it); the report holds
-    exactly the curves computed after the choice."""
-    import time as _time
-
-    from cal_testkit import synthetic_matrices, synthetic_profile, write_slit_recording
-
-    from thintact_sdk.calibration import pipeline
-    from thintact_sdk.calibration.pipeline import CalibrationOptions, calibrate_recording
-    from thintact_sdk.formats.recording import Recording
-    from thintact_sdk.simulation.scenes import make_scene
-
-    opts = CalibrationOptions(filter_steps=0, filter_scenes=8)
-    write_slit_recording(tmp_path / "rec", synthetic_profile(), synthetic_matrices(), np.random.default_rng(0),
-                         [make_scene("gelsight", 24, 32, 2), make_scene("smooth_color", 24, 32)])
-    rec = Recording(tmp_path / "rec")
-    real_select = pipeline.select
-
-    def slow_select(*a, **k):  # type: ignore[no-untyped-def]
-        _time.sleep(3.0)  # the choice ends well after health: the other lane is free first
-        return real_select(*a, **k)
-
-    monkeypatch.setattr(pipeline, "select", slow_select)
-    early = calibrate_recording(rec, tmp_path / "early", opts, report=False)
-    monkeypatch.setattr(pipeline, "select", real_select)
-    late = calibrate_recording(rec, tmp_path / "late", opts, report=False)
-    meta = {d: json.loads((tmp_path / d / "calibration.json").read_text()) for d in ("early", "late")}
-    stages = {s["stage"]: s for s in meta["early"]["metrics"]["stages"]}
-    assert stages["noise criteria"].get("speculative"), stages["noise criteria"]
-    assert meta["early"]["metrics"]["tau_selection"] == meta["late"]["metrics"]["tau_selection"]
-    assert [c.criterion for c in early.selection.curves][-2:] == ["gcv", "discrepancy"]
-    assert late.selection.decoder == early.selection.decoder

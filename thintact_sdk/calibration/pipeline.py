@@ -37,7 +37,6 @@ from thintact_sdk.calibration.selection import (
     TauSelection,
     add_noise_curves,
     has_noise_curves,
-    noise_curves_of,
     select,
     validation_frames,
 )
@@ -54,7 +53,6 @@ from thintact_sdk.calibration.validation import (
     ValidationResult,
     averaged_noise,
     choose_tau,
-    default_decoder,
     make_decoder,
     score,
 )
@@ -340,7 +338,6 @@ def calibrate_recording(
                                      method=opts.method, max_iter=opts.max_iter, tol=opts.tol,
                                      rank=opts.rank)
     noise_ready: Future[NoiseEstimate] = Future()
-    bundle_ready: Future[CalibrationBundle] = Future()
 
     def health_lane() -> tuple[HealthReport, PredictionDesign | None]:
         """Health (its noise first, for the τ selection), then the prediction's design part."""
@@ -376,21 +373,16 @@ def calibrate_recording(
 
     def selection_lane() -> tuple[CalibrationBundle, dict[str, float], TauSelection]:
         """The joint filter, then the decoder and τ (once the noise is measured)."""
-        try:
-            with log.stage("joint filter", "training the joint filter") as st:
-                trained = checkpoints.load_filter()
-                if trained is not None:
-                    jf, tau_table, tau0 = trained
-                    bundle = CalibrationBundle.create(profile, sm, jf, tau=tau0, source=source,
-                                                      exposure_us=collection.exposure_us)
-                    st["resumed"] = True
-                else:
-                    bundle, tau_table = build_bundle(profile, sm, opts, k, source, collection.exposure_us)
-                    checkpoints.save_filter(bundle.filter, tau_table, float(bundle.meta["tau"]))
-        except BaseException as exc:
-            bundle_ready.set_exception(exc)
-            raise
-        bundle_ready.set_result(bundle)
+        with log.stage("joint filter", "training the joint filter") as st:
+            trained = checkpoints.load_filter()
+            if trained is not None:
+                jf, tau_table, tau0 = trained
+                bundle = CalibrationBundle.create(profile, sm, jf, tau=tau0, source=source,
+                                                  exposure_us=collection.exposure_us)
+                st["resumed"] = True
+            else:
+                bundle, tau_table = build_bundle(profile, sm, opts, k, source, collection.exposure_us)
+                checkpoints.save_filter(bundle.filter, tau_table, float(bundle.meta["tau"]))
         with log.stage("decoder and tau", "choosing the decoder and tau on the validation frames") as st:
             selection = checkpoints.load_object("selection")
             if isinstance(selection, TauSelection):
@@ -405,35 +397,22 @@ def calibrate_recording(
         return bundle, tau_table, selection
 
     def noise_curves(lane_a: Future[tuple[CalibrationBundle, dict[str, float], TauSelection]]) -> None:
-        """The GCV and discrepancy curves of the chosen decoder (reported beside the choice).
-        Started on the first lane free: when that is before the choice, the curves of the
-        default decoder are computed meanwhile (the choice on the paper's design), and used
-        if it is chosen."""
+        """The GCV and discrepancy curves of the chosen decoder (reported beside the choice),
+        beside the prediction."""
         if not frames.signals or opts.tau is not None:
+            return
+        bundle, _, selection = lane_a.result()
+        if has_noise_curves(selection):
             return
         with log.stage("noise criteria", "GCV and discrepancy curves of the chosen decoder") as st:
             stored = checkpoints.load_object("noise_criteria")
             if isinstance(stored, list) and stored and all(isinstance(c, TauCurve) for c in stored):
-                bundle, _, selection = lane_a.result()
-                if not has_noise_curves(selection):
-                    selection.curves += stored
+                selection.curves += stored
                 st["resumed"] = True
-                return
-            guess: tuple[str, list[TauCurve]] | None = None
-            if not lane_a.done():
-                name = opts.decoder or default_decoder()
-                bundle = bundle_ready.result()
-                guess = (name, noise_curves_of(profile, bundle, frames, noise_ready.result(), name))
-            bundle, _, selection = lane_a.result()
-            if has_noise_curves(selection):
-                return
-            if guess is not None and guess[0] == selection.decoder:
-                selection.curves += guess[1]
-                st["speculative"] = True
             else:
                 add_noise_curves(profile, bundle, frames, noise_ready.result(), selection)
-            checkpoints.save_object("noise_criteria", [c for c in selection.curves
-                                                       if c.criterion in ("gcv", "discrepancy")])
+                checkpoints.save_object("noise_criteria", [c for c in selection.curves
+                                                           if c.criterion in ("gcv", "discrepancy")])
 
     def predict(lane_a: Future[tuple[CalibrationBundle, dict[str, float], TauSelection]],
                 lane_b: Future[tuple[HealthReport, PredictionDesign | None]]) -> Prediction | None:
