@@ -183,9 +183,9 @@ class CaptureWorker:
 
 def warm_backends(profile: Profile, design: SystemMatrices) -> None:
     """Have the array backend of every calibration decoder that needs no joint filter measured
-    on the design's simulated matrices (the unit's shapes), under the thread settings the
-    calibration decodes with after the capture: one BLAS thread (the τ selection's lanes) and
-    the process's own (the prediction). The measurements are cached per host and shape
+    on the design's simulated matrices (the unit's shapes), under the thread setting the
+    calibration decodes with after the capture (one BLAS thread: the τ selection and the
+    prediction run on its lanes). The measurements are cached per host and shape
     (:mod:`~thintact_sdk.reconstruction.decoders.backend_selection`), so the decoders built
     after the last pattern are built directly; the first unit of a shape on a station no
     longer measures them then. What is measured is speed and accuracy on probe scenes, both
@@ -197,4 +197,3 @@ def warm_backends(profile: Profile, design: SystemMatrices) -> None:
         kwargs: dict[str, Any] = {"prior": None} if takes_scene_prior(name) else {}
         with blas_threads(1):
             make_decoder(profile, bundle, name, **kwargs)
-        make_decoder(profile, bundle, name, **kwargs)

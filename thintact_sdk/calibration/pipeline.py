@@ -389,7 +389,7 @@ def calibrate_recording(
                 st["resumed"] = True
             else:
                 # GCV and discrepancy only where the choice needs them; else they are reported
-                # and computed by noise_curves, on the first core free
+                # and computed by noise_curves, beside the prediction
                 selection = select(profile, bundle, frames, noise_ready.result(), decoder=opts.decoder,
                                    tau=opts.tau, simulated=_simulated_curve(tau_table),
                                    noise_criteria_curves=False)

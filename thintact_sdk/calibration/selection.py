@@ -166,20 +166,14 @@ def add_noise_curves(profile: Profile, bundle: CalibrationBundle, frames: Valida
                      noise: NoiseEstimate, selection: TauSelection) -> None:
     """Append the GCV and discrepancy curves of the chosen decoder to ``selection.curves``,
     for a selection made with ``noise_criteria_curves=False`` whose choice did not need them
-    (cross-validation chose): the calibration computes them on whichever core is free first.
+    (cross-validation chose): the calibration computes them beside the prediction.
     Nothing is done when they are there already or there are no validation frames."""
     if not frames.signals or has_noise_curves(selection):
         return
-    selection.curves += noise_curves_of(profile, bundle, frames, noise, selection.decoder)
-
-
-def noise_curves_of(profile: Profile, bundle: CalibrationBundle, frames: ValidationFrames,
-                    noise: NoiseEstimate, name: str) -> list[TauCurve]:
-    """The GCV and discrepancy curves of decoder ``name`` (plain Tikhonov where it takes a
-    scene prior, as :func:`select` computes them) on the τ grid of ``bundle``'s matrices."""
+    name = selection.decoder  # plain Tikhonov where it takes a scene prior, as select computes them
     decoder = make_decoder(profile, bundle, name, **({"prior": None} if takes_scene_prior(name) else {}))
     sm = bundle.system_matrices
-    return list(_noise_curves(decoder, sm, frames, noise, tau_grid(sm)))
+    selection.curves += list(_noise_curves(decoder, sm, frames, noise, tau_grid(sm)))
 
 
 def select(
