@@ -12,8 +12,9 @@ end of the prediction (:func:`~thintact_sdk.calibration.pipeline.calibrate_recor
 worker's :class:`Prepared`).
 
 Two threads: one follows the recording (compression, then the solve), one the prediction's
-design and then the decoders' backend measurement on the design's matrices (:func:`warm_backends`). numpy releases the interpreter lock in its kernels, so on two cores they run beside
-the capture. A failure in either is kept and the pipeline computes that part itself after
+design and then the decoders' backend measurement on the design's matrices
+(:func:`warm_backends`). numpy releases the interpreter lock in its kernels, so on two cores
+they run beside the capture. A failure in either is kept and the pipeline computes that part itself after
 the capture (nothing is lost, only the head start).
 """
 

@@ -100,11 +100,17 @@ def signal_of(
     meas = np.asarray(recording.measurement(i), dtype=np.float64)
     if meas.ndim == 2:
         meas = meas[..., None]
-    scale = 1.0
+    scale = exposure_scale(recording, i, exposure_us)
+    return (meas - dark_dn) * scale, scale
+
+
+def exposure_scale(recording: Recording, i: int, exposure_us: float | None) -> float:
+    """The factor that brings frame ``i`` to the reference exposure ``exposure_us`` (1 when
+    either is unknown or they agree to 1e-6)."""
     exp = frame_exposure_us(recording, i)
     if exposure_us is not None and exp is not None and abs(exp - exposure_us) > 1e-6 * exposure_us:
-        scale = exposure_us / exp
-    return (meas - dark_dn) * scale, scale
+        return exposure_us / exp
+    return 1.0
 
 
 def _dark(recording: Recording, dark_frames: list[int]) -> tuple[np.ndarray, str]:

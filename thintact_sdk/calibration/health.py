@@ -35,7 +35,7 @@ from scipy import ndimage
 
 from thintact_sdk.calibration.blemish import find_blemishes, ratio_map
 from thintact_sdk.calibration.classify import classify_scene, is_dark, is_slit
-from thintact_sdk.calibration.collect import SlitCollection, frame_exposure_us, signal_of
+from thintact_sdk.calibration.collect import SlitCollection, exposure_scale, signal_of
 from thintact_sdk.calibration.ghost import GhostScan, find_ghosts
 from thintact_sdk.errors import CalibrationError
 from thintact_sdk.formats.profiles import NoiseSpec
@@ -424,7 +424,7 @@ def _residual_cf(recording: Recording, i: int, collection: SlitCollection, sm: S
     raw = np.asarray(recording.measurement(i))
     raw = raw[..., None] if raw.ndim == 2 else raw
     pred = _forward_lit(sm, scene_for_channels(scene, c))
-    scale = _exposure_scale(recording, i, collection)
+    scale = exposure_scale(recording, i, collection.exposure_us)
     res = np.empty_like(pred)
     ok = np.empty(pred.shape, bool)
     for ch in range(c):
@@ -436,15 +436,6 @@ def _residual_cf(recording: Recording, i: int, collection: SlitCollection, sm: S
         np.less(raw[..., ch], saturation, out=ok[ch])
     label = recording.frames[i].label or str(i)
     return label, res / scale, pred / scale, ok
-
-
-def _exposure_scale(recording: Recording, i: int, collection: SlitCollection) -> float:
-    """The factor :func:`~thintact_sdk.calibration.collect.signal_of` applies to frame ``i``."""
-    exp = frame_exposure_us(recording, i)
-    ref = collection.exposure_us
-    if ref is not None and exp is not None and abs(exp - ref) > 1e-6 * ref:
-        return ref / exp
-    return 1.0
 
 
 def _residual(recording: Recording, i: int, collection: SlitCollection, sm: SystemMatrices,
@@ -470,7 +461,7 @@ def _sampled_residual(recording: Recording, i: int, collection: SlitCollection, 
     got = raw[rr, ss, cc].astype(np.float64)
     keep = got < saturation
     rr, ss, cc, got = rr[keep], ss[keep], cc[keep], got[keep]
-    scale = _exposure_scale(recording, i, collection)
+    scale = exposure_scale(recording, i, collection.exposure_us)
     pred = _lit_at(sm, scene_for_channels(scene, sm.channels), rr, ss, cc)
     res = (got - collection.dark_dn[rr, ss, cc]) * scale - pred
     return pred / scale, res / scale
