@@ -73,3 +73,36 @@ def test_nested_holds_from_two_threads_restore_the_first_settings() -> None:
     t.start()
     t.join(5.0)
     assert worker_saw[-1] == torch_before  # new threads start from the restored value
+
+
+def test_the_threads_reported_are_numpys_even_with_opencvs_openblas_mapped_first(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """OpenCV ships its own OpenBLAS, which can be mapped at a lower address than numpy's and
+    keeps its default threads when a hold began before it was loaded: the threads reported (the
+    backend cache's key) must still be the ones numpy's products run on (a calibration once
+    re-measured every backend mid-run because the count it reported flipped to OpenCV's)."""
+    import ctypes
+
+    import cv2  # noqa: F401 - maps OpenCV's OpenBLAS
+
+    from thintact_sdk.host import blas
+
+    paths = blas._openblas_paths()
+    numpy_path = [q for q in paths if blas._numpy_first(q) == 0]
+    others = [q for q in paths if blas._numpy_first(q) == 2]
+    if not numpy_path or not others:
+        pytest.skip("numpy's and another package's OpenBLAS are not both mapped here")
+    monkeypatch.setattr(blas, "_openblas_paths", lambda: others + [q for q in paths if q not in others])
+    libs = blas._scan_openblas()
+    before = [int(get()) for _, get in libs]
+    try:
+        for setter, _ in libs:
+            setter(ctypes.c_int(3))
+        numpy_lib = ctypes.CDLL(numpy_path[0])
+        setter = next(getattr(numpy_lib, n) for n in ("scipy_openblas_set_num_threads64_", "openblas_set_num_threads64_",
+                                                      "openblas_set_num_threads") if hasattr(numpy_lib, n))
+        setter(ctypes.c_int(1))
+        assert int(libs[0][1]()) == 1  # numpy's is read first
+    finally:
+        for (setter, _), old in zip(libs, before, strict=True):
+            setter(ctypes.c_int(old))

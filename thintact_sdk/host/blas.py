@@ -11,6 +11,7 @@ ctypes when it is found, and changes nothing otherwise.
 from __future__ import annotations
 
 import ctypes
+import os
 import sys
 import threading
 from collections.abc import Iterator
@@ -47,8 +48,8 @@ def _loaded_openblas() -> list[tuple[Any, Any]]:
     return found
 
 
-def _scan_openblas() -> list[tuple[Any, Any]]:
-    """:func:`_loaded_openblas` without the cache."""
+def _openblas_paths() -> list[str]:
+    """Files of the OpenBLAS libraries mapped into this process, in address order (Linux)."""
     paths: list[str] = []
     try:
         with open("/proc/self/maps", encoding="utf-8") as f:
@@ -58,8 +59,13 @@ def _scan_openblas() -> list[tuple[Any, Any]]:
                     paths.append(path)
     except OSError:
         return []
-    found: list[tuple[Any, Any]] = []
-    for path in paths:
+    return paths
+
+
+def _scan_openblas() -> list[tuple[Any, Any]]:
+    """:func:`_loaded_openblas` without the cache."""
+    found: list[tuple[str, tuple[Any, Any]]] = []
+    for path in _openblas_paths():
         try:
             lib = ctypes.CDLL(path)
         except OSError:
@@ -68,8 +74,23 @@ def _scan_openblas() -> list[tuple[Any, Any]]:
         getter = next((getattr(lib, n) for n in _GET_NAMES if hasattr(lib, n)), None)
         if setter is not None and getter is not None:
             getter.restype = ctypes.c_int
-            found.append((setter, getter))
-    return found
+            found.append((path, (setter, getter)))
+    # numpy's own first: :func:`openblas_threads` reads the first, and another package's copy
+    # (OpenCV ships one) can be mapped at a lower address and keep its default thread count
+    found.sort(key=lambda item: _numpy_first(item[0]))
+    return [pair for _, pair in found]
+
+
+def _numpy_first(path: str) -> int:
+    """Sort key of a library path: 0 for numpy's OpenBLAS, 1 for scipy's, 2 for any other."""
+    import numpy
+    import scipy
+
+    for rank, package in enumerate((numpy, scipy)):
+        root = os.path.dirname(os.path.abspath(str(package.__file__)))
+        if path.startswith((root + os.sep, root + ".libs" + os.sep)):
+            return rank
+    return 2
 
 
 @contextmanager
@@ -91,6 +112,7 @@ def blas_threads(n: int | None) -> Iterator[int]:
 
 
 def openblas_threads() -> int | None:
-    """Threads of the first OpenBLAS loaded into this process, or None when none is found."""
+    """Threads of numpy's OpenBLAS (the one numpy's products run on; else the first OpenBLAS
+    mapped into this process), or None when none is found."""
     libs = _loaded_openblas()
     return int(libs[0][1]()) if libs else None
