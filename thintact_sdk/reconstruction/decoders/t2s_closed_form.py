@@ -101,7 +101,7 @@ class T2SClosedFormDecoder(ClosedFormDecoder):
         self.prior = None if prior is None or prior.is_plain else prior
         if self.prior is not None:
             system_matrices = self.prior.transform(system_matrices)
-        sm = _least_truncated(system_matrices, open_rtol, max_open_rank)
+        sm, open_sv = _least_truncated(system_matrices, open_rtol, max_open_rank)
         (r, s), (n, m) = sm.sensor_shape, sm.scene_shape
         if r < n or s < m:
             raise InvalidShapeError("t2s-closed-form needs at least as many sensor rows/cols as scene rows/cols")
@@ -150,8 +150,7 @@ class T2SClosedFormDecoder(ClosedFormDecoder):
             for key, val in (("a", a), ("b", b), ("a2", a2), ("b2", b2)):
                 per[key].append(val)
             self.info["open_rank"].append([int(np.sum(sp > 0)), int(np.sum(sq > 0))])
-            full_p = np.linalg.svd(sm.Po[c].astype(np.float64), compute_uv=False)
-            full_q = np.linalg.svd(sm.Qo[c].astype(np.float64), compute_uv=False)
+            full_p, full_q = open_sv[c]
             self.info["dropped_open_sv"].append([_dropped_fraction(full_p, len(svds[c][1])),
                                                  _dropped_fraction(full_q, len(svds[c][4]))])
         xp = self.xp
@@ -410,26 +409,34 @@ def _block_rows(channels: int, cols: int, itemsize: int) -> int:
     return max(8, BLOCK_BYTES // (channels * cols * itemsize))
 
 
-def _truncation_loss(sm: SystemMatrices, rtol: float, max_rank: int) -> float:
-    """Largest share of squared singular values of Po or Qo (any channel) the truncation drops."""
+def _truncation_loss(sm: SystemMatrices, rtol: float, max_rank: int) -> tuple[float, list[list[np.ndarray]]]:
+    """Largest share of squared singular values of Po or Qo (any channel) the truncation
+    drops, and those singular values (``[[Po's, Qo's] per channel]``)."""
     worst = 0.0
+    values: list[list[np.ndarray]] = []
     for c in range(sm.channels):
+        values.append([])
         for a in (sm.Po[c], sm.Qo[c]):
-            sv2 = np.linalg.svd(np.asarray(a, np.float64), compute_uv=False) ** 2
+            sv = np.linalg.svd(np.asarray(a, np.float64), compute_uv=False)
+            values[-1].append(sv)
+            sv2 = sv**2
             if sv2[0] <= 0:
                 continue
             kept = max(1, min(int(np.sum(sv2 > rtol**2 * sv2[0])), max_rank))
             worst = max(worst, float(sv2[kept:].sum() / sv2.sum()))
-    return worst
+    return worst, values
 
 
-def _least_truncated(sm: SystemMatrices, rtol: float, max_rank: int) -> SystemMatrices:
+def _least_truncated(sm: SystemMatrices, rtol: float, max_rank: int) -> tuple[SystemMatrices, list[list[np.ndarray]]]:
     """``sm`` as given or in the canonical gauge, whichever loses less to the truncation of
-    its open term (the operator is the same)."""
+    its open term (the operator is the same), and the singular values of its Po, Qo per
+    channel (:func:`_truncation_loss`)."""
     canonical = canonical_gauge(sm)
-    if _truncation_loss(canonical, rtol, max_rank) < _truncation_loss(sm, rtol, max_rank):
-        return canonical
-    return sm
+    loss_canonical, values_canonical = _truncation_loss(canonical, rtol, max_rank)
+    loss, values = _truncation_loss(sm, rtol, max_rank)
+    if loss_canonical < loss:
+        return canonical, values_canonical
+    return sm, values
 
 
 def _dropped_fraction(sv: np.ndarray, kept: int) -> float:
