@@ -65,12 +65,12 @@ def test_streamed_assess_equals_holding_every_frame(tmp_path: Path) -> None:
     rec, collection, sm = _unit(tmp_path, ("R", "G", "B"), Ghost(6, -9, 0.05), seed=1)
     report = assess(rec, collection, sm, 1)
     slit_chi2, chi2_map, noise = _held(rec, collection, sm)
-    # below the cap nothing is subsampled: the same values, to the rounding of the sums (the
-    # streamed pass sums one channel plane at a time)
+    # below the cap nothing is subsampled: the same values, to float32 rounding (the χ² pass
+    # works on float32 channel planes; the reference is float64 throughout)
     assert report.slit_chi2.keys() == slit_chi2.keys()
     for label, value in slit_chi2.items():
-        assert report.slit_chi2[label] == pytest.approx(value, rel=1e-12), label
-    np.testing.assert_allclose(report.chi2_map, chi2_map, rtol=1e-12)
+        assert report.slit_chi2[label] == pytest.approx(value, rel=2e-5), label
+    np.testing.assert_allclose(report.chi2_map, chi2_map, rtol=2e-5, atol=1e-6)
     assert report.noise.to_json() == noise.to_json()
     # recorded from the code before streaming (commit 2d817fa) on this unit
     assert report.noise.to_json()["variance_offset_dn2"] == 8.2061

@@ -467,6 +467,79 @@ def _sampled_residual(recording: Recording, i: int, collection: SlitCollection, 
     return pred / scale, res / scale
 
 
+class _LitForward32:
+    """:func:`_forward_lit` one channel at a time in float32 (``R × S``): both terms in one
+    ``R × 2k`` by ``2k × S`` product over the scene's ``k`` lit rows (or columns). A slit
+    frame of thousands of DN against noise of a few DN loses nothing to float32 in a χ² map,
+    and a channel plane in float32 stays in the last-level cache where the whole frame in
+    float64 does not."""
+
+    def __init__(self, sm: SystemMatrices) -> None:
+        def pick(m: np.ndarray, ch: int) -> np.ndarray:
+            return np.asarray(m[ch if m.shape[0] > 1 else 0], np.float32)
+
+        self.p = [(pick(sm.Po, ch), pick(sm.Pc, ch)) for ch in range(sm.channels)]
+        self.q = [(pick(sm.Qo, ch), pick(sm.Qc, ch)) for ch in range(sm.channels)]
+
+    def __call__(self, xc: np.ndarray, ch: int) -> np.ndarray:
+        """Channel ``ch``'s prediction (DN, float32 ``R × S``) of its scene plane ``xc``."""
+        xc = np.asarray(xc, np.float32)
+        lit = xc != 0
+        rows, cols = np.flatnonzero(lit.any(axis=1)), np.flatnonzero(lit.any(axis=0))
+        (po, pc), (qo, qc) = self.p[ch], self.q[ch]
+        if len(rows) <= len(cols):
+            x = xc[rows]
+            return np.hstack([po[:, rows], pc[:, rows]]) @ np.vstack([x @ qo.T, x @ qc.T])
+        x = xc[:, cols]
+        return np.hstack([po @ x, pc @ x]) @ np.vstack([qo[:, cols].T, qc[:, cols].T])
+
+
+def _chi2_pass(recording: Recording, indices: list[int], collection: SlitCollection, sm: SystemMatrices,
+               saturation: float, noise: NoiseEstimate) -> tuple[np.ndarray, dict[str, float]]:
+    """Pass 2: the χ² map (``R × S``, float64: each pixel's mean of ``r²/σ²`` over the slit
+    frames and channels where it is unsaturated) and each slit frame's mean χ², with the
+    measured noise. Per frame and channel in float32 planes, in place (what
+    :func:`_residual_cf` gives, to float32 rounding)."""
+    c, shape = sm.channels, sm.sensor_shape
+    forward = _LitForward32(sm)
+    dark = [np.asarray(collection.dark_dn[..., ch], np.float32) for ch in range(c)]
+    offset, slope = np.float32(noise.variance_offset_dn2), np.float32(noise.variance_slope)
+    chi2_sum = np.zeros(shape)
+    saturated = np.zeros(shape, np.int32)
+    z, var = np.empty(shape, np.float32), np.empty(shape, np.float32)
+    bad = np.empty(shape, bool)
+    slit_chi2: dict[str, float] = {}
+    for i in indices:
+        scene = recording.scene(i)
+        if scene is None:  # the recording changed under us: slit frames are classified by their scene
+            raise CalibrationError(f"{recording.root}: frame {i} has no scene any more")
+        raw = np.asarray(recording.measurement(i))
+        raw = raw[..., None] if raw.ndim == 2 else raw
+        x = scene_for_channels(scene, c)
+        unscale = np.float32(1.0 / exposure_scale(recording, i, collection.exposure_us))
+        z_sum, m_sum = 0.0, 0
+        for ch in range(c):
+            pred = forward(x[..., ch], ch)
+            if unscale != 1.0:
+                pred *= unscale  # the prediction at this frame's exposure
+            np.subtract(raw[..., ch], dark[ch], out=z, dtype=np.float32)
+            z -= pred
+            np.multiply(z, z, out=z)
+            np.clip(pred, 0.0, None, out=var)
+            var *= slope
+            var += offset
+            z /= var
+            np.greater_equal(raw[..., ch], saturation, out=bad)
+            np.copyto(z, np.float32(0.0), where=bad)
+            chi2_sum += z
+            saturated += bad
+            z_sum += float(z.sum(dtype=np.float64))
+            m_sum += z.size - int(np.count_nonzero(bad))
+        slit_chi2[recording.frames[i].label or str(i)] = z_sum / max(m_sum, 1)
+    count = c * len(indices) - saturated
+    return chi2_sum / np.maximum(count, 1), slit_chi2
+
+
 def _noise_samples(recording: Recording, indices: list[int], collection: SlitCollection,
                    sm: SystemMatrices, saturation: float) -> tuple[np.ndarray, np.ndarray]:
     """Pass 1: the prediction and ``r²`` of the unsaturated slit-frame pixels the noise fit uses.
@@ -559,22 +632,7 @@ def _assess(recording: Recording, collection: SlitCollection, sm: SystemMatrices
         from_frames = "dark frame" in collection.dark_source
         noise = _fit_noise(pred_all, r2_all, nz, k, dark_frames if from_frames else 0)
         del pred_all, r2_all
-    chi2_sum = np.zeros(shape)
-    count = np.zeros(shape)
-    slit_chi2: dict[str, float] = {}
-    for i in indices:  # pass 2: the χ² map with the measured noise, one channel plane at a time
-        label, r, p, m = _residual_cf(recording, i, collection, sm, saturation)
-        z_sum, m_sum = 0.0, 0
-        for ch in range(c):
-            z = r[ch] * r[ch]
-            z /= noise.variance(p[ch])
-            z[~m[ch]] = 0.0
-            chi2_sum += z
-            count += m[ch]
-            z_sum += float(z.sum())
-            m_sum += int(np.count_nonzero(m[ch]))
-        slit_chi2[label] = z_sum / max(m_sum, 1)
-    chi2_map = chi2_sum / np.maximum(count, 1)
+    chi2_map, slit_chi2 = _chi2_pass(recording, indices, collection, sm, saturation, noise)
     slit_frames = SlitFrames(recording, indices, horizontal, collection.dark_dn, collection.exposure_us, c)
     names = list(profile.sensor.channels)
     col_dev, col_spread = _line_deviation(sm.Qo)
