@@ -70,3 +70,32 @@ def test_noisy_training_data_has_the_sensor_variance() -> None:
     resid = (noisy.y - clean.y).astype(np.float64)
     expected = profile.noise.read_noise_dn**2 + np.maximum(clean.y, 0) / profile.noise.electrons_per_dn
     assert np.mean(resid**2 / expected) == pytest.approx(1.0, rel=0.1)
+
+
+def test_training_its_own_data_spends_the_measurements_for_their_spectra() -> None:
+    """With no data passed and no gradient steps, the measurements become their spectra in
+    place (issue 36: 0.5 GB less at the paper's size): the same filter as from the same data
+    passed in, which is left untouched, and one data set's bytes less at the peak."""
+    import tracemalloc
+
+    from thintact_sdk.formats.profiles import NoiseSpec
+
+    sm, _ = frequency_split_matrices((64, 72), (16, 18), (6, 7), seed=4)
+    scenes = training_scenes(16, 18, count=10, seed=1)
+    noise = NoiseSpec(black_level_dn=0.0, read_noise_dn=2.0, electrons_per_dn=4.0, saturation_dn=4095.0)
+    data = make_training_data(sm, scenes, noise=noise, seed=0)
+    kept = data.y.copy()
+    tracemalloc.start()
+    given = train_joint_filter(sm, data=data, steps=0, seed=0)
+    peak_given = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    np.testing.assert_array_equal(data.y, kept)
+    tracemalloc.start()
+    own = train_joint_filter(sm, scenes, noise=noise, steps=0, seed=0)
+    peak_own = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    np.testing.assert_array_equal(own.phi_f, given.phi_f)
+    np.testing.assert_array_equal(own.phi_s, given.phi_s)
+    assert own.meta["closed_form_loss"] == given.meta["closed_form_loss"]
+    # making the data set itself costs its two arrays; the spectra beside them are not added
+    assert peak_own - peak_given < 1.5 * data.y.nbytes, (peak_own, peak_given, data.y.nbytes)

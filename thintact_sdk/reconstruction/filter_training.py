@@ -26,7 +26,7 @@ from scipy.ndimage import gaussian_filter
 
 from thintact_sdk.errors import InvalidShapeError, InvalidValueError
 from thintact_sdk.reconstruction.dct import SeparableDCT, dct2, idct2
-from thintact_sdk.reconstruction.joint_filter import JointFilter, joint_filter_open
+from thintact_sdk.reconstruction.joint_filter import JointFilter
 from thintact_sdk.reconstruction.t2s import SystemMatrices
 from thintact_sdk.simulation.noise import signal_variance_dn
 from thintact_sdk.simulation.scenes import gelsight, gelsight_count, make_scene
@@ -180,23 +180,31 @@ def _fit_phi_s(h: np.ndarray, k: np.ndarray, rank: int | None, iters: int = 30) 
     return out
 
 
-def _loss(data: TrainingData, tr: SeparableDCT, phi_f: np.ndarray, phi_s: np.ndarray) -> float:
+def _loss(zy: np.ndarray, y_open: np.ndarray, tr: SeparableDCT, phi_f: np.ndarray, phi_s: np.ndarray) -> float:
+    """The relative loss ``‖F(Y) − Yo‖² / ‖Yo‖²`` from the measurements' spectra ``zy``
+    (``tr.fwd`` of each frame): :func:`joint_filter_open` without transforming Y again."""
     err = 0.0
     norm = 0.0
-    for f in range(data.y.shape[0]):  # frame by frame: no float64 copy of the data set
-        g = joint_filter_open(phi_s, phi_f, data.y[f], tr)
-        err += float(np.sum((g - data.y_open[f]) ** 2))
-        norm += float(np.sum(data.y_open[f].astype(np.float64) ** 2))
+    for f in range(zy.shape[0]):  # frame by frame: no float64 copy of the data set
+        g = phi_s * tr.inv(phi_f * zy[f])
+        err += float(np.sum((g - y_open[f]) ** 2))
+        norm += float(np.sum(y_open[f].astype(np.float64) ** 2))
     return err / norm
 
 
 def _closed_form(
-    data: TrainingData, tr: SeparableDCT, rank: int | None, rounds: int
+    data: TrainingData, tr: SeparableDCT, rank: int | None, rounds: int, in_place: bool = False
 ) -> tuple[np.ndarray, np.ndarray, list[float]]:
+    """The closed-form alternation; ``in_place``: each frame of ``data.y`` is replaced by its
+    spectrum (where shape and dtype allow), so the measurements and their spectra are never
+    held side by side (0.5 GB each at the paper's size; ``data.y`` is spent)."""
     # sums over the frames are taken a frame at a time: no F-frame temporaries beside the
     # transformed measurements (at the paper's size each would be 0.5-1 GB)
     first = tr.fwd(data.y[0])
-    zy = np.empty((data.y.shape[0], *first.shape), first.dtype)  # F × C × (block)
+    if in_place and first.shape == data.y.shape[1:] and first.dtype == data.y.dtype:
+        zy = data.y
+    else:
+        zy = np.empty((data.y.shape[0], *first.shape), first.dtype)  # F × C × (block)
     zy[0] = first
     for f in range(1, data.y.shape[0]):
         zy[f] = tr.fwd(data.y[f])
@@ -221,7 +229,7 @@ def _closed_form(
             h += g * g
             k += g * data.y_open[f]
         phi_s = _fit_phi_s(h, k, rank)
-        loss = _loss(data, tr, phi_f, phi_s)
+        loss = _loss(zy, data.y_open, tr, phi_f, phi_s)
         history.append(loss)
         if best is None or loss < best[0]:
             best = (loss, phi_f, phi_s)
@@ -422,6 +430,7 @@ def train_joint_filter(
     JointFilter
         ``meta`` holds the relative training loss ``‖F(Y) − Yo‖² / ‖Yo‖²`` of each stage.
     """
+    own_data = data is None
     if data is None:
         n, m = system_matrices.scene_shape
         scenes = training_scenes(n, m, seed=seed) if scenes is None else scenes
@@ -441,7 +450,9 @@ def train_joint_filter(
     if block is not None and (block[0] >= r and block[1] >= s):
         block = None
     tr = _transform((r, s), block)
-    phi_f, phi_s, hist_cf = _closed_form(data, tr, phi_s_rank, max(1, closed_form_rounds))
+    # data made here and not needed after the closed form: its measurements become their spectra
+    phi_f, phi_s, hist_cf = _closed_form(data, tr, phi_s_rank, max(1, closed_form_rounds),
+                                         in_place=own_data and steps <= 0)
     hist_gd: list[float] = []
     if steps > 0 and block is None and phi_s_rank is None:
         phi_f, phi_s, hist_gd = _refine_fft(data, phi_f, phi_s, steps, lr, progress, min(hist_cf))
