@@ -119,6 +119,24 @@ def test_npy_frames_are_mapped_and_a_let_go_mapping_is_mapped_again_not_read(
         rec.measurement(0)
 
 
+def test_open_mappings_stay_within_their_byte_budget(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    # the pages of an open mapping count in the process's memory (issue 36: 1 GB of mapped
+    # frames at the paper's size): beyond the budget the oldest are let go, never the newest
+    _, stored = _tiny_recording(tmp_path / "rec", "npy")
+    reads = _count_reads(monkeypatch)
+    frame = stored[0].nbytes
+    monkeypatch.setattr(recording, "MAX_OPEN_MAP_BYTES", int(2.5 * frame))
+    rec = Recording(tmp_path / "rec")
+    for k, m in enumerate(stored):
+        np.testing.assert_array_equal(rec.measurement(k), m)
+        assert rec._open_map_bytes == sum(v.nbytes for v in rec._open_maps.values()) <= 2.5 * frame
+        assert ("measurement", k) in rec._open_maps
+    monkeypatch.setattr(recording, "MAX_OPEN_MAP_BYTES", 0)
+    np.testing.assert_array_equal(rec.measurement(0), stored[0])  # the newest stays, however small the budget
+    assert list(rec._open_maps) == [("measurement", 0)]
+    assert set(reads.values()) == {1}
+
+
 def test_decoded_frames_beyond_the_memory_budget_are_mapped_with_the_same_values(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     _, stored = _tiny_recording(tmp_path / "rec", "png")

@@ -81,6 +81,11 @@ MAX_OPEN_MAPS = 128
 descriptor, and a paper-size calibration has about two thousand frame files). A frame whose
 mapping was let go is mapped again when asked for, after checking that its file is the one
 read (same inode, size and modification time); it is not read or checked again."""
+MAX_OPEN_MAP_BYTES = 256 * 2**20
+"""Bytes of mapped frames one :class:`Recording` keeps open at once (at least one frame):
+the pages of a frame read through an open mapping count in the process's resident memory
+until it is let go (128 paper-size frames were 1 GB of it). Mapping a frame again costs a
+``stat`` and a header read, not a read of the frame."""
 
 
 @dataclass
@@ -255,7 +260,7 @@ class Recording:
     read-only and shared; copy before changing one. Memory: ``.npy`` frames (from
     :data:`MAP_FROM_BYTES`) are memory-mapped, so the page cache holds them, not the process;
     decoded frames are held up to :data:`HELD_BYTES`, then mapped from a temporary file; at
-    most :data:`MAX_OPEN_MAPS` mappings are open at once.
+    most :data:`MAX_OPEN_MAPS` mappings (:data:`MAX_OPEN_MAP_BYTES`) are open at once.
 
     Parameters
     ----------
@@ -311,6 +316,7 @@ class Recording:
         self.frames: list[RecordingFrame] = [self._frame(i, fr, mpath) for i, fr in enumerate(frames)]
         self._kept: dict[tuple[str, int], np.ndarray | _Mapped | None] = {}
         self._open_maps: OrderedDict[tuple[str, int], np.ndarray] = OrderedDict()
+        self._open_map_bytes = 0
         self._held_bytes = 0
         self._spill: tempfile.TemporaryDirectory[str] | None = None
         self._lock = threading.RLock()
@@ -422,11 +428,14 @@ class Recording:
         return _Mapped(path, _stamp(path), view.shape, view.dtype)
 
     def _remember(self, key: tuple[str, int], view: np.ndarray) -> None:
-        """Keep ``view`` among the open mappings, letting the oldest go beyond :data:`MAX_OPEN_MAPS`."""
+        """Keep ``view`` among the open mappings, letting the oldest go beyond :data:`MAX_OPEN_MAPS`
+        or :data:`MAX_OPEN_MAP_BYTES` (the newest always stays)."""
         view.flags.writeable = False
         self._open_maps[key] = view
-        while len(self._open_maps) > MAX_OPEN_MAPS:
-            self._open_maps.popitem(last=False)
+        self._open_map_bytes += view.nbytes
+        while len(self._open_maps) > 1 and (len(self._open_maps) > MAX_OPEN_MAPS
+                                            or self._open_map_bytes > MAX_OPEN_MAP_BYTES):
+            self._open_map_bytes -= self._open_maps.popitem(last=False)[1].nbytes
 
     def _mapping(self, key: tuple[str, int], kept: _Mapped) -> np.ndarray:
         """The open mapping of a kept frame, mapped again (not read) if it was let go.
