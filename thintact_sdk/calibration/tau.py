@@ -210,10 +210,10 @@ def weighted_mean(table: np.ndarray, weights: np.ndarray) -> np.ndarray:
 def shared_decode(decoder: Any, signals: Sequence[np.ndarray]) -> Callable[[int], np.ndarray]:
     """``decode(i)``: ``decoder.decode(signals[i])`` at the decoder's current τ.
 
-    A decoder with ``project`` / ``decode_projected`` (the τ-free first big product and the
-    rest of the solve, e.g. :class:`~thintact_sdk.reconstruction.decoders.t2s_closed_form.T2SClosedFormDecoder`)
+    A decoder with ``project`` / ``decode_projected`` (the τ-free big products and the rest
+    of the solve, e.g. :class:`~thintact_sdk.reconstruction.decoders.t2s_closed_form.T2SClosedFormDecoder`)
     has every signal projected once here, so a sweep over τ decodes each frame from its
-    projection instead of repeating that product per τ (the same figures up to float rounding).
+    projection instead of repeating those products per τ (the same figures up to float rounding).
     """
     if hasattr(decoder, "project") and hasattr(decoder, "decode_projected"):
         projected = [decoder.project(y) for y in signals]

@@ -160,6 +160,7 @@ class T2SClosedFormDecoder(ClosedFormDecoder):
         self._sp, self._sq = np.stack(per["sp"]), np.stack(per["sq"])  # C × kP, C × kQ
         self._full_modes = (self._coding_left.shape[1], self._coding_right.shape[2])
         self._left_all: Any = None  # every coding mode and E's rows, placed by :meth:`project`
+        self._right_all: Any = None  # every coding mode's columns, placed by :meth:`project`
         self.kept_modes = (0, 0)
         self._place(*kept_mode_counts(self._sp, self._sq, self.channel_tau, self.mode_rtol))
         self._uq = xp.asarray(np.stack(per["uq"]), gemm=True)  # C × S × kq
@@ -260,26 +261,41 @@ class T2SClosedFormDecoder(ClosedFormDecoder):
         self._lr_right_t = xp.asarray(np.swapaxes(np.concatenate([self._b_all64, q[..., None]], axis=2), 1, 2))
 
     def project(self, frame: np.ndarray) -> tuple[Any, Any]:
-        """The τ-free first big product of ``frame`` (``R × S × C`` DN above black), for
-        decoding it at several τ with :meth:`decode_projected`.
+        """The τ-free big products of ``frame`` (``R × S × C`` DN above black), for decoding it
+        at several τ with :meth:`decode_projected`.
 
-        Returns ``(T_c, T_o)``: ``U_Pᵀ Y`` for every coding mode (``C × kP × S``) and the open
-        term's rows (``C × kp × S``), GEMM precision, on the backend. Which coding modes a
-        decode uses depends on τ (``mode_rtol``); it takes the leading rows it needs.
+        Returns ``(core, E)``: ``Σ_P U_Pᵀ Y U_Q Σ_Q`` for every coding mode (``C × kP × kQ``)
+        and the open term's ``E`` (``C × kp × kq``), both products in GEMM precision, stored in
+        the backend's precision. Which coding modes a decode uses depends on τ
+        (``mode_rtol``); it takes the leading block it needs, so a sweep over τ takes neither
+        big product again.
         """
         self._check(frame)
         xp = self.xp
         if self._left_all is None:
             self._left_all = xp.asarray(np.concatenate([self._coding_left, self._up_t], axis=1), gemm=True)
+            self._right_all = xp.asarray(self._coding_right, gemm=True)
         t = self._left_all @ xp.channels_first(frame, gemm=True)
         big_p = self._full_modes[0]
-        return t[:, :big_p], t[:, big_p:]
+        core = xp.cast(t[:, :big_p] @ self._right_all, gemm=False)
+        return core, xp.cast(t[:, big_p:] @ self._uq, gemm=False) * self._scale
 
     def decode_projected(self, projected: tuple[Any, Any]) -> np.ndarray:
         """:meth:`decode` of the frame :meth:`project` returned ``projected`` for, at the
-        current τ (the same figures up to float rounding; black level 0)."""
-        t_c, t_o = projected
-        return self._solve_projected(t_c[:, : self.k_p], t_o, 0.0)
+        current τ (the same figures up to float rounding; black level 0; ``projected`` is
+        not changed)."""
+        core_all, e = projected
+        kept_p, kept_q = self.k_p, self._right.shape[2]
+        xp = self.xp
+        if xp.name == "numpy" and xp.gemm_dtype == xp.dtype:
+            core = np.zeros((self.channels, *self._full_modes), xp.dtype)
+            core[:, :kept_p, :kept_q] = core_all[:, :kept_p, :kept_q]
+            return self._solve_blocked_core(core, e, 0.0)
+        kept = core_all[:, :kept_p, :kept_q]
+        core = xp.pad_to(kept, *self._full_modes)
+        if core is kept:  # every mode kept: the solve scales its core in place, so a copy
+            core = kept * 1
+        return self._solve_core(core, e, 0.0)
 
     def _linear(self, y: Any) -> tuple[Any, Any]:
         """``(Σ_P U_Pᵀ Y U_Q Σ_Q, Eᵀ Y)`` for channel-first ``y`` (GEMM precision)."""
@@ -307,6 +323,12 @@ class T2SClosedFormDecoder(ClosedFormDecoder):
         if xp.name == "numpy" and xp.gemm_dtype == xp.dtype:
             return self._solve_blocked(t_c, t_o, black_dn)
         core, e = self._linear_projected(t_c, t_o)
+        return self._solve_core(core, e, black_dn)
+
+    def _solve_core(self, core: Any, e: Any, black_dn: float) -> np.ndarray:
+        """:meth:`_solve_projected` from the coding core (``C × kP × kQ``, zero past the kept
+        modes; this frame's own array, scaled in place) and ``E``."""
+        xp = self.xp
         if black_dn:
             e = e - black_dn * self._e_unit
         core *= self._den  # Hc⁻¹ ⊙ core (core is this frame's own array)
@@ -342,13 +364,19 @@ class T2SClosedFormDecoder(ClosedFormDecoder):
         float32 rounding; one read and one write of the coefficients fewer than the generic
         path, and no padding pass."""
         c = self.channels
-        (big_p, big_q), kept_p, kp = self._full_modes, self.k_p, self._kp
+        (big_p, big_q), kept_p = self._full_modes, self.k_p
         kept_q = self._right.shape[2]
         core = np.empty((c, big_p, big_q), self.xp.dtype)
         np.matmul(t_c, self._right, out=core[:, :kept_p, :kept_q])
         core[:, :kept_p, kept_q:] = 0
         core[:, kept_p:] = 0
-        e = (t_o @ self._uq) * self._scale  # C × kp × kq
+        return self._solve_blocked_core(core, (t_o @ self._uq) * self._scale, black_dn)
+
+    def _solve_blocked_core(self, core: np.ndarray, e: np.ndarray, black_dn: float) -> np.ndarray:
+        """:meth:`_solve_blocked` from the coding core (``C × kP × kQ``, zero past the kept
+        modes; this frame's own array, scaled in place) and ``E`` (``C × kp × kq``)."""
+        c = self.channels
+        (big_p, big_q), kept_p, kp = self._full_modes, self.k_p, self._kp
         if black_dn:
             e = e - black_dn * self._e_unit
         den, a_all = self._den, self._a_all
