@@ -494,6 +494,16 @@ class _ChannelForward:
             xc = np.ascontiguousarray(x[..., c])
             yield left @ np.vstack([xc @ qo, xc @ qc])
 
+    def adjoint(self, image: np.ndarray) -> np.ndarray:
+        """``Aᵀ`` of a channel-first ``C × R × S`` image: ``Poᵀ Z Qo + Pcᵀ Z Qc`` per channel,
+        ``N × M × C`` float32, so that ``⟨Z, A X⟩ = ⟨Aᵀ Z, X⟩`` for any scene ``X``."""
+        n = self.left[0].shape[1] // 2
+        out = []
+        for c, (left, (qo, qc)) in enumerate(zip(self.left, self.right, strict=True)):
+            lz = left.T @ np.asarray(image[c], np.float32)  # 2N × S: [Poᵀ Z; Pcᵀ Z]
+            out.append(lz[:n] @ qo.T + lz[n:] @ qc.T)
+        return np.stack(out, axis=2)
+
 
 def noise_criteria(decoder: Any, sm: SystemMatrices, signals: Sequence[np.ndarray],
                    inv_var: Sequence[np.ndarray], taus: np.ndarray, probes: int = 4,
@@ -527,17 +537,19 @@ def noise_criteria(decoder: Any, sm: SystemMatrices, signals: Sequence[np.ndarra
     decode = shared_decode(decoder, list(signals) + zs)
     forward = _ChannelForward(sm)
     ys, ws, zcs = ([_channel_first(a) for a in arrays] for arrays in (signals, inv_var, zs))
+    backs = [forward.adjoint(z) for z in zcs]
     for j, tau in enumerate(taus):
         decoder.set_tau(float(tau))
         acc, count = 0.0, 0
         for i, (y, w) in enumerate(zip(ys, ws, strict=True)):
             for ch, pred in enumerate(forward(decode(i))):
-                r = y[ch] - pred
-                acc += float(np.vdot(r * r, w[ch]))
+                r = np.subtract(y[ch], pred, out=pred)  # the prediction is this frame's own array
+                acc += float(np.vdot(np.square(r, out=r), w[ch]))
                 count += r.size
         chi2[j] = acc / count
-        trace = float(np.mean([sum(float(np.vdot(z[ch], pred)) for ch, pred in enumerate(forward(decode(len(ys) + i))))
-                               for i, z in enumerate(zcs)]))
+        # zᵀ A D z = ⟨Aᵀ z, D z⟩: each probe's back-projection is taken once, not a forward per τ
+        trace = float(np.mean([float(np.vdot(back, np.asarray(decode(len(ys) + i), np.float32)))
+                               for i, back in enumerate(backs)]))
         gcv[j] = chi2[j] / (1.0 - min(trace, n - 1.0) / n) ** 2
     grid = [float(t) for t in taus]
     k = int(np.argmin(gcv))
