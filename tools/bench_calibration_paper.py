@@ -205,6 +205,8 @@ WIZ_OPEN, WIZ_CLOSE = "<!-- bench_calibration_wizard -->", "<!-- /bench_calibrat
 
 def _wizard(a: argparse.Namespace) -> int:
     out, result = a.out / f"wizard_div{a.scale}", a.out / f"wizard_div{a.scale}.json"
+    # a fresh unit: the wizard resumes a capture it finds in its output directory
+    shutil.rmtree(out, ignore_errors=True)
     load0 = os.getloadavg()[0]
     subprocess.run([sys.executable, __file__, "--wizard-child", str(a.scale), str(out), str(result)],
                    check=True, env=dict(os.environ, THINTACT_CACHE_DIR=str(_fresh_cache(out))))
