@@ -180,18 +180,6 @@ def _fit_phi_s(h: np.ndarray, k: np.ndarray, rank: int | None, iters: int = 30) 
     return out
 
 
-def _loss(zy: np.ndarray, y_open: np.ndarray, tr: SeparableDCT, phi_f: np.ndarray, phi_s: np.ndarray) -> float:
-    """The relative loss ``‖F(Y) − Yo‖² / ‖Yo‖²`` from the measurements' spectra ``zy``
-    (``tr.fwd`` of each frame): :func:`joint_filter_open` without transforming Y again."""
-    err = 0.0
-    norm = 0.0
-    for f in range(zy.shape[0]):  # frame by frame: no float64 copy of the data set
-        g = phi_s * tr.inv(phi_f * zy[f])
-        err += float(np.sum((g - y_open[f]) ** 2))
-        norm += float(np.sum(y_open[f].astype(np.float64) ** 2))
-    return err / norm
-
-
 def _closed_form(
     data: TrainingData, tr: SeparableDCT, rank: int | None, rounds: int, in_place: bool = False
 ) -> tuple[np.ndarray, np.ndarray, list[float]]:
@@ -212,6 +200,7 @@ def _closed_form(
     for z in zy:
         zz += z.astype(np.float64) ** 2
     ridge = 1e-9 * float(np.mean(zz)) + 1e-30
+    yo_norm = sum(float(np.sum(np.square(yo, dtype=np.float64))) for yo in data.y_open)
     c, r, s = data.y.shape[1:]
     phi_s = np.ones((c, r, s))
     history: list[float] = []
@@ -229,7 +218,9 @@ def _closed_form(
             h += g * g
             k += g * data.y_open[f]
         phi_s = _fit_phi_s(h, k, rank)
-        loss = _loss(zy, data.y_open, tr, phi_f, phi_s)
+        # ‖Φs ⊙ g_f − Yo_f‖² summed over the frames is Σ Φs² H − 2 Φs K + ‖Yo‖²: the relative
+        # loss from the sums just taken, with no frame transformed again
+        loss = max(0.0, float(np.sum(phi_s * (phi_s * h - 2.0 * k))) + yo_norm) / yo_norm
         history.append(loss)
         if best is None or loss < best[0]:
             best = (loss, phi_f, phi_s)
