@@ -113,3 +113,19 @@ def test_a_sensor_binned_decoder_sweeps_from_one_projection_too() -> None:
     assert shared is not None and afresh is not None
     np.testing.assert_allclose(shared.curve.values, afresh.curve.values, rtol=1e-5)
     assert shared.curve.tau == afresh.curve.tau
+
+
+def test_noise_criteria_take_the_weights_as_a_function_of_the_signal() -> None:
+    # the calibration passes 1/σ²(y) as a function, so that no float64 list of weights (440 MB
+    # at the paper's size) is held beside their float32 copies (issue 36)
+    sm, signals, _ = _unit()
+    grid = tau_grid(sm)[::3]
+
+    def weight(y: np.ndarray) -> np.ndarray:
+        return 1.0 / (0.05 + 0.01 * np.clip(np.asarray(y, np.float64), 0.0, None))
+
+    dec = T2SClosedFormDecoder(sm, 1.0, ArrayBackend("numpy", "float64"))
+    listed = noise_criteria(dec, sm, signals, [weight(y) for y in signals], grid)
+    lazily = noise_criteria(dec, sm, signals, weight, grid)
+    for a, b in zip(listed, lazily, strict=True):
+        assert a.values == b.values and (a.tau == b.tau or (np.isnan(a.tau) and np.isnan(b.tau)))

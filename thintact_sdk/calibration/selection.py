@@ -153,8 +153,8 @@ def _results(frames: ValidationFrames, estimates: list[np.ndarray]) -> list[Vali
 
 def _noise_curves(decoder: Any, sm: SystemMatrices, frames: ValidationFrames, noise: NoiseEstimate,
                   grid: np.ndarray) -> tuple[TauCurve, TauCurve]:
-    inv_var = [1.0 / noise.variance(np.asarray(y, np.float64)) for y in frames.signals]
-    return noise_criteria(decoder, sm, frames.signals, inv_var, grid)
+    return noise_criteria(decoder, sm, frames.signals,
+                          lambda y: 1.0 / noise.variance(np.asarray(y, np.float64)), grid)
 
 
 def has_noise_curves(selection: TauSelection) -> bool:

@@ -506,8 +506,8 @@ class _ChannelForward:
 
 
 def noise_criteria(decoder: Any, sm: SystemMatrices, signals: Sequence[np.ndarray],
-                   inv_var: Sequence[np.ndarray], taus: np.ndarray, probes: int = 4,
-                   seed: int = 0) -> tuple[TauCurve, TauCurve]:
+                   inv_var: Sequence[np.ndarray] | Callable[[np.ndarray], np.ndarray], taus: np.ndarray,
+                   probes: int = 4, seed: int = 0) -> tuple[TauCurve, TauCurve]:
     """GCV and the discrepancy principle over ``signals`` (one pass over the τ grid).
 
     Parameters
@@ -517,8 +517,10 @@ def noise_criteria(decoder: Any, sm: SystemMatrices, signals: Sequence[np.ndarra
     sm
         The matrices the residual ``r = Y − A X̂_τ`` is computed with.
     inv_var
-        ``1/σ²`` per measured value (DN⁻²), same shapes as ``signals``; weighting leaves the
-        trace of the influence operator unchanged, so the classical GCV formula applies.
+        ``1/σ²`` per measured value (DN⁻²), same shapes as ``signals``, or a function giving
+        it for a signal (then only its float32 copy is ever held, one frame's at a time
+        while it is made); weighting leaves the trace of the influence operator unchanged, so
+        the classical GCV formula applies.
     probes
         Rademacher probes of Hutchinson's trace estimator (the same for every τ).
 
@@ -536,7 +538,10 @@ def noise_criteria(decoder: Any, sm: SystemMatrices, signals: Sequence[np.ndarra
     gcv = np.empty(len(taus))
     decode = shared_decode(decoder, list(signals) + zs)
     forward = _ChannelForward(sm)
-    ys, ws, zcs = ([_channel_first(a) for a in arrays] for arrays in (signals, inv_var, zs))
+    weight = inv_var if callable(inv_var) else None
+    ws = [_channel_first(weight(y) if weight is not None else inv_var[i])  # type: ignore[index]
+          for i, y in enumerate(signals)]
+    ys, zcs = ([_channel_first(a) for a in arrays] for arrays in (signals, zs))
     backs = [forward.adjoint(z) for z in zcs]
     for j, tau in enumerate(taus):
         decoder.set_tau(float(tau))
