@@ -86,8 +86,9 @@ def _numpy_first(path: str) -> int:
     import numpy
     import scipy
 
+    path = os.path.realpath(path)  # the maps name files by their real paths; a venv may be a link
     for rank, package in enumerate((numpy, scipy)):
-        root = os.path.dirname(os.path.abspath(str(package.__file__)))
+        root = os.path.dirname(os.path.realpath(str(package.__file__)))
         if path.startswith((root + os.sep, root + ".libs" + os.sep)):
             return rank
     return 2
