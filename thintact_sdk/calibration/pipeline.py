@@ -338,6 +338,7 @@ def calibrate_recording(
                                      method=opts.method, max_iter=opts.max_iter, tol=opts.tol,
                                      rank=opts.rank)
     noise_ready: Future[NoiseEstimate] = Future()
+    built: dict[str, Any] = {}  # the decoders the choice built, for the noise criteria to reuse
 
     def health_lane() -> tuple[HealthReport, PredictionDesign | None]:
         """Health (its noise first, for the τ selection), then the prediction's design part."""
@@ -392,7 +393,9 @@ def calibrate_recording(
                 # and computed by noise_curves, beside the prediction
                 selection = select(profile, bundle, frames, noise_ready.result(), decoder=opts.decoder,
                                    tau=opts.tau, simulated=_simulated_curve(tau_table),
-                                   noise_criteria_curves=False)
+                                   noise_criteria_curves=False, built=built)
+                for name in [n for n in built if n != selection.decoder]:
+                    del built[name]  # only the chosen one is reused
                 checkpoints.save_object("selection", selection)
         return bundle, tau_table, selection
 
@@ -410,7 +413,9 @@ def calibrate_recording(
                 selection.curves += stored
                 st["resumed"] = True
             else:
-                add_noise_curves(profile, bundle, frames, noise_ready.result(), selection)
+                add_noise_curves(profile, bundle, frames, noise_ready.result(), selection,
+                                 decoder=built.get(selection.decoder))
+                built.clear()
                 checkpoints.save_object("noise_criteria", [c for c in selection.curves
                                                            if c.criterion in ("gcv", "discrepancy")])
 

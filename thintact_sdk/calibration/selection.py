@@ -163,15 +163,19 @@ def has_noise_curves(selection: TauSelection) -> bool:
 
 
 def add_noise_curves(profile: Profile, bundle: CalibrationBundle, frames: ValidationFrames,
-                     noise: NoiseEstimate, selection: TauSelection) -> None:
+                     noise: NoiseEstimate, selection: TauSelection, decoder: Any | None = None) -> None:
     """Append the GCV and discrepancy curves of the chosen decoder to ``selection.curves``,
     for a selection made with ``noise_criteria_curves=False`` whose choice did not need them
     (cross-validation chose): the calibration computes them beside the prediction.
-    Nothing is done when they are there already or there are no validation frames."""
+    Nothing is done when they are there already or there are no validation frames.
+
+    ``decoder``: the chosen decoder as :func:`select` built it (plain Tikhonov; its τ is
+    changed), else it is built here."""
     if not frames.signals or has_noise_curves(selection):
         return
     name = selection.decoder  # plain Tikhonov where it takes a scene prior, as select computes them
-    decoder = make_decoder(profile, bundle, name, **({"prior": None} if takes_scene_prior(name) else {}))
+    if decoder is None:
+        decoder = make_decoder(profile, bundle, name, **({"prior": None} if takes_scene_prior(name) else {}))
     sm = bundle.system_matrices
     selection.curves += list(_noise_curves(decoder, sm, frames, noise, tau_grid(sm)))
 
@@ -186,6 +190,7 @@ def select(
     tau: float | None = None,
     simulated: TauCurve | None = None,
     noise_criteria_curves: bool = True,
+    built: dict[str, Any] | None = None,
 ) -> TauSelection:
     """Choose the decoder and τ on the unit's validation frames.
 
@@ -209,6 +214,10 @@ def select(
     noise_criteria_curves
         Compute the GCV and discrepancy curves (reported; GCV is the fallback without a
         simulated curve).
+    built
+        Filled with the decoders built for the choice, by name (plain Tikhonov where a
+        decoder takes a scene prior), for :func:`add_noise_curves` to take instead of
+        building the chosen one again.
     """
     sm = bundle.system_matrices
     curves: list[TauCurve] = [simulated] if simulated is not None else []
@@ -223,6 +232,8 @@ def select(
     # plain Tikhonov for a decoder that can take a scene prior, whatever the bundle already holds
     decoders = {name: make_decoder(profile, bundle, name, **({"prior": None} if takes_scene_prior(name) else {}))
                 for name in names}
+    if built is not None:
+        built.update(decoders)
     cvs: dict[str, CrossValidation] = {}
     for name, dec in decoders.items():
         if takes_scene_prior(name):
