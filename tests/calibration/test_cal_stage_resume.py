@@ -211,3 +211,74 @@ def test_slits_compressed_on_two_threads_equal_one_thread_and_name_the_first_dea
     with pytest.raises(CalibrationError, match=f"slit frame {slits[2]} "):
         collect_slits(Recording(tmp_path / "rec"))
 
+
+
+def test_the_noise_criteria_take_the_decoder_the_choice_built(tmp_path, monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    """The reported GCV and discrepancy curves reuse the plain decoder the τ choice built
+    (issue 36: building it again took about 6 s at the paper's size, after the choice) and
+    come out as from a decoder built afresh."""
+    import copy
+
+    from cal_testkit import synthetic_matrices, synthetic_profile, write_slit_recording
+
+    from thintact_sdk.calibration import selection as selection_module
+    from thintact_sdk.calibration.collect import collect_slits
+    from thintact_sdk.calibration.health import measure_noise
+    from thintact_sdk.calibration.pipeline import CalibrationOptions, build_bundle, solve_matrices
+    from thintact_sdk.calibration.selection import add_noise_curves, select, validation_frames
+    from thintact_sdk.calibration.validation import calibration_decoders
+    from thintact_sdk.formats.recording import Recording
+    from thintact_sdk.simulation.scenes import make_scene
+
+    profile = synthetic_profile()
+    scenes = [make_scene(k, 24, 32, s) for k, s in (("gelsight", 2), ("smooth_color", 1), ("gelsight", 5),
+                                                     ("smooth_color", 7))]
+    write_slit_recording(tmp_path / "rec", profile, synthetic_matrices(), np.random.default_rng(3), scenes)
+    rec = Recording(tmp_path / "rec")
+    collection = collect_slits(rec)
+    opts = CalibrationOptions(filter_steps=0, filter_scenes=8)
+    sm, _ = solve_matrices(collection, opts, rec.profile)
+    bundle, _ = build_bundle(rec.profile, sm, opts, 1, "recording", collection.exposure_us)
+    frames = validation_frames(rec, collection, rec.profile.noise.saturation_dn)
+    noise = measure_noise(rec, collection, sm, 1)
+    built: dict[str, object] = {}
+    chosen = select(rec.profile, bundle, frames, noise, noise_criteria_curves=False, built=built)
+    assert set(built) == set(calibration_decoders())
+    afresh = copy.deepcopy(chosen)
+    add_noise_curves(rec.profile, bundle, frames, noise, afresh)
+
+    def no_build(*a, **k):  # type: ignore[no-untyped-def]
+        raise AssertionError("the chosen decoder was built again")
+
+    monkeypatch.setattr(selection_module, "make_decoder", no_build)
+    add_noise_curves(rec.profile, bundle, frames, noise, chosen, decoder=built[chosen.decoder])
+    got = {c.criterion: c for c in chosen.curves if c.criterion in ("gcv", "discrepancy")}
+    want = {c.criterion: c for c in afresh.curves if c.criterion in ("gcv", "discrepancy")}
+    assert set(got) == set(want) == {"gcv", "discrepancy"}
+    for name, curve in want.items():
+        np.testing.assert_allclose(got[name].values, curve.values, rtol=1e-6)
+
+
+def test_the_capture_measures_every_calibration_decoders_backend(tmp_path, monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    """During the capture the backends of every calibration decoder are measured on the
+    design's matrices, the joint-filter decoder's too on a filter trained on them (issue 36:
+    measuring it after the last pattern took about 20 s at the paper's size, before the τ
+    choice could start); the unit's own decoders are then built from the cache."""
+    import json
+
+    from cal_testkit import synthetic_matrices, synthetic_profile
+
+    from thintact_sdk.calibration.capture_worker import warm_backends
+    from thintact_sdk.calibration.validation import calibration_decoders
+    from thintact_sdk.reconstruction.decoders import backend_selection
+
+    monkeypatch.setenv("THINTACT_CACHE_DIR", str(tmp_path))
+    warm_backends(synthetic_profile(), synthetic_matrices())
+    measured = json.loads((tmp_path / "decoder-backends.json").read_text())
+    names = {key.split("|")[1] for key in measured}
+    assert names == set(calibration_decoders()) and "thintact-noniterative" in names
+    assert all("|blas 1," in key for key in measured)  # the calibration lanes' one BLAS thread
+    # a later build of the same shapes takes the cached choice: nothing is measured again
+    monkeypatch.setattr(backend_selection, "measure_backends", lambda *a, **k: (_ for _ in ()).throw(
+        AssertionError("measured again")))
+    warm_backends(synthetic_profile(), synthetic_matrices(seed=4))

@@ -182,19 +182,33 @@ class CaptureWorker:
         self._design_thread.start()
 
 
+WARM_FILTER_SCENES = 8
+"""Training scenes of the joint filter :func:`warm_backends` trains on the design's matrices for
+a decoder that needs one: the backend measurement needs a filter of the unit's shape, and its
+accuracy check (each backend against float64 on probe scenes) does not depend on how well the
+filter was trained."""
+
+
 def warm_backends(profile: Profile, design: SystemMatrices) -> None:
-    """Have the array backend of every calibration decoder that needs no joint filter measured
-    on the design's simulated matrices (the unit's shapes), under the thread setting the
-    calibration decodes with after the capture (one BLAS thread: the τ selection and the
-    prediction run on its lanes). The measurements are cached per host and shape
-    (:mod:`~thintact_sdk.reconstruction.decoders.backend_selection`), so the decoders built
-    after the last pattern are built directly; the first unit of a shape on a station no
-    longer measures them then. What is measured is speed and accuracy on probe scenes, both
-    set by the shapes and the design, not by this unit's defects."""
-    bundle = CalibrationBundle.create(profile, design, None, tau=1.0, source="simulator")
-    for name in calibration_decoders():
-        if needs_joint_filter(name):
-            continue
-        kwargs: dict[str, Any] = {"prior": None} if takes_scene_prior(name) else {}
-        with blas_threads(1):
+    """Have the array backend of every calibration decoder measured on the design's simulated
+    matrices (the unit's shapes), under the thread setting the calibration decodes with after
+    the capture (one BLAS thread: the τ selection and the prediction run on its lanes); a
+    decoder that needs a joint filter gets one trained on those matrices
+    (:data:`WARM_FILTER_SCENES` scenes, the profile's noise). The measurements are cached per
+    host and shape (:mod:`~thintact_sdk.reconstruction.decoders.backend_selection`), so the
+    decoders built after the last pattern are built directly; the first unit of a shape on a
+    station no longer measures them then. What is measured is speed and accuracy on probe
+    scenes, both set by the shapes and the design, not by this unit's defects."""
+    from thintact_sdk.reconstruction.filter_training import train_joint_filter, training_scenes
+
+    plain = CalibrationBundle.create(profile, design, None, tau=1.0, source="simulator")
+    with blas_threads(1):
+        for name in calibration_decoders():
+            bundle = plain
+            if needs_joint_filter(name):
+                n, m = design.scene_shape
+                jf = train_joint_filter(design, training_scenes(n, m, count=WARM_FILTER_SCENES, seed=0),
+                                        noise=profile.noise, steps=0, seed=0)
+                bundle = CalibrationBundle.create(profile, design, jf, tau=1.0, source="simulator")
+            kwargs: dict[str, Any] = {"prior": None} if takes_scene_prior(name) else {}
             make_decoder(profile, bundle, name, **kwargs)
