@@ -538,9 +538,8 @@ def noise_criteria(decoder: Any, sm: SystemMatrices, signals: Sequence[np.ndarra
     gcv = np.empty(len(taus))
     decode = shared_decode(decoder, list(signals) + zs)
     forward = _ChannelForward(sm)
-    weight = inv_var if callable(inv_var) else None
-    ws = [_channel_first(weight(y) if weight is not None else inv_var[i])  # type: ignore[index]
-          for i, y in enumerate(signals)]
+    weights = (inv_var(y) for y in signals) if callable(inv_var) else iter(inv_var)
+    ws = [_channel_first(w) for w in weights]
     ys, zcs = ([_channel_first(a) for a in arrays] for arrays in (signals, zs))
     backs = [forward.adjoint(z) for z in zcs]
     for j, tau in enumerate(taus):
