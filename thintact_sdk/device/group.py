@@ -330,7 +330,7 @@ class SensorGroup:
         self._opened_s = time.monotonic()
         for m in self.members:
             m.status = MemberStatus(m.name, "starting")
-            m.last_frame_s = time.monotonic()
+            m.last_frame_s = self._opened_s  # so each startup ends at _opened_s + startup_s
             m.intervals_s.clear()
             m.thread = threading.Thread(target=self._capture_loop, args=(m,),
                                         name=f"group-{m.name}", daemon=True)
@@ -471,7 +471,7 @@ class SensorGroup:
             limit = self.startup_s if m.status.state == "starting" else self.stall_after_s
             if m.status.state == "running" and m.intervals_s:
                 limit = max(limit, STALL_FRAME_PERIODS * float(np.median(m.intervals_s)))
-            if m.status.state in ("running", "starting") and now_s - m.last_frame_s > limit:
+            if m.status.state in ("running", "starting") and now_s - m.last_frame_s >= limit:
                 m.status.state = "stalled"
                 m.status.stalls += 1
                 if not m.status.error:
@@ -541,14 +541,17 @@ class SensorGroup:
         deadline = max(time.monotonic() + timeout_s, self._opened_s + self.startup_s)
         with self._cond:
             while True:
-                self._update_stalls(time.monotonic())
+                # one clock reading per pass: at the deadline, a member silent since the
+                # open is already stalled when the pairing is tried
+                now = time.monotonic()
+                self._update_stalls(now)
                 pair = self._try_pair()
                 if pair is not None:
                     return pair
                 gone = self._no_member_left()
                 if gone is not None:
                     raise gone
-                left = deadline - time.monotonic()
+                left = deadline - now
                 if left <= 0:
                     states = ", ".join(f"{m.name} {m.status.state}" for m in self.members)
                     raise DeviceTimeoutError(
