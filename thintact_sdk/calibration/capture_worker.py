@@ -42,6 +42,7 @@ from thintact_sdk.errors import ThinTactError
 from thintact_sdk.formats.profiles import Profile
 from thintact_sdk.formats.recording import Recording
 from thintact_sdk.host.blas import blas_threads
+from thintact_sdk.host.memory import return_free_heap
 from thintact_sdk.reconstruction.bundle import CalibrationBundle
 from thintact_sdk.reconstruction.t2s import SystemMatrices
 
@@ -134,6 +135,7 @@ class CaptureWorker:
                     if self._design_thread is None and self.options.predict:
                         self._maybe_start_design(view, i)
                 self._done = len(view)
+                return_free_heap()  # the frames just compressed: freed, and given back
                 t_compress += time.monotonic() - t0
                 if len(comp.slits) >= self.slits and prep.solved is None and comp.broken is None:
                     prep.seconds["compress"] = round(t_compress, 3)
@@ -148,6 +150,7 @@ class CaptureWorker:
         sm, reports = solve_collection(collection, self.profile, o.method, o.max_iter, o.tol)
         self.prepared.solved = (collection, sm, reports)
         self.prepared.seconds["solve"] = round(time.monotonic() - t0, 3)
+        return_free_heap()  # the compression's frames and the solve's work arrays
 
     def _maybe_start_design(self, view: Recording, i: int) -> None:
         """Start the prediction's design when frame ``i`` is the white frame (after a dark
@@ -170,6 +173,7 @@ class CaptureWorker:
             except (ThinTactError, ValueError, np.linalg.LinAlgError) as err:
                 self.prepared.errors["design"] = str(err)
             self.prepared.seconds["design"] = round(time.monotonic() - t0, 3)
+            return_free_heap()  # the simulated slit frames
             if self.prepared.design is not None:
                 t0 = time.monotonic()
                 try:
@@ -177,6 +181,7 @@ class CaptureWorker:
                 except (ThinTactError, ValueError, np.linalg.LinAlgError) as err:
                     self.prepared.errors["backends"] = str(err)
                 self.prepared.seconds["backends"] = round(time.monotonic() - t0, 3)
+                return_free_heap()
 
         self._design_thread = threading.Thread(target=run, name="calibrate-design", daemon=True)
         self._design_thread.start()

@@ -48,6 +48,7 @@ from thintact_sdk.errors import CalibrationError
 from thintact_sdk.formats.profiles import NoiseSpec, Profile
 from thintact_sdk.formats.safe_arrays import read_npz
 from thintact_sdk.formats.safe_json import loads as safe_loads
+from thintact_sdk.host.memory import return_free_heap
 from thintact_sdk.reconstruction.joint_filter import JointFilter
 from thintact_sdk.reconstruction.t2s import SystemMatrices
 from thintact_sdk.simulation.simulator import Simulator
@@ -191,6 +192,9 @@ class StageLog:
         t0 = time.monotonic()
         entry: dict[str, Any] = {"stage": name, "start_s": round(t0 - self.start, 3)}
         yield entry
+        # what the stage freed goes back to the system before the next stage allocates
+        # (host.memory: glibc otherwise keeps freed frames in its heaps)
+        return_free_heap()
         entry["seconds"] = round(time.monotonic() - t0, 3)
         entry["peak_rss_mib"] = round(peak_rss_mib(), 1)
         self.done.append(entry)
