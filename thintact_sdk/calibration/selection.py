@@ -11,6 +11,8 @@ there is none): on the test recordings GCV chose a τ 3-15× too small.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -22,9 +24,11 @@ from thintact_sdk.calibration.health import NoiseEstimate
 from thintact_sdk.calibration.tau import (
     CrossValidation,
     TauCurve,
+    choose_prior,
     cross_validate,
-    cross_validate_prior,
+    enough_folds,
     noise_criteria,
+    prior_candidates,
     tau_grid,
 )
 from thintact_sdk.calibration.validation import (
@@ -180,6 +184,64 @@ def add_noise_curves(profile: Profile, bundle: CalibrationBundle, frames: Valida
     selection.curves += list(_noise_curves(decoder, sm, frames, noise, tau_grid(sm)))
 
 
+SELECT_WORKERS = 2
+"""Cross-validations :func:`select` runs at once (threads: numpy's kernels release the
+interpreter lock), the calibration's two lanes."""
+
+
+def _cross_validate_all(
+    profile: Profile, bundle: CalibrationBundle, frames: ValidationFrames, names: list[str], grid: np.ndarray,
+    on_decoder: Callable[[str], None] | None,
+) -> tuple[dict[str, CrossValidation], dict[str, Any]]:
+    """Each decoder's cross-validation (:func:`~thintact_sdk.calibration.tau.cross_validate`;
+    with its scene priors, :func:`~thintact_sdk.calibration.tau.cross_validate_prior`'s
+    choice), and the plain decoders built for them, by name.
+
+    Every build and cross-validation is one job of one pool of :data:`SELECT_WORKERS`: the
+    plain decoders first, then every scene prior, so no core waits for the slowest job of one
+    decoder before the next decoder starts. The results are combined in the order a
+    sequential search takes them, so the choice is the same.
+    """
+    sig, tru, lab = frames.signals, frames.truths, frames.labels
+    plain_kwargs = {name: {"prior": None} if takes_scene_prior(name) else {} for name in names}
+    priors = {name: prior_candidates() if takes_scene_prior(name) and enough_folds(tru) else [] for name in names}
+
+    def plain(name: str) -> tuple[Any, CrossValidation | None]:
+        dec = make_decoder(profile, bundle, name, **plain_kwargs[name])
+        return dec, cross_validate(dec, name, sig, tru, lab, grid)
+
+    def with_prior(name: str, prior: ScenePrior) -> CrossValidation | None:
+        return cross_validate(make_decoder(profile, bundle, name, prior=prior), name, sig, tru, lab, grid)
+
+    with ThreadPoolExecutor(max_workers=SELECT_WORKERS, thread_name_prefix="select-cv") as pool:
+        jobs = {name: pool.submit(plain, name) for name in names}
+        prior_jobs = {name: [pool.submit(with_prior, name, p) for p in priors[name]] for name in names}
+        try:
+            decoders: dict[str, Any] = {}
+            plain_cvs: dict[str, CrossValidation] = {}
+            for name in names:
+                decoders[name], cv = jobs[name].result()
+                if cv is not None:
+                    plain_cvs[name] = cv
+            if on_decoder is not None and plain_cvs:
+                # only the leader's own priors can still move the scores: then it stays ahead
+                leader = max(plain_cvs.values(), key=lambda cv: cv.held_out_mean_db).decoder
+                if priors[leader] and not any(priors[n] for n in plain_cvs if n != leader):
+                    on_decoder(leader)
+            cvs: dict[str, CrossValidation] = {}
+            for name, cv in plain_cvs.items():
+                cvs[name] = cv if not priors[name] else choose_prior(
+                    cv, priors[name], [f.result() for f in prior_jobs[name]], lab, tru)
+        except BaseException:
+            for job in jobs.values():
+                job.cancel()
+            for fs in prior_jobs.values():
+                for f in fs:
+                    f.cancel()
+            raise
+    return cvs, decoders
+
+
 def select(
     profile: Profile,
     bundle: CalibrationBundle,
@@ -191,6 +253,7 @@ def select(
     simulated: TauCurve | None = None,
     noise_criteria_curves: bool = True,
     built: dict[str, Any] | None = None,
+    on_decoder: Callable[[str], None] | None = None,
 ) -> TauSelection:
     """Choose the decoder and τ on the unit's validation frames.
 
@@ -218,6 +281,13 @@ def select(
         Filled with the decoders built for the choice, by name (plain Tikhonov where a
         decoder takes a scene prior), for :func:`add_noise_curves` to take instead of
         building the chosen one again.
+    on_decoder
+        Called with the chosen decoder's name as soon as it is certain while the scene
+        priors are still being cross-validated: when plain Tikhonov of the one decoder that
+        takes scene priors already scores best (a prior only replaces plain Tikhonov by
+        scoring higher). Not called otherwise; the decoders in ``built`` are complete by then, and the
+        chosen one's is no longer used by the choice (the calibration starts the work that
+        depends on the name alone, e.g. its noise criteria and prediction).
     """
     sm = bundle.system_matrices
     curves: list[TauCurve] = [simulated] if simulated is not None else []
@@ -229,26 +299,13 @@ def select(
         return TauSelection(name, float(tau), "given (--tau)", {name: float(tau)}, curves,
                             validation=_results(frames, estimates))
     grid = tau_grid(sm)
-    # plain Tikhonov for a decoder that can take a scene prior, whatever the bundle already holds
-    decoders = {name: make_decoder(profile, bundle, name, **({"prior": None} if takes_scene_prior(name) else {}))
-                for name in names}
+    cvs, decoders = _cross_validate_all(profile, bundle, frames, names, grid, on_decoder)
     if built is not None:
         built.update(decoders)
-    cvs: dict[str, CrossValidation] = {}
-    for name, dec in decoders.items():
-        if takes_scene_prior(name):
-            # plain Tikhonov is the decoder already built for this name (not a second copy)
-            cv = cross_validate_prior(
-                lambda prior, name=name, dec=dec: dec if prior is None else  # type: ignore[misc]
-                make_decoder(profile, bundle, name, prior=prior),
-                name, frames.signals, frames.truths, frames.labels, grid)
-        else:
-            cv = cross_validate(dec, name, frames.signals, frames.truths, frames.labels, grid)
-        if cv is not None:
-            cvs[name] = cv
-            what = "" if cv.prior is None else f", scene prior alpha {cv.prior.alpha:g} k0 {cv.prior.k0:g}"
-            curves.append(TauCurve(f"cross-validation ({name}{what})", cv.curve.taus, cv.curve.values,
-                                   cv.curve.tau, cv.curve.unit, cv.curve.note))
+    for name, cv in cvs.items():
+        what = "" if cv.prior is None else f", scene prior alpha {cv.prior.alpha:g} k0 {cv.prior.k0:g}"
+        curves.append(TauCurve(f"cross-validation ({name}{what})", cv.curve.taus, cv.curve.values,
+                               cv.curve.tau, cv.curve.unit, cv.curve.note))
     if cvs:
         best = max(cvs.values(), key=lambda cv: cv.held_out_mean_db)
         chosen, criterion, tau_chosen = best.decoder, "cross-validation", best.curve.tau

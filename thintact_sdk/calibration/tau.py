@@ -221,19 +221,24 @@ def shared_decode(decoder: Any, signals: Sequence[np.ndarray]) -> Callable[[int]
     return lambda i: np.asarray(decoder.decode(signals[i]))
 
 
-def _mse_table(decoder: Any, signals: Sequence[np.ndarray], truths: Sequence[np.ndarray],
+def _mse_table(decode: Callable[[int], np.ndarray], decoder: Any, truths: Sequence[np.ndarray],
                taus: np.ndarray) -> np.ndarray:
-    """Mean squared error of every signal at every τ, per channel: ``scenes × τ × C``
-    (estimates clipped to [0, 1], display units)."""
-    channels = np.asarray(decoder.decode(signals[0])).shape[-1] if signals else 1
-    tru = [scene_for_channels(np.asarray(x, np.float32), channels).astype(np.float64) for x in truths]
-    table = np.empty((len(signals), len(taus), channels))
-    decode = shared_decode(decoder, signals)
+    """Mean squared error of every frame at every τ, per channel: ``scenes × τ × C``
+    (estimates clipped to [0, 1], display units; ``decode`` as :func:`shared_decode` made
+    for ``decoder``)."""
+    table = np.empty((len(truths), len(taus), 0))
+    tru: list[np.ndarray] = []
     for j, tau in enumerate(taus):
         decoder.set_tau(float(tau))
-        for i, x in enumerate(tru):
-            est = np.clip(np.asarray(decode(i), np.float64), 0.0, 1.0).reshape(x.shape)
-            table[i, j] = np.mean((est - x) ** 2, axis=(0, 1))
+        for i in range(len(truths)):
+            est = np.asarray(decode(i), np.float64)
+            if not tru:  # the channel count is the decoder's
+                channels = est.shape[-1] if est.ndim == 3 else 1
+                tru = [scene_for_channels(np.asarray(x, np.float32), channels).astype(np.float64)
+                       for x in truths]
+                table = np.empty((len(truths), len(taus), channels))
+            est = np.clip(est, 0.0, 1.0).reshape(tru[i].shape)
+            table[i, j] = np.mean((est - tru[i]) ** 2, axis=(0, 1))
     return table
 
 
@@ -243,14 +248,14 @@ def _db(mse: np.ndarray) -> np.ndarray:
         return np.asarray(-10.0 * np.log10(mse))
 
 
-def _refined_table(decoder: Any, signals: Sequence[np.ndarray], truths: Sequence[np.ndarray],
+def _refined_table(decode: Callable[[int], np.ndarray], decoder: Any, truths: Sequence[np.ndarray],
                    taus: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The τ grid refined around its best weighted mean PSNR, and the ``scenes × τ × C`` MSE."""
-    mse = _mse_table(decoder, signals, truths, taus)
+    mse = _mse_table(decode, decoder, truths, taus)
     fine = refine(taus, float(taus[int(np.argmax(weighted_mean(_db(mse.mean(axis=2)), weights)))]))
     extra = np.setdiff1d(fine, taus)
     taus = np.concatenate([taus, extra])
-    mse = np.concatenate([mse, _mse_table(decoder, signals, truths, extra)], axis=1)
+    mse = np.concatenate([mse, _mse_table(decode, decoder, truths, extra)], axis=1)
     order = np.argsort(taus)
     return taus[order], mse[:, order]
 
@@ -270,13 +275,15 @@ def cross_validate(decoder: Any, name: str, signals: Sequence[np.ndarray],
     taus
         τ grid (DN²).
     """
+    if not enough_folds(truths, min_per_fold):
+        return None
     folds = assign_folds(truths)
     weights = scene_weights(truths)
-    distinct = {(f, _scene_key(x)) for f, x in zip(folds, truths, strict=True)}
-    if any(sum(1 for f, _ in distinct if f == fold) < min_per_fold for fold in (0, 1)):
-        return None
     fold_arr = np.asarray(folds)
-    taus, mse = _refined_table(decoder, signals, truths, taus, weights)
+    # every frame projected once (shared_decode): the grid, its refinement and the held-out
+    # estimates below all decode from the same projections
+    decode = shared_decode(decoder, signals)
+    taus, mse = _refined_table(decode, decoder, truths, taus, weights)
     table = _db(mse.mean(axis=2))
     fold_tau = [float(taus[int(np.argmax(weighted_mean(table[fold_arr == f], weights[fold_arr == f])))])
                 for f in (0, 1)]
@@ -302,7 +309,7 @@ def cross_validate(decoder: Any, name: str, signals: Sequence[np.ndarray],
     for f in (0, 1):
         decoder.set_tau(fold_taus[1 - f])
         for i in (int(k) for k in np.flatnonzero(fold_arr == f)):
-            est = np.asarray(decoder.decode(signals[i]), np.float32)
+            est = np.asarray(decode(i), np.float32)
             out.held_out_estimates[labels[i]] = est
             out.held_out_psnr[labels[i]] = score(labels[i], est, truths[i]).psnr_db
     decoder.set_tau(deployed)
@@ -351,20 +358,43 @@ def cross_validate_prior(make: Callable[[ScenePrior | None], Any], name: str, si
         Candidates cross-validated at once (threads; ``make`` must be safe to call from two).
     """
     plain = cross_validate(make(None), name, signals, truths, labels, taus, min_per_fold)
-    candidates = [p for p in (default_priors() if priors is None else priors) if not p.is_plain]
+    candidates = prior_candidates(priors)
     if plain is None or not candidates:
         return plain
-    plain.plain_held_out_db = plain.held_out_mean_db
-    keys = [_scene_key(x) for x in truths]
-    best, curves = plain, []
 
     def one(candidate: ScenePrior) -> CrossValidation | None:
         return cross_validate(make(candidate), name, signals, truths, labels, taus, min_per_fold)
 
     # the candidates are independent: two at a time (numpy's kernels release the interpreter
-    # lock), taken in order below, so the choice is the one a sequential search makes
+    # lock); choose_prior takes them in order, so the choice is the one a sequential search makes
     with ThreadPoolExecutor(max_workers=max(1, int(workers)), thread_name_prefix="prior-cv") as pool:
         results = list(pool.map(one, candidates))
+    return choose_prior(plain, candidates, results, labels, truths)
+
+
+def prior_candidates(priors: Sequence[ScenePrior] | None = None) -> list[ScenePrior]:
+    """The scene priors :func:`cross_validate_prior` compares with plain Tikhonov: ``priors``
+    (default :func:`default_priors`) without the plain ones (α = 0)."""
+    return [p for p in (default_priors() if priors is None else priors) if not p.is_plain]
+
+
+def enough_folds(truths: Sequence[np.ndarray], min_per_fold: int = MIN_SCENES_PER_FOLD) -> bool:
+    """Whether the scenes make two folds of ``min_per_fold`` distinct scenes each (else
+    :func:`cross_validate` returns ``None`` without decoding)."""
+    distinct = {(f, _scene_key(x)) for f, x in zip(assign_folds(truths), truths, strict=True)}
+    return all(sum(1 for f, _ in distinct if f == fold) >= min_per_fold for fold in (0, 1))
+
+
+def choose_prior(plain: CrossValidation, candidates: Sequence[ScenePrior],
+                 results: Sequence[CrossValidation | None], labels: Sequence[str],
+                 truths: Sequence[np.ndarray]) -> CrossValidation:
+    """The choice of :func:`cross_validate_prior` from plain Tikhonov's cross-validation and
+    each candidate's (``results[i]`` for ``candidates[i]``, ``None`` where it did not make
+    two folds), taken in the candidates' order: the best held-out mean among the candidates
+    that also raise the median distinct scene (:func:`median_scene_gain`), else plain."""
+    plain.plain_held_out_db = plain.held_out_mean_db
+    keys = [_scene_key(x) for x in truths]
+    best, curves = plain, []
     for candidate, cv in zip(candidates, results, strict=True):
         if cv is None:
             continue
