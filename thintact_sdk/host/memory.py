@@ -6,9 +6,8 @@ each large block freed, up to 32 MiB on 64-bit hosts. After the first paper-size
 freed, frames and their temporaries (a 1024 × 1280 × 3 float32 frame is 15.7 MB) come from
 the heaps instead, one per thread that allocated, and a freed block stays in the process's
 resident memory until the heap above it is freed too. A long calibration whose threads
-allocate and free such arrays for minutes ends up holding hundreds of MB of free heap: on
-the pipelined wizard at half the paper's size, 384 MiB of the 1036 MiB its heaps held when
-the capture ended were free, and trimming gave 346 MiB back (docs/calibration.md).
+allocate and free such arrays for minutes ends up holding hundreds of MB of free heap
+(measured in docs/calibration.md, issue 36).
 
 :func:`return_free_heap` trims every heap (glibc 2.8 and later also release free pages in
 the middle of a heap). It is cheap next to a calibration stage; it is no replacement for
