@@ -65,7 +65,7 @@ def test_a_crash_in_the_prediction_resumes_without_recomputing_health_or_the_cho
 
     monkeypatch.setattr(pipeline, "predict_from_design", real_predict)
     assert (tmp_path / "cal" / "stages" / "design.npz").is_file()
-    for name in ("collect_slits", "solve_matrices", "build_bundle", "assess", "select", "add_noise_curves",
+    for name in ("collect_slits", "solve_matrices", "build_bundle", "assess", "select", "noise_curves_of",
                  "design_for_prediction"):
         monkeypatch.setattr(pipeline, name, never)
     again = calibrate_recording(rec, tmp_path / "cal", opts, report=False)
@@ -225,14 +225,21 @@ def test_the_noise_criteria_take_the_decoder_the_choice_built(tmp_path, monkeypa
     from thintact_sdk.calibration.collect import collect_slits
     from thintact_sdk.calibration.health import measure_noise
     from thintact_sdk.calibration.pipeline import CalibrationOptions, build_bundle, solve_matrices
-    from thintact_sdk.calibration.selection import add_noise_curves, select, validation_frames
+    from thintact_sdk.calibration.selection import (
+        add_noise_curves,
+        has_noise_curves,
+        select,
+        validation_frames,
+    )
     from thintact_sdk.calibration.validation import calibration_decoders
     from thintact_sdk.formats.recording import Recording
     from thintact_sdk.simulation.scenes import make_scene
 
     profile = synthetic_profile()
+    # four distinct scenes (smooth_color has no index): two folds, so cross-validation chooses
+    # and the curves are left to add_noise_curves
     scenes = [make_scene(k, 24, 32, s) for k, s in (("gelsight", 2), ("smooth_color", 1), ("gelsight", 5),
-                                                     ("smooth_color", 7))]
+                                                     ("checker", 0))]
     write_slit_recording(tmp_path / "rec", profile, synthetic_matrices(), np.random.default_rng(3), scenes)
     rec = Recording(tmp_path / "rec")
     collection = collect_slits(rec)
@@ -244,6 +251,7 @@ def test_the_noise_criteria_take_the_decoder_the_choice_built(tmp_path, monkeypa
     built: dict[str, object] = {}
     chosen = select(rec.profile, bundle, frames, noise, noise_criteria_curves=False, built=built)
     assert set(built) == set(calibration_decoders())
+    assert chosen.criterion == "cross-validation" and not has_noise_curves(chosen)
     afresh = copy.deepcopy(chosen)
     add_noise_curves(rec.profile, bundle, frames, noise, afresh)
 
@@ -257,6 +265,66 @@ def test_the_noise_criteria_take_the_decoder_the_choice_built(tmp_path, monkeypa
     assert set(got) == set(want) == {"gcv", "discrepancy"}
     for name, curve in want.items():
         np.testing.assert_allclose(got[name].values, curve.values, rtol=1e-6)
+
+
+
+def test_the_noise_criteria_and_the_prediction_start_once_the_decoder_is_certain(tmp_path, monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    # the scene priors only replace plain Tikhonov by scoring higher: once plain t2s leads,
+    # the decoder's name is certain and the work that needs only the name starts beside the
+    # priors (issue 36); the bundle is the one a run without the early start writes
+    from cal_testkit import synthetic_matrices, synthetic_profile, write_slit_recording
+
+    from thintact_sdk.calibration import pipeline
+    from thintact_sdk.calibration.pipeline import CalibrationOptions, calibrate_recording
+    from thintact_sdk.formats.recording import Recording
+    from thintact_sdk.simulation.scenes import make_scene
+
+    scenes = [make_scene(k, 24, 32, s) for k, s in (("gelsight", 2), ("smooth_color", 1), ("gelsight", 5),
+                                                     ("checker", 0))]
+    write_slit_recording(tmp_path / "rec", synthetic_profile(), synthetic_matrices(), np.random.default_rng(3),
+                         scenes)
+    rec = Recording(tmp_path / "rec")
+    # the decoder imposed (its τ and scene prior still chosen): certain after plain Tikhonov
+    opts = CalibrationOptions(filter_steps=0, filter_scenes=8, decoder="t2s-closed-form")
+    events: list[tuple[str, str]] = []
+    real_select, real_curves, real_predict = pipeline.select, pipeline.noise_curves_of, pipeline.predict_from_design
+
+    def spy_select(*a, on_decoder=None, **k):  # type: ignore[no-untyped-def]
+        def told(name: str) -> None:
+            events.append(("told", name))
+            on_decoder(name)
+
+        out = real_select(*a, on_decoder=None if on_decoder is None else told, **k)
+        events.append(("chosen", out.decoder))
+        return out
+
+    def spy_curves(profile, bundle, frames, noise, name, decoder=None):  # type: ignore[no-untyped-def]
+        events.append(("noise criteria", name))
+        assert decoder is not None  # the plain decoder the choice built
+        return real_curves(profile, bundle, frames, noise, name, decoder)
+
+    def spy_predict(profile, design, labels, truths, name, **k):  # type: ignore[no-untyped-def]
+        events.append(("prediction", name))
+        return real_predict(profile, design, labels, truths, name, **k)
+
+    monkeypatch.setattr(pipeline, "select", spy_select)
+    monkeypatch.setattr(pipeline, "noise_curves_of", spy_curves)
+    monkeypatch.setattr(pipeline, "predict_from_design", spy_predict)
+    calibrate_recording(rec, tmp_path / "early", opts, report=False)
+    told = [e for e in events if e[0] == "told"]
+    chosen = [e for e in events if e[0] == "chosen"]
+    assert told and chosen and told[0][1] == chosen[0][1] == "t2s-closed-form"
+    assert events.index(told[0]) < events.index(chosen[0])  # told while the priors still ran
+    assert {e for e in events if e[0] in ("noise criteria", "prediction")} == {
+        ("noise criteria", "t2s-closed-form"), ("prediction", "t2s-closed-form")}
+
+    events.clear()
+    monkeypatch.setattr(pipeline, "select", lambda *a, on_decoder=None, **k: spy_select(*a, **k))
+    calibrate_recording(rec, tmp_path / "late", opts, report=False)
+    assert not [e for e in events if e[0] == "told"]
+    meta = {d: json.loads((tmp_path / d / "calibration.json").read_text()) for d in ("early", "late")}
+    for key in ("tau_selection", "psnr_db", "judged_psnr_db", "verdict", "predicted_psnr_db"):
+        assert meta["early"]["metrics"][key] == meta["late"]["metrics"][key], key
 
 
 def test_the_capture_measures_every_calibration_decoders_backend(tmp_path, monkeypatch) -> None:  # type: ignore[no-untyped-def]

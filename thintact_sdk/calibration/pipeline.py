@@ -35,8 +35,8 @@ from thintact_sdk.calibration.prediction import (
 from thintact_sdk.calibration.registration import RegistrationResult
 from thintact_sdk.calibration.selection import (
     TauSelection,
-    add_noise_curves,
     has_noise_curves,
+    noise_curves_of,
     select,
     validation_frames,
 )
@@ -339,6 +339,9 @@ def calibrate_recording(
                                      rank=opts.rank)
     noise_ready: Future[NoiseEstimate] = Future()
     built: dict[str, Any] = {}  # the decoders the choice built, for the noise criteria to reuse
+    # the chosen decoder's name, with the bundle when the choice told it early (while its scene
+    # priors still ran: select's on_decoder), else None once the choice ended
+    name_ready: Future[tuple[str, CalibrationBundle | None]] = Future()
 
     def health_lane() -> tuple[HealthReport, PredictionDesign | None]:
         """Health (its noise first, for the τ selection), then the prediction's design part."""
@@ -374,6 +377,17 @@ def calibrate_recording(
 
     def selection_lane() -> tuple[CalibrationBundle, dict[str, float], TauSelection]:
         """The joint filter, then the decoder and τ (once the noise is measured)."""
+        try:
+            out = choose()
+        except BaseException as exc:
+            if not name_ready.done():
+                name_ready.set_exception(exc)
+            raise
+        if not name_ready.done():
+            name_ready.set_result((out[2].decoder, None))
+        return out
+
+    def choose() -> tuple[CalibrationBundle, dict[str, float], TauSelection]:
         with log.stage("joint filter", "training the joint filter") as st:
             trained = checkpoints.load_filter()
             if trained is not None:
@@ -390,69 +404,76 @@ def calibrate_recording(
                 st["resumed"] = True
             else:
                 # GCV and discrepancy only where the choice needs them; else they are reported
-                # and computed by noise_curves, beside the prediction
+                # and computed by noise_curves, beside the prediction: from the moment the
+                # decoder's name is certain, beside the scene priors still being chosen
                 selection = select(profile, bundle, frames, noise_ready.result(), decoder=opts.decoder,
                                    tau=opts.tau, simulated=_simulated_curve(tau_table),
-                                   noise_criteria_curves=False, built=built)
-                for name in [n for n in built if n != selection.decoder]:
-                    del built[name]  # only the chosen one is reused
+                                   noise_criteria_curves=False, built=built,
+                                   on_decoder=lambda name: name_ready.set_result((name, bundle)))
+                for name in list(built):  # the noise criteria may be clearing it meanwhile
+                    if name != selection.decoder:
+                        built.pop(name, None)  # only the chosen one is reused
                 checkpoints.save_object("selection", selection)
         return bundle, tau_table, selection
 
     def noise_curves(lane_a: Future[tuple[CalibrationBundle, dict[str, float], TauSelection]]) -> None:
         """The GCV and discrepancy curves of the chosen decoder (reported beside the choice),
-        beside the prediction."""
+        beside the prediction; started as soon as the decoder's name is certain."""
         if not frames.signals or opts.tau is not None:
             return
-        bundle, _, selection = lane_a.result()
-        if has_noise_curves(selection):
-            return
+        name, early_bundle = name_ready.result()
+        if early_bundle is None:  # told when the choice ended: it may hold the curves already
+            if has_noise_curves(lane_a.result()[2]):
+                return
         with log.stage("noise criteria", "GCV and discrepancy curves of the chosen decoder") as st:
             stored = checkpoints.load_object("noise_criteria")
             if isinstance(stored, list) and stored and all(isinstance(c, TauCurve) for c in stored):
-                selection.curves += stored
+                curves = stored
                 st["resumed"] = True
             else:
-                add_noise_curves(profile, bundle, frames, noise_ready.result(), selection,
-                                 decoder=built.get(selection.decoder))
+                bundle = early_bundle if early_bundle is not None else lane_a.result()[0]
+                curves = noise_curves_of(profile, bundle, frames, noise_ready.result(), name,
+                                         decoder=built.get(name))
                 built.clear()
-                checkpoints.save_object("noise_criteria", [c for c in selection.curves
-                                                           if c.criterion in ("gcv", "discrepancy")])
+                checkpoints.save_object("noise_criteria", curves)
+        selection = lane_a.result()[2]
+        if not has_noise_curves(selection):
+            selection.curves += curves
 
-    def predict(lane_a: Future[tuple[CalibrationBundle, dict[str, float], TauSelection]],
-                lane_b: Future[tuple[HealthReport, PredictionDesign | None]]) -> Prediction | None:
+    def predict(lane_b: Future[tuple[HealthReport, PredictionDesign | None]]) -> Prediction | None:
         """The prediction for the chosen decoder, beside the noise criteria."""
         if not opts.predict:
             return None
-        _, _, selection = lane_a.result()
+        name, _ = name_ready.result()  # the prediction depends on the decoder's name alone
         _, design = lane_b.result()
         with log.stage("prediction", "predicting what this design should reach") as st:
             if not frames.labels:
                 return None
             stored = checkpoints.load_json("prediction")
-            if stored is not None and stored.get("decoder") == selection.decoder:
+            if stored is not None and stored.get("decoder") == name:
                 st["resumed"] = True
                 return Prediction(dict(stored["psnr_db"]), list(stored["gains_dn_per_unit"]),
                                   float(stored["tau"]), dict(stored["notes"]))
             if design is None:
                 design = simulate_design()
             prediction = predict_from_design(
-                profile, design, frames.labels, frames.truths, selection.decoder,
+                profile, design, frames.labels, frames.truths, name,
                 filter_steps=opts.filter_steps, filter_scenes=opts.filter_scenes)
             checkpoints.save_json("prediction", {
-                "decoder": selection.decoder, "psnr_db": prediction.psnr_db,
+                "decoder": name, "psnr_db": prediction.psnr_db,
                 "gains_dn_per_unit": prediction.gains_dn_per_unit, "tau": prediction.tau,
                 "notes": prediction.notes})
             return prediction
 
-    # two lanes on two cores, each with one BLAS thread: the health check (and the prediction's
-    # simulated design) beside the filter and the τ selection; the reported noise criteria and
-    # the prediction then run on whichever lanes are free
-    with blas_threads(1), ThreadPoolExecutor(max_workers=2, thread_name_prefix="calibrate") as pool:
+    # lanes with one BLAS thread each: the health check (and the prediction's simulated design)
+    # beside the filter and the τ selection (itself two threads: selection.SELECT_WORKERS); the
+    # reported noise criteria wait for the decoder's name and then run beside the scene
+    # priors, and the prediction takes the next lane to come free
+    with blas_threads(1), ThreadPoolExecutor(max_workers=3, thread_name_prefix="calibrate") as pool:
         lane_b = pool.submit(health_lane)
         lane_a = pool.submit(selection_lane)
         lane_c = pool.submit(noise_curves, lane_a)
-        lane_d = pool.submit(predict, lane_a, lane_b)
+        lane_d = pool.submit(predict, lane_b)
         bundle, tau_table, selection = lane_a.result()
         health, design = lane_b.result()
         lane_c.result()

@@ -166,6 +166,21 @@ def has_noise_curves(selection: TauSelection) -> bool:
     return any(c.criterion in ("gcv", "discrepancy") for c in selection.curves)
 
 
+def noise_curves_of(profile: Profile, bundle: CalibrationBundle, frames: ValidationFrames,
+                    noise: NoiseEstimate, name: str, decoder: Any | None = None) -> list[TauCurve]:
+    """The GCV and discrepancy curves of decoder ``name`` on ``frames`` (plain Tikhonov where
+    it takes a scene prior, as :func:`select` computes them); empty without validation frames.
+
+    ``decoder``: that decoder as :func:`select` built it (plain Tikhonov; its τ is changed),
+    else it is built here."""
+    if not frames.signals:
+        return []
+    if decoder is None:
+        decoder = make_decoder(profile, bundle, name, **({"prior": None} if takes_scene_prior(name) else {}))
+    sm = bundle.system_matrices
+    return list(_noise_curves(decoder, sm, frames, noise, tau_grid(sm)))
+
+
 def add_noise_curves(profile: Profile, bundle: CalibrationBundle, frames: ValidationFrames,
                      noise: NoiseEstimate, selection: TauSelection, decoder: Any | None = None) -> None:
     """Append the GCV and discrepancy curves of the chosen decoder to ``selection.curves``,
@@ -173,15 +188,10 @@ def add_noise_curves(profile: Profile, bundle: CalibrationBundle, frames: Valida
     (cross-validation chose): the calibration computes them beside the prediction.
     Nothing is done when they are there already or there are no validation frames.
 
-    ``decoder``: the chosen decoder as :func:`select` built it (plain Tikhonov; its τ is
-    changed), else it is built here."""
+    ``decoder``: as for :func:`noise_curves_of`."""
     if not frames.signals or has_noise_curves(selection):
         return
-    name = selection.decoder  # plain Tikhonov where it takes a scene prior, as select computes them
-    if decoder is None:
-        decoder = make_decoder(profile, bundle, name, **({"prior": None} if takes_scene_prior(name) else {}))
-    sm = bundle.system_matrices
-    selection.curves += list(_noise_curves(decoder, sm, frames, noise, tau_grid(sm)))
+    selection.curves += noise_curves_of(profile, bundle, frames, noise, selection.decoder, decoder)
 
 
 SELECT_WORKERS = 2
@@ -191,7 +201,7 @@ interpreter lock), the calibration's two lanes."""
 
 def _cross_validate_all(
     profile: Profile, bundle: CalibrationBundle, frames: ValidationFrames, names: list[str], grid: np.ndarray,
-    on_decoder: Callable[[str], None] | None,
+    on_decoder: Callable[[str], None] | None, built: dict[str, Any] | None = None,
 ) -> tuple[dict[str, CrossValidation], dict[str, Any]]:
     """Each decoder's cross-validation (:func:`~thintact_sdk.calibration.tau.cross_validate`;
     with its scene priors, :func:`~thintact_sdk.calibration.tau.cross_validate_prior`'s
@@ -200,7 +210,8 @@ def _cross_validate_all(
     Every build and cross-validation is one job of one pool of :data:`SELECT_WORKERS`: the
     plain decoders first, then every scene prior, so no core waits for the slowest job of one
     decoder before the next decoder starts. The results are combined in the order a
-    sequential search takes them, so the choice is the same.
+    sequential search takes them, so the choice is the same. ``built`` receives the plain
+    decoders as soon as they are built (before ``on_decoder`` is called).
     """
     sig, tru, lab = frames.signals, frames.truths, frames.labels
     plain_kwargs = {name: {"prior": None} if takes_scene_prior(name) else {} for name in names}
@@ -223,6 +234,8 @@ def _cross_validate_all(
                 decoders[name], cv = jobs[name].result()
                 if cv is not None:
                     plain_cvs[name] = cv
+            if built is not None:
+                built.update(decoders)
             if on_decoder is not None and plain_cvs:
                 # only the leader's own priors can still move the scores: then it stays ahead
                 leader = max(plain_cvs.values(), key=lambda cv: cv.held_out_mean_db).decoder
@@ -299,9 +312,7 @@ def select(
         return TauSelection(name, float(tau), "given (--tau)", {name: float(tau)}, curves,
                             validation=_results(frames, estimates))
     grid = tau_grid(sm)
-    cvs, decoders = _cross_validate_all(profile, bundle, frames, names, grid, on_decoder)
-    if built is not None:
-        built.update(decoders)
+    cvs, decoders = _cross_validate_all(profile, bundle, frames, names, grid, on_decoder, built)
     for name, cv in cvs.items():
         what = "" if cv.prior is None else f", scene prior alpha {cv.prior.alpha:g} k0 {cv.prior.k0:g}"
         curves.append(TauCurve(f"cross-validation ({name}{what})", cv.curve.taus, cv.curve.values,
