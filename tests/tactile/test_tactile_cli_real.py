@@ -54,6 +54,27 @@ def test_import_declares_colour_order_and_crop(tmp_path):
         np.abs(plain.reference - f0).mean())
 
 
+def test_cli_evaluate_takes_the_ball_model_as_calibrate_tactile_does(tmp_path, capsys):
+    pack = tmp_path / "pack.npz"
+    assert main(["tactile", "import", str(_folder(tmp_path)), "--out", str(pack), "--mm-per-px", "0.1245",
+                 "--ball-radius-mm", "2"]) == 0
+    capsys.readouterr()
+    for shape in ("sink-in", "rigid"):
+        out = tmp_path / f"{shape}.json"
+        assert main(["tactile", "evaluate", str(pack), "--model", "lut", "--ball-model", shape, "--quiet",
+                     "--json", str(out)]) == 0
+        res = json.loads(out.read_text())
+        assert res["ball_model"]["model"] == shape
+        # rigid has no parameter; with four presses the sink-in skirt's length is not fitted
+        assert (res["ball_model"]["skirt_length_mm"] > 0) == (shape == "sink-in")
+        assert f"ball model: {shape}" in capsys.readouterr().out
+    # four training presses: auto keeps the rigid cap and says why
+    out = tmp_path / "auto.json"
+    assert main(["tactile", "evaluate", str(pack), "--model", "lut", "--quiet", "--json", str(out)]) == 0
+    res = json.loads(out.read_text())
+    assert res["ball_model"]["model"] == "rigid" and res["ball_model"]["chosen_by"].startswith("default")
+
+
 def test_cli_import_evaluate_depth(tmp_path, capsys):
     folder = _folder(tmp_path)
     pack = tmp_path / "pack.npz"

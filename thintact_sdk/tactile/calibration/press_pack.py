@@ -272,6 +272,7 @@ def evaluate_pack(
     boundary: str = "free",
     stage: Callable[[str], None] | None = None,
     lut: Any = None,
+    ball_model: str = "auto",
 ) -> dict[str, Any]:
     """Calibrate on the ``train`` presses from the images and the ball radius alone (what
     ``thintact calibrate-tactile`` does) and measure the other presses through the
@@ -282,12 +283,16 @@ def evaluate_pack(
     calibrated elsewhere, e.g. on a fitted simulation) nothing is calibrated: the ``train``
     presses are left out and the others measured with it.
 
+    ``ball_model``: how the training presses are shaped into the gel (``"auto"``, ``"rigid"``,
+    ``"sink-in"``; :func:`~thintact_sdk.tactile.calibration.ball_press.calibrate_from_presses`).
+
     Returns
     -------
     dict
         ``summary`` (:func:`~thintact_sdk.tactile.calibration.ball_eval.summarise`), ``presses`` (per
         test press figures), ``train``, ``test``, ``gradient_model``, ``validation``,
-        ``press_report`` (the calibration's per-press report).
+        ``press_report`` (the calibration's per-press report), ``ball_model`` (the model the
+        calibration used and how it was chosen; ``None`` with a given ``lut``).
     """
     from thintact_sdk.tactile.calibration.ball_eval import press_figures, summarise
     from thintact_sdk.tactile.calibration.ball_press import BallPress, calibrate_from_presses
@@ -301,7 +306,7 @@ def evaluate_pack(
             lut = calibrate_from_presses(profile, pack.reference_image(),
                                          [BallPress(pack.image(i)) for i in train],
                                          ball_radius_mm, bins, model=model, mlp_steps=mlp_steps,
-                                         stage=say)
+                                         stage=say, ball_model=ball_model)
         except CalibrationError as err:  # "press k" counts the training presses
             raise CalibrationError(f"{err} (training presses, in order: {train})") from None
     interp = TactileInterpreter(profile, lut, boundary=boundary)  # type: ignore[arg-type]
@@ -326,5 +331,6 @@ def evaluate_pack(
         "gradient_model": lut.meta.get("gradient_model"),
         "validation": lut.meta.get("validation"),
         "press_report": lut.meta.get("press_report", []),
+        "ball_model": lut.meta.get("ball_model"),
         "lut": lut,
     }

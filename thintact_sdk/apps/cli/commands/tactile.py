@@ -77,6 +77,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     ev.add_argument("--train", help="comma-separated training presses (default: even ones)")
     ev.add_argument("--model", choices=("auto", "lut", "mlp"), default="auto",
                     help="gradient model (auto: chosen on validation presses, default)")
+    ev.add_argument("--ball-model", choices=("auto", "rigid", "sink-in"), default="auto",
+                    help="shape of the training presses in the gel, as calibrate-tactile's: auto (the "
+                    "rigid cap or a sink-in skirt fitted to the gel, whichever reconstructs held-out "
+                    "training presses as the ball; default), rigid, sink-in")
     ev.add_argument("--bins", type=int_range(4, 256), default=24, help="LUT nodes per axis")
     ev.add_argument("--mlp-steps", type=positive_int, default=1500, help="network steps")
     ev.add_argument("--json", dest="json_out", help="write every figure to this JSON file")
@@ -141,11 +145,16 @@ def run_evaluate(args: argparse.Namespace) -> int:
             raise ThinTactError(f"--train {args.train!r}: comma-separated press numbers") from None
     with stage_reporter(args.quiet) as say:
         res = evaluate_pack(pack, radius, mm, train, args.model, args.bins,
-                            mlp_steps=args.mlp_steps, stage=say)
+                            mlp_steps=args.mlp_steps, stage=say, ball_model=args.ball_model)
     s = res["summary"]
     for entry in res["press_report"]:
         for w in entry["warnings"]:
             print(f"calibration press {res['train'][entry['press']]}: {w}")
+    bm = res.get("ball_model")
+    if bm:
+        skirt = f", skirt length {bm['skirt_length_mm']:.2f} mm" if bm.get("skirt_length_mm") else ""
+        how = f" ({bm['chosen_by']})" if bm.get("chosen_by") else ""
+        print(f"ball model: {bm['model']}{skirt}{how}")
     val = res["validation"]
     chosen = res["gradient_model"]
     if val:
