@@ -254,8 +254,9 @@ def _refined_table(decode: Callable[[int], np.ndarray], decoder: Any, truths: Se
     mse = _mse_table(decode, decoder, truths, taus)
     fine = refine(taus, float(taus[int(np.argmax(weighted_mean(_db(mse.mean(axis=2)), weights)))]))
     extra = np.setdiff1d(fine, taus)
-    taus = np.concatenate([taus, extra])
-    mse = np.concatenate([mse, _mse_table(decode, decoder, truths, extra)], axis=1)
+    if extra.size:  # (an empty table has no channel axis to join on)
+        taus = np.concatenate([taus, extra])
+        mse = np.concatenate([mse, _mse_table(decode, decoder, truths, extra)], axis=1)
     order = np.argsort(taus)
     return taus[order], mse[:, order]
 
