@@ -146,6 +146,16 @@ def run_evaluate(args: argparse.Namespace) -> int:
     with stage_reporter(args.quiet) as say:
         res = evaluate_pack(pack, radius, mm, train, args.model, args.bins,
                             mlp_steps=args.mlp_steps, stage=say, ball_model=args.ball_model)
+    _print_evaluation(res, radius)
+    if json_out is not None:
+        res.pop("lut")
+        json_out.write_text(json.dumps(res, indent=1, default=float) + "\n")
+        print(f"wrote {json_out}")
+    return 0
+
+
+def _print_evaluation(res: dict[str, Any], radius: float) -> None:
+    """The calibration's warnings, the models used and the held-out figures of ``evaluate_pack``."""
     s = res["summary"]
     for entry in res["press_report"]:
         for w in entry["warnings"]:
@@ -177,8 +187,3 @@ def run_evaluate(args: argparse.Namespace) -> int:
     print(f"  edge presses {s['edge_presses']}"
           + (f", fitted radius vs interior {s['edge_radius_vs_interior_median']:+.0%}"
              if "edge_radius_vs_interior_median" in s else ""))
-    if json_out is not None:
-        res.pop("lut")
-        json_out.write_text(json.dumps(res, indent=1, default=float) + "\n")
-        print(f"wrote {json_out}")
-    return 0
