@@ -135,7 +135,7 @@ class CaptureWorker:
                     if self._design_thread is None and self.options.predict:
                         self._maybe_start_design(view, i)
                 self._done = len(view)
-                return_free_heap()  # the frames just compressed: freed, and given back
+                return_free_heap()  # what this pass, the solve and the design thread freed meanwhile
                 t_compress += time.monotonic() - t0
                 if len(comp.slits) >= self.slits and prep.solved is None and comp.broken is None:
                     prep.seconds["compress"] = round(t_compress, 3)
@@ -150,7 +150,6 @@ class CaptureWorker:
         sm, reports = solve_collection(collection, self.profile, o.method, o.max_iter, o.tol)
         self.prepared.solved = (collection, sm, reports)
         self.prepared.seconds["solve"] = round(time.monotonic() - t0, 3)
-        return_free_heap()  # the compression's frames and the solve's work arrays
 
     def _maybe_start_design(self, view: Recording, i: int) -> None:
         """Start the prediction's design when frame ``i`` is the white frame (after a dark
@@ -173,7 +172,6 @@ class CaptureWorker:
             except (ThinTactError, ValueError, np.linalg.LinAlgError) as err:
                 self.prepared.errors["design"] = str(err)
             self.prepared.seconds["design"] = round(time.monotonic() - t0, 3)
-            return_free_heap()  # the simulated slit frames
             if self.prepared.design is not None:
                 t0 = time.monotonic()
                 try:
@@ -181,7 +179,6 @@ class CaptureWorker:
                 except (ThinTactError, ValueError, np.linalg.LinAlgError) as err:
                     self.prepared.errors["backends"] = str(err)
                 self.prepared.seconds["backends"] = round(time.monotonic() - t0, 3)
-                return_free_heap()
 
         self._design_thread = threading.Thread(target=run, name="calibrate-design", daemon=True)
         self._design_thread.start()
