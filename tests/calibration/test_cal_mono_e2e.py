@@ -81,3 +81,15 @@ def test_the_capture_path_passes_monochrome_frames_through() -> None:
                    exposure_us=None, gain_db=None)
     with pytest.raises(DeviceError, match="monochrome sensor delivers 2-D frames"):
         to_measurement(rgb, prof)
+
+
+def test_score_psnr_is_scores_psnr_without_the_ssim() -> None:
+    # the τ and decoder searches score thousands of estimates by PSNR alone: the same figure
+    from thintact_sdk.calibration.validation import score, score_psnr
+
+    rng = np.random.default_rng(0)
+    truth = rng.random((12, 16, 3)).astype(np.float32)
+    for estimate in (truth + rng.normal(0, 0.2, truth.shape),  # leaves [0, 1]: clipped
+                     (truth.mean(axis=2) + rng.normal(0, 0.05, truth.shape[:2]))[..., None],  # one channel
+                     truth.mean(axis=2)):  # a monochrome estimate without a channel axis
+        assert score_psnr(estimate, truth) == score("x", estimate, truth).psnr_db

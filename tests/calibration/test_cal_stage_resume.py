@@ -327,6 +327,57 @@ def test_the_noise_criteria_and_the_prediction_start_once_the_decoder_is_certain
         assert meta["early"]["metrics"][key] == meta["late"]["metrics"][key], key
 
 
+def test_the_filter_free_decoders_are_chosen_while_the_joint_filter_trains(tmp_path, monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    # the T2S closed form needs no joint filter: its cross-validation runs while the filter
+    # trains (which waits for health's noise pass), and the bundle is the one a run that
+    # trains the filter first writes (issue 36)
+    import threading
+
+    from cal_testkit import synthetic_matrices, synthetic_profile, write_slit_recording
+
+    from thintact_sdk.calibration import pipeline, selection
+    from thintact_sdk.calibration.pipeline import CalibrationOptions, calibrate_recording
+    from thintact_sdk.formats.recording import Recording
+    from thintact_sdk.simulation.scenes import make_scene
+
+    scenes = [make_scene(k, 24, 32, s) for k, s in (("gelsight", 2), ("smooth_color", 1), ("gelsight", 5),
+                                                     ("checker", 0))]
+    write_slit_recording(tmp_path / "rec", synthetic_profile(), synthetic_matrices(), np.random.default_rng(3),
+                         scenes)
+    rec = Recording(tmp_path / "rec")
+    opts = CalibrationOptions(filter_steps=0, filter_scenes=8)
+    t2s_done = threading.Event()
+    seen: dict[str, bool] = {}
+    real_build, real_cv, real_select = pipeline.build_bundle, selection.cross_validate, pipeline.select
+
+    def spy_cv(decoder, name, *a, **k):  # type: ignore[no-untyped-def]
+        out = real_cv(decoder, name, *a, **k)
+        if name == "t2s-closed-form":
+            t2s_done.set()
+        return out
+
+    def slow_build(*a, **k):  # type: ignore[no-untyped-def]
+        # a run that trains the filter before choosing never sets the event: 20 s lost, and the test fails
+        seen["t2s cross-validated before the filter was trained"] = t2s_done.wait(20.0)
+        return real_build(*a, **k)
+
+    monkeypatch.setattr(selection, "cross_validate", spy_cv)
+    monkeypatch.setattr(pipeline, "build_bundle", slow_build)
+    calibrate_recording(rec, tmp_path / "beside", opts, report=False)
+    assert seen == {"t2s cross-validated before the filter was trained": True}
+
+    def filter_first(profile, bundle, *a, filtered=None, **k):  # type: ignore[no-untyped-def]
+        return real_select(profile, filtered(), *a, **k)  # every decoder on the full bundle
+
+    monkeypatch.setattr(pipeline, "build_bundle", real_build)
+    monkeypatch.setattr(pipeline, "select", filter_first)
+    calibrate_recording(rec, tmp_path / "first", opts, report=False)
+    meta = {d: json.loads((tmp_path / d / "calibration.json").read_text()) for d in ("beside", "first")}
+    assert meta["beside"]["decoder"] == meta["first"]["decoder"]
+    for key in ("tau_selection", "psnr_db", "judged_psnr_db", "verdict", "predicted_psnr_db"):
+        assert meta["beside"]["metrics"][key] == meta["first"]["metrics"][key], key
+
+
 def test_the_capture_measures_every_calibration_decoders_backend(tmp_path, monkeypatch) -> None:  # type: ignore[no-untyped-def]
     """During the capture the backends of every calibration decoder are measured on the
     design's matrices, the joint-filter decoder's too on a filter trained on them (issue 36:

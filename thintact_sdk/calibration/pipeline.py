@@ -54,6 +54,7 @@ from thintact_sdk.calibration.validation import (
     averaged_noise,
     choose_tau,
     make_decoder,
+    needs_joint_filter,
     score,
 )
 from thintact_sdk.calibration.verdict import judge
@@ -375,19 +376,12 @@ def calibrate_recording(
                         checkpoints.save_design(design)
         return health, design
 
-    def selection_lane() -> tuple[CalibrationBundle, dict[str, float], TauSelection]:
-        """The joint filter, then the decoder and τ (once the noise is measured)."""
-        try:
-            out = choose()
-        except BaseException as exc:
-            if not name_ready.done():
-                name_ready.set_exception(exc)
-            raise
-        if not name_ready.done():
-            name_ready.set_result((out[2].decoder, None))
-        return out
-
-    def choose() -> tuple[CalibrationBundle, dict[str, float], TauSelection]:
+    def filter_lane() -> tuple[CalibrationBundle, dict[str, float]]:
+        """The joint filter, started once health's noise pass is done: the filter's training
+        set (32 simulated frames and their open components, 1 GB at the paper's size) and the
+        noise pass's frames are the two largest working sets after the capture, and they are
+        never held at once. Only the decoders that need the filter wait for it."""
+        noise_ready.result()  # (a failed noise pass fails this lane too: nothing to train for)
         with log.stage("joint filter", "training the joint filter") as st:
             trained = checkpoints.load_filter()
             if trained is not None:
@@ -398,22 +392,48 @@ def calibrate_recording(
             else:
                 bundle, tau_table = build_bundle(profile, sm, opts, k, source, collection.exposure_us)
                 checkpoints.save_filter(bundle.filter, tau_table, float(bundle.meta["tau"]))
+        return bundle, tau_table
+
+    def selection_lane(lane_f: Future[tuple[CalibrationBundle, dict[str, float]]],
+                       ) -> tuple[CalibrationBundle, dict[str, float], TauSelection]:
+        """The decoder and τ, beside the joint filter's training: the decoders that need no
+        filter are built on the matrices alone and cross-validated meanwhile."""
+        try:
+            out = choose(lane_f)
+        except BaseException as exc:
+            if not name_ready.done():
+                name_ready.set_exception(exc)
+            raise
+        if not name_ready.done():
+            name_ready.set_result((out[2].decoder, None))
+        return out
+
+    def choose(lane_f: Future[tuple[CalibrationBundle, dict[str, float]]],
+               ) -> tuple[CalibrationBundle, dict[str, float], TauSelection]:
         with log.stage("decoder and tau", "choosing the decoder and tau on the validation frames") as st:
             selection = checkpoints.load_object("selection")
             if isinstance(selection, TauSelection):
                 st["resumed"] = True
             else:
+                # the filter-free decoders' bundle: the matrices, with the τ a bundle has before
+                # its τ is chosen on simulated scenes (build_bundle)
+                matrices_only = CalibrationBundle.create(
+                    profile, sm, None, tau=opts.tau if opts.tau is not None else 1.0, source=source,
+                    exposure_us=collection.exposure_us)
                 # GCV and discrepancy only where the choice needs them; else they are reported
                 # and computed by noise_curves, beside the prediction: from the moment the
                 # decoder's name is certain, beside the scene priors still being chosen
-                selection = select(profile, bundle, frames, noise_ready.result(), decoder=opts.decoder,
-                                   tau=opts.tau, simulated=_simulated_curve(tau_table),
+                selection = select(profile, matrices_only, frames, noise_ready.result, decoder=opts.decoder,
+                                   tau=opts.tau, simulated=lambda: _simulated_curve(lane_f.result()[1]),
                                    noise_criteria_curves=False, built=built,
-                                   on_decoder=lambda name: name_ready.set_result((name, bundle)))
+                                   on_decoder=lambda name: name_ready.set_result(
+                                       (name, None if needs_joint_filter(name) else matrices_only)),
+                                   filtered=lambda: lane_f.result()[0])
                 for name in list(built):  # the noise criteria may be clearing it meanwhile
                     if name != selection.decoder:
                         built.pop(name, None)  # only the chosen one is reused
                 checkpoints.save_object("selection", selection)
+        bundle, tau_table = lane_f.result()
         return bundle, tau_table, selection
 
     def noise_curves(lane_a: Future[tuple[CalibrationBundle, dict[str, float], TauSelection]]) -> None:
@@ -466,12 +486,14 @@ def calibrate_recording(
             return prediction
 
     # lanes with one BLAS thread each: the health check (and the prediction's simulated design)
-    # beside the filter and the τ selection (itself two threads: selection.SELECT_WORKERS); the
-    # reported noise criteria wait for the decoder's name and then run beside the scene
-    # priors, and the prediction takes the next lane to come free
-    with blas_threads(1), ThreadPoolExecutor(max_workers=3, thread_name_prefix="calibrate") as pool:
+    # beside the τ selection (itself two threads: selection.SELECT_WORKERS) and the joint
+    # filter, which starts when health's noise pass ends; the reported noise criteria wait for
+    # the decoder's name and then run beside the scene priors, and the prediction takes the
+    # next lane to come free
+    with blas_threads(1), ThreadPoolExecutor(max_workers=4, thread_name_prefix="calibrate") as pool:
         lane_b = pool.submit(health_lane)
-        lane_a = pool.submit(selection_lane)
+        lane_f = pool.submit(filter_lane)
+        lane_a = pool.submit(selection_lane, lane_f)
         lane_c = pool.submit(noise_curves, lane_a)
         lane_d = pool.submit(predict, lane_b)
         bundle, tau_table, selection = lane_a.result()

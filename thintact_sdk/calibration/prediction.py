@@ -27,7 +27,7 @@ from thintact_sdk.calibration.validation import (
     averaged_noise,
     make_decoder,
     needs_joint_filter,
-    score,
+    score_psnr,
 )
 from thintact_sdk.errors import ThinTactError
 from thintact_sdk.formats.profiles import NoiseSpec, Profile
@@ -331,7 +331,7 @@ def predict_from_design(
     for tau in grid:
         dec.set_tau(float(tau))  # type: ignore[attr-defined]
         for label, y, x in zip(labels, signals, scenes, strict=True):
-            best[label] = max(best.get(label, -np.inf), score(label, dec.decode(y), x).psnr_db)
+            best[label] = max(best.get(label, -np.inf), score_psnr(dec.decode(y), x))
     return Prediction(best, gains.tolist(), float("nan"), {"tau": "best in hindsight"})
 
 

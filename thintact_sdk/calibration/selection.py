@@ -36,6 +36,7 @@ from thintact_sdk.calibration.validation import (
     calibration_decoders,
     default_decoder,
     make_decoder,
+    needs_joint_filter,
     score,
     takes_scene_prior,
     tau_key,
@@ -200,12 +201,14 @@ interpreter lock), the calibration's two lanes."""
 
 
 def _cross_validate_all(
-    profile: Profile, bundle: CalibrationBundle, frames: ValidationFrames, names: list[str], grid: np.ndarray,
-    on_decoder: Callable[[str], None] | None, built: dict[str, Any] | None = None,
+    profile: Profile, bundle_for: Callable[[str], CalibrationBundle], frames: ValidationFrames, names: list[str],
+    grid: np.ndarray, on_decoder: Callable[[str], None] | None, built: dict[str, Any] | None = None,
 ) -> tuple[dict[str, CrossValidation], dict[str, Any]]:
     """Each decoder's cross-validation (:func:`~thintact_sdk.calibration.tau.cross_validate`;
     with its scene priors, :func:`~thintact_sdk.calibration.tau.cross_validate_prior`'s
-    choice), and the plain decoders built for them, by name.
+    choice), and the plain decoders built for them, by name. Each decoder is built on
+    ``bundle_for(name)``, which may wait, in that decoder's own job, for a joint filter still
+    being trained.
 
     Every build and cross-validation is one job of one pool of :data:`SELECT_WORKERS`: the
     plain decoders first, then every scene prior, so no core waits for the slowest job of one
@@ -218,11 +221,11 @@ def _cross_validate_all(
     priors = {name: prior_candidates() if takes_scene_prior(name) and enough_folds(tru) else [] for name in names}
 
     def plain(name: str) -> tuple[Any, CrossValidation | None]:
-        dec = make_decoder(profile, bundle, name, **plain_kwargs[name])
+        dec = make_decoder(profile, bundle_for(name), name, **plain_kwargs[name])
         return dec, cross_validate(dec, name, sig, tru, lab, grid)
 
     def with_prior(name: str, prior: ScenePrior) -> CrossValidation | None:
-        return cross_validate(make_decoder(profile, bundle, name, prior=prior), name, sig, tru, lab, grid)
+        return cross_validate(make_decoder(profile, bundle_for(name), name, prior=prior), name, sig, tru, lab, grid)
 
     with ThreadPoolExecutor(max_workers=SELECT_WORKERS, thread_name_prefix="select-cv") as pool:
         jobs = {name: pool.submit(plain, name) for name in names}
@@ -259,14 +262,15 @@ def select(
     profile: Profile,
     bundle: CalibrationBundle,
     frames: ValidationFrames,
-    noise: NoiseEstimate,
+    noise: NoiseEstimate | Callable[[], NoiseEstimate],
     *,
     decoder: str | None = None,
     tau: float | None = None,
-    simulated: TauCurve | None = None,
+    simulated: TauCurve | Callable[[], TauCurve | None] | None = None,
     noise_criteria_curves: bool = True,
     built: dict[str, Any] | None = None,
     on_decoder: Callable[[str], None] | None = None,
+    filtered: Callable[[], CalibrationBundle] | None = None,
 ) -> TauSelection:
     """Choose the decoder and τ on the unit's validation frames.
 
@@ -275,18 +279,22 @@ def select(
     profile
         The device profile.
     bundle
-        The unit's bundle (matrices and trained filter).
+        The unit's bundle (matrices and trained filter; without a filter when ``filtered`` is
+        given).
     frames
         Its validation frames.
     noise
-        The noise measured on its slit frames (weights of GCV and the discrepancy principle).
+        The noise measured on its slit frames (weights of GCV and the discrepancy principle),
+        or a function giving it, called only when those are computed (e.g. a measurement
+        still running when the choice starts).
     decoder
         Impose this decoder (default: the best of
         :func:`~thintact_sdk.calibration.validation.calibration_decoders`).
     tau
         Impose this τ (no selection; the validation is then scored at it).
     simulated
-        The τ curve on simulated training scenes (reported, and the fallback).
+        The τ curve on simulated training scenes (reported, and the fallback), or a function
+        giving it (called once the decoders are cross-validated).
     noise_criteria_curves
         Compute the GCV and discrepancy curves (reported; GCV is the fallback without a
         simulated curve).
@@ -301,18 +309,36 @@ def select(
         scoring higher). Not called otherwise; the decoders in ``built`` are complete by then, and the
         chosen one's is no longer used by the choice (the calibration starts the work that
         depends on the name alone, e.g. its noise criteria and prediction).
+    filtered
+        A function giving the bundle with its trained joint filter, for the decoders that
+        need one (:func:`~thintact_sdk.calibration.validation.needs_joint_filter`): they are
+        built on it, in their own jobs, so the decoders that need no filter are
+        cross-validated while it is still being trained. Without it, every decoder is built
+        on ``bundle``.
     """
     sm = bundle.system_matrices
-    curves: list[TauCurve] = [simulated] if simulated is not None else []
+
+    def bundle_for(name: str) -> CalibrationBundle:
+        return filtered() if filtered is not None and needs_joint_filter(name) else bundle
+
+    def simulated_curve() -> list[TauCurve]:
+        curve = simulated() if callable(simulated) else simulated
+        return [] if curve is None else [curve]
+
+    def measured_noise() -> NoiseEstimate:
+        return noise() if callable(noise) else noise
+
     names = [decoder] if decoder else calibration_decoders()
     if tau is not None:
         name = names[0] if decoder else default_decoder()
-        dec = make_decoder(profile, bundle, name, tau=tau)
+        dec = make_decoder(profile, bundle_for(name), name, tau=tau)
         estimates = [np.asarray(dec.decode(y), np.float32) for y in frames.signals]
-        return TauSelection(name, float(tau), "given (--tau)", {name: float(tau)}, curves,
+        return TauSelection(name, float(tau), "given (--tau)", {name: float(tau)}, simulated_curve(),
                             validation=_results(frames, estimates))
     grid = tau_grid(sm)
-    cvs, decoders = _cross_validate_all(profile, bundle, frames, names, grid, on_decoder, built)
+    cvs, decoders = _cross_validate_all(profile, bundle_for, frames, names, grid, on_decoder, built)
+    curves = simulated_curve()
+    fallback = curves[0] if curves else None
     for name, cv in cvs.items():
         what = "" if cv.prior is None else f", scene prior alpha {cv.prior.alpha:g} k0 {cv.prior.k0:g}"
         curves.append(TauCurve(f"cross-validation ({name}{what})", cv.curve.taus, cv.curve.values,
@@ -323,14 +349,14 @@ def select(
     else:
         chosen = names[0] if decoder else default_decoder()
         criterion, tau_chosen = "gcv", float("nan")
-    if frames.signals and (noise_criteria_curves or (not cvs and simulated is None)):
-        gcv, discrepancy = _noise_curves(decoders[chosen], sm, frames, noise, grid)
+    if frames.signals and (noise_criteria_curves or (not cvs and fallback is None)):
+        gcv, discrepancy = _noise_curves(decoders[chosen], sm, frames, measured_noise(), grid)
         curves += [gcv, discrepancy]
         tau_chosen = gcv.tau if not cvs else tau_chosen
-    if not cvs and simulated is not None:
+    if not cvs and fallback is not None:
         # GCV under-regularises on these frames (docs/calibration.md): without two folds of
         # scenes the simulated-scene choice is the safer default; GCV stays in the report.
-        criterion, tau_chosen = "simulated", simulated.tau
+        criterion, tau_chosen = "simulated", fallback.tau
     decoder_taus = {name: cv.curve.tau for name, cv in cvs.items()} or {chosen: tau_chosen}
     selection = TauSelection(chosen, tau_chosen, criterion, decoder_taus, curves, cvs)
     if chosen in cvs:

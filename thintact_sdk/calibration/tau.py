@@ -38,7 +38,7 @@ from typing import Any
 
 import numpy as np
 
-from thintact_sdk.calibration.validation import score
+from thintact_sdk.calibration.validation import score_psnr
 from thintact_sdk.reconstruction.filter_training import scene_for_channels
 from thintact_sdk.reconstruction.scene_prior import ScenePrior
 from thintact_sdk.reconstruction.t2s import SystemMatrices
@@ -312,7 +312,7 @@ def cross_validate(decoder: Any, name: str, signals: Sequence[np.ndarray],
         for i in (int(k) for k in np.flatnonzero(fold_arr == f)):
             est = np.asarray(decode(i), np.float32)
             out.held_out_estimates[labels[i]] = est
-            out.held_out_psnr[labels[i]] = score(labels[i], est, truths[i]).psnr_db
+            out.held_out_psnr[labels[i]] = score_psnr(est, truths[i])
     decoder.set_tau(deployed)
     return out
 

@@ -105,17 +105,29 @@ def make_decoder(
     return decoder  # type: ignore[no-any-return]
 
 
+def _displayed(estimate: np.ndarray, truth: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``estimate`` clipped to [0, 1] (as displayed, ``N × M × C`` float32) and ``truth`` at its
+    channel count (:func:`scene_for_channels`)."""
+    est = np.clip(np.asarray(estimate, np.float32), 0.0, 1.0)
+    if est.ndim == 2:
+        est = est[..., None]
+    return est, scene_for_channels(np.asarray(truth, np.float32), est.shape[2])
+
+
 def score(label: str, estimate: np.ndarray, truth: np.ndarray) -> ValidationResult:
     """PSNR and SSIM of ``estimate`` against ``truth`` (clipped to [0, 1] first, as displayed).
 
     ``truth`` is brought to the estimate's channel count first (:func:`scene_for_channels`:
     a monochrome device is scored against the mean of the displayed channels).
     """
-    est = np.clip(np.asarray(estimate, np.float32), 0.0, 1.0)
-    if est.ndim == 2:
-        est = est[..., None]
-    tru = scene_for_channels(np.asarray(truth, np.float32), est.shape[2])
+    est, tru = _displayed(estimate, truth)
     return ValidationResult(label, psnr(est, tru), ssim(est, tru), est, tru)
+
+
+def score_psnr(estimate: np.ndarray, truth: np.ndarray) -> float:
+    """:func:`score`'s PSNR (dB) alone, without its SSIM: for the many estimates a τ or decoder
+    search scores and discards (the same figure, computed the same way)."""
+    return psnr(*_displayed(estimate, truth))
 
 
 def averaged_noise(noise: NoiseSpec, frames: int) -> NoiseSpec:
@@ -165,7 +177,7 @@ def choose_tau(
         values = []
         for yc, x in zip(coding, scenes, strict=True):
             est = np.stack([solvers[c].solve(yc[..., c]) for c in range(sm.channels)], axis=-1)
-            values.append(score("", est, x).psnr_db)
+            values.append(score_psnr(est, x))
         return float(np.mean(values))
 
     sweep = sweep_tau([rel * unit for rel in TAU_GRID], mean_psnr)
