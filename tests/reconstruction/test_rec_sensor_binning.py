@@ -272,3 +272,45 @@ def test_a_decoder_without_the_capability_gets_the_full_measurement() -> None:
         sensor.reconstruct(to_measurement(raw, profile, sensor_bin=2))
     with pytest.raises(InvalidValueError, match="sensor_bin 3"):
         to_measurement(raw, profile, sensor_bin=3)
+
+
+def test_backends_are_judged_at_the_probes_best_tau_whatever_tau_they_are_built_with() -> None:
+    # at an unregularised τ every backend decodes noise alike, so a lossy one (binned) looked
+    # free; the calibration builds its decoders at whatever τ it has at hand (issue 36)
+    from thintact_sdk.reconstruction.decoders.backend_selection import measure_backends, probe_tau
+    from thintact_sdk.reconstruction.decoders.modes import channel_taus
+
+    sm = _operator()
+    probes = make_probes(sm, load_profile("virtual-mini").noise)
+    specs = candidate_specs(HOST, "float32", torch_available=False, sensor_bin=2)
+
+    def builder(tau: float):  # type: ignore[no-untyped-def]
+        def build(xp: ArrayBackend, b: int = 1) -> Decoder:
+            if b == 1:
+                return T2SClosedFormDecoder(sm, tau, xp)
+            inner = T2SClosedFormDecoder(bin_system_matrices(sm, b), channel_taus(tau, sm.channels) / b**2, xp)
+            return SensorBinnedDecoder(inner, sm.sensor_shape, sm.channels, b)
+        return build
+
+    best = probe_tau(builder(200.0)(ArrayBackend("numpy", "float64")), probes)
+    assert best is not None
+    costs = {}
+    for tau in (1e-3, 200.0, 1e5):
+        _, cost, failed, decoders = measure_backends(builder(tau), probes, specs, repeats=1)
+        assert not failed
+        for dec in decoders.values():  # handed back at the τ they were built with
+            np.testing.assert_allclose(dec.channel_tau, tau, rtol=1e-9)  # type: ignore[attr-defined]
+        costs[tau] = cost
+    for tau in (1e-3, 1e5):  # the same verdict from every starting τ (the search grid is absolute)
+        for key in costs[200.0]:
+            assert abs(costs[tau][key] - costs[200.0][key]) < 0.02, (tau, key, costs)
+    # and the τ found is the best of a fine sweep on the float64 reference, within its quarter decade
+    ref = builder(200.0)(ArrayBackend("numpy", "float64"))
+    sweep = {t: np.mean([float(-10 * np.log10(np.mean((np.clip(_decode(ref, t, p), 0, 1) - p.truth) ** 2)))
+                         for p in probes]) for t in best * np.logspace(-1, 1, 41)}
+    assert abs(np.log10(max(sweep, key=sweep.__getitem__) / best)) <= 0.25
+
+
+def _decode(decoder: Decoder, tau: float, probe) -> np.ndarray:  # type: ignore[no-untyped-def]
+    decoder.set_tau(tau)  # type: ignore[attr-defined]
+    return decoder.decode(probe.raw.astype(np.float32) - np.float32(probe.black_dn))

@@ -2,9 +2,12 @@
 
 For one decoder and operator shape, every candidate backend (:func:`candidate_specs`) is
 built, checked for accuracy against float64 on probe scenes and timed on the real frame size;
-the fastest whose PSNR cost is within ``bound_db`` (default 0.1 dB) is used. The measurements
-are cached per host fingerprint and operator shape (:class:`BackendCache`), so the next
-decoder of that shape is built directly. A user preference (``THINTACT_BACKEND`` or a
+the fastest whose PSNR cost is within ``bound_db`` (default 0.1 dB) is used. A decoder whose τ can be changed is
+checked and timed at the τ that decodes the probes best on float64 (:func:`probe_tau`), not at
+the τ it happens to be built with: how much a cheaper backend (bfloat16, a binned sensor) costs
+depends on the regularisation, and at an unregularised τ every backend decodes noise alike. The
+measurements are cached per host fingerprint and operator shape (:class:`BackendCache`), so the
+next decoder of that shape is built directly. A user preference (``THINTACT_BACKEND`` or a
 profile's ``decoder.settings``) is honoured only where it is accurate and not slower than the
 best by more than ``slack`` (20 %); otherwise a :class:`BackendPreferenceWarning` says why not.
 """
@@ -32,6 +35,11 @@ from thintact_sdk.reconstruction.t2s import SystemMatrices
 PSNR_BOUND_DB = 0.1
 PREFERENCE_SLACK = 0.2
 PROBE_SCENES = (("usaf", 0), ("gelsight", 20))
+MEASURED_AT = "probe-tau"
+"""How the measurements are made (part of every cache key): backends are compared at the τ
+:func:`probe_tau` finds. Entries cached under another rule are measured again."""
+PROBE_TAU_DECADES = 8
+""":func:`probe_tau` searches τ over this many decades either side of the decoder's own τ."""
 
 
 class BackendPreferenceWarning(UserWarning):
@@ -159,6 +167,35 @@ def _scores(decoder: Decoder, probes: Sequence[Probe]) -> list[float]:
     return [psnr(np.clip(_decode_fn(decoder, p)(), 0.0, 1.0), p.truth) for p in probes]
 
 
+def probe_tau(decoder: Decoder, probes: Sequence[Probe]) -> float | None:
+    """The τ (DN², the decoder's units) at which ``decoder`` decodes ``probes`` best (mean
+    PSNR): whole powers of ten over :data:`PROBE_TAU_DECADES` decades either side of its own
+    τ, then quarter decades around the best. The grid is fixed in absolute terms (``10^(k/4)``),
+    so every starting τ within reach finds the same τ. ``None`` for a decoder without
+    ``set_tau``; the decoder is left at the τ found."""
+    if not hasattr(decoder, "set_tau") or not hasattr(decoder, "tau"):
+        return None
+    own = float(decoder.tau)
+    centre = int(round(np.log10(own))) if np.isfinite(own) and own > 0 else 0
+    scores: dict[float, float] = {}
+
+    def mean_psnr(exponent: float) -> float:
+        if exponent not in scores:
+            decoder.set_tau(10.0 ** exponent)  # type: ignore[attr-defined]
+            scores[exponent] = float(np.mean(_scores(decoder, probes)))
+        return scores[exponent]
+
+    best = max(range(centre - PROBE_TAU_DECADES, centre + PROBE_TAU_DECADES + 1), key=mean_psnr)
+    chosen = max((best + q / 4.0 for q in range(-3, 4)), key=mean_psnr)
+    decoder.set_tau(10.0 ** chosen)  # type: ignore[attr-defined]
+    return float(10.0 ** chosen)
+
+
+def _own_tau(decoder: Decoder) -> Any:
+    """The τ ``decoder`` was built with (per channel where it has one), to restore it."""
+    return np.array(decoder.channel_tau) if hasattr(decoder, "channel_tau") else float(decoder.tau)  # type: ignore[attr-defined]
+
+
 def _time_ms(fn: Callable[[], Any], repeats: int, give_up_ms: float) -> float:
     """Median ms of ``repeats`` calls after one warm-up; stops early once two calls both took
     longer than ``give_up_ms`` (a candidate that cannot win is not measured to the end)."""
@@ -185,9 +222,13 @@ def measure_backends(
     """Time and score every spec: ``(measured_ms, psnr_cost_db, failed, decoders)``.
 
     ``build(backend)`` makes the decoder (``build(backend, sensor_bin)`` a binned one); the
-    reference is ``build`` on numpy float64, unbinned.
+    reference is ``build`` on numpy float64, unbinned. Every candidate is scored and timed at
+    the reference's :func:`probe_tau` (where the decoder can change τ) and handed back at the
+    τ it was built with.
     """
-    reference = _scores(build(ArrayBackend("numpy", "float64")), probes)
+    ref_decoder = build(ArrayBackend("numpy", "float64"))
+    tau = probe_tau(ref_decoder, probes)
+    reference = _scores(ref_decoder, probes)
     measured: dict[str, float] = {}
     cost: dict[str, float] = {}
     failed: dict[str, str] = {}
@@ -195,9 +236,14 @@ def measure_backends(
     for spec in specs:
         try:
             decoder = build_for(build, spec)
+            own = None if tau is None else _own_tau(decoder)
+            if tau is not None:
+                decoder.set_tau(tau)  # type: ignore[attr-defined]
             give_up = 3.0 * min(measured.values()) if measured else np.inf
             measured[spec.key] = _time_ms(_decode_fn(decoder, probes[0]), repeats, give_up)
             cost[spec.key] = float(max(r - s for r, s in zip(reference, _scores(decoder, probes), strict=True)))
+            if own is not None:
+                decoder.set_tau(own)  # type: ignore[attr-defined]
             decoders[spec.key] = decoder
         except Exception as err:  # noqa: BLE001 - a backend that fails here is simply not a candidate
             failed[spec.key] = f"failed ({type(err).__name__}: {err})"

@@ -51,6 +51,7 @@ from thintact_sdk.reconstruction.decoders.backend_candidates import (
     preference_from_settings,
 )
 from thintact_sdk.reconstruction.decoders.backend_selection import (
+    MEASURED_AT,
     BackendPreferenceWarning,
     make_probes,
     select_backend,
@@ -120,7 +121,8 @@ def _selected(name: str, profile: Profile, settings: dict[str, Any], sm: SystemM
     (r, s), (n, m) = sm.sensor_shape, sm.scene_shape
     # the threads the candidates are timed on: a Sensor on a 2-core host decodes (and so
     # selects) on one kernel thread, `thintact bench reconstruct` on the library's
-    key = f"{host_fingerprint(caps)}|{name}|{sm.channels}x{r}x{s}->{n}x{m}|{dtype}|{kernel_threads_now()}"
+    key = (f"{host_fingerprint(caps)}|{name}|{sm.channels}x{r}x{s}->{n}x{m}|{dtype}|{kernel_threads_now()}"
+           f"|{MEASURED_AT}")
     try:
         sensor_bin = binning_offered((r, s), (n, m), sm.channels, settings.get("sensor_bin", "auto")) if binnable else 1
     except ValueError as err:
