@@ -329,8 +329,7 @@ def test_the_noise_criteria_and_the_prediction_start_once_the_decoder_is_certain
 
 def test_the_filter_free_decoders_are_chosen_while_the_joint_filter_trains(tmp_path, monkeypatch) -> None:  # type: ignore[no-untyped-def]
     # the T2S closed form needs no joint filter: its cross-validation runs while the filter
-    # trains (which waits for health's noise pass), and the bundle is the one a run that
-    # trains the filter first writes (issue 36)
+    # trains, and the bundle is the one a run that trains the filter first writes (issue 36)
     import threading
 
     from cal_testkit import synthetic_matrices, synthetic_profile, write_slit_recording

@@ -377,11 +377,10 @@ def calibrate_recording(
         return health, design
 
     def filter_lane() -> tuple[CalibrationBundle, dict[str, float]]:
-        """The joint filter, started once health's noise pass is done: the filter's training
-        set (32 simulated frames and their open components, 1 GB at the paper's size) and the
-        noise pass's frames are the two largest working sets after the capture, and they are
-        never held at once. Only the decoders that need the filter wait for it."""
-        noise_ready.result()  # (a failed noise pass fails this lane too: nothing to train for)
+        """The joint filter, from the start: the decoder's name is certain only once the
+        decoder that needs it is cross-validated, and the work that waits for the name (noise
+        criteria, prediction) should run beside the scene priors, not after them. Only the
+        decoders that need the filter wait for it."""
         with log.stage("joint filter", "training the joint filter") as st:
             trained = checkpoints.load_filter()
             if trained is not None:
@@ -487,7 +486,7 @@ def calibrate_recording(
 
     # lanes with one BLAS thread each: the health check (and the prediction's simulated design)
     # beside the τ selection (itself two threads: selection.SELECT_WORKERS) and the joint
-    # filter, which starts when health's noise pass ends; the reported noise criteria wait for
+    # filter; the reported noise criteria wait for
     # the decoder's name and then run beside the scene priors, and the prediction takes the
     # next lane to come free
     with blas_threads(1), ThreadPoolExecutor(max_workers=4, thread_name_prefix="calibrate") as pool:
