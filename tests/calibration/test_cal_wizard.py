@@ -131,3 +131,60 @@ def test_pipelined_wizard_solves_during_the_capture_and_gives_the_same_unit(tmp_
     assert fast.prediction is not None and slow.prediction is not None
     for label, db in slow.prediction.psnr_db.items():
         assert abs(fast.prediction.psnr_db[label] - db) < 0.05
+
+
+def test_the_scene_priors_are_chosen_on_the_design_during_the_capture(tmp_path: Path) -> None:
+    """With validation scenes that make two folds, the capture worker chooses each decoder's
+    scene prior on the design's simulated validation frames while the wizard captures; after
+    the last pattern the unit compares plain Tikhonov with that prior alone (issue 36), says
+    so in its report, and deploys a prior only where its own frames agree."""
+    from thintact_sdk.calibration.tau import prior_candidates
+
+    prof = synthetic_profile()
+    sm = synthetic_matrices(gains_dn=(30.0, 40.0, 25.0))
+    settings = WizardSettings(frames=2, validation=("gelsight:1", "smooth_color", "gelsight:5", "checker"))
+    opts = CalibrationOptions(filter_steps=0, filter_scenes=8, predict=True)
+    runs = {}
+    for pipelined in (True, False):
+        disp = FakeDisplay()
+        runs[pipelined] = run_wizard(prof, tmp_path / str(pipelined), FakeCamera(prof, sm, disp, seed=1),
+                                     disp, settings, opts, pipelined=pipelined)
+    fast, slow = (runs[k].bundle.meta["metrics"] for k in (True, False))
+    assert "priors" in fast["pipelined"]["seconds"] and not fast["pipelined"]["errors"], fast["pipelined"]
+    search = fast["tau_selection"]["scene_prior_search"]
+    assert set(search) == {"t2s-closed-form"} and "design's simulated validation frames" in search["t2s-closed-form"]
+    assert "scene_prior_search" not in slow["tau_selection"]
+    # the unit searched every candidate without the worker, one at most with it
+    assert len(slow["tau_selection"]["scene_prior_candidates"]["t2s-closed-form"]) == len(prior_candidates())
+    narrowed = fast["tau_selection"].get("scene_prior_candidates", {}).get("t2s-closed-form", [])
+    assert len(narrowed) == (0 if search["t2s-closed-form"].startswith(
+        "chosen on the design's simulated validation frames during the capture: none") else 1)
+    deployed = runs[True].bundle.meta.get("scene_prior", {}).get("t2s-closed-form")
+    if deployed is not None:  # only a prior the unit's own frames chose
+        assert [(c["alpha"], c["k0"]) for c in narrowed] == [(deployed["alpha"], deployed["k0"])]
+
+
+def test_design_priors_choose_as_the_units_own_search_does() -> None:
+    """:func:`design_priors` is the unit's prior search on the design's frames: the same
+    candidates, τ cross-validation and median-scene rule."""
+    from thintact_sdk.calibration.capture_worker import DESIGN_PRIOR_SEED, design_priors
+    from thintact_sdk.calibration.prediction import design_for_prediction, design_signals
+    from thintact_sdk.calibration.tau import cross_validate_prior, tau_grid
+    from thintact_sdk.calibration.validation import make_decoder
+    from thintact_sdk.reconstruction.bundle import CalibrationBundle
+    from thintact_sdk.simulation.scenes import make_scene
+
+    prof = synthetic_profile()
+    design = design_for_prediction(prof, synthetic_matrices(gains_dn=(30.0, 40.0, 25.0)), 2)
+    n, m = prof.scene.rows, prof.scene.cols
+    validation = [(f"v{i}", make_scene(k, n, m, s).astype(np.float32))
+                  for i, (k, s) in enumerate((("gelsight", 1), ("smooth_color", 0), ("gelsight", 5), ("checker", 0)))]
+    chosen = design_priors(prof, design, validation)
+    assert chosen is not None and set(chosen) == {"t2s-closed-form"}
+    scenes = [x for _, x in validation]
+    signals = design_signals(design, scenes, np.random.default_rng(DESIGN_PRIOR_SEED))
+    bundle = CalibrationBundle.create(prof, design.design, None, tau=1.0, source="simulator")
+    cv = cross_validate_prior(lambda p: make_decoder(prof, bundle, "t2s-closed-form", prior=p), "t2s-closed-form",
+                              signals, scenes, [lb for lb, _ in validation], tau_grid(design.design))
+    assert cv is not None and chosen["t2s-closed-form"] == cv.prior
+    assert design_priors(prof, design, validation[:2]) is None  # two scenes make no two folds

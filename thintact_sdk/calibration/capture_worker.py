@@ -30,7 +30,11 @@ from typing import Any
 import numpy as np
 
 from thintact_sdk.calibration.collect import SlitCollection, SlitCompressor, white_frame_signal
-from thintact_sdk.calibration.prediction import PredictionDesign, design_for_prediction
+from thintact_sdk.calibration.prediction import (
+    PredictionDesign,
+    design_for_prediction,
+    design_signals,
+)
 from thintact_sdk.calibration.solver import SolveReport, solve_collection
 from thintact_sdk.calibration.validation import (
     calibration_decoders,
@@ -44,6 +48,7 @@ from thintact_sdk.formats.recording import Recording
 from thintact_sdk.host.blas import blas_threads
 from thintact_sdk.host.memory import return_free_heap
 from thintact_sdk.reconstruction.bundle import CalibrationBundle
+from thintact_sdk.reconstruction.scene_prior import ScenePrior
 from thintact_sdk.reconstruction.t2s import SystemMatrices
 
 
@@ -58,15 +63,20 @@ class Prepared:
         ``(collection, matrices, reports)`` of the slit scan, as the pipeline's first stage.
     design
         The prediction's simulated design (white-frame signal level).
+    priors
+        Per calibration decoder that takes a scene prior, the prior (``None``: plain Tikhonov)
+        :func:`design_priors` chose on the design's own validation frames; the unit then
+        cross-validates only plain Tikhonov and that prior. ``None`` when not searched.
     seconds
         Wall time of each part, measured in the worker (``compress``, ``solve``, ``design``,
-        ``backends``: :func:`warm_backends`).
+        ``backends``: :func:`warm_backends`, ``priors``).
     errors
         What went wrong in a part that was then left to the pipeline.
     """
 
     solved: tuple[SlitCollection, SystemMatrices, list[SolveReport]] | None = None
     design: PredictionDesign | None = None
+    priors: dict[str, ScenePrior | None] | None = None
     seconds: dict[str, float] = field(default_factory=dict)
     errors: dict[str, str] = field(default_factory=dict)
 
@@ -86,11 +96,15 @@ class CaptureWorker:
         Frames averaged per pattern (the noise of the prediction).
     slits
         Slit frames the plan holds (the solve starts when that many are in).
+    validation
+        The plan's validation scenes, ``(label, N × M × C scene)``: with them the scene priors
+        are chosen on the design during the capture (:func:`design_priors`).
     """
 
     def __init__(self, profile: Profile, capture_dir: Path, options: Any, frames_averaged: int,
-                 slits: int) -> None:
+                 slits: int, validation: list[tuple[str, np.ndarray]] | None = None) -> None:
         self.profile, self.capture_dir, self.options = profile, Path(capture_dir), options
+        self.validation = list(validation or [])
         self.frames_averaged, self.slits = max(1, int(frames_averaged)), int(slits)
         self.compressor = SlitCompressor(profile, options.rank)
         self.prepared = Prepared()
@@ -179,6 +193,13 @@ class CaptureWorker:
                 except (ThinTactError, ValueError, np.linalg.LinAlgError) as err:
                     self.prepared.errors["backends"] = str(err)
                 self.prepared.seconds["backends"] = round(time.monotonic() - t0, 3)
+                if self.validation and self.options.tau is None:
+                    t0 = time.monotonic()
+                    try:
+                        self.prepared.priors = design_priors(self.profile, self.prepared.design, self.validation)
+                    except (ThinTactError, ValueError, np.linalg.LinAlgError) as err:
+                        self.prepared.errors["priors"] = str(err)
+                    self.prepared.seconds["priors"] = round(time.monotonic() - t0, 3)
 
         self._design_thread = threading.Thread(target=run, name="calibrate-design", daemon=True)
         self._design_thread.start()
@@ -214,3 +235,42 @@ def warm_backends(profile: Profile, design: SystemMatrices) -> None:
                 bundle = CalibrationBundle.create(profile, design, jf, tau=1.0, source="simulator")
             kwargs: dict[str, Any] = {"prior": None} if takes_scene_prior(name) else {}
             make_decoder(profile, bundle, name, **kwargs)
+
+
+DESIGN_PRIOR_SEED = 1
+"""Seed of the sensor noise of the design's validation frames in :func:`design_priors` (a
+stream of its own: the prediction's frames, drawn from the design's, are not changed)."""
+
+
+def design_priors(profile: Profile, design: PredictionDesign,
+                  validation: list[tuple[str, np.ndarray]]) -> dict[str, ScenePrior | None] | None:
+    """The scene prior each calibration decoder that takes one would deploy on a unit built
+    exactly to the design, chosen as the unit's own choice is
+    (:func:`~thintact_sdk.calibration.tau.cross_validate_prior`: plain Tikhonov and every
+    candidate, τ cross-validated, the median scene must gain) on the design's simulated
+    frames of the plan's validation scenes; ``None`` where the scenes do not make two folds.
+
+    A scene prior describes the scenes (their DCT power), which the design's frames show as
+    the unit's do, at the unit's signal level and the profile's noise. The capture worker
+    runs this while the wizard captures, so after the last pattern the unit cross-validates
+    plain Tikhonov and this prior alone instead of every candidate (at the paper's size the
+    nine candidates cost about 150 CPU-seconds), and deploys the prior only where it also wins
+    on the unit's own frames."""
+    from thintact_sdk.calibration.tau import cross_validate_prior, enough_folds, tau_grid
+
+    labels = [label for label, _ in validation]
+    scenes = [np.asarray(x, np.float32) for _, x in validation]
+    if not enough_folds(scenes):
+        return None
+    signals = design_signals(design, scenes, np.random.default_rng(DESIGN_PRIOR_SEED))
+    bundle = CalibrationBundle.create(profile, design.design, None, tau=1.0, source="simulator")
+    grid = tau_grid(design.design)
+    out: dict[str, ScenePrior | None] = {}
+    with blas_threads(1):
+        for name in calibration_decoders():
+            if not takes_scene_prior(name) or needs_joint_filter(name):
+                continue
+            cv = cross_validate_prior(lambda prior, n=name: make_decoder(profile, bundle, n, prior=prior),  # type: ignore[misc]
+                                      name, signals, scenes, labels, grid, workers=1)
+            out[name] = None if cv is None else cv.prior
+    return out

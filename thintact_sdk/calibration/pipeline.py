@@ -427,7 +427,8 @@ def calibrate_recording(
                                    noise_criteria_curves=False, built=built,
                                    on_decoder=lambda name: name_ready.set_result(
                                        (name, None if needs_joint_filter(name) else matrices_only)),
-                                   filtered=lambda: lane_f.result()[0])
+                                   filtered=lambda: lane_f.result()[0],
+                                   design_priors=None if prepared is None else prepared.priors)
                 for name in list(built):  # the noise criteria may be clearing it meanwhile
                     if name != selection.decoder:
                         built.pop(name, None)  # only the chosen one is reused

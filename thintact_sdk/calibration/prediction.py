@@ -298,6 +298,19 @@ def design_for_prediction(
     return PredictionDesign(sim, gains, noise, dark_dn, design, rng, seed)
 
 
+def design_signals(prepared: PredictionDesign, scenes: list[np.ndarray],
+                   rng: np.random.Generator) -> list[np.ndarray]:
+    """The design's validation frames of ``scenes`` (``N × M × C`` display values): signals
+    ``R × S × C`` above its dark capture (DN, float32), with the sensor noise drawn from ``rng``."""
+    c = prepared.design.channels
+    out = []
+    for x in scenes:
+        expected = prepared.sim.predict_signal_dn(scene_for_channels(x, c).astype(np.float64), prepared.gains)
+        raw = signal_to_dn(expected, prepared.noise, rng)
+        out.append((raw - prepared.dark_dn).astype(np.float32))
+    return out
+
+
 def predict_from_design(
     profile: Profile,
     prepared: PredictionDesign,
@@ -310,7 +323,6 @@ def predict_from_design(
 ) -> Prediction:
     """Finish a prediction for ``decoder`` (:func:`predict_validation`'s second part)."""
     design, noise, rng, gains = prepared.design, prepared.noise, prepared.rng, prepared.gains
-    c = design.channels
     n, m = design.scene_shape
     jf = None
     if needs_joint_filter(decoder):
@@ -318,11 +330,7 @@ def predict_from_design(
                                 noise=noise, steps=filter_steps, seed=0)
     bundle = CalibrationBundle.create(profile, design, jf, tau=1.0, source="simulator")
     dec = make_decoder(profile, bundle, decoder)
-    signals = []
-    for x in scenes:
-        expected = prepared.sim.predict_signal_dn(scene_for_channels(x, c).astype(np.float64), gains)
-        raw = signal_to_dn(expected, noise, rng)
-        signals.append((raw - prepared.dark_dn).astype(np.float32))
+    signals = design_signals(prepared, scenes, rng)
     grid = tau_grid(design)
     cv = cross_validate(dec, decoder, signals, scenes, labels, grid)
     if cv is not None:

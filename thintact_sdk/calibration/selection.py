@@ -70,6 +70,7 @@ class TauSelection:
     cross_validation: dict[str, CrossValidation] = field(default_factory=dict)
     validation: list[ValidationResult] = field(default_factory=list)
     judged_validation: list[ValidationResult] | None = None
+    prior_search: dict[str, str] = field(default_factory=dict)
 
     @property
     def verdict_validation(self) -> list[ValidationResult]:
@@ -118,6 +119,7 @@ class TauSelection:
                      "all_scenes_mean_psnr_db": round(max(c.values), 3)} for p, c in v.prior_curves]
                 for k, v in self.cross_validation.items() if v.prior_curves},
             "curves": [c.to_json() for c in self.curves],
+            **({"scene_prior_search": dict(self.prior_search)} if self.prior_search else {}),
         }
 
     def write_taus(self, meta: dict[str, Any]) -> None:
@@ -203,6 +205,7 @@ interpreter lock), the calibration's two lanes."""
 def _cross_validate_all(
     profile: Profile, bundle_for: Callable[[str], CalibrationBundle], frames: ValidationFrames, names: list[str],
     grid: np.ndarray, on_decoder: Callable[[str], None] | None, built: dict[str, Any] | None = None,
+    narrowed: dict[str, ScenePrior | None] | None = None,
 ) -> tuple[dict[str, CrossValidation], dict[str, Any]]:
     """Each decoder's cross-validation (:func:`~thintact_sdk.calibration.tau.cross_validate`;
     with its scene priors, :func:`~thintact_sdk.calibration.tau.cross_validate_prior`'s
@@ -214,11 +217,21 @@ def _cross_validate_all(
     plain decoders first, then every scene prior, so no core waits for the slowest job of one
     decoder before the next decoder starts. The results are combined in the order a
     sequential search takes them, so the choice is the same. ``built`` receives the plain
-    decoders as soon as they are built (before ``on_decoder`` is called).
+    decoders as soon as they are built (before ``on_decoder`` is called). ``narrowed``: the
+    scene prior to compare with plain Tikhonov, per decoder named there (``None``: none), in
+    place of every candidate.
     """
     sig, tru, lab = frames.signals, frames.truths, frames.labels
     plain_kwargs = {name: {"prior": None} if takes_scene_prior(name) else {} for name in names}
-    priors = {name: prior_candidates() if takes_scene_prior(name) and enough_folds(tru) else [] for name in names}
+    def candidates(name: str) -> list[ScenePrior]:
+        if not (takes_scene_prior(name) and enough_folds(tru)):
+            return []
+        if narrowed is not None and name in narrowed:
+            prior = narrowed[name]
+            return [] if prior is None else [prior]
+        return prior_candidates()
+
+    priors = {name: candidates(name) for name in names}
 
     def plain(name: str) -> tuple[Any, CrossValidation | None]:
         dec = make_decoder(profile, bundle_for(name), name, **plain_kwargs[name])
@@ -271,6 +284,7 @@ def select(
     built: dict[str, Any] | None = None,
     on_decoder: Callable[[str], None] | None = None,
     filtered: Callable[[], CalibrationBundle] | None = None,
+    design_priors: dict[str, ScenePrior | None] | None = None,
 ) -> TauSelection:
     """Choose the decoder and τ on the unit's validation frames.
 
@@ -315,6 +329,12 @@ def select(
         built on it, in their own jobs, so the decoders that need no filter are
         cross-validated while it is still being trained. Without it, every decoder is built
         on ``bundle``.
+    design_priors
+        Per decoder, the scene prior chosen on the design's own validation frames during the
+        capture (:func:`~thintact_sdk.calibration.capture_worker.design_priors`; ``None``:
+        plain Tikhonov): that decoder compares plain Tikhonov with this prior alone instead
+        of every candidate, and deploys it only where it wins on the unit's frames too. The
+        selection's ``prior_search`` says which search was made.
     """
     sm = bundle.system_matrices
 
@@ -336,7 +356,7 @@ def select(
         return TauSelection(name, float(tau), "given (--tau)", {name: float(tau)}, simulated_curve(),
                             validation=_results(frames, estimates))
     grid = tau_grid(sm)
-    cvs, decoders = _cross_validate_all(profile, bundle_for, frames, names, grid, on_decoder, built)
+    cvs, decoders = _cross_validate_all(profile, bundle_for, frames, names, grid, on_decoder, built, design_priors)
     curves = simulated_curve()
     fallback = curves[0] if curves else None
     for name, cv in cvs.items():
@@ -359,6 +379,12 @@ def select(
         criterion, tau_chosen = "simulated", fallback.tau
     decoder_taus = {name: cv.curve.tau for name, cv in cvs.items()} or {chosen: tau_chosen}
     selection = TauSelection(chosen, tau_chosen, criterion, decoder_taus, curves, cvs)
+    if design_priors:
+        selection.prior_search = {
+            name: "chosen on the design's simulated validation frames during the capture: "
+            + ("none (plain Tikhonov)" if p is None else f"alpha {p.alpha:g}, k0 {p.k0:g}")
+            + "; the unit compared plain Tikhonov with it alone"
+            for name, p in design_priors.items()}
     if chosen in cvs:
         cv = cvs[chosen]
         selection.validation = _results(frames, [cv.held_out_estimates[lb] for lb in frames.labels])

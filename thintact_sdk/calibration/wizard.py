@@ -222,9 +222,11 @@ def run_wizard(
     )
     opts = options or CalibrationOptions()
     plan_slits = profile.scene.rows + profile.scene.cols
+    plan = build_plan(profile, ws.validation) if ws.validation is not None else build_plan(profile)
     worker = CaptureWorker(profile, capture_dir, opts,
                            opts.frames_averaged if opts.frames_averaged is not None else ws.frames,
-                           plan_slits) if pipelined else None
+                           plan_slits, [(s.label, s.make()) for s in plan if s.kind == "validation"]
+                           ) if pipelined else None
     with camera, display:
         registration = capture_session(profile, capture_dir, camera, display, ws, progress, status,
                                        None if worker is None else worker.frame_written)
