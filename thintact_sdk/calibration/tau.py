@@ -571,14 +571,18 @@ def noise_criteria(decoder: Any, sm: SystemMatrices, signals: Sequence[np.ndarra
     forward = _ChannelForward(sm)
     weights = (inv_var(y) for y in signals) if callable(inv_var) else iter(inv_var)
     ws = [_channel_first(w) for w in weights]
-    ys, zcs = ([_channel_first(a) for a in arrays] for arrays in (signals, zs))
-    backs = [forward.adjoint(z) for z in zcs]
+    # the probes are needed once, for their back-projections (their decodes come from the
+    # projections shared_decode took); the signals are read through channel views, not copied:
+    # at the paper's size each copy of a frame is 16 MB, and these were 20 of them
+    backs = [forward.adjoint(_channel_first(z)) for z in zs]
+    del zs
+    ys = [np.asarray(y, np.float32) for y in signals]
     for j, tau in enumerate(taus):
         decoder.set_tau(float(tau))
         acc, count = 0.0, 0
         for i, (y, w) in enumerate(zip(ys, ws, strict=True)):
             for ch, pred in enumerate(forward(decode(i))):
-                r = np.subtract(y[ch], pred, out=pred)  # the prediction is this frame's own array
+                r = np.subtract(y[..., ch], pred, out=pred)  # the prediction is this frame's own array
                 acc += float(np.vdot(np.square(r, out=r), w[ch]))
                 count += r.size
         chi2[j] = acc / count
