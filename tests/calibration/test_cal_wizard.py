@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -104,11 +105,9 @@ def test_resume_refuses_a_changed_profile(tmp_path: Path) -> None:
         run_wizard(other, tmp_path / "c", FakeCamera(other, synthetic_matrices(), disp), disp, SETTINGS, FAST)
 
 
-def test_pipelined_wizard_solves_during_the_capture_and_gives_the_same_unit(tmp_path: Path) -> None:
-    """The capture worker compresses and solves the slits while the wizard captures and
-    simulates the prediction's design from the white frame: the bundle is the one the
-    wizard makes without it (matrices, filter, validation), the prediction within 0.05 dB,
-    and the calibration records the time from the last pattern to the bundle."""
+def _with_and_without_the_worker(tmp_path: Path, settings: WizardSettings) -> dict[bool, Any]:
+    """The same synthetic unit through the wizard with the capture worker (``True``) and
+    without it (``False``), predicting, each in its own directory."""
     prof = synthetic_profile()
     sm = synthetic_matrices(gains_dn=(30.0, 40.0, 25.0))
     opts = CalibrationOptions(filter_steps=0, filter_scenes=8, predict=True)
@@ -116,7 +115,16 @@ def test_pipelined_wizard_solves_during_the_capture_and_gives_the_same_unit(tmp_
     for pipelined in (True, False):
         disp = FakeDisplay()
         runs[pipelined] = run_wizard(prof, tmp_path / str(pipelined), FakeCamera(prof, sm, disp, seed=1),
-                                     disp, SETTINGS, opts, pipelined=pipelined)
+                                     disp, settings, opts, pipelined=pipelined)
+    return runs
+
+
+def test_pipelined_wizard_solves_during_the_capture_and_gives_the_same_unit(tmp_path: Path) -> None:
+    """The capture worker compresses and solves the slits while the wizard captures and
+    simulates the prediction's design from the white frame: the bundle is the one the
+    wizard makes without it (matrices, filter, validation), the prediction within 0.05 dB,
+    and the calibration records the time from the last pattern to the bundle."""
+    runs = _with_and_without_the_worker(tmp_path, SETTINGS)
     fast, slow = runs[True], runs[False]
     m = fast.bundle.meta["metrics"]
     assert m["pipelined"]["solve"] and m["pipelined"]["prediction_design"], m["pipelined"]
@@ -140,15 +148,8 @@ def test_the_scene_priors_are_chosen_on_the_design_during_the_capture(tmp_path: 
     so in its report, and deploys a prior only where its own frames agree."""
     from thintact_sdk.calibration.tau import prior_candidates
 
-    prof = synthetic_profile()
-    sm = synthetic_matrices(gains_dn=(30.0, 40.0, 25.0))
     settings = WizardSettings(frames=2, validation=("gelsight:1", "smooth_color", "gelsight:5", "checker"))
-    opts = CalibrationOptions(filter_steps=0, filter_scenes=8, predict=True)
-    runs = {}
-    for pipelined in (True, False):
-        disp = FakeDisplay()
-        runs[pipelined] = run_wizard(prof, tmp_path / str(pipelined), FakeCamera(prof, sm, disp, seed=1),
-                                     disp, settings, opts, pipelined=pipelined)
+    runs = _with_and_without_the_worker(tmp_path, settings)
     fast, slow = (runs[k].bundle.meta["metrics"] for k in (True, False))
     assert "priors" in fast["pipelined"]["seconds"] and not fast["pipelined"]["errors"], fast["pipelined"]
     search = fast["tau_selection"]["scene_prior_search"]
