@@ -487,9 +487,8 @@ def calibrate_recording(
 
     # lanes with one BLAS thread each: the health check (and the prediction's simulated design)
     # beside the τ selection (itself two threads: selection.SELECT_WORKERS) and the joint
-    # filter; the reported noise criteria wait for
-    # the decoder's name and then run beside the scene priors, and the prediction takes the
-    # next lane to come free
+    # filter; the reported noise criteria wait for the decoder's name and then run beside the
+    # scene priors, and the prediction takes the next lane to come free
     with blas_threads(1), ThreadPoolExecutor(max_workers=4, thread_name_prefix="calibrate") as pool:
         lane_b = pool.submit(health_lane)
         lane_f = pool.submit(filter_lane)
