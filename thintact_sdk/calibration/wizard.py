@@ -108,6 +108,12 @@ def _restore_exposure(camera: Camera, writer: RecordingWriter) -> float | None:
     return None
 
 
+def wizard_plan(profile: Profile, settings: WizardSettings) -> list[Step]:
+    """The patterns the wizard captures for ``profile`` with ``settings`` (its validation
+    scenes, else the plan's default ones)."""
+    return build_plan(profile, settings.validation) if settings.validation is not None else build_plan(profile)
+
+
 def capture_session(
     profile: Profile,
     capture_dir: Path,
@@ -125,7 +131,7 @@ def capture_session(
     ``on_written()`` is called after each pattern is written (or found, resuming): the
     pipelined calibration's :class:`~thintact_sdk.calibration.capture_worker.CaptureWorker`.
     """
-    plan = build_plan(profile, settings.validation) if settings.validation is not None else build_plan(profile)
+    plan = wizard_plan(profile, settings)
     writer = RecordingWriter(capture_dir, profile)
     total = len(plan)
     exposure = _restore_exposure(camera, writer) if writer.has_label("white") else None
@@ -221,12 +227,11 @@ def run_wizard(
         encoding="utf-8",
     )
     opts = options or CalibrationOptions()
-    plan_slits = profile.scene.rows + profile.scene.cols
-    plan = build_plan(profile, ws.validation) if ws.validation is not None else build_plan(profile)
+    plan = wizard_plan(profile, ws)
     worker = CaptureWorker(profile, capture_dir, opts,
                            opts.frames_averaged if opts.frames_averaged is not None else ws.frames,
-                           plan_slits, [(s.label, s.make()) for s in plan if s.kind == "validation"]
-                           ) if pipelined else None
+                           sum(s.kind in ("hslit", "vslit") for s in plan),
+                           [(s.label, s.make()) for s in plan if s.kind == "validation"]) if pipelined else None
     with camera, display:
         registration = capture_session(profile, capture_dir, camera, display, ws, progress, status,
                                        None if worker is None else worker.frame_written)
