@@ -147,3 +147,37 @@ def test_sampled_residual_is_the_full_residual_at_the_picked_entries(tmp_path: P
         assert p.shape == e.shape == kept.shape
         np.testing.assert_allclose(p, pred.reshape(-1)[kept], rtol=1e-12, atol=1e-9)
         np.testing.assert_allclose(e, res.reshape(-1)[kept], rtol=1e-12, atol=1e-9)
+
+
+def test_the_noise_fit_bins_by_blocks_and_keeps_one_copy_at_most(monkeypatch) -> None:
+    """The noise fit's bins are found a block at a time into one byte per entry and the median
+    of r² is taken in place: the same estimate as binning everything at once in int64, with
+    at most one entries-sized copy alive (the quantile's), not two (issue 36's memory)."""
+    import tracemalloc
+
+    from thintact_sdk.formats.profiles import NoiseSpec
+
+    rng = np.random.default_rng(5)
+    pred = rng.uniform(0.0, 3000.0, 400_000)
+    r2 = (rng.standard_normal(pred.size) * np.sqrt(4.0 + pred / 4.0)) ** 2
+    nz = NoiseSpec(black_level_dn=0.0, read_noise_dn=2.0, electrons_per_dn=4.0, saturation_dn=4095.0)
+    # the former formulation: every bin index at once, the median of a copy
+    edges = np.unique(np.quantile(pred, np.linspace(0.0, 1.0, 25)))
+    idx = np.clip(np.searchsorted(edges, pred, side="right") - 1, 0, len(edges) - 2)
+    xs = [float(np.mean(pred[idx == b])) for b in range(len(edges) - 1)]
+    ys = [float(np.median(r2[idx == b])) / health._MEDIAN_CHI2_1 for b in range(len(edges) - 1)]
+    slope, offset = np.polyfit(xs, ys, 1)
+    monkeypatch.setattr(health, "_BIN_BLOCK", 12_345)  # blocks that do not divide the entries
+    tracemalloc.start()
+    try:
+        noise = health._fit_noise(pred, r2.copy(), nz, 1, 0)
+        tracemalloc.reset_peak()
+        r2_given = r2.copy()
+        base = tracemalloc.get_traced_memory()[0]
+        health._fit_noise(pred, r2_given, nz, 1, 0)
+        extra = tracemalloc.get_traced_memory()[1] - base
+    finally:
+        tracemalloc.stop()
+    assert noise.variance_offset_dn2 == float(offset)  # above the quantisation floor here
+    assert noise.variance_slope == float(slope)
+    assert extra < 1.4 * pred.nbytes, (extra, pred.nbytes)

@@ -195,25 +195,37 @@ def _scan_json(g: GhostScan) -> dict[str, Any]:
             "significant": g.significant}
 
 
+_BIN_BLOCK = 1 << 20
+"""Entries binned at a time by :func:`_fit_noise`."""
+
+
 def _fit_noise(pred: np.ndarray, r2: np.ndarray, noise: NoiseSpec, frames: int,
                dark_frames: int) -> NoiseEstimate:
     """``E[r²] = a + b·signal`` over 24 signal-quantile bins (robust: each bin's median of
     ``r²`` / 0.4549, the median of a χ²₁ variable, so a local defect does not bias it).
+    ``r2`` is reordered (its median is taken in place).
 
     ``dark_frames`` captures were averaged into the subtracted dark level: their read noise is
     in every residual too, and is taken out of the per-frame read noise reported.
     """
     edges = np.unique(np.quantile(pred, np.linspace(0.0, 1.0, 25)))
-    idx = np.searchsorted(edges, pred, side="right")  # in place below: one index array, not three
-    idx -= 1
-    np.clip(idx, 0, max(len(edges) - 2, 0), out=idx)
+    # the bin of each entry as one byte (24 bins), found a block at a time: no index array of
+    # the entries' size in int64 beside them (160 MB at the noise-fit cap)
+    idx = np.empty(pred.shape, np.uint8)
+    top = max(len(edges) - 2, 0)
+    for a in range(0, pred.size, _BIN_BLOCK):
+        found = np.searchsorted(edges, pred[a : a + _BIN_BLOCK], side="right")
+        found -= 1
+        idx[a : a + _BIN_BLOCK] = np.clip(found, 0, top)
     xs, ys = [], []
     for bin_index in range(len(edges) - 1):
         sel = idx == bin_index
         if np.count_nonzero(sel) > 10:
             xs.append(float(np.mean(pred[sel])))
             ys.append(float(np.median(r2[sel])) / _MEDIAN_CHI2_1)
-    offset: float = float(np.median(r2)) / _MEDIAN_CHI2_1
+    del idx
+    # the last use of r2: its median taken in place (the caller's entries are spent)
+    offset: float = float(np.median(r2, overwrite_input=True)) / _MEDIAN_CHI2_1
     slope: float = 0.0
     if len(xs) >= 2 and np.ptp(xs) > 0:
         slope, offset = (float(v) for v in np.polyfit(xs, ys, 1))

@@ -17,7 +17,7 @@ outside the lowest ``kr × ks`` DCT frequencies, ``phi_s_rank=r`` makes ``Φs = 
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -33,6 +33,7 @@ from thintact_sdk.simulation.scenes import gelsight, gelsight_count, make_scene
 
 __all__ = [
     "JointFilter",
+    "OpenComponents",
     "TrainingData",
     "make_training_data",
     "scene_for_channels",
@@ -106,12 +107,48 @@ def training_scenes(n: int, m: int, count: int = 32, seed: int = 0) -> list[np.n
     return out[:count]
 
 
+class OpenComponents:
+    """The open components ``Yo_f = Po X_f Qoᵀ`` of a data set, computed again each time a frame
+    is read instead of held (``F × C × R × S``, float32 DN, equal to the held ones). The closed
+    form reads each twice per round; holding them all takes as much memory as the
+    measurements (0.5 GB at the paper's size)."""
+
+    def __init__(self, system_matrices: SystemMatrices, scenes: Sequence[np.ndarray]) -> None:
+        self._sm = system_matrices
+        self._scenes = list(scenes)
+        self.shape = (len(self._scenes), system_matrices.channels, *system_matrices.sensor_shape)
+
+    def __len__(self) -> int:
+        return len(self._scenes)
+
+    def __getitem__(self, f: int) -> np.ndarray:
+        x = scene_for_channels(self._scenes[f], self._sm.channels)
+        return np.moveaxis(self._sm.forward_open(x), -1, 0).astype(np.float32)
+
+    def __iter__(self) -> Iterator[np.ndarray]:
+        return (self[f] for f in range(len(self)))
+
+    def __array__(self, dtype: Any = None, copy: Any = None) -> np.ndarray:
+        out = np.stack(list(self))
+        return out if dtype is None else out.astype(dtype)
+
+    def any(self) -> bool:
+        """Whether the open term is non-zero (``Po X Qoᵀ`` is zero for every scene when it is not)."""
+        return bool(np.any(self._sm.Po) and np.any(self._sm.Qo))
+
+
 @dataclass
 class TrainingData:
-    """Virtual data set: measurements and their open components, ``F × C × R × S`` (DN)."""
+    """Virtual data set: measurements and their open components, ``F × C × R × S`` (DN); the
+    open components either held or :class:`OpenComponents` (computed when read)."""
 
     y: np.ndarray
-    y_open: np.ndarray
+    y_open: np.ndarray | OpenComponents
+
+    def has_open(self) -> bool:
+        """Whether the open components are not all zero."""
+        yo = self.y_open
+        return yo.any() if isinstance(yo, OpenComponents) else bool(np.any(yo))
 
 
 def make_training_data(
@@ -119,6 +156,7 @@ def make_training_data(
     scenes: Sequence[np.ndarray],
     noise: Any | None = None,
     seed: int = 0,
+    hold_open: bool = True,
 ) -> TrainingData:
     """Simulate ``Y`` and ``Yo`` for every scene with the T2S model.
 
@@ -130,6 +168,9 @@ def make_training_data(
     noise
         A :class:`thintact_sdk.formats.profiles.NoiseSpec` (or ``None`` for noiseless data): Gaussian
         noise of the sensor's variance ``read² + Y / electrons_per_dn`` (DN²) is added to Y.
+    hold_open
+        Hold the open components (``False``: :class:`OpenComponents`, computed when read; the
+        measurements and their noise are the same either way).
     """
     rng = np.random.default_rng(seed)
     ys: np.ndarray | None = None
@@ -141,14 +182,15 @@ def make_training_data(
         if noise is not None:
             var = signal_variance_dn(y, noise)
             y = y + rng.standard_normal(y.shape) * np.sqrt(var)
-        if ys is None or yos is None:
+        if ys is None:
             ys = np.empty((len(scenes), y.shape[-1], *y.shape[:-1]), np.float32)
-            yos = np.empty_like(ys)
+            yos = np.empty_like(ys) if hold_open else None
         ys[f] = np.moveaxis(y, -1, 0)
-        yos[f] = np.moveaxis(yo, -1, 0)
-    if ys is None or yos is None:
+        if yos is not None:
+            yos[f] = np.moveaxis(yo, -1, 0)
+    if ys is None:
         raise InvalidValueError("the joint filter needs at least one training scene")
-    return TrainingData(ys, yos)
+    return TrainingData(ys, yos if yos is not None else OpenComponents(system_matrices, scenes))
 
 
 def _transform(shape: tuple[int, int], low_block: tuple[int, int] | None) -> SeparableDCT:
@@ -200,23 +242,25 @@ def _closed_form(
     for z in zy:
         zz += z.astype(np.float64) ** 2
     ridge = 1e-9 * float(np.mean(zz)) + 1e-30
-    yo_norm = sum(float(np.sum(np.square(yo, dtype=np.float64))) for yo in data.y_open)
+    yo_norm = 0.0  # ‖Yo‖², taken in the first round's pass (open components may be computed when read)
     c, r, s = data.y.shape[1:]
     phi_s = np.ones((c, r, s))
     history: list[float] = []
     best: tuple[float, np.ndarray, np.ndarray] | None = None
-    for _ in range(rounds):
+    for i in range(rounds):
         safe = np.where(np.abs(phi_s) > 1e-3, phi_s, 1e-3)
         num = np.zeros(zy.shape[1:])
         for z, yo in zip(zy, data.y_open, strict=True):
+            if i == 0:
+                yo_norm += float(np.sum(np.square(yo, dtype=np.float64)))
             num += z * tr.fwd(yo / safe)
         phi_f = num / (zz + ridge)
         h = np.zeros((c, r, s))
         k = np.zeros((c, r, s))
-        for f in range(data.y.shape[0]):
+        for f, yo in enumerate(data.y_open):
             g = tr.inv(phi_f * zy[f])
             h += g * g
-            k += g * data.y_open[f]
+            k += g * yo
         phi_s = _fit_phi_s(h, k, rank)
         # ‖Φs ⊙ g_f − Yo_f‖² summed over the frames is Σ Φs² H − 2 Φs K + ‖Yo‖²: the relative
         # loss from the sums just taken, with no frame transformed again
@@ -246,7 +290,7 @@ def _refine_torch(
     kr, ks = low_block if low_block is not None else (r, s)
     tr = SeparableDCT((r, s), (kr, ks), to_backend=lambda a: torch.from_numpy(a.astype(np.float32)))
     y = torch.from_numpy(data.y)
-    yo = torch.from_numpy(data.y_open)
+    yo = torch.from_numpy(np.asarray(data.y_open))
     norm = float(torch.sum(yo.double() ** 2))
     pf = torch.tensor(phi_f, dtype=torch.float32, requires_grad=True)
     params = [pf]
@@ -294,7 +338,7 @@ ADAM_EPS = 1e-8
 refinements)."""
 
 
-def _loss_and_gradient(zy: Sequence[np.ndarray], y_open: np.ndarray, pf: np.ndarray, ps: np.ndarray,
+def _loss_and_gradient(zy: Sequence[np.ndarray], y_open: np.ndarray | OpenComponents, pf: np.ndarray, ps: np.ndarray,
                        norm: float) -> tuple[float, list[np.ndarray]]:
     """The relative loss ``Σ‖Φs ⊙ IDCT(Φf ⊙ Z_f) − Yo_f‖² / norm`` and its gradients
     ``[∂/∂Φf, ∂/∂Φs]`` (float32, ``C × R × S``) for spectra ``zy`` (``F × C × R × S``); see
@@ -425,9 +469,11 @@ def train_joint_filter(
     if data is None:
         n, m = system_matrices.scene_shape
         scenes = training_scenes(n, m, seed=seed) if scenes is None else scenes
-        data = make_training_data(system_matrices, scenes, noise=noise, seed=seed)
+        # the closed form alone reads each open component twice per round: computed when
+        # read rather than held beside the measurements (the gradient steps read them every step)
+        data = make_training_data(system_matrices, scenes, noise=noise, seed=seed, hold_open=steps > 0)
     r, s = data.y.shape[2:]
-    if not np.any(data.y_open):  # one-term (coding-only) matrices: nothing to remove, F(Y) = 0
+    if not data.has_open():  # one-term (coding-only) matrices: nothing to remove, F(Y) = 0
         c = data.y.shape[1]
         return JointFilter(np.zeros((c, r, s)), np.ones((c, r, s)),
                            {"method": "none: the system matrices have no open term", "final_loss": 0.0})

@@ -131,7 +131,13 @@ class VirtualCamera(Camera):
         self._is_open = True
 
     def close(self) -> None:
+        """Close the camera and release what rendering held: the simulator and its cached
+        signals (up to 256 MB; a wizard's calibration runs after the capture with the camera
+        closed). Opening again builds them anew."""
         self._is_open = False
+        self._sim = None
+        self._linear_cache.clear()
+        self._scenes.clear()
 
     def capabilities(self) -> CameraCapabilities:
         return CameraCapabilities(
