@@ -213,10 +213,11 @@ def _fit_noise(pred: np.ndarray, r2: np.ndarray, noise: NoiseSpec, frames: int,
     # the entries' size in int64 beside them (160 MB at the noise-fit cap)
     idx = np.empty(pred.shape, np.uint8)
     top = max(len(edges) - 2, 0)
-    for a in range(0, pred.size, _BIN_BLOCK):
-        found = np.searchsorted(edges, pred[a : a + _BIN_BLOCK], side="right")
+    for start in range(0, pred.size, _BIN_BLOCK):
+        block = slice(start, start + _BIN_BLOCK)
+        found = np.searchsorted(edges, pred[block], side="right")
         found -= 1
-        idx[a : a + _BIN_BLOCK] = np.clip(found, 0, top)
+        idx[block] = np.clip(found, 0, top)
     xs, ys = [], []
     for bin_index in range(len(edges) - 1):
         sel = idx == bin_index
