@@ -400,3 +400,37 @@ def test_the_capture_measures_every_calibration_decoders_backend(tmp_path, monke
     monkeypatch.setattr(backend_selection, "measure_backends", lambda *a, **k: (_ for _ in ()).throw(
         AssertionError("measured again")))
     warm_backends(synthetic_profile(), synthetic_matrices(seed=4))
+
+
+def test_a_resume_after_the_capture_narrows_the_prior_search_as_the_first_run_did(tmp_path, monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    # the priors the capture worker chose on the design are checkpointed: a wizard run killed
+    # after the capture resumes without the worker and still cross-validates plain Tikhonov
+    # and the design's prior alone; a run without that checkpoint searches every prior
+    from cal_testkit import synthetic_matrices, synthetic_profile, write_slit_recording
+
+    from thintact_sdk.calibration import pipeline
+    from thintact_sdk.calibration.capture_worker import Prepared
+    from thintact_sdk.calibration.pipeline import CalibrationOptions, calibrate_recording
+    from thintact_sdk.formats.recording import Recording
+    from thintact_sdk.simulation.scenes import make_scene
+
+    opts = CalibrationOptions(filter_steps=0, filter_scenes=8)
+    write_slit_recording(tmp_path / "rec", synthetic_profile(), synthetic_matrices(), np.random.default_rng(0),
+                         [make_scene("gelsight", 24, 32, 2), make_scene("smooth_color", 24, 32)])
+    rec = Recording(tmp_path / "rec")
+    prepared = Prepared(priors={"t2s-closed-form": ScenePrior(1.5, 3.0), "t2s-other": None})
+    seen: list[object] = []
+
+    def killed(*a, design_priors=None, **k):  # type: ignore[no-untyped-def]
+        seen.append(design_priors)
+        raise RuntimeError("killed while choosing the decoder")
+
+    monkeypatch.setattr(pipeline, "select", killed)
+    with pytest.raises(RuntimeError):
+        calibrate_recording(rec, tmp_path / "cal", opts, report=False, prepared=prepared)
+    assert (tmp_path / "cal" / "stages" / "design_priors.json").is_file()
+    with pytest.raises(RuntimeError):
+        calibrate_recording(rec, tmp_path / "cal", opts, report=False)  # resumed: no worker
+    with pytest.raises(RuntimeError):
+        calibrate_recording(rec, tmp_path / "fresh", opts, report=False)
+    assert seen == [prepared.priors, prepared.priors, None]

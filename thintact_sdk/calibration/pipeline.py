@@ -63,6 +63,7 @@ from thintact_sdk.formats.profiles import CalibrationLimits, Profile
 from thintact_sdk.formats.recording import Recording
 from thintact_sdk.host.blas import blas_threads
 from thintact_sdk.reconstruction.bundle import CalibrationBundle
+from thintact_sdk.reconstruction.scene_prior import ScenePrior
 from thintact_sdk.reconstruction.t2s import SystemMatrices
 
 
@@ -256,6 +257,20 @@ def limits_of(profile: Profile) -> CalibrationLimits:
     return profile.calibration_limits or CalibrationLimits()
 
 
+def _design_priors(checkpoints: Checkpoints, prepared: Prepared | None) -> dict[str, ScenePrior | None] | None:
+    """The scene priors the capture worker chose on the design, checkpointed so that a run
+    resumed after the capture (no worker then) narrows the prior search as the first did;
+    None when neither has them (every prior is then searched)."""
+    if prepared is not None and prepared.priors is not None:
+        checkpoints.save_object("design_priors", prepared.priors)
+        return prepared.priors
+    stored = checkpoints.load_object("design_priors")
+    if isinstance(stored, dict) and all(isinstance(k, str) and (v is None or isinstance(v, ScenePrior))
+                                        for k, v in stored.items()):
+        return stored
+    return None
+
+
 def calibrate_recording(
     recording: Recording,
     out_dir: str | Path,
@@ -331,6 +346,7 @@ def calibrate_recording(
             checkpoints.save_solve(collection, sm, reports)
     frames = validation_frames(recording, collection, profile.noise.saturation_dn)
     want_prediction = bool(opts.predict and frames.labels)
+    design_priors = _design_priors(checkpoints, prepared)
 
     def simulate_design() -> PredictionDesign:
         """The prediction's design at the white frame's signal level (as the wizard's)."""
@@ -428,7 +444,7 @@ def calibrate_recording(
                                    on_decoder=lambda name: name_ready.set_result(
                                        (name, None if needs_joint_filter(name) else matrices_only)),
                                    filtered=lambda: lane_f.result()[0],
-                                   design_priors=None if prepared is None else prepared.priors)
+                                   design_priors=design_priors)
                 for name in list(built):  # the noise criteria may be clearing it meanwhile
                     if name != selection.decoder:
                         built.pop(name, None)  # only the chosen one is reused
