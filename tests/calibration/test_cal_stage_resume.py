@@ -165,6 +165,13 @@ def test_slits_compressed_as_they_arrive_equal_the_collection_of_the_finished_re
     b, _ = solve_matrices(want, CalibrationOptions(), full.profile)
     for name in ("Po", "Qo", "Pc", "Qc"):
         np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+    # released once its collection is made (the wizard's worker, issue 36's memory): the
+    # compressed images go; a later collection is taken from the recording, never half-made
+    streamed.release()
+    assert streamed.acc is None and streamed.broken is not None
+    with pytest.raises(CalibrationError):
+        streamed.slit_collection()
+    np.testing.assert_array_equal(streamed.finish(full).dark_dn, want.dark_dn)
     # a slit before the dark frame breaks the streaming assumption: collected again
     late = SlitCompressor(full.profile)
     slit = next(i for i in range(len(full)) if i not in want.validation and full.scene(i).any())

@@ -119,12 +119,31 @@ def _with_and_without_the_worker(tmp_path: Path, settings: WizardSettings) -> di
     return runs
 
 
-def test_pipelined_wizard_solves_during_the_capture_and_gives_the_same_unit(tmp_path: Path) -> None:
+def test_pipelined_wizard_solves_during_the_capture_and_gives_the_same_unit(tmp_path: Path, monkeypatch) -> None:  # type: ignore[no-untyped-def]
     """The capture worker compresses and solves the slits while the wizard captures and
     simulates the prediction's design from the white frame: the bundle is the one the
     wizard makes without it (matrices, filter, validation), the prediction within 0.05 dB,
-    and the calibration records the time from the last pattern to the bundle."""
+    and the calibration records the time from the last pattern to the bundle. The worker's
+    compressed images are released before the calibration starts (its collection holds
+    stacked copies)."""
+    from thintact_sdk.calibration import wizard
+    from thintact_sdk.calibration.collect import SlitCompressor
+
+    events: list[str] = []
+    real_release, real_calibrate = SlitCompressor.release, wizard.calibrate_recording
+
+    def release(self: SlitCompressor) -> None:
+        events.append("released")
+        real_release(self)
+
+    def calibrate(*a: Any, **k: Any) -> Any:
+        events.append("calibrate")
+        return real_calibrate(*a, **k)
+
+    monkeypatch.setattr(SlitCompressor, "release", release)
+    monkeypatch.setattr(wizard, "calibrate_recording", calibrate)
     runs = _with_and_without_the_worker(tmp_path, SETTINGS)
+    assert events == ["released", "calibrate", "calibrate"]  # the pipelined run first
     fast, slow = runs[True], runs[False]
     m = fast.bundle.meta["metrics"]
     assert m["pipelined"]["solve"] and m["pipelined"]["prediction_design"], m["pipelined"]

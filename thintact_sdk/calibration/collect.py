@@ -403,6 +403,13 @@ class SlitCompressor:
             return collect_slits(recording, self.rank, progress, frame_gains)
         return self.slit_collection()
 
+    def release(self) -> None:
+        """Drop the compressed slit images (a collection made of them holds its own stacked
+        copies): once the capture's collection is made, nothing reads them again. Afterwards
+        :meth:`finish` collects from the recording and :meth:`slit_collection` refuses."""
+        self.acc = None
+        self.broken = self.broken or "the compressed slits were released"
+
     def slit_collection(self) -> SlitCollection:
         """The collection of what was added so far (the solve can start once every slit is
         in; its ``validation`` lists the other frames seen so far)."""

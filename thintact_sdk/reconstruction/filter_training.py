@@ -178,10 +178,12 @@ def make_training_data(
     for f, scene in enumerate(scenes):  # written in place: no list of frames beside the stack
         x = scene_for_channels(scene, system_matrices.channels)
         yo = system_matrices.forward_open(x)
-        y = yo + system_matrices.forward_coding(x)
+        y = system_matrices.forward_coding(x)
+        y += yo  # in place: one float64 frame fewer at a time (the same sums)
         if noise is not None:
-            var = signal_variance_dn(y, noise)
-            y = y + rng.standard_normal(y.shape) * np.sqrt(var)
+            draw = rng.standard_normal(y.shape)
+            draw *= np.sqrt(signal_variance_dn(y, noise))
+            y += draw
         if ys is None:
             ys = np.empty((len(scenes), y.shape[-1], *y.shape[:-1]), np.float32)
             yos = np.empty_like(ys) if hold_open else None
