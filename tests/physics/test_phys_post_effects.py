@@ -108,9 +108,10 @@ def test_sensor_blur_and_glare(mini, scenes, base):
     sim = Simulator(mini.with_physics({"sensor_blur": {"sigma_um": 15.0},
                                        "veiling_glare": {"fraction": 0.1}}))
     y = sim.forward_batch(scenes)
-    b = pixel_blur_brute_force(base, 1.5, up=8)  # 8× already within 2e-4 of 16× here, far inside the tolerance
+    # independent reference: scipy's Gaussian filter, weights sampled at the pixel offsets
+    b = gaussian_filter(base, sigma=(0, 1.5, 1.5, 0), mode="reflect", truncate=6)
     expect = b + 0.1 * b.mean(axis=(1, 2), keepdims=True)
-    assert np.allclose(y, expect, rtol=2e-3, atol=2e-3 * np.abs(expect).max())
+    assert np.allclose(y, expect, rtol=1e-6, atol=1e-6 * np.abs(expect).max())
     terms = sim.separable_terms(2)
     assert np.allclose(sum(p @ scenes[1, ..., 2] @ q.T for p, q in terms), y[1, ..., 2], rtol=1e-9)
 
@@ -157,3 +158,40 @@ def test_changing_post_effects_reuses_the_kernel(mini, scenes):
     for g in (0.8, 0.9, 1.1):
         Simulator(mini.with_physics({"sensor_gamma": {"gamma": g}})).predict_dn(scenes, 2e4)
     assert time.perf_counter() - t0 < 3.0
+
+
+def test_sensor_blur_is_sampled_at_the_pixel_offsets():
+    """The independent renderer's convention (issue 34): a 4 um blur on 10 um pixels moves
+    exp(-1/(2·0.4²)) / Σ of the light into each neighbour (4.04 %), a 3 um one 0.4 %; the
+    scene blur keeps the weights integrated over its (piecewise-constant) pixels."""
+    from thintact_sdk.simulation.effects import scene_blur, sensor_blur
+
+    one = np.zeros((1, 9, 9, 1))
+    one[0, 4, 4, 0] = 1.0
+    row = sensor_blur.apply(one, 4.0, 10.0)[0, 4, :, 0] / sensor_blur.apply(one, 4.0, 10.0)[0, 4].sum()
+    x = np.arange(-4, 5)
+    g = np.exp(-0.5 * (x / 0.4) ** 2)
+    assert np.allclose(row, g / g.sum(), atol=1e-12)
+    assert row[5] == pytest.approx(0.0404, abs=5e-5)
+    assert sensor_blur.apply(one, 3.0, 10.0)[0, 4, 5, 0] / sensor_blur.apply(one, 3.0, 10.0)[0, 4].sum() \
+        == pytest.approx(0.0037, abs=2e-4)
+    # the scene blur: 3 um over 10 um pixels moves sigma/(sqrt(2 pi) pitch) ~ 12 %
+    s_row = scene_blur.apply(one, 3.0, 10.0)[0, 4, :, 0]
+    assert s_row[5] / s_row.sum() == pytest.approx(0.3 / np.sqrt(2 * np.pi), abs=0.005)
+
+
+@pytest.mark.parametrize("block", [2, 4])
+def test_sensor_blur_on_blocks_is_the_fine_blur_binned(block):
+    """On a binned copy (``sensor.block_pixels``) the weights are the fine pixels' sampled
+    weights summed over the blocks: exact for a signal uniform within each block."""
+    from thintact_sdk.simulation.effects._blur import blur_pixels
+
+    rng = np.random.default_rng(2)
+    coarse = rng.random((1, 6, 7, 1))
+    fine = np.repeat(np.repeat(coarse, block, axis=1), block, axis=2)
+    sigma_fine = 1.3
+    blurred = blur_pixels(fine, sigma_fine, (1, 2), "sampled")
+    binned = blurred.reshape(1, 6, block, 7, block, 1).mean(axis=(2, 4))
+    on_blocks = blur_pixels(coarse, sigma_fine / block, (1, 2), "sampled", block)
+    # interior blocks (the mirrored edges differ between the two grids by design)
+    assert np.allclose(on_blocks[:, 2:-2, 2:-2], binned[:, 2:-2, 2:-2], atol=1e-12)

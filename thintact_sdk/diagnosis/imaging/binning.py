@@ -60,7 +60,8 @@ def auto_bin_factor(rows: int, cols: int, max_pixels: int = MAX_DIAGNOSIS_PIXELS
 
 
 def binned_profile(profile: Profile, b: int) -> Profile:
-    """The device whose sensor pixels are ``b × b`` blocks of ``profile``'s (pitch × b)."""
+    """The device whose sensor pixels are ``b × b`` blocks of ``profile``'s (pitch × b; the
+    sensor section's ``block_pixels`` says so, for effects defined between single pixels)."""
     if b < 1 or profile.sensor.rows % b or profile.sensor.cols % b:
         raise ThinTactError(
             f"bin factor {b} must divide the sensor's rows ({profile.sensor.rows}) and "
@@ -71,6 +72,9 @@ def binned_profile(profile: Profile, b: int) -> Profile:
     d["sensor"]["rows"] = profile.sensor.rows // b
     d["sensor"]["cols"] = profile.sensor.cols // b
     d["sensor"]["pixel_pitch_um"] = profile.sensor.pixel_pitch_um * b
+    # effects defined between the recording's pixels (the sampled sensor blur) take their
+    # weights there and sum them over the blocks
+    d["sensor"]["block_pixels"] = b * int(getattr(profile.sensor, "block_pixels", None) or 1)
     return profile_from_dict(d)
 
 

@@ -1,7 +1,10 @@
 """``sensor_blur``: Gaussian blur in the sensor plane (optical / electrical pixel crosstalk).
 
-The blur is integrated over the pixels (see :mod:`thintact_sdk.simulation.effects._blur`). Edges are
-mirrored (``reflect``).
+Between pixel values the Gaussian is sampled at the pixel offsets and normalised: the sensor's
+irradiance is smooth across a pixel, so this is the blurred irradiance integrated over the
+pixel (see :mod:`thintact_sdk.simulation.effects._blur`; a 4 um blur on 10 um pixels moves
+4.04 % of a pixel's light into each neighbour, one below 3 um under 0.4 %). Edges are mirrored
+(``reflect``).
 
 Bound: σ ≤ 500 um. Pixel crosstalk (microlens and colour-filter stack, charge diffusion)
 spreads light over a few pixels (a few to tens of um); a Gaussian half a millimetre wide
@@ -14,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from thintact_sdk.simulation.effects._blur import blur_by_um, plane_blur_hooks
+from thintact_sdk.simulation.effects._blur import PLANE_CONVENTION, blur_by_um, plane_blur_hooks
 from thintact_sdk.simulation.effects._spec import (
     DeviceProfile,
     EffectSpec,
@@ -26,7 +29,7 @@ from thintact_sdk.simulation.effects._spec import (
 
 def apply(signals: np.ndarray, sigma_um: float, pitch_um: float) -> np.ndarray:
     """Blur ``F × rows × cols × C`` signals by ``sigma_um`` (sensor pixel pitch ``pitch_um``)."""
-    return blur_by_um(signals, sigma_um, pitch_um)
+    return blur_by_um(signals, sigma_um, pitch_um, PLANE_CONVENTION["sensor"])
 
 
 _forward, _terms = plane_blur_hooks("sensor")
