@@ -87,17 +87,17 @@ CASES: dict[str, dict[str, Any]] = {
         "physics": {"scene_blur": {"sigma_um": 60.0}},
         "check": {"sigma_um": (60.0, 3.0)},
     },
-    # the concealed set's blurs change this device's prediction by 3.7e-4 of the signal, under
-    # the diagnosis's 6e-4 amplitude floor: nothing may be named, and the unbinned stage must
-    # say which effect would explain the unbinned excess below the floor
+    # the concealed set's blurs and leakage change this device's prediction by 2.6-4.1e-4 of
+    # the signal, under the diagnosis's 6e-4 amplitude floor: decisive and stable under refit
+    # (the same value on each half of the frames), they are named all the same (issue 34)
     "subfloor_sensor_blur": {
-        "physics": {"sensor_blur": {"sigma_um": 6.0}}, "check": {}, "below_floor": "sensor_blur",
+        "physics": {"sensor_blur": {"sigma_um": 6.0}}, "check": {"sigma_um": (6.0, 1.0)},
     },
     "subfloor_scene_blur": {
-        "physics": {"scene_blur": {"sigma_um": 25.0}}, "check": {}, "below_floor": "scene_blur",
+        "physics": {"scene_blur": {"sigma_um": 25.0}}, "check": {"sigma_um": (25.0, 3.0)},
     },
     "subfloor_leakage": {  # the concealed set's 3 %: 4.1e-4 of this device's signal
-        "physics": {"mask_leakage": {"transmittance": 0.03}}, "check": {}, "below_floor": "mask_leakage",
+        "physics": {"mask_leakage": {"transmittance": 0.03}}, "check": {"transmittance": (0.03, 0.003)},
     },
     "display_gamma": {
         "physics": {"display_gamma": {"gamma": 1.15}},
@@ -120,7 +120,7 @@ CASES: dict[str, dict[str, Any]] = {
 """Hidden effects, and ``{param: (truth, tolerance)}`` for the check (the tolerances of
 ``tests/diagnose/test_diagnose_concealed.py``; the angle and shift of ``mask_shift`` and the
 geometry's looser, as binned data see them; the blurs at widths this device's prediction
-shows above the amplitude floor, ``subfloor_*`` at the concealed set's). Every effect the simulator renders at this
+shows above the amplitude floor, ``subfloor_*`` at the concealed set's, under it). Every effect the simulator renders at this
 size is here, the rotated mask streamed window by window (``Simulator(stream_windows=True)``);
 refraction is not (its kernel refuses this size, and the diagnosis does not screen it:
 ``binned.not_screened``). ``clean``: nothing hidden, nothing may be named."""
@@ -189,11 +189,6 @@ def run_diagnose(rec: Path, out: Path, time_budget_s: float) -> tuple[int, float
 def check_finding(report: dict[str, Any], case: str) -> list[str]:
     """Problems with the report's findings for ``case`` (empty: right)."""
     found = [f["effect"] for f in report.get("findings", [])]
-    if "below_floor" in CASES[case]:
-        want = CASES[case]["below_floor"]
-        low = [b["effect"] for b in report.get("below_floor", [])]
-        bad = [f"an effect under the amplitude floor, but named {found}"] if found else []
-        return bad + ([] if want in low else [f"the unbinned stage did not name {want} under the floor ({low})"])
     if not CASES[case]["physics"]:
         return [f"nothing hidden, but named {found}"] if found else []
     name = next(iter(CASES[case]["physics"]))

@@ -223,8 +223,9 @@ def test_cli_screens_a_mask_shift_with_the_angle_held(tmp_path: Path,
 def test_unbinned_amplitude_admits_an_effect_binning_hides(tmp_path: Path) -> None:
     """A mask shift changes the binned prediction less than the unbinned one (binning
     averages its fine structure away). With the amplitude floor between the two, the
-    binned diagnosis rejects it on its own but names it when the change is measured on
-    the unbinned recording (as the CLI does)."""
+    binned diagnosis names it on its own only by its refit on each half of the frames (it
+    is decisive and stable), and by its amplitude when the change is measured on the
+    unbinned recording (as the CLI does)."""
     from thintact_sdk.diagnosis.imaging import DiagnoseOptions, diagnose, load_diagnosis_data
     from thintact_sdk.diagnosis.imaging.binning import bin_data, unbinned_amplitude_fn
 
@@ -242,13 +243,16 @@ def test_unbinned_amplitude_admits_an_effect_binning_hides(tmp_path: Path) -> No
     opts = DiagnoseOptions(candidates=["mask_misalignment"], amp_floor=floor, max_effects=1,
                            held_params={"mask_misalignment": ("angle_deg",)})
     d = diagnose(data, variance_fn=binned_variance_fn(4), options=opts)
-    assert d.report["findings"] == []
+    f = d.report["findings"][0]
+    assert f["effect"] == "mask_misalignment" and abs(f["params"]["dx_um"] - 7.0) < 1.0
     assert "unbinned" not in " ".join(d.selection.log)
+    assert "stable under refit" in f["evidence"] and f["amplitude_fraction"] < floor
+    assert all(abs(h["dx_um"] - 7.0) < 1.0 for h in f["refit_on_halves"])
     opts.fine_amplitude = fine
     d = diagnose(data, variance_fn=binned_variance_fn(4), options=opts)
     f = d.report["findings"][0]
     assert f["effect"] == "mask_misalignment" and abs(f["params"]["dx_um"] - 7.0) < 1.0
-    assert "on the unbinned recording" in f["evidence"]
+    assert "on the unbinned recording" in f["evidence"] and "refit_on_halves" not in f
 
 
 def test_held_params_name_fit_parameters() -> None:

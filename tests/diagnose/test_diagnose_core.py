@@ -23,11 +23,13 @@ class _T:
 class _Search:
     """Candidates with a fixed Δχ² each, the same every round; ``veto`` is never admitted."""
 
-    def __init__(self, gains: dict[str, tuple[float | None, int]], veto: str = "") -> None:
-        self.gains, self.veto = gains, veto
+    def __init__(self, gains: dict[str, tuple[float | None, int]], veto: str = "",
+                 second_look: str = "") -> None:
+        self.gains, self.veto, self.second_look = gains, veto, second_look
         self.accepted: list[tuple[str, list[str], float]] = []
         self.settled = False
         self.reviews: list[list[str]] = []
+        self.reconsidered: list[list[str]] = []
 
     def has_candidates(self) -> bool:
         return len(self.accepted) < len(self.gains)
@@ -38,6 +40,10 @@ class _Search:
 
     def admits(self, t: _T) -> bool:
         return t.name != self.veto
+
+    def reconsider(self, tried: list[_T]) -> list[_T]:
+        self.reconsidered.append([t.name for t in tried])
+        return [t for t in tried if t.name == self.second_look]
 
     def review(self, tried: list[_T], cleared: list[_T]) -> None:
         self.reviews.append([t.name for t in cleared])
@@ -76,6 +82,20 @@ def test_admission_rule_max_effects_and_a_stop() -> None:
 
     stops = _Stops({"a": (30.0, 1)})
     assert forward_select(stops, crit, max_effects=3) == 0 and not stops.settled
+
+
+def test_a_second_look_only_when_nothing_is_admitted() -> None:
+    """``reconsider`` sees only the candidates that clear the criterion, and only in a round
+    whose admission rule admitted none; what it returns is accepted like a cleared one."""
+    crit = InformationCriterion.for_values(100, margin=10.0)
+    search = _Search({"a": (30.0, 1), "b": (40.0, 3), "c": (12.0, 1)}, veto="b", second_look="b")
+    forward_select(search, crit, max_effects=5)
+    # round 1: a admitted (b vetoed); round 2: b vetoed, nothing else clears -> second look
+    assert [a[0] for a in search.accepted] == ["a", "b"]
+    assert search.reconsidered == [["b"]]  # round 3: c clears nothing, nothing to look at
+    none = _Search({"b": (40.0, 3)}, veto="b")
+    forward_select(none, crit, max_effects=5)
+    assert none.accepted == [] and none.settled and none.reconsidered == [["b"]]
 
 
 def test_report_skeleton_keeps_section_order_and_places_extras() -> None:

@@ -97,8 +97,8 @@ def test_every_effect_simulates_at_paper_size_or_refuses_cleanly(repo_root: Path
 @pytest.mark.parametrize("case", ["sensor_blur", "subfloor_leakage"])
 def test_paper_size_sub_block_and_sub_floor_cases(repo_root: Path, tmp_path: Path, case: str) -> None:
     """A 10 um sensor blur (binned it looks like a scene blur; the unbinned stage puts the
-    blur in its place) and a 3 % leakage under the amplitude floor (not named, listed in
-    ``below_floor``), each within the limits (measured 148 s / 127 s, 6.2 / 5.6 GiB)."""
+    blur in its place) and a 3 % leakage under the amplitude floor (named because its fit is
+    decisive and stable under refit), each within the limits."""
     tool = _tool(repo_root, "diagnose_paper_size")
     rc = tool.main(["--out", str(tmp_path), "--case", case])
     result = json.loads((tmp_path / "result.json").read_text())

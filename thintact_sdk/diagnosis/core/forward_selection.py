@@ -6,7 +6,9 @@ fitted at the current model, each a :class:`Tried`: its name, ``dchi2`` (how muc
 −2 log-likelihood, χ² units; ``None`` when it was not fitted) and ``k`` (the parameters it
 adds). A candidate *clears* the :class:`InformationCriterion` when ``dchi2 > k·ln n +
 margin`` (its BIC drops by more than ``margin``) and the diagnosis *admits* it (a rule of its
-own: an amplitude floor, a share of the excess χ²). The cleared candidate with the largest
+own: an amplitude floor, a share of the excess χ²); when it admits none, it may still
+*reconsider* the ones that clear the criterion with a costlier check of its own (imaging: a
+refit on each half of the frames). The cleared candidate with the largest
 BIC gain ``dchi2 − k·ln n`` is accepted, together with the alternatives the diagnosis names;
 the loop ends when none clears, when the diagnosis has nothing left to try or stops (a time
 budget), or when ``max_effects`` effects are accepted.
@@ -91,6 +93,11 @@ class EffectSearch(Protocol[T]):
         clear it, in order)."""
         ...
 
+    def reconsider(self, tried: list[T]) -> list[T]:
+        """No candidate of the round was admitted: those of ``tried`` (each clearing the
+        criterion) the diagnosis admits on a second, costlier look; empty when none."""
+        ...
+
     def review(self, tried: list[T], cleared: list[T]) -> None:
         """Called every round once ``cleared`` is known, before accepting or stopping."""
         ...
@@ -117,6 +124,9 @@ def forward_select(search: EffectSearch[T], criterion: InformationCriterion,
         if tried is None:
             break
         cleared = [t for t in tried if criterion.clears(t) and search.admits(t)]
+        clearing = [t for t in tried if criterion.clears(t)]
+        if not cleared and clearing:
+            cleared = search.reconsider(clearing)
         search.review(tried, cleared)
         if not cleared:
             search.settle(tried)

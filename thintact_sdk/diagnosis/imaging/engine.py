@@ -527,6 +527,27 @@ def _finding(
         + ("." if rnd.fine_amplitude is None else
            f" ({rnd.fine_amplitude:.1e} of the signal on the unbinned recording).")
     )
+    extra: dict[str, Any] = {}
+    if rnd.below_floor is not None:
+        halves = [CANDIDATES[rnd.name].to_params(h, prof) for h in rnd.halves or []]
+        ev_txt += (
+            f" That change is {rnd.below_floor:.1e} of the rms signal, under the amplitude floor, "
+            "but the fit is decisive and stable under refit: on each half of the frames it clears "
+            f"the criterion again, at {' and '.join(map(str, halves))}, so it is named.")
+        extra["amplitude_fraction"] = float(f"{rnd.below_floor:.3g}")
+        extra["refit_on_halves"] = halves
+    if rnd.swapped_from is not None:
+        ev_txt += (
+            f" Its round first accepted {rnd.swapped_from}; once the later effects were in, "
+            f"{rnd.name} in its place fits better (BIC lower by {rnd.swap_dchi2:.0f}), so it was swapped.")
+        extra["swapped_from"] = rnd.swapped_from
+    for name, vec, gain in rnd.absorbed:
+        ev_txt += (
+            f" It makes {name} (accepted in an earlier round) unnecessary: refitted with it, that "
+            f"effect went to {CANDIDATES[name].to_params(vec, prof)}, and the model without it "
+            f"fits better (BIC lower by {gain:.0f}), so it was dropped.")
+    if rnd.absorbed:
+        extra["absorbed"] = [name for name, _v, _g in rnd.absorbed]
     alts = []
     for a in rnd.alternatives:
         assert a.evaluation is not None
@@ -536,4 +557,4 @@ def _finding(
             + tell_apart(rnd.name, a.name, _frame_hint(data, model, rnd.evaluation, a.evaluation))
         )
     return finding_entry(rnd.name, params, round(view.stats.rms_dn, 4),
-                         round(view.stats.chi2_per_dof, 4), ev_txt, alts)
+                         round(view.stats.chi2_per_dof, 4), ev_txt, alts, **extra)

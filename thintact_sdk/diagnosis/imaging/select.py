@@ -16,6 +16,12 @@ Round by round, at the current model (effects accepted so far, gains profiled):
    fit is as good within the BIC resolution are named as alternatives. The loop and the
    criterion are the ones tactile shares
    (:mod:`~thintact_sdk.diagnosis.core.forward_selection`); this module supplies the rounds.
+4. *Under the floor*: when every candidate that clears Δχ² stays under the floor, the best
+   is still accepted when it is decisive and stable under refit on each half of the frames
+   (:func:`_stable_under_refit`): a floor must never hide a decisive effect.
+5. *Revisit*: after each accepted effect, every earlier round's winner is left out or
+   swapped for its round's fitted rivals, refitted jointly, and the lowest BIC kept
+   (:func:`_revisit_rounds`).
 
 W holds 1/(σ² + (sys_frac·signal)²): the systematic-error allowance.
 
@@ -29,6 +35,7 @@ never tested here by name. One :class:`~thintact_sdk.diagnosis.imaging.deadline.
 
 from __future__ import annotations
 
+import copy
 import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
@@ -62,6 +69,21 @@ SIMULATION_ERRORS = (ThinTactError, ImportError, NotImplementedError, ValueError
 #: concealed set are 0.7-4.3 (geometry, a strongly nonlinear effect, 4.3)
 LINE_SEARCH_REACH = 10.0
 
+#: a candidate under the amplitude floor is still named when it is decisive and *stable under
+#: refit*: refitted on each half of the fit frames (every other frame, the accepted effects
+#: refitted with it), it clears the criterion on both halves and every fitted parameter of
+#: each half lies within ``STABLE_REL`` of the whole fit's value plus ``STABLE_STEP`` of the
+#: effect's typical step (so that a parameter near its null value has a scale). 25 % is the
+#: parameter tolerance the diagnosis is held to (a 4 um blur within 1 um)
+STABLE_REL = 0.25
+STABLE_STEP = 0.05
+
+#: the fitted rivals of an earlier round revisited after each accepted effect (best first)
+REVISIT_RIVALS = 2
+
+#: candidates under the floor checked for stability in a round that admitted none (best first)
+STABLE_CHECKS = 2
+
 
 @dataclass
 class CandidateResult:
@@ -78,6 +100,8 @@ class CandidateResult:
     refined: bool = False  # Levenberg-Marquardt done (not only the line search)
     joint: Values = field(default_factory=dict)  # refitted values of earlier effects
     fine_amplitude: float | None = None  # relative change on the finer data (FineAmplitude)
+    halves: list[np.ndarray] | None = None  # refitted on each half of the frames (stability)
+    stable: bool | None = None  # decisive and stable under refit on the halves (None: not checked)
 
 
 @dataclass
@@ -94,6 +118,17 @@ class Round:
     ranking: list[CandidateResult]
     evaluation: Evaluation
     fine_amplitude: float | None = None
+    #: named under the amplitude floor (a fraction of the rms signal) because its fit is
+    #: decisive and stable under refit; the halves' parameter vectors
+    below_floor: float | None = None
+    halves: list[np.ndarray] | None = None
+    #: the effect this round first accepted and a later round's revisit replaced, with the
+    #: χ² the replacement saved (:func:`_revisit_rounds`)
+    swapped_from: str | None = None
+    swap_dchi2: float = 0.0
+    #: effects accepted in earlier rounds that this one made unnecessary (dropped by the
+    #: revisit, :func:`_revisit_rounds`): ``(name, parameters when dropped, BIC gain)``
+    absorbed: list[tuple[str, np.ndarray, float]] = field(default_factory=list)
 
 
 @dataclass
@@ -108,6 +143,7 @@ class BelowFloor:
     amplitude_fraction: float  # rms change of the prediction / rms signal
     fine_amplitude: float | None  # the same on the unbinned recording, when measured
     vector: np.ndarray
+    halves: list[np.ndarray] | None = None  # refitted on each half of the frames (not stable)
 
     def to_json(self, profile: Profile) -> dict[str, object]:
         """``report.json`` ``below_floor`` entry (parameters in the contract's units)."""
@@ -118,6 +154,8 @@ class BelowFloor:
             "amplitude_fraction": float(f"{self.amplitude_fraction:.3g}")}
         if self.fine_amplitude is not None:
             out["unbinned_amplitude_fraction"] = float(f"{self.fine_amplitude:.3g}")
+        if self.halves is not None:
+            out["refit_on_halves"] = [cand.to_params(h, profile) for h in self.halves]
         return out
 
 
@@ -451,6 +489,15 @@ class _ImagingSearch:
         return r.amplitude_dn > self.amp_floor * self.signal_rms or _clears_fine_floor(
             self.state, r, self.amp_floor, self.fine_amplitude, self.say)
 
+    def reconsider(self, tried: list[CandidateResult]) -> list[CandidateResult]:
+        """Every candidate that cleared the criterion stayed under the amplitude floor: the
+        best of them (by BIC gain) is named all the same when it is decisive and stable under
+        refit (:func:`_stable_under_refit`); the next one is looked at only when it is not."""
+        for r in sorted(tried, key=lambda t: -self.criterion.gain(t))[:STABLE_CHECKS]:
+            if _stable_under_refit(self.state, r, self.criterion, self.deadline.share(0.5), self.say):
+                return [r]
+        return []
+
     def review(self, tried: list[CandidateResult], cleared: list[CandidateResult]) -> None:
         return None
 
@@ -463,13 +510,19 @@ class _ImagingSearch:
     def accept(self, best: CandidateResult, alternatives: list[CandidateResult],
                threshold: float) -> None:
         self.state.accept(best, alternatives, self.scores, threshold)
+        rnd = self.state.rounds[-1]
+        if best.stable and best.amplitude_dn <= self.amp_floor * self.signal_rms:
+            rnd.below_floor = best.amplitude_dn / max(self.signal_rms, 1e-12)
+            rnd.halves = best.halves
+        # at most 30 % of the time left, so that later rounds still happen
+        _revisit_rounds(self.state, self.criterion, self.deadline.share(0.3), self.say)
 
     def settle(self, tried: list[CandidateResult]) -> None:
         state, crit = self.state, self.criterion
         state.rejected.extend(tried)
         state.below_floor = sorted(
             (BelowFloor(r.name, r.dchi2, crit.threshold(r.k), r.amplitude_dn / max(self.signal_rms, 1e-12),
-                        r.fine_amplitude, np.asarray(r.fitted, float))
+                        r.fine_amplitude, np.asarray(r.fitted, float), r.halves)
              for r in tried if r.dchi2 is not None and r.fitted is not None and crit.clears(r)),
             key=lambda b: -b.dchi2)
         state.log.append("no remaining candidate clears the criterion: " + ", ".join(
@@ -498,6 +551,177 @@ def _clears_fine_floor(
         return False
     say(f"{res.name}: changes the unbinned prediction by {res.fine_amplitude:.1e} of the signal")
     return res.fine_amplitude > amp_floor
+
+
+def half_model(model: DiagnosisModel, keep: np.ndarray) -> DiagnosisModel:
+    """``model`` fitted on the frames ``keep`` (bool per frame) only: the same data, simulator
+    cache and weights, the other frames weighted 0."""
+    half = copy.copy(model)
+    sel = np.asarray(keep, bool)[:, None, None, None]
+    half.fit_mask = model.fit_mask & sel
+    half.n_fit = int(half.fit_mask.sum())
+    half.weights = np.where(sel, model.weights, 0.0)
+    return half
+
+
+def _stable_under_refit(state: _SelectionState, res: CandidateResult, criterion: InformationCriterion,
+                        deadline: Deadline, say: Callable[[str], None]) -> bool:
+    """True when ``res`` (a candidate whose fit cleared ``criterion`` on the fit frames) is
+    decisive and stable under refit (:data:`STABLE_REL`): refitted from its whole fit on the
+    even and on the odd frames, with the accepted effects refitted jointly, it clears the
+    criterion on each half and its parameters agree. Fills ``res.halves`` and ``res.stable``."""
+    model = state.model
+    frames = model.data.measured_dn.shape[0]
+    if res.fitted is None or frames < 2 or deadline.expired():
+        return False
+    cand = CANDIDATES[res.name]
+    free = model.free(cand)
+    tol = STABLE_REL * np.abs(res.fitted) + STABLE_STEP * np.abs(cand.step(model.profile))
+    halves: list[np.ndarray] = []
+    cleared = True
+    for parity in (0, 1):
+        half = half_model(model, np.arange(frames) % 2 == parity)
+        ev0 = half.evaluate(state.values)
+        try:
+            if cand.domain == "linear":  # closed-form terms: solved on the half
+                part = score_candidate(half, state.values, ev0, cand)
+            else:
+                trial = Trial(half, state.values, (res.name,))
+                part = CandidateResult(res.name, res.k, res.score_dchi2, res.vector,
+                                       fitted=np.array(res.fitted, float), evaluation=trial(
+                                           trial.pack({**state.values, res.name: res.fitted})))
+                fit_candidate(half, state.values, ev0, part, deadline, jointly=state.accepted)
+        except SIMULATION_ERRORS as err:
+            state.log.append(f"{res.name}: its refit on half the frames failed in the simulator ({err})")
+            return False
+        assert part.fitted is not None
+        halves.append(part.fitted)
+        cleared &= InformationCriterion.for_values(half.n_fit, criterion.margin).clears(part)
+    res.halves = halves
+    agree = all(bool(np.all(np.abs(h[free] - res.fitted[free]) <= tol[free])) for h in halves)
+    res.stable = cleared and agree
+    say(f"{res.name}: under the amplitude floor; refitted on each half of the frames "
+        + " / ".join(str(cand.to_params(h, model.profile)) for h in halves)
+        + (": stable, named" if res.stable else ": not stable, not named"))
+    return res.stable
+
+
+def _drop_if_absorbed(state: _SelectionState, rnd: Round, criterion: InformationCriterion,
+                      deadline: Deadline, say: Callable[[str], None]) -> bool:
+    """Leave ``rnd``'s effect out, refit the newest other accepted one (with every other that
+    may move) and keep that model when its BIC is lower; True when it was dropped."""
+    model = state.model
+    last = next(r for r in reversed(state.rounds) if r is not rnd)
+    start = {n: v for n, v in state.values.items() if n != rnd.name}
+    joint = tuple(r.name for r in state.rounds
+                  if r is not rnd and r is not last and CANDIDATES[r.name].joint_refit)
+    now = model.evaluate(state.values)
+    try:
+        vals, ev = _refine(model, CANDIDATES[last.name], start, np.array(start[last.name], float),
+                           model.evaluate(start), 6, deadline, joint)
+    except SIMULATION_ERRORS as err:
+        state.log.append(f"revisiting {rnd.name} (left out) failed in the simulator ({err})")
+        return False
+    gain = (now.chi2 - ev.chi2) + rnd.k * criterion.ln_n
+    say(f"revisit {rnd.name} → left out: χ² {now.chi2:.1f} → {ev.chi2:.1f}")
+    if gain <= 0:
+        return False
+    state.log.append(f"revisited {rnd.name}: no longer needed once {last.name} is in "
+                     f"(BIC lower by {gain:.1f} without it); dropped")
+    last.absorbed.append((rnd.name, np.asarray(rnd.vector, float), gain))
+    state.rounds.remove(rnd)
+    state.values = {**start, **vals}
+    for r in state.rounds:
+        r.vector = np.asarray(state.values[r.name], float)
+    state.accepted = tuple(r.name for r in state.rounds)
+    model.set_reference(ev.pred_dn)
+    state.ev = model.evaluate(state.values)
+    return True
+
+
+def _revisit_rounds(state: _SelectionState, criterion: InformationCriterion, deadline: Deadline,
+                    say: Callable[[str], None]) -> None:
+    """Revisit each earlier round's choice now that a later effect is in the model: its
+    winner is left out, or swapped, in turn, for the (at most :data:`REVISIT_RIVALS`, by BIC
+    gain) rivals that round fitted (line search or full fit) and that cleared the criterion
+    there; each variant is refitted
+    jointly with the other accepted effects, and the best one whose BIC is lower than the
+    current model's is kept (a swapped-out winner is named as its alternative; a left-out one
+    is recorded by the newest round as absorbed). Greedy selection takes the best effect at
+    the model of its round: a uniform veil can fit a recording better than mask leakage only
+    until a pixel blur is in the model, and leakage can stand in for a blur on binned data
+    until the blur itself is in (its joint refit then goes to 0)."""
+    if len(state.rounds) < 2:
+        return
+    changed = False
+    for rnd in list(state.rounds[:-1]):
+        if deadline.expired():
+            return
+        changed |= _revisit_round(state, rnd, criterion, deadline, say)
+    if changed and len(state.rounds) > 1:
+        # the model changed under the later rounds' choices too: one more pass, every round
+        for rnd in list(state.rounds):
+            if deadline.expired() or rnd not in state.rounds:
+                return
+            _revisit_round(state, rnd, criterion, deadline, say)
+
+
+def _revisit_round(state: _SelectionState, rnd: Round, criterion: InformationCriterion,
+                   deadline: Deadline, say: Callable[[str], None]) -> bool:
+    """One round of :func:`_revisit_rounds`; True when its effect was dropped or swapped."""
+    model = state.model
+    if _drop_if_absorbed(state, rnd, criterion, deadline, say):
+        return True
+    rivals = sorted((r for r in rnd.ranking
+                     if r.fitted is not None and r.name != rnd.name
+                     and r.name not in state.values and r.dchi2 is not None and criterion.clears(r)),
+                    key=lambda r: -criterion.gain(r))[:REVISIT_RIVALS]
+    now = model.evaluate(state.values)
+    best: tuple[float, CandidateResult, Values, Evaluation] | None = None
+    for riv in rivals:
+        assert riv.fitted is not None
+        start = {n: v for n, v in state.values.items() if n != rnd.name}
+        cand = CANDIDATES[riv.name]
+        joint = tuple(n for n in state.accepted
+                      if n != rnd.name and n in start and CANDIDATES[n].joint_refit)
+        start[riv.name] = riv.fitted
+        try:
+            ev_start = model.evaluate(start)
+            vals, ev = _refine(model, cand, start, np.array(riv.fitted, float), ev_start, 6,
+                               deadline, joint)
+        except SIMULATION_ERRORS as err:
+            state.log.append(f"revisiting {rnd.name} with {riv.name} failed in the simulator ({err})")
+            continue
+        gain = (now.chi2 - ev.chi2) - (riv.k - rnd.k) * criterion.ln_n
+        say(f"revisit {rnd.name} → {riv.name}: χ² {now.chi2:.1f} → {ev.chi2:.1f}")
+        if gain > 0 and (best is None or gain > best[0]):
+            best = (gain, riv, {**start, **vals}, ev)
+    if best is None:
+        return False
+    gain, riv, vals, ev = best
+    old = rnd.name
+    others = [r.name for r in state.rounds if r is not rnd]
+    state.log.append(f"revisited {old}: {riv.name} explains the data better once "
+                     f"{', '.join(others)} {'is' if len(others) == 1 else 'are'} in "
+                     f"(BIC lower by {gain:.1f}); swapped")
+    assert riv.fitted is not None and riv.dchi2 is not None
+    displaced = CandidateResult(old, rnd.k, 0.0, rnd.vector, dchi2=rnd.dchi2, fitted=rnd.vector,
+                                evaluation=rnd.evaluation, refined=True)
+    rnd.name, rnd.vector, rnd.k, rnd.dchi2 = riv.name, vals[riv.name], riv.k, riv.dchi2
+    rnd.threshold = criterion.threshold(riv.k)
+    rnd.amplitude_dn, rnd.fine_amplitude = riv.amplitude_dn, riv.fine_amplitude
+    rnd.alternatives = [displaced]
+    rnd.evaluation = riv.evaluation if riv.evaluation is not None else rnd.evaluation
+    rnd.swapped_from, rnd.swap_dchi2 = old, gain
+    rnd.below_floor, rnd.halves = None, None
+    state.values = {n: v for n, v in vals.items() if n != old}
+    for r in state.rounds:
+        r.vector = np.asarray(state.values[r.name], float)
+    state.accepted = tuple(r.name for r in state.rounds)
+    state.remaining = [c for c in state.remaining if c != riv.name]
+    model.set_reference(ev.pred_dn)
+    state.ev = model.evaluate(state.values)
+    return True
 
 
 class _SelectionState:

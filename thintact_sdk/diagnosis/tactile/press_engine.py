@@ -141,6 +141,9 @@ class _TactileSearch:
                                      "chi2_per_dof": round(t.score.chi2_per_dof, 5)} for t in tried})
         return tried
 
+    def reconsider(self, tried: list[_Tried]) -> list[_Tried]:
+        return []  # the excess-share rule has no costlier second look
+
     def admits(self, t: _Tried) -> bool:
         cur = self.current
         return (cur.chi2_per_dof - t.score.chi2_per_dof
