@@ -615,7 +615,7 @@ def _drop_if_absorbed(state: _SelectionState, rnd: Round, criterion: Information
     start = {n: v for n, v in state.values.items() if n != rnd.name}
     joint = tuple(r.name for r in state.rounds
                   if r is not rnd and r is not last and CANDIDATES[r.name].joint_refit)
-    now = model.evaluate(state.values)
+    now = state.ev
     try:
         vals, ev = _refine(model, CANDIDATES[last.name], start, np.array(start[last.name], float),
                            model.evaluate(start), 6, deadline, joint)
@@ -630,12 +630,7 @@ def _drop_if_absorbed(state: _SelectionState, rnd: Round, criterion: Information
                      f"(BIC lower by {gain:.1f} without it); dropped")
     last.absorbed.append((rnd.name, np.asarray(rnd.vector, float), gain))
     state.rounds.remove(rnd)
-    state.values = {**start, **vals}
-    for r in state.rounds:
-        r.vector = np.asarray(state.values[r.name], float)
-    state.accepted = tuple(r.name for r in state.rounds)
-    model.set_reference(ev.pred_dn)
-    state.ev = model.evaluate(state.values)
+    state.revised({**start, **vals}, ev.pred_dn)
     return True
 
 
@@ -676,7 +671,7 @@ def _revisit_round(state: _SelectionState, rnd: Round, criterion: InformationCri
                      if r.fitted is not None and r.name != rnd.name
                      and r.name not in state.values and r.dchi2 is not None and criterion.clears(r)),
                     key=lambda r: -criterion.gain(r))[:REVISIT_RIVALS]
-    now = model.evaluate(state.values)
+    now = state.ev
     best: tuple[float, CandidateResult, Values, Evaluation] | None = None
     for riv in rivals:
         assert riv.fitted is not None
@@ -714,13 +709,8 @@ def _revisit_round(state: _SelectionState, rnd: Round, criterion: InformationCri
     rnd.evaluation = riv.evaluation if riv.evaluation is not None else rnd.evaluation
     rnd.swapped_from, rnd.swap_dchi2 = old, gain
     rnd.below_floor, rnd.halves = None, None
-    state.values = {n: v for n, v in vals.items() if n != old}
-    for r in state.rounds:
-        r.vector = np.asarray(state.values[r.name], float)
-    state.accepted = tuple(r.name for r in state.rounds)
     state.remaining = [c for c in state.remaining if c != riv.name]
-    model.set_reference(ev.pred_dn)
-    state.ev = model.evaluate(state.values)
+    state.revised({n: v for n, v in vals.items() if n != old}, ev.pred_dn)
     return True
 
 
@@ -739,6 +729,17 @@ class _SelectionState:
         #: each candidate's score Δχ² in the latest round that scored it
         self.last_score: dict[str, float] = {}
         self.ev = evaluate_self_weighted(model, values)
+
+    def revised(self, values: Values, pred_dn: np.ndarray) -> None:
+        """A revisit changed the accepted effects (:attr:`rounds` already says which):
+        ``values`` are the refitted ones, ``pred_dn`` their prediction (the new reference of
+        the fit weights)."""
+        self.values = values
+        for r in self.rounds:
+            r.vector = np.asarray(values[r.name], float)
+        self.accepted = tuple(r.name for r in self.rounds)
+        self.model.set_reference(pred_dn)
+        self.ev = self.model.evaluate(values)
 
     def drop(self, name: str, why: str) -> None:
         """Leave ``name`` out of the selection (the simulator failed on it)."""
