@@ -511,7 +511,7 @@ class _ImagingSearch:
                threshold: float) -> None:
         self.state.accept(best, alternatives, self.scores, threshold)
         rnd = self.state.rounds[-1]
-        if best.stable and best.amplitude_dn <= self.amp_floor * self.signal_rms:
+        if best.stable:  # only checked under the floor (reconsider)
             rnd.below_floor = best.amplitude_dn / max(self.signal_rms, 1e-12)
             rnd.halves = best.halves
         # at most 30 % of the time left, so that later rounds still happen
@@ -553,7 +553,7 @@ def _clears_fine_floor(
     return res.fine_amplitude > amp_floor
 
 
-def half_model(model: DiagnosisModel, keep: np.ndarray) -> DiagnosisModel:
+def _half_model(model: DiagnosisModel, keep: np.ndarray) -> DiagnosisModel:
     """``model`` fitted on the frames ``keep`` (bool per frame) only: the same data, simulator
     cache and weights, the other frames weighted 0."""
     half = copy.copy(model)
@@ -580,7 +580,7 @@ def _stable_under_refit(state: _SelectionState, res: CandidateResult, criterion:
     halves: list[np.ndarray] = []
     cleared = True
     for parity in (0, 1):
-        half = half_model(model, np.arange(frames) % 2 == parity)
+        half = _half_model(model, np.arange(frames) % 2 == parity)
         ev0 = half.evaluate(state.values)
         try:
             if cand.domain == "linear":  # closed-form terms: solved on the half
