@@ -91,9 +91,13 @@ class TactileFrame:
     marker_displacements_mm
         ``K × 2`` float32 displacement of each marker from the reference frame in mm.
     contact
-        True when any pixel is deeper than the profile's contact threshold.
+        True when the contact region covers at least the interpreter's smallest contact
+        area (0.1 mm² by default); there is none without a pixel deeper than the profile's
+        contact threshold.
     contact_area_mm2
-        Area of the contact region in mm².
+        Area of the contact region in mm²: where the membrane wraps the object (concave
+        depth, holes filled), not the skirt a real gel sinks in around it
+        (:mod:`thintact_sdk.tactile.interpretation.contact_region`).
     shear_direction_rad
         Direction of the mean marker displacement (atan2(y, x)), NaN without shear.
     shear_mm

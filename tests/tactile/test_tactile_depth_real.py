@@ -63,11 +63,51 @@ def test_sphere_fit_and_press_figures_on_an_exact_cap():
     radius, (r, c) = fit_sphere(d, MM)
     assert abs(radius - 2.0) < 1e-6 and abs(r - 45) < 1e-6 and abs(c - 60) < 1e-6
     f = press_figures(d, gx, gy, 2.0, MM, contact_threshold_mm=0.0)
-    assert abs(f.press_mm - 0.8) < 1e-4 and f.depth_rms_mm < 1e-4 and f.slope_rms < 1e-3
-    assert abs(f.contact_radius_mm / f.contact_radius_expected_mm - 1) < 0.03
+    assert abs(f.press_mm - 0.8) < 1e-3 and f.depth_rms_mm < 1e-3 and f.slope_rms < 1e-2
+    # the slope's kink at the rim of an exact cap moves the one-pixel curvature's sign
+    # change about 1.4 px inwards (a real membrane has no kink: the next test)
+    assert -0.1 < f.contact_radius_mm / f.contact_radius_expected_mm - 1 < 0
     assert not f.edge
     flat = press_figures(d * 0.5, gx * 0.5, gy * 0.5, 2.0, MM)
     assert flat.sphere_radius_mm > 3.0  # a cap too flat reads as a larger ball
+
+
+@pytest.mark.parametrize("skirt_mm", [0.3, 0.6, 1.2])
+def test_contact_region_leaves_a_sink_in_skirt_out(skirt_mm):
+    """A gel that sinks in around the ball (ball surface inside the contact, a K0 skirt
+    outside, the elastomer blur): the contact region is the ball's contact circle, where the
+    region deeper than the contact threshold takes the skirt in."""
+    from thintact_sdk.tactile.calibration.ball_press import BallModel
+    from thintact_sdk.tactile.interpretation.contact_region import contact_region
+    from thintact_sdk.tactile.interpretation.grid import TactileParams
+
+    params = TactileParams(rows=90, cols=120, mm_per_px=MM)
+    model = BallModel("sink-in", skirt_mm)
+    h = 0.5
+    dist = np.hypot(*(np.mgrid[0:90, 0:120] - np.array([45.0, 60.0])[:, None, None])) * MM
+    _, press, a = model.rigid_depth(dist, h, 2.0)
+    d = model.depth((90, 120), (45.0, 60.0), h, 2.0, params)
+    gy, gx = np.gradient(d, MM)
+    region = contact_region(d, MM, 0.1, MM)
+    # the sign change is found to within about the blur: elastomer (0.25 mm) + one pixel
+    blur = 1.5 * (params.elastomer_sigma_mm + MM)
+    assert abs(np.sqrt(region.sum() / np.pi) * MM - a) < blur
+    f = press_figures(d, gx, gy, 2.0, MM, 0.1)
+    assert abs(f.contact_radius_mm - a) < blur
+    assert f.skirt_radius_mm > f.contact_radius_mm
+    assert abs(f.press_mm - press) < 0.05 and f.depth_rms_mm < 0.03  # the ball's surface
+    # no contact without a pixel over the threshold; a flat punch's face is filled in
+    assert not contact_region(d * 0.05, MM, 0.1, MM).any()
+    punch = np.zeros((90, 120))
+    punch[30:60, 40:80] = 0.5
+    from scipy.ndimage import gaussian_filter
+
+    punch = gaussian_filter(punch, 2.5)
+    region = contact_region(punch, MM, 0.1, MM)
+    assert region[32:58, 42:78].all() and not region[:20].any()
+    # a punch cut by the frame's edge: the rim closes along the edge
+    cut = contact_region(punch[:, 55:], MM, 0.1, MM)
+    assert cut[32:58, :20].all()
 
 
 def _network(tmp_path, steps=200):
@@ -147,10 +187,12 @@ def test_vendored_real_presses_figures_and_report():
     assert res["gradient_model"] == "lut" and res["validation"] is None  # 4 presses: no choice
     assert res["test"] == [1, 3, 5, 7] and s["presses"] == 4
     # measured (rigid cap, 4 presses: too few to choose the ball model; its depth bound
-    # 0.95 R): depth RMS 0.097 mm, slope RMS 0.414 (flat 0.949), sphere radius 2.05 mm
+    # 0.95 R): depth RMS 0.130 mm and slope RMS 0.407 (flat 0.912) inside the contact,
+    # sphere radius 2.05 mm, contact ratio 0.98 (the region deeper than 0.1 mm: 1.61)
     assert res["lut"].meta["ball_model"]["model"] == "rigid"
-    assert s["depth_rms_mm"] < 0.11 and s["slope_rms"] < 0.45 < s["slope_rms_flat"]
+    assert s["depth_rms_mm"] < 0.15 and s["slope_rms"] < 0.45 < s["slope_rms_flat"]
     assert 1.9 < s["sphere_radius_median_mm"] < 2.3
+    assert abs(s["contact_ratio_median"] - 1) < 0.1 < s["skirt_ratio_median"] - 1.3
     # every press's circle is wider than a 2 mm ball allows: the report says so
     assert all(any("not physical" in w for w in e["warnings"]) for e in res["press_report"])
     assert s["annotated_depth_rms_mm"] > 3 * s["depth_rms_mm"]  # the annotation's depth ≈ R

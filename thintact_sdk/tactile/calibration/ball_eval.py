@@ -6,14 +6,18 @@ Annotation-free figures, per press, from the reconstructed depth ``d`` (mm) and 
   loaded core, the pixels deeper than half the peak (for a rigid ball cap exactly Hertz's
   contact circle). A pipeline that gives back the shape it was calibrated on returns the
   ball radius; caps read too flat return a larger radius.
-* **contact radius** ``√(area/π)`` of the region deeper than the contact threshold that
-  holds the peak, against
-  the contact radius a ball of radius R pressed to the reconstructed peak depth p must have,
-  ``√(2Rp − p²)``.
-* **ball fit with the radius fixed**: the rigid cap of radius R whose centre and press depth
-  best fit the core (least squares); depth RMS inside its contact circle (``r < 0.9·a``, the
-  rim is smoothed by the elastomer) and slope RMS (vector magnitude) there.
-* **edge press**: the fitted contact circle reaches the frame's edge.
+* **contact radius** ``√(area/π)`` of the contact region that holds the peak (the
+  interpreter's: where the membrane wraps the ball, its sink-in skirt left out;
+  :mod:`thintact_sdk.tactile.interpretation.contact_region`), against the contact radius a
+  ball of radius R pressed to the reconstructed peak depth p must have, ``√(2Rp − p²)``.
+  ``skirt_radius_mm`` is the radius of the region deeper than the contact threshold that
+  holds the peak, the figure reported before (it includes the skirt).
+* **ball fit with the radius fixed**: the ball of radius R whose centre and depth best fit
+  the reconstructed depth inside the contact region (least squares on its surface); depth
+  RMS inside the contact, within ``0.9·a`` of the fitted centre (a the contact radius; the
+  rim is smoothed by the elastomer), and slope RMS (vector magnitude) there. Without a
+  contact region, the rigid cap fitted to the core and its contact circle.
+* **edge press**: the contact circle (fitted centre, contact radius) reaches the frame's edge.
 
 With annotated circles (centre, contact radius a_ann), the same RMS figures against the cap of
 radius R whose contact circle is the annotated one (press depth ``R − √(R² − a_ann²)``).
@@ -28,8 +32,13 @@ import numpy as np
 from scipy.ndimage import label
 from scipy.optimize import least_squares
 
+from thintact_sdk.tactile.interpretation.contact_region import contact_region
+
 CORE_FRACTION = 0.5
 RIM_FRACTION = 0.9
+EDGE_NEIGHBOURS = 3
+"""An edge press is compared with the median of this many interior presses of the most
+similar press depth (one press's sphere radius alone varies too much to compare with)."""
 
 
 @dataclass
@@ -46,6 +55,7 @@ class PressFigures:
     slope_rms: float
     slope_rms_flat: float
     edge: bool
+    skirt_radius_mm: float = float("nan")
     annotated_depth_rms_mm: float | None = None
     annotated_slope_rms: float | None = None
     annotated_press_mm: float | None = None
@@ -90,27 +100,35 @@ def ball_cap(shape: tuple[int, int], centre_rc: tuple[float, float], press_mm: f
     return depth, gx, gy, float(np.sqrt(max(2 * radius_mm * p - p * p, 0.0))) / mm_per_px
 
 
-def fit_ball_fixed_radius(depth_mm: np.ndarray, radius_mm: float, mm_per_px: float
+def fit_ball_fixed_radius(depth_mm: np.ndarray, radius_mm: float, mm_per_px: float,
+                          pixels: np.ndarray | None = None
                           ) -> tuple[tuple[float, float], float]:
-    """``((row, col), press_mm)`` of the rigid cap of radius ``radius_mm`` that best fits the
-    pixels deeper than half the peak (least squares on depth)."""
+    """``((row, col), press_mm)`` of the ball of radius ``radius_mm`` that best fits the depth
+    (least squares): with ``pixels`` (``N × M`` bool, the contact) its surface
+    ``press − R + √(R² − r²)`` on those pixels, else the rigid cap (0 outside its contact
+    circle) on the pixels deeper than half the peak."""
     d = np.asarray(depth_mm, np.float64)
     peak = float(d.max())
-    rr, cc = np.nonzero(d > CORE_FRACTION * peak)
+    surface = pixels is not None and int(pixels.sum()) >= 3
+    fitted = pixels if pixels is not None and surface else d > CORE_FRACTION * peak
+    rr, cc = np.nonzero(fitted)
     if peak <= 0 or len(rr) < 3:
         r0, c0 = np.unravel_index(int(np.argmax(d)), d.shape)
         return (float(r0), float(c0)), max(peak, 0.0)
     w = d[rr, cc]
-    start = np.array([np.average(rr, weights=w), np.average(cc, weights=w),
-                      min(peak, 0.99 * radius_mm)])
+    weights = np.clip(w, 1e-9, None)
+    start = np.array([np.average(rr, weights=weights), np.average(cc, weights=weights),
+                      peak if surface else min(peak, 0.99 * radius_mm)])
 
     def resid(p: np.ndarray) -> np.ndarray:
         r2 = ((rr - p[0]) ** 2 + (cc - p[1]) ** 2) * mm_per_px**2
-        cap = np.sqrt(np.clip(radius_mm**2 - r2, 0.0, None)) - (radius_mm - p[2])
-        return cap - w
+        ball = np.sqrt(np.clip(radius_mm**2 - r2, 0.0, None)) - (radius_mm - p[2])
+        return (ball if surface else np.clip(ball, 0.0, None)) - w
 
-    sol = least_squares(resid, start, bounds=([-np.inf, -np.inf, 0.0],
-                                               [np.inf, np.inf, radius_mm]))
+    # a rigid cap is at most a hemisphere; a ball's surface inside a contact can sit deeper
+    # than its radius where the gel sinks in around it
+    top = np.inf if surface else radius_mm
+    sol = least_squares(resid, start, bounds=([-np.inf, -np.inf, 0.0], [np.inf, np.inf, top]))
     return (float(sol.x[0]), float(sol.x[1])), float(sol.x[2])
 
 
@@ -122,6 +140,7 @@ def press_figures(
     mm_per_px: float,
     contact_threshold_mm: float = 0.1,
     annotated: tuple[tuple[float, float], float] | None = None,
+    smooth_mm: float = 0.0,
 ) -> PressFigures:
     """The figures of one press (module docstring).
 
@@ -133,18 +152,48 @@ def press_figures(
         Ball radius.
     annotated
         ``((row, col), contact_radius_px)`` of an annotated contact circle, or None.
+    smooth_mm
+        The scale at which the contact region reads curvature: the pixel of the grid the
+        depth was reconstructed on (default: one pixel of ``depth_mm``).
     """
     d = np.asarray(depth_mm, np.float64)
     peak = float(d.max())
     sphere, _ = fit_sphere(d, mm_per_px)
-    above = d > contact_threshold_mm
-    if above.any():  # the contact region holding the peak (not noise elsewhere)
-        labels, _ = label(above)
-        above = labels == labels[np.unravel_index(int(np.argmax(d)), d.shape)]
-    area = float(above.sum()) * mm_per_px**2
+    deepest = np.unravel_index(int(np.argmax(d)), d.shape)
+
+    def holding_peak(mask: np.ndarray) -> np.ndarray:
+        """The part of ``mask`` that holds the peak."""
+        if not mask[deepest]:
+            return np.zeros(mask.shape, bool)
+        labels, _ = label(mask)
+        return labels == labels[deepest]
+
+    region = contact_region(d, mm_per_px, contact_threshold_mm, smooth_mm)
+    contact = holding_peak(region)
+    contact_r = float(np.sqrt(float(contact.sum()) / np.pi)) * mm_per_px
+    skirt_r = float(np.sqrt(float(holding_peak(d > contact_threshold_mm).sum()) / np.pi)) \
+        * mm_per_px
     p = min(max(peak, 0.0), radius_mm)
     expected = float(np.sqrt(max(2 * radius_mm * p - p * p, 0.0)))
-    centre, press = fit_ball_fixed_radius(d, radius_mm, mm_per_px)
+    rr, cc = np.mgrid[0 : d.shape[0], 0 : d.shape[1]]
+    if contact.sum() >= 3:  # the ball's surface fitted inside the contact
+        centre, press = fit_ball_fixed_radius(d, radius_mm, mm_per_px, contact)
+        a_px = contact_r / mm_per_px
+        x = (cc - centre[1]) * mm_per_px
+        y = (rr - centre[0]) * mm_per_px
+        # inside the contact and on the ball (a reconstructed contact can be wider than it)
+        inside = contact & (np.hypot(x, y) < RIM_FRACTION * min(a_px * mm_per_px, radius_mm))
+        root = np.sqrt(np.clip(radius_mm**2 - x * x - y * y, 1e-9, None))
+        ball = root - (radius_mm - press)
+        tx, ty = -x / root, -y / root
+        if inside.any():
+            drms = float(np.sqrt(np.mean((d - ball)[inside] ** 2)))
+            srms = float(np.sqrt(np.mean(np.hypot(grad_x - tx, grad_y - ty)[inside] ** 2)))
+            flat = float(np.sqrt(np.mean(np.hypot(tx, ty)[inside] ** 2)))
+        else:
+            drms = srms = flat = float("nan")
+        edge = bool(centre[0] - a_px <= 0 or centre[1] - a_px <= 0
+                    or centre[0] + a_px >= d.shape[0] - 1 or centre[1] + a_px >= d.shape[1] - 1)
 
     def against(c: tuple[float, float], pr: float) -> tuple[float, float, float, bool]:
         cap, tx, ty, a_px = ball_cap(d.shape, c, pr, radius_mm, mm_per_px)
@@ -159,9 +208,11 @@ def press_figures(
                     or c[1] + a_px >= d.shape[1] - 1)
         return drms, srms, flat, edge
 
-    drms, srms, flat, edge = against(centre, press)
-    out = PressFigures(peak, sphere, float(np.sqrt(area / np.pi)), expected, centre, press,
-                       drms, srms, flat, edge)
+    if contact.sum() < 3:  # no contact resolved: the rigid cap fitted to the core
+        centre, press = fit_ball_fixed_radius(d, radius_mm, mm_per_px)
+        drms, srms, flat, edge = against(centre, press)
+    out = PressFigures(peak, sphere, contact_r, expected, centre, press, drms, srms, flat,
+                       edge, skirt_r)
     if annotated is not None:
         (ar, ac), a_px = annotated
         a_mm = min(a_px * mm_per_px, radius_mm)
@@ -174,7 +225,10 @@ def press_figures(
 def summarise(figures: list[PressFigures], radius_mm: float) -> dict[str, Any]:
     """Pack-level figures: median fitted sphere radius and its middle half (and relative to
     ``radius_mm``), median contact-radius ratio (measured / expected), depth and slope RMS
-    over the presses (root of the mean of squares), edge against interior presses."""
+    over the presses (root of the mean of squares), median skirt ratio (the region deeper
+    than the contact threshold, measured / expected), edge against interior presses (each
+    edge press's sphere radius over the median of the ``EDGE_NEIGHBOURS`` interior presses of
+    the most similar press depth, minus 1; the median over edge presses)."""
     def rms(vals: list[float | None]) -> float | None:
         v = np.array([x for x in vals if x is not None and np.isfinite(x)], np.float64)
         return float(np.sqrt(np.mean(v**2))) if len(v) else None
@@ -182,6 +236,9 @@ def summarise(figures: list[PressFigures], radius_mm: float) -> dict[str, Any]:
     radii = np.array([f.sphere_radius_mm for f in figures])
     ratio = np.array([f.contact_radius_mm / f.contact_radius_expected_mm
                       for f in figures if f.contact_radius_expected_mm > 0])
+    skirt = np.array([f.skirt_radius_mm / f.contact_radius_expected_mm
+                      for f in figures if f.contact_radius_expected_mm > 0
+                      and np.isfinite(f.skirt_radius_mm)])
     out: dict[str, Any] = {
         "presses": len(figures),
         "ball_radius_mm": radius_mm,
@@ -189,6 +246,7 @@ def summarise(figures: list[PressFigures], radius_mm: float) -> dict[str, Any]:
         "sphere_radius_q25_mm": float(np.percentile(radii, 25)),
         "sphere_radius_q75_mm": float(np.percentile(radii, 75)),
         "contact_ratio_median": float(np.median(ratio)) if len(ratio) else None,
+        "skirt_ratio_median": float(np.median(skirt)) if len(skirt) else None,
         "depth_rms_mm": rms([f.depth_rms_mm for f in figures]),
         "slope_rms": rms([f.slope_rms for f in figures]),
         "slope_rms_flat": rms([f.slope_rms_flat for f in figures]),
@@ -204,8 +262,9 @@ def summarise(figures: list[PressFigures], radius_mm: float) -> dict[str, Any]:
     inner = [f for f in figures if not f.edge]
     if edge and inner:
         rel = []
-        for f in edge:  # the interior press of most similar fitted press depth
-            g = min(inner, key=lambda h: abs(h.press_mm - f.press_mm))
-            rel.append(f.sphere_radius_mm / g.sphere_radius_mm - 1.0)
+        for f in edge:  # the interior presses of most similar fitted press depth
+            near = sorted(inner, key=lambda h: abs(h.press_mm - f.press_mm))[:EDGE_NEIGHBOURS]
+            rel.append(f.sphere_radius_mm / float(np.median([g.sphere_radius_mm for g in near]))
+                       - 1.0)
         out["edge_radius_vs_interior_median"] = float(np.median(rel))
     return out

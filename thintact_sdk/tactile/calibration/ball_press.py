@@ -549,7 +549,8 @@ class _BallFitter:
             gx, gy = lut.lookup(self.feats[self.ball[k].slot])
             depth = np.clip(integrate_gradients(gx, gy, self.params.mm_per_px), 0.0, None)
             figs.append(press_figures(depth, gx, gy, self.radius, self.params.mm_per_px,
-                                      self.params.contact_threshold_mm))
+                                      self.params.contact_threshold_mm,
+                                      smooth_mm=self.params.mm_per_px))
         s = summarise(figs, self.radius)
         sphere = s["sphere_radius_median_mm"] / self.radius
         contact = s["contact_ratio_median"]

@@ -321,7 +321,8 @@ def evaluate_pack(
             ann = ((float(pack.centres_rc[i][0]) / f, float(pack.centres_rc[i][1]) / f),
                    float(pack.radii_px[i]) / f)
         figs.append(press_figures(depth, gx, gy, ball_radius_mm, interp.work.mm_per_px,
-                                  interp.params.contact_threshold_mm, ann))
+                                  interp.params.contact_threshold_mm, ann,
+                                  interp.work.mm_per_px))
     return {
         "summary": summarise(figs, ball_radius_mm),
         "presses": [{"press": i, "name": pack.names[i], **f.as_dict()}

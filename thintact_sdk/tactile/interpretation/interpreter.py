@@ -2,8 +2,11 @@
 
 Per frame: detect the markers (and mask them out), subtract the no-contact background,
 map colour changes to slopes with the LUT, fill the masked pixels from their
-neighbours, integrate the slopes to depth (Poisson), threshold it for contact, and track
+neighbours, integrate the slopes to depth (Poisson), find the contact region in it, and track
 the markers against the reference frame.
+The contact region is where the membrane wraps the object
+(:mod:`~thintact_sdk.tactile.interpretation.contact_region`), not everything deeper than the
+contact threshold: a real gel's skirt around the contact is left out.
 """
 
 from __future__ import annotations
@@ -17,6 +20,7 @@ import numpy as np
 from thintact_sdk.formats.profiles import Profile
 from thintact_sdk.frames import TactileFrame
 from thintact_sdk.tactile.interpretation.colour_change import colour_change, fill_masked
+from thintact_sdk.tactile.interpretation.contact_region import contact_region
 from thintact_sdk.tactile.interpretation.force import ForceModel
 from thintact_sdk.tactile.interpretation.grid import (
     TactileParams,
@@ -194,9 +198,16 @@ class TactileInterpreter:
         return upsample(self._work_depth(img, det.mask), self.factor)
 
     def contact(self, depth_mm: np.ndarray) -> tuple[bool, float, np.ndarray]:
-        """``(contact, area_mm2, mask)`` from a depth map and the contact threshold."""
-        mask = depth_mm > self.params.contact_threshold_mm
-        area = float(mask.sum()) * self.params.mm_per_px**2
+        """``(contact, area_mm2, mask)`` of a depth map on the full grid (``N × M`` mm): the
+        contact region of :func:`~thintact_sdk.tactile.interpretation.contact_region.contact_region`
+        (where the membrane wraps the object, its skirt left out), contact when it covers at
+        least ``min_contact_area_mm2``."""
+        return self._contact(depth_mm, self.params.mm_per_px)
+
+    def _contact(self, depth_mm: np.ndarray, mm_per_px: float) -> tuple[bool, float, np.ndarray]:
+        mask = contact_region(depth_mm, mm_per_px, self.params.contact_threshold_mm,
+                              self.work.mm_per_px)
+        area = float(mask.sum()) * mm_per_px**2
         return area >= self.min_contact_area_mm2, area, mask
 
     def interpret(
@@ -209,8 +220,10 @@ class TactileInterpreter:
             self._accumulate_reference(full)
         img = self._work_image(full)
         det = detect_markers(img, self.work, self.marker_threshold)
-        depth = upsample(self._work_depth(img, det.mask), self.factor)
-        contact, area, _ = self.contact(depth)
+        work_depth = self._work_depth(img, det.mask)
+        # the contact region on the working grid: the curvature it reads is no finer there
+        contact, area, _ = self._contact(work_depth, self.work.mm_per_px)
+        depth = upsample(work_depth, self.factor)
         pos, disp = self.tracker.update(det.positions_mm)
         shear, direction = mean_shear(disp)
         meta: dict[str, object] = {

@@ -177,7 +177,9 @@ def _print_evaluation(res: dict[str, Any], radius: float) -> None:
           f"({s['sphere_radius_median_mm'] / radius - 1:+.0%}), middle half "
           f"{s['sphere_radius_q25_mm']:.2f}-{s['sphere_radius_q75_mm']:.2f} mm")
     if s["contact_ratio_median"] is not None:
-        print(f"  contact radius / sqrt(2Rd-d^2)  median {s['contact_ratio_median']:.2f}")
+        skirt = (f" (the region deeper than the contact threshold, skirt included: "
+                 f"{s['skirt_ratio_median']:.2f})" if s.get("skirt_ratio_median") else "")
+        print(f"  contact radius / sqrt(2Rd-d^2)  median {s['contact_ratio_median']:.2f}{skirt}")
     print(f"  depth RMS {s['depth_rms_mm']:.3f} mm, slope RMS {s['slope_rms']:.3f} "
           f"(flat {s['slope_rms_flat']:.3f}) against the ball fitted with its radius fixed")
     if "annotated_depth_rms_mm" in s:

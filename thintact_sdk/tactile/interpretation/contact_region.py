@@ -1,0 +1,107 @@
+"""The contact region of a depth map: where the membrane wraps the object, not its skirt.
+
+A real gel sinks in around an indenter: outside the contact the membrane is still pushed
+down (a skirt that decays over about the layer's thickness), so the region deeper than the
+contact threshold is wider than the contact. On two real GelSight ball-press packs the
+region deeper than 0.1 mm was 1.4-1.6 times the radius a ball of the pack's radius has at
+the reconstructed peak depth (docs/tactile.md), while the reconstructed cap itself had the
+ball's shape.
+
+Inside a contact with a convex object the membrane takes the object's shape and curves
+down away from the deepest point (negative Laplacian of depth); in the skirt it curves back
+up towards the undeformed level (positive Laplacian). The rim of the contact is where the
+curvature changes sign. So the contact region is
+
+1. the pixels deeper than the contact threshold where the depth is concave (Laplacian < 0,
+   of a Gaussian one pixel of the grid the depth was reconstructed on wide: the finest
+   detail it holds; a wider one moves the rim of a steep cap inwards),
+2. of these, the connected parts that hold the deepest point of a region deeper than the
+   contact threshold (a frame with nothing deeper than the threshold has no contact;
+   concave speckle of noise and drift beside a contact holds no such point),
+3. with their holes filled: the flat face of a punch has no curvature inside its
+   concave rim; a rim cut by the frame's edge counts as closed where the depth at the edge
+   is over the contact threshold.
+
+A region deeper than the threshold whose deepest point is not concave (no curvature
+resolved there) counts whole.
+
+No parameter is fitted: the smoothing scale is the reconstruction's own pixel and the sign
+change needs no level. For a membrane under tension on an elastic foundation (a gel on
+glass) a negative Laplacian means an outside pressure pushes it there, i.e. contact; where
+the object's face is flat the pressure is held by the foundation alone, hence the filled
+holes.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+MIN_SMOOTH_PX = 1.0
+"""Smallest Laplacian-of-Gaussian width in pixels: one pixel of the grid the depth is on (a
+narrower Gaussian is not sampled by the grid)."""
+
+
+def contact_region(depth_mm: np.ndarray, mm_per_px: float, threshold_mm: float,
+                   smooth_mm: float = 0.0) -> np.ndarray:
+    """``N × M`` bool: the pixels in contact (module docstring).
+
+    Parameters
+    ----------
+    depth_mm
+        ``N × M`` depth in mm (positive into the elastomer).
+    mm_per_px
+        Pixel size in mm.
+    threshold_mm
+        Contact threshold: a region counts only where some pixel is deeper.
+    smooth_mm
+        Width (σ, mm) of the Gaussian whose Laplacian measures the curvature: the pixel of
+        the grid the depth was reconstructed on (the interpreter's working grid); at least
+        one pixel of ``depth_mm``.
+    """
+    d = np.asarray(depth_mm, np.float64)
+    seeds = d > threshold_mm
+    if not seeds.any():
+        return np.zeros(d.shape, bool)
+    sigma = max(smooth_mm / mm_per_px, MIN_SMOOTH_PX)
+    smooth = cv2.GaussianBlur(d, (0, 0), sigma, borderType=cv2.BORDER_REPLICATE)
+    lap = cv2.Laplacian(smooth, cv2.CV_64F, ksize=1, borderType=cv2.BORDER_REPLICATE)
+    concave = (lap < 0) & seeds
+    labels = _components(concave)
+    seed_labels = _components(seeds)
+    # the deepest pixel of each region over the threshold
+    idx = np.flatnonzero(seeds)
+    idx = idx[np.argsort(-d.ravel()[idx], kind="stable")]
+    _, first = np.unique(seed_labels.ravel()[idx], return_index=True)
+    peaks = idx[first]
+    at_peak = labels.ravel()[peaks]
+    keep = np.zeros(int(labels.max()) + 1, bool)
+    keep[at_peak[at_peak > 0]] = True
+    keep[0] = False
+    whole = np.zeros(int(seed_labels.max()) + 1, bool)
+    # no curvature resolved at its deepest point: the region counts whole
+    whole[seed_labels.ravel()[peaks[at_peak == 0]]] = True
+    whole[0] = False
+    return _filled(keep[labels], seeds) | whole[seed_labels]
+
+
+def _components(mask: np.ndarray) -> np.ndarray:
+    """4-connected component labels of ``mask`` (0 outside it)."""
+    _, labels = cv2.connectedComponents(mask.view(np.uint8), connectivity=4)
+    return labels
+
+
+def _filled(part: np.ndarray, seeds: np.ndarray) -> np.ndarray:
+    """``part`` with its holes filled, the frame's edge closing it where ``seeds``.
+
+    Only the kept parts' own holes: a ring of concave pixels elsewhere (a blurred frame
+    edge) is not in ``part`` and cannot enclose a skirt."""
+    n, m = part.shape
+    walls = np.zeros((n + 4, m + 4), np.uint8)  # an empty outer ring the flood starts from
+    walls[2:-2, 2:-2] = part
+    walls[1, 2:-2] |= seeds[0]
+    walls[-2, 2:-2] |= seeds[-1]
+    walls[2:-2, 1] |= seeds[:, 0]
+    walls[2:-2, -2] |= seeds[:, -1]
+    cv2.floodFill(walls, None, (0, 0), 2, flags=4)
+    return walls[2:-2, 2:-2] != 2
