@@ -86,6 +86,7 @@ def test_cli_import_evaluate_depth(tmp_path, capsys):
     assert main(["tactile", "evaluate", str(pack), "--model", "lut", "--json", str(out)]) == 0
     text = capsys.readouterr()
     assert "fitted sphere radius" in text.out and "[" in text.err  # progress lines on stderr
+    assert "skirt included" in text.out and "under 45 deg" in text.out
     res = json.loads(out.read_text())
     assert res["train"] == [0, 2, 4, 6] and res["test"] == [1, 3, 5, 7]
     assert res["gradient_model"] == "lut" and len(res["presses"]) == 4

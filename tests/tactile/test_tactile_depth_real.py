@@ -68,6 +68,10 @@ def test_sphere_fit_and_press_figures_on_an_exact_cap():
     # change about 1.4 px inwards (a real membrane has no kink: the next test)
     assert -0.1 < f.contact_radius_mm / f.contact_radius_expected_mm - 1 < 0
     assert not f.edge
+    assert f.slope_rms_gentle < 1e-2  # the slopes under 45 degrees alone
+    deep, dx, dy, _ = _cap(press=1.5)  # slopes up to 1.6 inside 0.9 of the contact
+    short = press_figures(deep, dx * 0.8, dy * 0.8, 2.0, MM, contact_threshold_mm=0.0)
+    assert 0 < short.slope_rms_gentle < 0.8 * short.slope_rms  # the error grows with the slope
     flat = press_figures(d * 0.5, gx * 0.5, gy * 0.5, 2.0, MM)
     assert flat.sphere_radius_mm > 3.0  # a cap too flat reads as a larger ball
 
@@ -187,12 +191,14 @@ def test_vendored_real_presses_figures_and_report():
     assert res["gradient_model"] == "lut" and res["validation"] is None  # 4 presses: no choice
     assert res["test"] == [1, 3, 5, 7] and s["presses"] == 4
     # measured (rigid cap, 4 presses: too few to choose the ball model; its depth bound
-    # 0.95 R): depth RMS 0.130 mm and slope RMS 0.407 (flat 0.912) inside the contact,
-    # sphere radius 2.05 mm, contact ratio 0.98 (the region deeper than 0.1 mm: 1.61)
+    # 0.95 R): depth RMS 0.128 mm and slope RMS 0.402 (flat 0.905, under 45 degrees
+    # 0.348) inside the contact, sphere radius 2.05 mm, contact ratio 0.98 (the region
+    # deeper than 0.1 mm: 1.61)
     assert res["lut"].meta["ball_model"]["model"] == "rigid"
     assert s["depth_rms_mm"] < 0.15 and s["slope_rms"] < 0.45 < s["slope_rms_flat"]
     assert 1.9 < s["sphere_radius_median_mm"] < 2.3
     assert abs(s["contact_ratio_median"] - 1) < 0.1 < s["skirt_ratio_median"] - 1.3
+    assert s["slope_rms_gentle"] < s["slope_rms"]
     # every press's circle is wider than a 2 mm ball allows: the report says so
     assert all(any("not physical" in w for w in e["warnings"]) for e in res["press_report"])
     assert s["annotated_depth_rms_mm"] > 3 * s["depth_rms_mm"]  # the annotation's depth ≈ R

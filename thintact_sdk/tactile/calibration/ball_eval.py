@@ -15,8 +15,9 @@ Annotation-free figures, per press, from the reconstructed depth ``d`` (mm) and 
 * **ball fit with the radius fixed**: the ball of radius R whose centre and depth best fit
   the reconstructed depth inside the contact region (least squares on its surface); depth
   RMS inside the contact, within ``0.9·a`` of the fitted centre (a the contact radius; the
-  rim is smoothed by the elastomer), and slope RMS (vector magnitude) there. Without a
-  contact region, the rigid cap fitted to the core and its contact circle.
+  rim is smoothed by the elastomer), and slope RMS (vector magnitude) there, also where the
+  ball's slope is under 1 (45°, ``slope_rms_gentle``). Without a contact region, the rigid
+  cap fitted to the core and its contact circle.
 * **edge press**: the contact circle (fitted centre, contact radius) reaches the frame's edge.
 
 With annotated circles (centre, contact radius a_ann), the same RMS figures against the cap of
@@ -36,6 +37,10 @@ from thintact_sdk.tactile.interpretation.contact_region import contact_region
 
 CORE_FRACTION = 0.5
 RIM_FRACTION = 0.9
+GENTLE_SLOPE = 1.0
+"""Ball slopes below this (45°) make the ``slope_rms_gentle`` figure: on GelSight-type gels
+the colour change stops growing with the slope about there (docs/tactile.md), so steeper
+slopes cannot be told apart from the image and read short."""
 EDGE_NEIGHBOURS = 3
 """An edge press is compared with the median of this many interior presses of the most
 similar press depth (one press's sphere radius alone varies too much to compare with)."""
@@ -56,6 +61,7 @@ class PressFigures:
     slope_rms_flat: float
     edge: bool
     skirt_radius_mm: float = float("nan")
+    slope_rms_gentle: float = float("nan")
     annotated_depth_rms_mm: float | None = None
     annotated_slope_rms: float | None = None
     annotated_press_mm: float | None = None
@@ -176,6 +182,7 @@ def press_figures(
     p = min(max(peak, 0.0), radius_mm)
     expected = float(np.sqrt(max(2 * radius_mm * p - p * p, 0.0)))
     rr, cc = np.mgrid[0 : d.shape[0], 0 : d.shape[1]]
+    srms_gentle = float("nan")
     if contact.sum() >= 3:  # the ball's surface fitted inside the contact
         centre, press = fit_ball_fixed_radius(d, radius_mm, mm_per_px, contact)
         a_px = contact_r / mm_per_px
@@ -188,8 +195,12 @@ def press_figures(
         tx, ty = -x / root, -y / root
         if inside.any():
             drms = float(np.sqrt(np.mean((d - ball)[inside] ** 2)))
-            srms = float(np.sqrt(np.mean(np.hypot(grad_x - tx, grad_y - ty)[inside] ** 2)))
+            err = np.hypot(grad_x - tx, grad_y - ty)
+            srms = float(np.sqrt(np.mean(err[inside] ** 2)))
             flat = float(np.sqrt(np.mean(np.hypot(tx, ty)[inside] ** 2)))
+            gentle = inside & (np.hypot(tx, ty) < GENTLE_SLOPE)
+            if gentle.any():
+                srms_gentle = float(np.sqrt(np.mean(err[gentle] ** 2)))
         else:
             drms = srms = flat = float("nan")
         edge = bool(centre[0] - a_px <= 0 or centre[1] - a_px <= 0
@@ -212,7 +223,7 @@ def press_figures(
         centre, press = fit_ball_fixed_radius(d, radius_mm, mm_per_px)
         drms, srms, flat, edge = against(centre, press)
     out = PressFigures(peak, sphere, contact_r, expected, centre, press, drms, srms, flat,
-                       edge, skirt_r)
+                       edge, skirt_r, srms_gentle)
     if annotated is not None:
         (ar, ac), a_px = annotated
         a_mm = min(a_px * mm_per_px, radius_mm)
@@ -250,6 +261,7 @@ def summarise(figures: list[PressFigures], radius_mm: float) -> dict[str, Any]:
         "depth_rms_mm": rms([f.depth_rms_mm for f in figures]),
         "slope_rms": rms([f.slope_rms for f in figures]),
         "slope_rms_flat": rms([f.slope_rms_flat for f in figures]),
+        "slope_rms_gentle": rms([f.slope_rms_gentle for f in figures]),
         "peak_mean_mm": float(np.mean([f.peak_mm for f in figures])),
         "edge_presses": int(sum(f.edge for f in figures)),
     }

@@ -180,8 +180,11 @@ def _print_evaluation(res: dict[str, Any], radius: float) -> None:
         skirt = (f" (the region deeper than the contact threshold, skirt included: "
                  f"{s['skirt_ratio_median']:.2f})" if s.get("skirt_ratio_median") else "")
         print(f"  contact radius / sqrt(2Rd-d^2)  median {s['contact_ratio_median']:.2f}{skirt}")
+    gentle = (f"; {s['slope_rms_gentle']:.3f} where the ball's slope is under 45 deg"
+              if s.get("slope_rms_gentle") is not None else "")
     print(f"  depth RMS {s['depth_rms_mm']:.3f} mm, slope RMS {s['slope_rms']:.3f} "
-          f"(flat {s['slope_rms_flat']:.3f}) against the ball fitted with its radius fixed")
+          f"(flat {s['slope_rms_flat']:.3f}{gentle}) inside the contact, against the ball "
+          "fitted with its radius fixed")
     if "annotated_depth_rms_mm" in s:
         print(f"  against the annotated circles: depth RMS {s['annotated_depth_rms_mm']:.3f} mm "
               f"(their mean press depth {s['annotated_press_mean_mm']:.2f} mm), slope RMS "
