@@ -74,7 +74,8 @@ def in_domain(section: dict[str, Any], reference: np.ndarray, radius: float, mm:
 
 def table(rows: dict[str, dict[str, Any]], radius: float) -> str:
     head = ("| photometric stereo on | sphere radius, median (middle half) | contact / √(2Rp−p²) "
-            "| depth RMS, fixed-R ball | slope RMS (flat) | vs annotated: depth / slope RMS | peak |\n"
+            "| depth RMS inside the contact, fixed-R ball | slope RMS (flat) "
+            "| vs annotated: depth / slope RMS | peak |\n"
             "|---|---|---|---|---|---|---|\n")
     out = []
     for name, res in rows.items():

@@ -112,6 +112,8 @@ def test_contact_region_leaves_a_sink_in_skirt_out(skirt_mm):
     # a punch cut by the frame's edge: the rim closes along the edge
     cut = contact_region(punch[:, 55:], MM, 0.1, MM)
     assert cut[32:58, :20].all()
+    # a face over the whole frame has no curvature anywhere: it counts whole
+    assert contact_region(np.full((20, 30), 0.4), MM, 0.1, MM).all()
 
 
 def _network(tmp_path, steps=200):
