@@ -182,53 +182,52 @@ def press_figures(
     p = min(max(peak, 0.0), radius_mm)
     expected = float(np.sqrt(max(2 * radius_mm * p - p * p, 0.0)))
     rr, cc = np.mgrid[0 : d.shape[0], 0 : d.shape[1]]
-    srms_gentle = float("nan")
+    nan = float("nan")
+
+    def rms_inside(model: np.ndarray, tx: np.ndarray, ty: np.ndarray, inside: np.ndarray
+                   ) -> tuple[float, float, float, float]:
+        """Depth RMS, slope RMS, the flat membrane's slope RMS and the slope RMS where the
+        model's slope is under :data:`GENTLE_SLOPE`, over ``inside``."""
+        if not inside.any():
+            return nan, nan, nan, nan
+        err = np.hypot(grad_x - tx, grad_y - ty)
+        steep = np.hypot(tx, ty)
+        gentle = inside & (steep < GENTLE_SLOPE)
+        return (float(np.sqrt(np.mean((d - model)[inside] ** 2))),
+                float(np.sqrt(np.mean(err[inside] ** 2))),
+                float(np.sqrt(np.mean(steep[inside] ** 2))),
+                float(np.sqrt(np.mean(err[gentle] ** 2))) if gentle.any() else nan)
+
+    def touches_edge(c: tuple[float, float], a_px: float) -> bool:
+        return bool(c[0] - a_px <= 0 or c[1] - a_px <= 0 or c[0] + a_px >= d.shape[0] - 1
+                    or c[1] + a_px >= d.shape[1] - 1)
+
+    def against(c: tuple[float, float], pr: float) -> tuple[float, float, float, float, bool]:
+        """The figures against the rigid cap of press depth ``pr`` centred at ``c``."""
+        cap, tx, ty, a_px = ball_cap(d.shape, c, pr, radius_mm, mm_per_px)
+        inside = np.hypot(rr - c[0], cc - c[1]) < RIM_FRACTION * a_px
+        return (*rms_inside(cap, tx, ty, inside), bool(inside.any()) and touches_edge(c, a_px))
+
     if contact.sum() >= 3:  # the ball's surface fitted inside the contact
         centre, press = fit_ball_fixed_radius(d, radius_mm, mm_per_px, contact)
-        a_px = contact_r / mm_per_px
         x = (cc - centre[1]) * mm_per_px
         y = (rr - centre[0]) * mm_per_px
         # inside the contact and on the ball (a reconstructed contact can be wider than it)
-        inside = contact & (np.hypot(x, y) < RIM_FRACTION * min(a_px * mm_per_px, radius_mm))
+        inside = contact & (np.hypot(x, y) < RIM_FRACTION * min(contact_r, radius_mm))
         root = np.sqrt(np.clip(radius_mm**2 - x * x - y * y, 1e-9, None))
-        ball = root - (radius_mm - press)
-        tx, ty = -x / root, -y / root
-        if inside.any():
-            drms = float(np.sqrt(np.mean((d - ball)[inside] ** 2)))
-            err = np.hypot(grad_x - tx, grad_y - ty)
-            srms = float(np.sqrt(np.mean(err[inside] ** 2)))
-            flat = float(np.sqrt(np.mean(np.hypot(tx, ty)[inside] ** 2)))
-            gentle = inside & (np.hypot(tx, ty) < GENTLE_SLOPE)
-            if gentle.any():
-                srms_gentle = float(np.sqrt(np.mean(err[gentle] ** 2)))
-        else:
-            drms = srms = flat = float("nan")
-        edge = bool(centre[0] - a_px <= 0 or centre[1] - a_px <= 0
-                    or centre[0] + a_px >= d.shape[0] - 1 or centre[1] + a_px >= d.shape[1] - 1)
-
-    def against(c: tuple[float, float], pr: float) -> tuple[float, float, float, bool]:
-        cap, tx, ty, a_px = ball_cap(d.shape, c, pr, radius_mm, mm_per_px)
-        rr, cc = np.mgrid[0 : d.shape[0], 0 : d.shape[1]]
-        inside = np.hypot(rr - c[0], cc - c[1]) < RIM_FRACTION * a_px
-        if not inside.any():
-            return float("nan"), float("nan"), float("nan"), False
-        drms = float(np.sqrt(np.mean((d - cap)[inside] ** 2)))
-        srms = float(np.sqrt(np.mean(np.hypot(grad_x - tx, grad_y - ty)[inside] ** 2)))
-        flat = float(np.sqrt(np.mean(np.hypot(tx, ty)[inside] ** 2)))
-        edge = bool(c[0] - a_px <= 0 or c[1] - a_px <= 0 or c[0] + a_px >= d.shape[0] - 1
-                    or c[1] + a_px >= d.shape[1] - 1)
-        return drms, srms, flat, edge
-
-    if contact.sum() < 3:  # no contact resolved: the rigid cap fitted to the core
+        drms, srms, flat, srms_gentle = rms_inside(root - (radius_mm - press), -x / root,
+                                                   -y / root, inside)
+        edge = touches_edge(centre, contact_r / mm_per_px)
+    else:  # no contact resolved: the rigid cap fitted to the core
         centre, press = fit_ball_fixed_radius(d, radius_mm, mm_per_px)
-        drms, srms, flat, edge = against(centre, press)
+        drms, srms, flat, srms_gentle, edge = against(centre, press)
     out = PressFigures(peak, sphere, contact_r, expected, centre, press, drms, srms, flat,
                        edge, skirt_r, srms_gentle)
     if annotated is not None:
         (ar, ac), a_px = annotated
         a_mm = min(a_px * mm_per_px, radius_mm)
         ann_press = radius_mm - float(np.sqrt(radius_mm**2 - a_mm**2))
-        out.annotated_depth_rms_mm, out.annotated_slope_rms, _, _ = against((ar, ac), ann_press)
+        out.annotated_depth_rms_mm, out.annotated_slope_rms, *_ = against((ar, ac), ann_press)
         out.annotated_press_mm = ann_press
     return out
 
