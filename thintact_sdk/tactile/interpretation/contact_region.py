@@ -2,10 +2,9 @@
 
 A real gel sinks in around an indenter: outside the contact the membrane is still pushed
 down (a skirt that decays over about the layer's thickness), so the region deeper than the
-contact threshold is wider than the contact. On two real GelSight ball-press packs the
-region deeper than 0.1 mm was 1.4-1.6 times the radius a ball of the pack's radius has at
-the reconstructed peak depth (docs/tactile.md), while the reconstructed cap itself had the
-ball's shape.
+contact threshold is wider than the contact (measured on two real GelSight ball-press packs
+in docs/tactile.md, "Depth on real gels"), while the reconstructed cap itself has the ball's
+shape.
 
 Inside a contact with a convex object the membrane takes the object's shape and curves
 down away from the deepest point (negative Laplacian of depth); in the skirt it curves back
@@ -77,11 +76,10 @@ def contact_region(depth_mm: np.ndarray, mm_per_px: float, threshold_mm: float,
     at_peak = labels.ravel()[peaks]
     keep = np.zeros(int(labels.max()) + 1, bool)
     keep[at_peak[at_peak > 0]] = True
-    keep[0] = False
     whole = np.zeros(int(seed_labels.max()) + 1, bool)
-    # no curvature resolved at its deepest point: the region counts whole
+    # no curvature resolved at its deepest point: the region counts whole (every peak lies
+    # in a region, so label 0, outside them all, is never set)
     whole[seed_labels.ravel()[peaks[at_peak == 0]]] = True
-    whole[0] = False
     return _filled(keep[labels], seeds) | whole[seed_labels]
 
 
