@@ -7,23 +7,33 @@ slides by many mask cells across the nodes, so the family is neither small nor o
 (``docs/simulator.md``, "refraction"): the whole family must be held before it is
 compressed, and its SVD and products take several times its size.
 
-This module evaluates the *same* integrals (the per-axis tangent-map box integrals along the
-refracted map with the other axis's offset frozen at the pair's centre, plus the first-order
-coupling correction ``∂X/∂D²·Y₁ + X₁·∂Y/∂D²``) without keeping any family:
+This module evaluates the per-axis tangent-map box integrals along the refracted map
+without keeping any family:
 
 - the x pixel pairs ``(c, m)`` are sorted by ``D_x²`` and taken in groups of at most
-  ``group`` pairs (sized from the block budget);
-- for a group, the x integrals are tabulated at every ``D_y²`` node *for the group's pairs
-  only* (:func:`refracted_pair_integrals`), and the y family only at the few ``D_x²`` nodes
-  the group's pairs span (plus ghost nodes for the cubic interpolation and the derivative);
-- both are read by the same local cubics at each pair of the other axis, and the kernel
-  entries ``Σ_v c_v Σ_l [X·Y + ∂X·Y₁ + X₁·∂Y]`` of the group's columns are written into a
-  dense ``(R·S, N·M)`` float32 operator, then the group's tables are dropped.
+  ``group`` pairs (sized from the block budget), never straddling a class of ``|D_x|``;
+- for a group, the x integrals are tabulated at the ``D_y²`` nodes the y pairs reach *for
+  the group's pairs only* (:func:`refracted_pair_integrals`), and the y integrals only at
+  the few ``D_x²`` nodes the group spans (plus ghost nodes for the cubic interpolation and
+  the derivative);
+- both are read by local cubics at each pair of the other axis, and the kernel entries of
+  the group's columns are written into a dense ``(R·S, N·M)`` float32 operator, then the
+  group's tables are dropped.
 
-Work is the two families' tabulation once (as the separable path), memory is the operator
-plus one group's tables (:data:`BLOCK_BYTES`). The operator is refused, before anything is
-allocated, above :data:`DENSE_MAX_BYTES`, naming its size. Unrotated masks without
-diffraction (mask shifts, leakage and the pixel angular response included).
+**Coupling.** The x crossing depends on the y offset through ``κ(δx² + δy²)`` and vice
+versa. Where the other axis's offset moves a pair's crossing by little, it is frozen at
+the pair's centre with the first-order correction ``∂X/∂D²·Y₁ + X₁·∂Y/∂D²`` (the separable
+path's sum). At wide angles the crossing moves by many µm across a pair and that expansion
+is 1-5 % off; there (:func:`coupling_levels`, :data:`COUPLING_BIN_UM`) both pairs are split
+into bins of their offset (:func:`coupling_bins`) and every bin of x is expanded about every
+bin of y's reference offset and back, to first order in each with the cross term:
+``Σ_b Σ_c X_b·Y_c + ∂X_b·Y_c,1 + X_b,1·∂Y_c + ∂X_b,1·∂Y_c,1``, which integrates the
+coupling instead of freezing it.
+
+Work is the two axes' tabulation once (more sub-rectangles on binned pairs), memory is the
+operator plus one group's tables (:data:`BLOCK_BYTES`). The operator is refused, before
+anything is allocated, above :data:`DENSE_MAX_BYTES`, naming its size. Unrotated masks
+without diffraction (mask shifts, leakage and the pixel angular response included).
 """
 
 from __future__ import annotations
@@ -51,6 +61,18 @@ GHOST_NODES = 3
 """Nodes kept on each side of a group's ``D²`` range: the cubic reads one below and two
 above, the second-order derivative one more on each side."""
 
+COUPLING_BIN_UM = 2.0
+"""Largest move of one axis's crossing point across one coupling bin of the other axis's
+pixel pair (µm): a pair whose other-axis offset moves its crossing further is split into
+bins of its offset (:func:`coupling_bins`), each expanded about its own reference offset."""
+
+BIN_LEVELS = (1, 2, 3, 4, 6, 8)
+"""Bin counts a pair may get (rounded up to one of these; the last is the most)."""
+
+MIN_BINNED_SUB = 8
+"""Fewest sub-intervals per pixel of a binned pair (and at least two per bin): a bin's
+share of the weighted integrals is taken from its sub-rectangles' centres."""
+
 T_BATCH_ELEMENTS = 2_000_000
 """Sub-rectangle corner values evaluated at once by :func:`refracted_pair_integrals`."""
 
@@ -72,13 +94,38 @@ def check_dense_size(kp: KernelParams, limit_bytes: float = DENSE_MAX_BYTES) -> 
             "docs/simulator.md 'refraction'); bin the sensor or crop the scene")
 
 
+def coupling_bins(grid: AxisGrid, n_sub: int, n_bins: int) -> tuple[np.ndarray, np.ndarray]:
+    """Split a pixel pair's ``n_sub × n_sub`` sub-rectangles into ``n_bins`` bins of their
+    centre offset ``δ = s - u`` (equal widths over the pair's extent).
+
+    Every pair of an axis has the same pattern of sub-rectangle offsets about its centre
+    offset ``D``, so one pattern serves the whole axis.
+
+    Returns
+    -------
+    tuple of numpy.ndarray
+        ``(n_bins, n_sub, n_sub)`` 0/1 membership (sensor sub-interval, scene sub-interval)
+        and ``(n_bins,)`` each bin's reference offset from ``D`` (mm; the mean of its
+        members).
+    """
+    a = ((np.arange(n_sub) + 0.5) / n_sub - 0.5) * grid.sensor_pitch_mm
+    b = ((np.arange(n_sub) + 0.5) / n_sub - 0.5) * grid.scene_pitch_mm
+    rel = b[None, :] - a[:, None]
+    lo, hi = float(rel.min()), float(rel.max())
+    idx = np.minimum(((rel - lo) / max(hi - lo, 1e-300) * n_bins).astype(np.int64), n_bins - 1)
+    members = [idx == k for k in range(n_bins) if np.any(idx == k)]
+    masks = np.stack([m.astype(float) for m in members])
+    refs = np.array([float(rel[m].mean()) for m in members])
+    return masks, refs
+
+
 def refracted_pair_integrals(
     grid: AxisGrid, edges_mm: np.ndarray, values: np.ndarray, factor_derivs: FactorDerivs,
     kappa: TabulatedRadial, other_r2_mm2: np.ndarray, n_sub: int, sensor_idx: np.ndarray,
-    scene_idx: np.ndarray, shift_mm: float = 0.0,
+    scene_idx: np.ndarray, shift_mm: float = 0.0, n_bins: int = 1,
 ) -> np.ndarray:
     """:func:`~thintact_sdk.simulation.refracted.refracted_axis_family` (``weighted=True``)
-    for a list of pixel pairs instead of the whole grid.
+    for a list of pixel pairs instead of the whole grid, optionally split into coupling bins.
 
     Parameters
     ----------
@@ -90,11 +137,16 @@ def refracted_pair_integrals(
         ``(P,)`` this axis's sensor and scene pixel index of each pair.
     shift_mm
         The profile is read at ``m - shift``.
+    n_bins
+        Bins of the pair's offset (:func:`coupling_bins`): each bin's share of the integrals,
+        weighted by ``δ² - δ_b²`` (``δ_b = D + ref_b`` its reference offset) instead of
+        ``δ² - D²``. One bin is the whole pair (``ref = 0``).
 
     Returns
     -------
     numpy.ndarray
-        ``(2, T, V, L, P)``: the plain and the ``(δ² - D²)``-weighted integrals.
+        ``(B, 2, T, V, L, P)``: per bin, the plain and the weighted integrals (``B`` the bins
+        with members, ``n_bins`` or fewer).
     """
     from thintact_sdk.simulation.refracted import _weighted_block
 
@@ -108,14 +160,20 @@ def refracted_pair_integrals(
     off = sc[:, None, :] - uc[:, :, None]  # (P, a, b)
     centre = off.mean(axis=(1, 2))  # (P,)
     rel = off - centre[:, None, None]
-    powers = np.stack([rel**k for k in range(5)])  # (5, P, a, b)
+    masks, refs = coupling_bins(grid, n_sub, n_bins)
+    n_b = refs.size
+    # Σ over a bin's sub-rectangles of box·rel^k: one (bin, power) weight per sub-rectangle
+    weights = np.einsum("kpab,cab->ckpab", np.stack([rel**k for k in range(5)]), masks)
+    weights = weights.reshape(n_b * 5, *rel.shape)
     f, df, d2f = (np.moveaxis(a, -1, 0) for a in factor_derivs(centre))  # (L, P)
     n_v, n_p = values.shape[0], sensor_idx.size
     t_all = np.asarray(other_r2_mm2, float)
-    out = np.empty((2, t_all.size, n_v, f.shape[0], n_p))
+    out = np.empty((n_b, 2, t_all.size, n_v, f.shape[0], n_p))
     per_t = max(1, T_BATCH_ELEMENTS // max(1, 4 * n_v * off.size))
     edges = np.asarray(edges_mm, float)
     u_sub = uc[:, :, None]
+    # δ² - δ_b² = (δ² - D²) + c_b, c_b = D² - (D + ref_b)²
+    c_b = -(2 * centre[None, :] * refs[:, None] + refs[:, None] ** 2)  # (B, P)
     for t0 in range(0, t_all.size, per_t):
         t = t_all[t0:t0 + per_t, None, None, None]  # (t, 1, 1, 1)
         r2 = off**2 + t  # (t, P, a, b)
@@ -126,12 +184,16 @@ def refracted_pair_integrals(
         corners = np.stack([m0 + a_u + b_s, m0 - a_u + b_s, m0 + a_u - b_s, m0 - a_u - b_s])
         d = second_antiderivative(edges, values, corners)  # (V, 4, t, P, a, b)
         box = (d[:, 0] - d[:, 1] - d[:, 2] + d[:, 3]) / ((1 - gp) * gp)  # (V, t, P, a, b)
-        moments = np.einsum("vtpab,kpab->ktvp", box, powers)  # (5, t, V, P)
-        b0, b1 = moments[0], moments[1]
-        b2 = moments[2] + var_in * b0
-        out[0, t0:t0 + per_t] = (b0[:, :, None] * f + b1[:, :, None] * df
-                                 + 0.5 * b2[:, :, None] * d2f) / p
-        out[1, t0:t0 + per_t] = _weighted_block(moments, b2, centre, var_in, f, df, d2f) / p
+        moments = np.einsum("vtpab,jpab->jtvp", box, weights)
+        moments = moments.reshape((n_b, 5) + moments.shape[1:])  # (B, 5, t, V, P)
+        for ib in range(n_b):
+            mb = moments[ib]
+            b0, b1 = mb[0], mb[1]
+            b2 = mb[2] + var_in * b0
+            plain = b0[:, :, None] * f + b1[:, :, None] * df + 0.5 * b2[:, :, None] * d2f
+            out[ib, 0, t0:t0 + per_t] = plain / p
+            out[ib, 1, t0:t0 + per_t] = (_weighted_block(mb, b2, centre, var_in, f, df, d2f)
+                                         + c_b[ib] * plain) / p
     return out
 
 
@@ -157,6 +219,65 @@ def _interp(nodes: np.ndarray, fam: np.ndarray, t: np.ndarray) -> np.ndarray:
     for k in range(1, 4):
         out += fam[base + k] * ls[k].reshape(shape)
     return out
+
+
+def _squared_range(offsets_mm: np.ndarray, half_mm: float) -> tuple[np.ndarray, np.ndarray]:
+    """Smallest and largest ``δ²`` over a pair of centre offset ``D`` whose offsets span
+    ``D ± half`` (mm²)."""
+    a = np.abs(offsets_mm)
+    return np.maximum(a - half_mm, 0.0) ** 2, (a + half_mm) ** 2
+
+
+def coupling_levels(kappa: TabulatedRadial, dx_mm: np.ndarray, dy_mm: np.ndarray,
+                    half_x_mm: float, half_y_mm: float) -> np.ndarray:
+    """Coupling bins (:data:`BIN_LEVELS`) each ``(x pair, y pair)`` needs: the larger move of
+    one axis's crossing point, ``|D_x|·|κ'(D²)|·Δ(δ_y²)`` and its transpose, across the other
+    axis's pair, in steps of at most :data:`COUPLING_BIN_UM`.
+
+    ``dx_mm`` ``(P,)`` and ``dy_mm`` ``(Q,)`` are the pairs' centre offsets; returns ``(P, Q)``.
+    """
+    lo_x, hi_x = _squared_range(dx_mm, half_x_mm)
+    lo_y, hi_y = _squared_range(dy_mm, half_y_mm)
+    kd = np.abs(kappa.d1(dx_mm[:, None] ** 2 + dy_mm[None, :] ** 2))
+    move_x = np.abs(dx_mm)[:, None] * kd * (hi_y - lo_y)[None, :]
+    move_y = np.abs(dy_mm)[None, :] * kd * (hi_x - lo_x)[:, None]
+    need = np.ceil(np.maximum(move_x, move_y) * 1e3 / COUPLING_BIN_UM)
+    levels = np.asarray(BIN_LEVELS)
+    return levels[np.minimum(np.searchsorted(levels, need), levels.size - 1)]
+
+
+def _fill_block(nodes_y: np.ndarray, fx: np.ndarray, refs_x: np.ndarray, dx_mm: np.ndarray,
+                nodes_x: np.ndarray, fy: np.ndarray, refs_y: np.ndarray, dy_mm: np.ndarray,
+                coef: np.ndarray) -> np.ndarray:
+    """Kernel entries ``(Q, P)`` of x pairs (offsets ``dx_mm``) and y pairs (``dy_mm``) from
+    their binned integrals (``fx`` ``(Bx, 2, Ty, V, L, P)`` on ``nodes_y``, ``fy``
+    ``(By, 2, Tx, V, L, Q)`` on ``nodes_x``): ``Σ_{b,c} Σ_v coef_v Σ_l`` of the bivariate
+    first-order expansion of bin ``b`` of x about bin ``c``'s reference ``δ_y²`` and of bin
+    ``c`` of y about bin ``b``'s ``δ_x²``: ``X·Y + ∂X·Y₁ + X₁·∂Y + ∂X₁·∂Y₁``. With one bin
+    each the cross term ``∂X₁·∂Y₁`` is left out (the separable path's sum)."""
+    cross = refs_x.size > 1 or refs_y.size > 1
+
+    def deriv(fam: np.ndarray, nodes: np.ndarray) -> np.ndarray:
+        return np.gradient(fam, nodes, axis=2, edge_order=2) if nodes.size > 2 else np.zeros_like(fam)
+
+    dfx = deriv(fx, nodes_y)  # (Bx, 2, Ty, V, L, P): ∂X, ∂X₁
+    dfy = deriv(fy, nodes_x)
+    block = np.zeros((dy_mm.size, dx_mm.size))
+    for bx, rx in enumerate(refs_x):
+        at_x = (dx_mm + rx) ** 2  # where the y integrals are read: (P,)
+        for by, ry in enumerate(refs_y):
+            at_y = (dy_mm + ry) ** 2  # (Q,)
+            x0, x1 = _interp(nodes_y, fx[bx, 0], at_y), _interp(nodes_y, fx[bx, 1], at_y)
+            dx0 = _interp(nodes_y, dfx[bx, 0], at_y)
+            y0, y1 = _interp(nodes_x, fy[by, 0], at_x), _interp(nodes_x, fy[by, 1], at_x)
+            dy0 = _interp(nodes_x, dfy[by, 0], at_x)
+            block += np.einsum("v,qvlp,pvlq->qp", coef, x0, y0)
+            block += np.einsum("v,qvlp,pvlq->qp", coef, dx0, y1)
+            block += np.einsum("v,qvlp,pvlq->qp", coef, x1, dy0)
+            if cross:
+                block += np.einsum("v,qvlp,pvlq->qp", coef, _interp(nodes_y, dfx[bx, 1], at_y),
+                                   _interp(nodes_x, dfy[by, 1], at_x))
+    return block
 
 
 def build_blocked_refracted_kernel(
@@ -186,59 +307,70 @@ def build_blocked_refracted_kernel(
     c_o, c_c = mask_leakage.intensity_coefficients(kp.leakage)
     coef = np.array([c_o, c_c])
     n_v, n_l = 2, exp.rank
-    ox, oy = pair_offsets_mm(gx), pair_offsets_mm(gy)  # (S, M), (R, N)
-    tx, ty = (ox**2).ravel(), (oy**2).ravel()
+    ox, oy = pair_offsets_mm(gx).ravel(), pair_offsets_mm(gy).ravel()  # (S·M,), (R·N,)
+    tx, ty = ox**2, oy**2
+    half_x = (gx.sensor_pitch_mm + gx.scene_pitch_mm) / 2
+    half_y = (gy.sensor_pitch_mm + gy.scene_pitch_mm) / 2
     k0 = float(tables.kappa.value(np.array(0.0)))
 
-    def nodes_for(grid: AxisGrid, other_t: np.ndarray) -> np.ndarray:
+    def nodes_for(grid: AxisGrid, lo: float, hi: float) -> np.ndarray:
         width = min((1 - k0) * grid.sensor_pitch_mm, k0 * grid.scene_pitch_mm)
-        return _r2_nodes(float(other_t.min()), float(other_t.max()), tables, grid.max_offset_mm(), width)
+        return _r2_nodes(lo, hi, tables, grid.max_offset_mm(), width)
 
-    nodes_y = nodes_for(gx, ty)  # the x integrals' nodes (in D_y²)
-    nodes_x = nodes_for(gy, tx)  # the y integrals' nodes (in D_x²)
+    # the nodes cover the pairs' whole δ² range: binned integrals are read at their bins'
+    # reference offsets, up to a pair's half extent from its centre
+    nodes_y = nodes_for(gx, float(_squared_range(oy, half_y)[0].min()), float(_squared_range(oy, half_y)[1].max()))
+    nodes_x = nodes_for(gy, float(_squared_range(ox, half_x)[0].min()), float(_squared_range(ox, half_x)[1].max()))
     n_q = ty.size
-    # per x pair of a group: its x integrals at every D_y node (2·T_y·V·L), and, interpolated
-    # at every y pair, X, ∂X, X₁ and Y, ∂Y, Y₁ (6·Q·V·L)
-    per_pair = 8.0 * n_v * n_l * (2 * nodes_y.size + 6 * n_q + 2)
+    # per x pair of a group: its x integrals at every D_y node (2·T_y·V·L, plus the
+    # derivative), and, interpolated at every y pair, X, ∂X, X₁ and Y, ∂Y, Y₁ (6·Q·V·L)
+    per_pair = 8.0 * n_v * n_l * (4 * nodes_y.size + 8 * n_q + 2)
     group = int(max(1, min(tx.size, BLOCK_BYTES // per_pair)))
     order = np.argsort(tx, kind="stable")
+    # the bins a y pair gets with an x pair are decided by the x pair's class of |D_x| (one
+    # class per x pair extent, read at its upper bound), so the kernel does not depend on how
+    # the pairs are grouped; groups never straddle a class
+    x_class = np.ceil(np.abs(ox) / (2 * half_x)).astype(np.int64)
+    groups: list[np.ndarray] = []
+    for cls in np.unique(x_class):
+        members = order[x_class[order] == cls]
+        groups += [members[i:i + group] for i in range(0, members.size, group)]
     g_out = np.zeros((kp.rows * kp.cols, kp.scene_rows * kp.scene_cols), np.float32)
     g4 = g_out.reshape(kp.rows, kp.cols, kp.scene_rows, kp.scene_cols)
     rq, nq = np.divmod(np.arange(n_q), kp.scene_rows)
-    n_groups = -(-tx.size // group)
+    n_groups = len(groups)
     sx, sy = kp.dx_um * 1e-3, kp.dy_um * 1e-3
-    for gi in range(n_groups):
-        idx = order[gi * group:(gi + 1) * group]
+    most_bins = 1
+    for gi, idx in enumerate(groups):
         cp, mp = np.divmod(idx, kp.scene_cols)
-        # x side: the group's pairs at every D_y² node; ∂/∂D² on the nodes
-        fx = refracted_pair_integrals(gx, edges, vx, exp.fx_derivs, tables.kappa, nodes_y,
-                                      kp.n_sub, cp, mp, sx)  # (2, Ty, V, L, P)
-        dfx = np.gradient(fx[0], nodes_y, axis=0, edge_order=2)
-        x_at = _interp(nodes_y, fx[0], ty)  # (Q, V, L, P)
-        dx_at = _interp(nodes_y, dfx, ty)
-        x1_at = _interp(nodes_y, fx[1], ty)
-        del fx, dfx
-        # y side: the whole y grid at the group's few D_x² nodes
-        sl = _ghosted(nodes_x, float(tx[idx].min()), float(tx[idx].max()))
-        nodes = nodes_x[sl]
-        from thintact_sdk.simulation.refracted import refracted_axis_family
-
-        fy = refracted_axis_family(gy, edges, vy, exp.gy_derivs, tables.kappa, nodes, kp.n_sub,
-                                   sy, weighted=True)  # (2, Tg, V, L, R, N)
-        fy = fy.reshape(fy.shape[:4] + (n_q,))
-        dfy = np.gradient(fy[0], nodes, axis=0, edge_order=2) if nodes.size > 2 else np.zeros_like(fy[0])
-        y_at = _interp(nodes, fy[0], tx[idx])  # (P, V, L, Q)
-        dy_at = _interp(nodes, dfy, tx[idx])
-        y1_at = _interp(nodes, fy[1], tx[idx])
-        del fy, dfy
-        block = np.einsum("v,qvlp,pvlq->qp", coef, x_at, y_at)
-        block += np.einsum("v,qvlp,pvlq->qp", coef, dx_at, y1_at)
-        block += np.einsum("v,qvlp,pvlq->qp", coef, x1_at, dy_at)
-        g4[rq[:, None], cp[None, :], nq[:, None], mp[None, :]] = block
+        # the bins every y pair needs with this group's class
+        bound = np.array([x_class[idx[0]] * 2 * half_x])
+        levels = coupling_levels(tables.kappa, bound, oy, half_x, half_y)[0]  # (Q,)
+        for level in np.unique(levels):
+            qs = np.flatnonzero(levels == level)
+            # sub-rectangles finer than the bins (MIN_BINNED_SUB at least)
+            n_sub = kp.n_sub if level == 1 else max(kp.n_sub, MIN_BINNED_SUB, 2 * int(level))
+            most_bins = max(most_bins, int(level))
+            # x side: the group's pairs at the D_y² nodes these y pairs reach
+            reach = (float(ty[qs].min()), float(ty[qs].max())) if level == 1 else \
+                (float(_squared_range(oy[qs], half_y)[0].min()), float(_squared_range(oy[qs], half_y)[1].max()))
+            sl_y = _ghosted(nodes_y, *reach)
+            fx = refracted_pair_integrals(gx, edges, vx, exp.fx_derivs, tables.kappa, nodes_y[sl_y],
+                                          n_sub, cp, mp, sx, n_bins=int(level))  # (B, 2, Ty, V, L, P)
+            # y side: these y pairs at the few D_x² nodes the group spans
+            reach = (float(tx[idx].min()), float(tx[idx].max())) if level == 1 else \
+                (float(_squared_range(ox[idx], half_x)[0].min()), float(_squared_range(ox[idx], half_x)[1].max()))
+            sl_x = _ghosted(nodes_x, *reach)
+            fy = refracted_pair_integrals(gy, edges, vy, exp.gy_derivs, tables.kappa, nodes_x[sl_x],
+                                          n_sub, rq[qs], nq[qs], sy, n_bins=int(level))  # (B, 2, Tx, V, L, Q)
+            _, refs_x = coupling_bins(gx, n_sub, int(level))
+            _, refs_y = coupling_bins(gy, n_sub, int(level))
+            block = _fill_block(nodes_y[sl_y], fx, refs_x, ox[idx], nodes_x[sl_x], fy, refs_y, oy[qs], coef)
+            g4[rq[qs][:, None], cp[None, :], nq[qs][:, None], mp[None, :]] = block
         if progress is not None:
             progress(gi + 1, n_groups)
     info = {"rank": float(exp.rank), "radiometric_rel_error": exp.rel_error, "terms": 0.0,
-            "blocked_groups": float(n_groups)}
+            "blocked_groups": float(n_groups), "coupling_bins": float(most_bins)}
     return DirectKernel(g_out, kp.rows, kp.cols, info)
 
 
