@@ -228,6 +228,16 @@ def _squared_range(offsets_mm: np.ndarray, half_mm: float) -> tuple[np.ndarray, 
     return np.maximum(a - half_mm, 0.0) ** 2, (a + half_mm) ** 2
 
 
+def _reach(offsets_mm: np.ndarray, half_mm: float, binned: bool = True) -> tuple[float, float]:
+    """The ``δ²`` range (mm²) the integrals of pairs at centre offsets ``offsets_mm`` are
+    read over: their whole extent when binned, else their centres' ``D²``."""
+    if not binned:
+        d2 = offsets_mm**2
+        return float(d2.min()), float(d2.max())
+    lo, hi = _squared_range(offsets_mm, half_mm)
+    return float(lo.min()), float(hi.max())
+
+
 def coupling_levels(kappa: TabulatedRadial, dx_mm: np.ndarray, dy_mm: np.ndarray,
                     half_x_mm: float, half_y_mm: float) -> np.ndarray:
     """Coupling bins (:data:`BIN_LEVELS`) each ``(x pair, y pair)`` needs: the larger move of
@@ -319,8 +329,8 @@ def build_blocked_refracted_kernel(
 
     # the nodes cover the pairs' whole δ² range: binned integrals are read at their bins'
     # reference offsets, up to a pair's half extent from its centre
-    nodes_y = nodes_for(gx, float(_squared_range(oy, half_y)[0].min()), float(_squared_range(oy, half_y)[1].max()))
-    nodes_x = nodes_for(gy, float(_squared_range(ox, half_x)[0].min()), float(_squared_range(ox, half_x)[1].max()))
+    nodes_y = nodes_for(gx, *_reach(oy, half_y))
+    nodes_x = nodes_for(gy, *_reach(ox, half_x))
     n_q = ty.size
     # per x pair of a group: its x integrals at every D_y node (2·T_y·V·L, plus the
     # derivative), and, interpolated at every y pair, X, ∂X, X₁ and Y, ∂Y, Y₁ (6·Q·V·L)
@@ -352,15 +362,11 @@ def build_blocked_refracted_kernel(
             n_sub = kp.n_sub if level == 1 else max(kp.n_sub, MIN_BINNED_SUB, 2 * int(level))
             most_bins = max(most_bins, int(level))
             # x side: the group's pairs at the D_y² nodes these y pairs reach
-            reach = (float(ty[qs].min()), float(ty[qs].max())) if level == 1 else \
-                (float(_squared_range(oy[qs], half_y)[0].min()), float(_squared_range(oy[qs], half_y)[1].max()))
-            sl_y = _ghosted(nodes_y, *reach)
+            sl_y = _ghosted(nodes_y, *_reach(oy[qs], half_y, level > 1))
             fx = refracted_pair_integrals(gx, edges, vx, exp.fx_derivs, tables.kappa, nodes_y[sl_y],
                                           n_sub, cp, mp, sx, n_bins=int(level))  # (B, 2, Ty, V, L, P)
             # y side: these y pairs at the few D_x² nodes the group spans
-            reach = (float(tx[idx].min()), float(tx[idx].max())) if level == 1 else \
-                (float(_squared_range(ox[idx], half_x)[0].min()), float(_squared_range(ox[idx], half_x)[1].max()))
-            sl_x = _ghosted(nodes_x, *reach)
+            sl_x = _ghosted(nodes_x, *_reach(ox[idx], half_x, level > 1))
             fy = refracted_pair_integrals(gy, edges, vy, exp.gy_derivs, tables.kappa, nodes_x[sl_x],
                                           n_sub, rq[qs], nq[qs], sy, n_bins=int(level))  # (B, 2, Tx, V, L, Q)
             _, refs_x = coupling_bins(gx, n_sub, int(level))
