@@ -270,8 +270,9 @@ def _fill_block(nodes_y: np.ndarray, fx: np.ndarray, refs_x: np.ndarray, dx_mm: 
     def deriv(fam: np.ndarray, nodes: np.ndarray) -> np.ndarray:
         return np.gradient(fam, nodes, axis=2, edge_order=2) if nodes.size > 2 else np.zeros_like(fam)
 
-    dfx = deriv(fx, nodes_y)  # (Bx, 2, Ty, V, L, P): ∂X, ∂X₁
-    dfy = deriv(fy, nodes_x)
+    # ∂X and, for the cross term only, ∂X₁: (Bx, 1 or 2, Ty, V, L, P); likewise y
+    dfx = deriv(fx if cross else fx[:, :1], nodes_y)
+    dfy = deriv(fy if cross else fy[:, :1], nodes_x)
     block = np.zeros((dy_mm.size, dx_mm.size))
     for bx, rx in enumerate(refs_x):
         at_x = (dx_mm + rx) ** 2  # where the y integrals are read: (P,)
