@@ -13,6 +13,7 @@ from thintact_sdk.errors import ThinTactError
 from thintact_sdk.formats.profiles import load_profile
 from thintact_sdk.simulation import refracted as sim_refracted
 from thintact_sdk.simulation import refracted_blocked as sim_refracted_blocked
+from thintact_sdk.simulation.direct import DirectKernel
 from thintact_sdk.simulation.effects import resolve_physics
 from thintact_sdk.simulation.params import kernel_params
 from thintact_sdk.simulation.reference import reference_kernel
@@ -49,8 +50,16 @@ def test_blocked_kernel_equals_the_separable_refracted_kernel(monkeypatch: pytes
     finally:
         sim_refracted_blocked.BLOCK_BYTES = old
     assert many.info["blocked_groups"] > 10
-    assert np.max(np.abs(many.G - sim_refracted_blocked.build_blocked_refracted_kernel(kp).G)) \
-        <= 1e-6 * np.max(np.abs(many.G))
+    whole = sim_refracted_blocked.build_blocked_refracted_kernel(kp)
+    assert np.max(np.abs(many.G - whole.G)) <= 1e-6 * np.max(np.abs(many.G))
+    # the y pairs' tables in chunks of one pair (each chunk serving every group of its class)
+    steps: list[tuple[int, int]] = []
+    with monkeypatch.context() as m:
+        m.setattr(sim_refracted_blocked, "Y_CHUNK_BYTES", 1)
+        chunked = sim_refracted_blocked.build_blocked_refracted_kernel(kp, lambda d, t: steps.append((d, t)))
+    assert np.max(np.abs(chunked.G - whole.G)) <= 1e-6 * np.max(np.abs(whole.G))
+    assert [d for d, _ in steps] == list(range(1, len(steps) + 1)) and {t for _, t in steps} == {len(steps)}
+    assert len(steps) > kp.rows * kp.scene_rows  # at least one step per y pair
 
 
 def test_paper_device_with_refraction_is_refused_before_allocating():
@@ -87,13 +96,33 @@ def test_coupling_bins_grow_with_the_crossing_move():
     assert sim_refracted_blocked.build_blocked_refracted_kernel(narrow).info["coupling_bins"] == 1
 
 
+def test_crossings_that_need_bins_take_the_blocked_kernel_on_any_size():
+    """The separable path freezes the coupling, so a device whose crossings move across the
+    other axis's pair takes the blocked kernel however small its family; a device whose
+    crossings do not (virtual-mini with refraction) keeps the separable path."""
+    _, kp = _kp({"refraction": {"n_scene_side": 1.4}}, **WIDE77)
+    assert sim_refracted.refracted_family_bytes(kp) < sim_refracted_blocked.BLOCKED_FROM_BYTES
+    assert sim_refracted_blocked.needs_coupling_bins(kp) and sim_refracted_blocked.blocked_wanted(kp)
+    mini = kernel_params(load_profile("virtual-mini"), resolve_physics({"refraction": {"n_scene_side": 1.41}}))
+    assert not sim_refracted_blocked.needs_coupling_bins(mini)
+    assert not sim_refracted_blocked.blocked_wanted(mini)
+    # an operator over the dense limit keeps the separable path (bins alone do not route it)
+    with pytest.MonkeyPatch.context() as m:
+        m.setattr(sim_refracted_blocked, "DENSE_MAX_BYTES", sim_refracted_blocked.dense_bytes(kp) / 2)
+        assert not sim_refracted_blocked.blocked_wanted(kp)
+
+
 @pytest.mark.slow
 def test_blocked_kernel_at_77_degrees_against_brute_force():
     """Issue 34 item 1: within 1e-3 of a converged brute force per scene pixel at 70-77° air
     angles (the frozen other-axis offset alone was 1.6-4.9e-2 off there)."""
+    from thintact_sdk.simulation.simulator import clear_kernel_cache, get_kernel
+
     prof, kp = _kp({"refraction": {"n_scene_side": 1.4}}, **WIDE77)
-    kern = sim_refracted_blocked.build_blocked_refracted_kernel(kp)
-    assert kern.info["coupling_bins"] > 1
+    clear_kernel_cache()
+    kern = get_kernel(kp)  # the simulator's own choice of path
+    clear_kernel_cache()
+    assert isinstance(kern, DirectKernel) and kern.info["coupling_bins"] > 1
     g = kern.G.astype(float)
     sens = np.array([0, 4, 15, 19, 12])
     # 70-77° from every sensor pixel (the corners and one edge), then 0° and two between
@@ -101,3 +130,35 @@ def test_blocked_kernel_at_77_degrees_against_brute_force():
     ref = reference_kernel(prof, 40, 40, sens, scene)
     sub = g[np.ix_(sens, scene)]
     assert max(rel_rms(sub[:, j], ref[:, j]) for j in range(scene.size)) < 1e-3
+
+
+def test_simulate_reports_a_blocked_build_as_it_goes(tmp_path, monkeypatch: pytest.MonkeyPatch, capsys):
+    """``thintact simulate`` on a device whose refracted kernel is filled block by block (a
+    wide device's build takes minutes) says how far the build is, also when stderr is not a
+    terminal, and then how far the frames are; the frames are the blocked kernel's."""
+    import yaml
+
+    from thintact_sdk.apps.cli.main import main
+    from thintact_sdk.simulation.scene_batch import simulate_scenes
+    from thintact_sdk.simulation.simulator import clear_kernel_cache
+
+    monkeypatch.setattr(sim_refracted_blocked, "BLOCKED_FROM_BYTES", 0.0)  # this small device too
+    prof, kp = _kp(PHYS, **SMALL)
+    assert sim_refracted_blocked.blocked_wanted(kp)
+    (tmp_path / "p.yaml").write_text(yaml.safe_dump(prof.model_dump(mode="json", exclude_none=True)))
+    scenes = np.random.default_rng(0).random((3, 6, 8, 1))
+    np.save(tmp_path / "s.npy", scenes)
+    clear_kernel_cache()
+    assert main(["simulate", "--profile", str(tmp_path / "p.yaml"), "--scenes", str(tmp_path / "s.npy"),
+                 "--out", str(tmp_path / "y.npy")]) == 0
+    err = capsys.readouterr().err
+    built = [ln for ln in err.splitlines() if "building the imaging kernel" in ln]
+    assert len(built) >= 3 and built[-1].endswith("steps)") and "100 %" in built[-1]
+    assert "simulating frames: 100 % (3/3 frames)" in err
+    want = sim_refracted_blocked.build_blocked_refracted_kernel(kp).apply(scenes)
+    assert np.allclose(np.load(tmp_path / "y.npy"), want, rtol=1e-5, atol=1e-7 * np.abs(want).max())
+    clear_kernel_cache()
+    seen: list[tuple[int, int]] = []
+    simulate_scenes(prof, scenes, build_progress=lambda d, t: seen.append((d, t)))
+    assert seen and seen[-1][0] == seen[-1][1]
+    clear_kernel_cache()

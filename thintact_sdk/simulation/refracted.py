@@ -258,12 +258,12 @@ def pair_offsets_mm(grid: AxisGrid) -> np.ndarray:
 
 
 def _r2_nodes(d2_lo: float, d2_hi: float, tables: RefractedTables, reach_mm: float,
-              width_mm: float) -> np.ndarray:
+              width_mm: float, step_um: float = CROSSING_STEP_UM) -> np.ndarray:
     """Uniform ``D²`` nodes over ``[d2_lo, d2_hi]``: the crossing ``dx·κ`` moves by at most
-    ``min(CROSSING_STEP_UM, width/10)`` per step for offsets up to ``reach_mm``."""
+    ``min(step_um, width/10)`` per step for offsets up to ``reach_mm``."""
     probe = np.linspace(0.0, reach_mm**2 + d2_hi, 512)
     slope = float(np.max(np.abs(tables.kappa.d1(probe)))) * reach_mm  # |d(dx·κ)/dD²|
-    step_move = min(CROSSING_STEP_UM * 1e-3, width_mm / 10)
+    step_move = min(step_um * 1e-3, width_mm / 10)
     span = d2_hi - d2_lo
     n_int = max(3, int(math.ceil(span * max(slope, 1e-12) / step_move)))
     if span <= 0:

@@ -73,6 +73,16 @@ MIN_BINNED_SUB = 8
 """Fewest sub-intervals per pixel of a binned pair (and at least two per bin): a bin's
 share of the weighted integrals is taken from its sub-rectangles' centres."""
 
+CLASS_EXTENTS = 1
+"""Width of a class of x pairs in ``|D_x|`` (in x pair extents, ``p + p_scene``): the bins a y
+pair gets with every x pair of a class are those of the class's largest ``|D_x|``, and the
+y pairs' tables are tabulated once per class over the class's ``D_x²`` reach."""
+
+Y_CHUNK_BYTES = 256 * 1024**2
+"""Largest y-side table of one bin level of a class of x pairs (float64, before it is kept
+as float32 with its derivative): the y pairs are taken in chunks of this size, each
+chunk's tables serving every group of the class."""
+
 T_BATCH_ELEMENTS = 2_000_000
 """Sub-rectangle corner values evaluated at once by :func:`refracted_pair_integrals`."""
 
@@ -214,6 +224,7 @@ def _interp(nodes: np.ndarray, fam: np.ndarray, t: np.ndarray) -> np.ndarray:
     from thintact_sdk.simulation.refracted import _lagrange4
 
     base, ls = _lagrange4(nodes, t)
+    ls = [w.astype(fam.dtype, copy=False) for w in ls]
     shape = (t.size,) + (1,) * (fam.ndim - 1)
     out = fam[base] * ls[0].reshape(shape)
     for k in range(1, 4):
@@ -256,28 +267,31 @@ def coupling_levels(kappa: TabulatedRadial, dx_mm: np.ndarray, dy_mm: np.ndarray
     return levels[np.minimum(np.searchsorted(levels, need), levels.size - 1)]
 
 
-def _fill_block(nodes_y: np.ndarray, fx: np.ndarray, refs_x: np.ndarray, dx_mm: np.ndarray,
-                nodes_x: np.ndarray, fy: np.ndarray, refs_y: np.ndarray, dy_mm: np.ndarray,
-                coef: np.ndarray) -> np.ndarray:
+def _node_derivative(fam: np.ndarray, nodes: np.ndarray) -> np.ndarray:
+    """``∂/∂D²`` of tables ``(B, k, T, ...)`` along their node axis (second order)."""
+    if nodes.size > 2:  # uniform nodes: a scalar spacing keeps float32 tables float32
+        return np.gradient(fam, float(nodes[1] - nodes[0]), axis=2, edge_order=2)
+    return np.zeros_like(fam)
+
+
+def _fill_block(nodes_y: np.ndarray, fx: np.ndarray, dfx: np.ndarray, refs_x: np.ndarray,
+                dx_mm: np.ndarray, nodes_x: np.ndarray, fy: np.ndarray, dfy: np.ndarray,
+                refs_y: np.ndarray, dy_mm: np.ndarray, coef: np.ndarray) -> np.ndarray:
     """Kernel entries ``(Q, P)`` of x pairs (offsets ``dx_mm``) and y pairs (``dy_mm``) from
     their binned integrals (``fx`` ``(Bx, 2, Ty, V, L, P)`` on ``nodes_y``, ``fy``
-    ``(By, 2, Tx, V, L, Q)`` on ``nodes_x``): ``Σ_{b,c} Σ_v coef_v Σ_l`` of the bivariate
-    first-order expansion of bin ``b`` of x about bin ``c``'s reference ``δ_y²`` and of bin
-    ``c`` of y about bin ``b``'s ``δ_x²``: ``X·Y + ∂X·Y₁ + X₁·∂Y + ∂X₁·∂Y₁``. With one bin
-    each the cross term ``∂X₁·∂Y₁`` is left out (the separable path's sum)."""
+    ``(By, 2, Tx, V, L, Q)`` on ``nodes_x``) and their node derivatives (``dfx``, ``dfy``:
+    the plain integrals' only, ``(B, 1, T, V, L, ·)``, when both sides have one bin):
+    ``Σ_{b,c} Σ_v coef_v Σ_l`` of the bivariate first-order expansion of bin ``b`` of x about
+    bin ``c``'s reference ``δ_y²`` and of bin ``c`` of y about bin ``b``'s ``δ_x²``:
+    ``X·Y + ∂X·Y₁ + X₁·∂Y + ∂X₁·∂Y₁``. With one bin each the cross term ``∂X₁·∂Y₁`` is left
+    out (the separable path's sum). The tables may be float32 (the sums are then float32)."""
     cross = refs_x.size > 1 or refs_y.size > 1
-
-    def deriv(fam: np.ndarray, nodes: np.ndarray) -> np.ndarray:
-        return np.gradient(fam, nodes, axis=2, edge_order=2) if nodes.size > 2 else np.zeros_like(fam)
-
-    # ∂X and, for the cross term only, ∂X₁: (Bx, 1 or 2, Ty, V, L, P); likewise y
-    dfx = deriv(fx if cross else fx[:, :1], nodes_y)
-    dfy = deriv(fy if cross else fy[:, :1], nodes_x)
-    block = np.zeros((dy_mm.size, dx_mm.size))
-    for bx, rx in enumerate(refs_x):
-        at_x = (dx_mm + rx) ** 2  # where the y integrals are read: (P,)
-        for by, ry in enumerate(refs_y):
-            at_y = (dy_mm + ry) ** 2  # (Q,)
+    coef = coef.astype(fx.dtype)
+    block = np.zeros((dy_mm.size, dx_mm.size), fx.dtype)
+    for by, ry in enumerate(refs_y):
+        at_y = (dy_mm + ry) ** 2  # where the x integrals are read: (Q,)
+        for bx, rx in enumerate(refs_x):
+            at_x = (dx_mm + rx) ** 2  # where the y integrals are read: (P,)
             x0, x1 = _interp(nodes_y, fx[bx, 0], at_y), _interp(nodes_y, fx[bx, 1], at_y)
             dx0 = _interp(nodes_y, dfx[bx, 0], at_y)
             y0, y1 = _interp(nodes_x, fy[by, 0], at_x), _interp(nodes_x, fy[by, 1], at_x)
@@ -326,7 +340,9 @@ def build_blocked_refracted_kernel(
 
     def nodes_for(grid: AxisGrid, lo: float, hi: float) -> np.ndarray:
         width = min((1 - k0) * grid.sensor_pitch_mm, k0 * grid.scene_pitch_mm)
-        return _r2_nodes(lo, hi, tables, grid.max_offset_mm(), width)
+        # the crossing moves by a tenth of the narrower trapezoid side per node: no absolute
+        # cap (docs/simulator.md, "Wide angles": the 0.5 um cap changed nothing at 77°)
+        return _r2_nodes(lo, hi, tables, grid.max_offset_mm(), width, step_um=math.inf)
 
     # the nodes cover the pairs' whole δ² range: binned integrals are read at their bins'
     # reference offsets, up to a pair's half extent from its centre
@@ -341,41 +357,60 @@ def build_blocked_refracted_kernel(
     # the bins a y pair gets with an x pair are decided by the x pair's class of |D_x| (one
     # class per x pair extent, read at its upper bound), so the kernel does not depend on how
     # the pairs are grouped; groups never straddle a class
-    x_class = np.ceil(np.abs(ox) / (2 * half_x)).astype(np.int64)
-    groups: list[np.ndarray] = []
+    x_class = np.ceil(np.abs(ox) / (2 * CLASS_EXTENTS * half_x)).astype(np.int64)
+    classes = []  # (x pairs of the class, its groups)
     for cls in np.unique(x_class):
         members = order[x_class[order] == cls]
-        groups += [members[i:i + group] for i in range(0, members.size, group)]
+        classes.append((members, [members[i:i + group] for i in range(0, members.size, group)]))
     g_out = np.zeros((kp.rows * kp.cols, kp.scene_rows * kp.scene_cols), np.float32)
     g4 = g_out.reshape(kp.rows, kp.cols, kp.scene_rows, kp.scene_cols)
     rq, nq = np.divmod(np.arange(n_q), kp.scene_rows)
-    n_groups = len(groups)
     sx, sy = kp.dx_um * 1e-3, kp.dy_um * 1e-3
-    most_bins = 1
-    for gi, idx in enumerate(groups):
-        cp, mp = np.divmod(idx, kp.scene_cols)
-        # the bins every y pair needs with this group's class
-        bound = np.array([x_class[idx[0]] * 2 * half_x])
+    # the plan: per class, per bin level, the y pairs in chunks whose y tables fit
+    # Y_CHUNK_BYTES; each chunk's y tables serve every group of the class
+    plan = []
+    for members, cls_groups in classes:
+        # the bins every y pair needs with this class (read at its upper bound of |D_x|)
+        bound = np.array([x_class[members[0]] * 2 * CLASS_EXTENTS * half_x])
         levels = coupling_levels(tables.kappa, bound, oy, half_x, half_y)[0]  # (Q,)
         for level in np.unique(levels):
             qs = np.flatnonzero(levels == level)
-            # sub-rectangles finer than the bins (MIN_BINNED_SUB at least)
-            n_sub = kp.n_sub if level == 1 else max(kp.n_sub, MIN_BINNED_SUB, 2 * int(level))
-            most_bins = max(most_bins, int(level))
-            # x side: the group's pairs at the D_y² nodes these y pairs reach
-            sl_y = _ghosted(nodes_y, *_reach(oy[qs], half_y, level > 1))
-            fx = refracted_pair_integrals(gx, edges, vx, exp.fx_derivs, tables.kappa, nodes_y[sl_y],
-                                          n_sub, cp, mp, sx, n_bins=int(level))  # (B, 2, Ty, V, L, P)
-            # y side: these y pairs at the few D_x² nodes the group spans
-            sl_x = _ghosted(nodes_x, *_reach(ox[idx], half_x, level > 1))
-            fy = refracted_pair_integrals(gy, edges, vy, exp.gy_derivs, tables.kappa, nodes_x[sl_x],
-                                          n_sub, rq[qs], nq[qs], sy, n_bins=int(level))  # (B, 2, Tx, V, L, Q)
-            _, refs_x = coupling_bins(gx, n_sub, int(level))
-            _, refs_y = coupling_bins(gy, n_sub, int(level))
-            block = _fill_block(nodes_y[sl_y], fx, refs_x, ox[idx], nodes_x[sl_x], fy, refs_y, oy[qs], coef)
+            qs = qs[np.argsort(ty[qs], kind="stable")]  # a chunk spans a short D_y² range
+            sl_x = _ghosted(nodes_x, *_reach(ox[members], half_x, level > 1))
+            per_q = 8.0 * 2 * int(level) * (sl_x.stop - sl_x.start) * n_v * n_l * 2
+            chunk = int(max(1, min(qs.size, Y_CHUNK_BYTES // per_q)))
+            for c0 in range(0, qs.size, chunk):
+                plan.append((cls_groups, int(level), qs[c0:c0 + chunk], sl_x))
+    n_steps = sum(len(step[0]) for step in plan)
+    done, most_bins = 0, 1
+    for cls_groups, level, qs, sl_x in plan:
+        # sub-rectangles finer than the bins (MIN_BINNED_SUB at least, two per bin)
+        n_sub = kp.n_sub if level == 1 else max(kp.n_sub, MIN_BINNED_SUB, 2 * level)
+        most_bins = max(most_bins, level)
+        _, refs_x = coupling_bins(gx, n_sub, level)
+        _, refs_y = coupling_bins(gy, n_sub, level)
+        derivs = slice(None) if level > 1 else slice(0, 1)  # ∂X₁, ∂Y₁ for the cross term only
+        # y side: these y pairs at the D_x² nodes the class spans, and their derivative
+        fy64 = refracted_pair_integrals(gy, edges, vy, exp.gy_derivs, tables.kappa, nodes_x[sl_x],
+                                        n_sub, rq[qs], nq[qs], sy, n_bins=level)  # (B, 2, Tx, V, L, Q)
+        fy = fy64.astype(np.float32)
+        del fy64
+        dfy = _node_derivative(fy[:, derivs], nodes_x[sl_x])
+        # x side: each group's pairs at the D_y² nodes these y pairs reach
+        sl_y = _ghosted(nodes_y, *_reach(oy[qs], half_y, level > 1))
+        for idx in cls_groups:
+            cp, mp = np.divmod(idx, kp.scene_cols)
+            fx64 = refracted_pair_integrals(gx, edges, vx, exp.fx_derivs, tables.kappa, nodes_y[sl_y],
+                                            n_sub, cp, mp, sx, n_bins=level)  # (B, 2, Ty, V, L, P)
+            fx = fx64.astype(np.float32)
+            dfx = _node_derivative(fx[:, derivs], nodes_y[sl_y])
+            block = _fill_block(nodes_y[sl_y], fx, dfx, refs_x, ox[idx],
+                                nodes_x[sl_x], fy, dfy, refs_y, oy[qs], coef)
             g4[rq[qs][:, None], cp[None, :], nq[qs][:, None], mp[None, :]] = block
-        if progress is not None:
-            progress(gi + 1, n_groups)
+            done += 1
+            if progress is not None:
+                progress(done, n_steps)
+    n_groups = sum(len(c[1]) for c in classes)
     info = {"rank": float(exp.rank), "radiometric_rel_error": exp.rel_error, "terms": 0.0,
             "blocked_groups": float(n_groups), "coupling_bins": float(most_bins)}
     return DirectKernel(g_out, kp.rows, kp.cols, info)
@@ -387,13 +422,41 @@ derivative and their SVDs at once, several times the family's size; from this fa
 on (one axis, :func:`~thintact_sdk.simulation.refracted.refracted_family_bytes`) an
 unrotated, geometric refracted kernel is filled block by block here instead."""
 
+COUPLING_PROBE_OFFSETS = 512
+"""Pair offsets per axis (evenly through the sorted offsets, both ends included) at which
+:func:`needs_coupling_bins` evaluates :func:`coupling_levels`."""
+
+
+def needs_coupling_bins(kp: KernelParams) -> bool:
+    """Whether some pixel pair's crossing moves by more than :data:`COUPLING_BIN_UM` across
+    the other axis's pair (:func:`coupling_levels` above one bin), probed at
+    :data:`COUPLING_PROBE_OFFSETS` offsets per axis: where it does, the separable path's
+    frozen coupling is off by up to a few percent (``docs/simulator.md``, "Wide angles")."""
+    from thintact_sdk.simulation.refracted import _tables_and_expansion, pair_offsets_mm
+
+    tables, _ = _tables_and_expansion(kp)
+    gx, gy = kp.grid_x(), kp.grid_y()
+
+    def probe(grid: AxisGrid) -> np.ndarray:
+        o = np.unique(np.abs(pair_offsets_mm(grid).ravel()))
+        return o[np.unique(np.linspace(0, o.size - 1, COUPLING_PROBE_OFFSETS).round().astype(np.int64))]
+
+    levels = coupling_levels(tables.kappa, probe(gx), probe(gy),
+                             (gx.sensor_pitch_mm + gx.scene_pitch_mm) / 2,
+                             (gy.sensor_pitch_mm + gy.scene_pitch_mm) / 2)
+    return bool(levels.max() > 1)
+
 
 def blocked_wanted(kp: KernelParams) -> bool:
     """Whether the kernel of ``kp`` is built by :func:`build_blocked_refracted_kernel`:
-    refraction, an unrotated mask, no diffraction, and a separable family above
-    :data:`BLOCKED_FROM_BYTES`."""
+    refraction, an unrotated mask, no diffraction, and either a separable family above
+    :data:`BLOCKED_FROM_BYTES` or crossings that need coupling bins
+    (:func:`needs_coupling_bins`) on an operator within :data:`DENSE_MAX_BYTES` (the
+    separable path would freeze the coupling there)."""
     from thintact_sdk.simulation.refracted import refracted_family_bytes
 
     if kp.n_scene_side == 1.0 or kp.angle_deg != 0.0 or kp.wavelengths_nm is not None or kp.windowed:
         return False
-    return refracted_family_bytes(kp) > BLOCKED_FROM_BYTES
+    if refracted_family_bytes(kp) > BLOCKED_FROM_BYTES:
+        return True
+    return dense_bytes(kp) <= DENSE_MAX_BYTES and needs_coupling_bins(kp)

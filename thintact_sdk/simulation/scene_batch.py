@@ -76,6 +76,7 @@ def simulate_scenes(
     seed: int = 0,
     gain: float | None = None,
     progress: Callable[[int, int], None] | None = None,
+    build_progress: Callable[[int, int], None] | None = None,
 ) -> SimulatedFrames:
     """``scenes`` (a file for :func:`load_scenes`, or an ``F×N×M×C`` array of display
     values) through ``profile``'s simulator, as ``thintact simulate`` does.
@@ -83,7 +84,9 @@ def simulate_scenes(
     With ``noise``, the signal is ``gain`` DN per simulator unit (None: the simulator's
     reference gain, the brightest all-white pixel at 60 % of saturation minus black) and
     Poisson + read noise drawn from ``numpy.random.default_rng(seed)``, clipped at the
-    profile's saturation. ``progress(done, total)`` after each frame.
+    profile's saturation. ``progress(done, total)`` after each frame;
+    ``build_progress(done, total)`` during a kernel build that reports its steps
+    (:meth:`~thintact_sdk.simulation.simulator.Simulator.build_kernel`).
 
     Raises
     ------
@@ -109,6 +112,7 @@ def simulate_scenes(
             f"needs N×M×C = {want}"
         )
     sim = Simulator(profile)
+    sim.build_kernel(build_progress)
     out = np.empty((x.shape[0], profile.sensor.rows, profile.sensor.cols, want[2]))
     rng = np.random.default_rng(seed)
     if noise and gain is None:

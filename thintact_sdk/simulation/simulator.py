@@ -268,25 +268,28 @@ def _build_rotated_window(kp: KernelParams, exp: SeparableExpansion,
     return SeparableKernel(per_channel, info)
 
 
-def get_kernel(kp: KernelParams) -> ImagingKernel:
-    """The (cached) kernel for these parameters: separable (whole or tiled) or direct."""
+def get_kernel(kp: KernelParams, progress: Callable[[int, int], None] | None = None) -> ImagingKernel:
+    """The (cached) kernel for these parameters: separable (whole or tiled) or direct.
+
+    ``progress(done, total)`` is called while a long build runs step by step (the blocked
+    refracted kernel of a wide device, minutes to an hour); other builds do not call it."""
     if kp.windowed and not kp.separable:
         raise ThinTactError("a sensor window's kernel is built on the separable path only (the direct "
                             "kernel has no sensor offset)")
     if kp.separable:
-        return _separable_kernel(kp)
+        return _separable_kernel(kp, progress)
     hit = _cache_get(kp)
     if hit is not None:
         return hit
     return _cache_put(kp, build_direct_kernel(kp))
 
 
-def _separable_kernel(kp: KernelParams) -> ImagingKernel:
+def _separable_kernel(kp: KernelParams, progress: Callable[[int, int], None] | None = None) -> ImagingKernel:
     hit = _cache_get(kp)
     if isinstance(hit, SeparableKernel | TiledKernel) or (isinstance(hit, DirectKernel) and kp.n_scene_side != 1.0):
         return hit
     if sim_refracted_blocked.blocked_wanted(kp):  # a wide refracting device: filled block by block
-        return _cache_put(kp, sim_refracted_blocked.build_blocked_refracted_kernel(kp))
+        return _cache_put(kp, sim_refracted_blocked.build_blocked_refracted_kernel(kp, progress))
     if kp.wavelengths_nm is None and kp.leakage != 0.0:
         # geometric leakage only rescales the open and coding halves: reuse the t = 0 kernel
         base = _separable_kernel(replace(kp, leakage=0.0))
@@ -395,9 +398,16 @@ class Simulator(ImagingModel):
     def kernel(self) -> ImagingKernel | sim_tiled.StreamedTiledKernel:
         """The imaging kernel (built on first use, shared through the cache; a streamed one is
         built at each forward call, never cached)."""
+        return self.build_kernel()
+
+    def build_kernel(self, progress: Callable[[int, int], None] | None = None
+                     ) -> ImagingKernel | sim_tiled.StreamedTiledKernel:
+        """Build the imaging kernel now (what :attr:`kernel` does on first use), calling
+        ``progress(done, total)`` during a build long enough to report steps (the blocked
+        refracted kernel of a wide device); a kernel already built is returned at once."""
         if self._kernel is None:
             self._kernel = streamed_rotated_kernel(self.kernel_params) if self._stream \
-                else get_kernel(self.kernel_params)
+                else get_kernel(self.kernel_params, progress)
         return self._kernel
 
     @property

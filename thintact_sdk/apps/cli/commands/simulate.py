@@ -7,6 +7,7 @@ and writes the ``.npy``.
 from __future__ import annotations
 
 import argparse
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -38,19 +39,30 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def run(args: argparse.Namespace) -> int:
-    from rich.progress import Progress
+def _reporter(say: Callable[[str], None], what: str, unit: str) -> Callable[[int, int], None]:
+    """``progress(done, total)`` as a message each whole percent (at most 101 lines)."""
+    shown = [-1]
 
+    def report(done: int, total: int) -> None:
+        pct = 100 * done // max(total, 1)
+        if pct != shown[0]:
+            shown[0] = pct
+            say(f"{what}: {pct} % ({done}/{total} {unit})")
+    return report
+
+
+def run(args: argparse.Namespace) -> int:
     from thintact_sdk.formats.profiles import load_profile
+    from thintact_sdk.host.progress import stage_reporter
     from thintact_sdk.simulation.scene_batch import simulate_scenes
 
     out_path = claim_output(args.out, "file", force=args.force,
                             inputs=(args.scenes, file_input(args.profile)))
     profile = load_profile(args.profile)
-    with Progress(transient=True) as progress:
-        task = progress.add_task("simulating", total=None)
+    with stage_reporter() as say:  # a status line on a terminal, timestamped lines elsewhere
         made = simulate_scenes(profile, args.scenes, noise=args.noise, seed=args.seed, gain=args.gain,
-                               progress=lambda done, total: progress.update(task, completed=done, total=total))
+                               progress=_reporter(say, "simulating frames", "frames"),
+                               build_progress=_reporter(say, "building the imaging kernel", "steps"))
     if made.gain is not None:
         print(f"gain: {made.gain:.6g} DN per simulator unit")
     out_path.parent.mkdir(parents=True, exist_ok=True)
