@@ -10,12 +10,14 @@ compressed, and its SVD and products take several times its size.
 This module evaluates the per-axis tangent-map box integrals along the refracted map
 without keeping any family:
 
-- the x pixel pairs ``(c, m)`` are sorted by ``D_x²`` and taken in groups of at most
-  ``group`` pairs (sized from the block budget), never straddling a class of ``|D_x|``;
-- for a group, the x integrals are tabulated at the ``D_y²`` nodes the y pairs reach *for
-  the group's pairs only* (:func:`refracted_pair_integrals`), and the y integrals only at
-  the few ``D_x²`` nodes the group spans (plus ghost nodes for the cubic interpolation and
-  the derivative);
+- the x pixel pairs ``(c, m)`` are sorted by ``D_x²``, split into classes of ``|D_x|`` (one
+  pair extent wide) and taken in groups of at most ``group`` pairs (sized from the block
+  budget) that never straddle a class;
+- per class and bin level, the y integrals are tabulated at the ``D_x²`` nodes the class
+  spans (plus ghost nodes for the cubic interpolation and the derivative), in chunks of y
+  pairs sorted by ``D_y²`` (:data:`Y_CHUNK_BYTES`), and kept float32 for every group of the
+  class; per group, the x integrals are tabulated at the ``D_y²`` nodes the chunk reaches
+  *for the group's pairs only* (:func:`refracted_pair_integrals`);
 - both are read by local cubics at each pair of the other axis, and the kernel entries of
   the group's columns are written into a dense ``(R·S, N·M)`` float32 operator, then the
   group's tables are dropped.
@@ -30,9 +32,12 @@ bin of y's reference offset and back, to first order in each with the cross term
 ``Σ_b Σ_c X_b·Y_c + ∂X_b·Y_c,1 + X_b,1·∂Y_c + ∂X_b,1·∂Y_c,1``, which integrates the
 coupling instead of freezing it.
 
-Work is the two axes' tabulation once (more sub-rectangles on binned pairs), memory is the
-operator plus one group's tables (:data:`BLOCK_BYTES`). The operator is refused, before
-anything is allocated, above :data:`DENSE_MAX_BYTES`, naming its size. Unrotated masks
+Work is the two axes' tabulation about once each (the y side about twice: neighbouring
+classes' reaches overlap; more sub-rectangles on binned pairs) and the fill, memory is the
+operator plus one chunk's y tables and one group's x tables (:data:`Y_CHUNK_BYTES`,
+:data:`BLOCK_BYTES`). ``progress(done, total)`` is called after each (group, chunk)
+step. The operator is refused, before anything is allocated, above :data:`DENSE_MAX_BYTES`,
+naming its size. Unrotated masks
 without diffraction (mask shifts, leakage and the pixel angular response included).
 """
 
