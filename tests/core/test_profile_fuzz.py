@@ -203,6 +203,8 @@ def yaml_profiles(draw: st.DrawFn) -> tuple[str, bool]:
             value = "[" + ", ".join([f"*a{i - 1}"] * draw(st.integers(2, 8))) + "]"
         else:
             value = draw(_flow(st.sampled_from(SCALARS + [f"*a{j}" for j in range(i)])))
+            if value.startswith("*"):  # YAML allows no anchor on an alias ("&a1 *a0")
+                value = f"[{value}]"
         head.append(f"x{i}: &a{i} {value}")
     refs = [f"*a{j}" for j in range(len(head))]
     d = copy.deepcopy(BASE)
