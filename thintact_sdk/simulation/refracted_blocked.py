@@ -37,8 +37,8 @@ classes' reaches overlap; more sub-rectangles on binned pairs) and the fill, mem
 operator plus one chunk's y tables and one group's x tables (:data:`Y_CHUNK_BYTES`,
 :data:`BLOCK_BYTES`). ``progress(done, total)`` is called after each (group, chunk)
 step. The operator is refused, before anything is allocated, above :data:`DENSE_MAX_BYTES`,
-naming its size. Unrotated masks
-without diffraction (mask shifts, leakage and the pixel angular response included).
+naming its size. Unrotated masks without diffraction (mask shifts, leakage and the pixel
+angular response included).
 """
 
 from __future__ import annotations
@@ -84,9 +84,10 @@ pair gets with every x pair of a class are those of the class's largest ``|D_x|`
 y pairs' tables are tabulated once per class over the class's ``D_x²`` reach."""
 
 Y_CHUNK_BYTES = 256 * 1024**2
-"""Largest y-side table of one bin level of a class of x pairs (float64, before it is kept
-as float32 with its derivative): the y pairs are taken in chunks of this size, each
-chunk's tables serving every group of the class."""
+"""Largest y-side working memory of one bin level of a class of x pairs: the float64 table
+while it is integrated plus its float32 copy and node derivative (together twice the
+float64 table). The y pairs are taken in chunks of this size, each chunk's tables serving
+every group of the class."""
 
 T_BATCH_ELEMENTS = 2_000_000
 """Sub-rectangle corner values evaluated at once by :func:`refracted_pair_integrals`."""
@@ -382,6 +383,8 @@ def build_blocked_refracted_kernel(
             qs = np.flatnonzero(levels == level)
             qs = qs[np.argsort(ty[qs], kind="stable")]  # a chunk spans a short D_y² range
             sl_x = _ghosted(nodes_x, *_reach(ox[members], half_x, level > 1))
+            # bytes per y pair: the float64 (B, 2, Tx, V, L) table, and as much again for
+            # its float32 copy and derivative
             per_q = 8.0 * 2 * int(level) * (sl_x.stop - sl_x.start) * n_v * n_l * 2
             chunk = int(max(1, min(qs.size, Y_CHUNK_BYTES // per_q)))
             for c0 in range(0, qs.size, chunk):
