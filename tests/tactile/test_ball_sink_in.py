@@ -143,8 +143,12 @@ def test_taxim_pack_held_out_figures():
     bm = res["lut"].meta["ball_model"]
     assert bm["chosen_by"] == "validation" and len(bm["candidates"]) == 7
     assert bm["validation_presses"] == [3, 7, 11, 15, 19, 23]
-    # measured: rigid chosen, sphere 2.22 mm (2.04-2.26), contact ratio 1.35, depth RMS
-    # 0.082 mm, slope RMS 0.348
-    assert 2.0 < s["sphere_radius_median_mm"] < 2.4
-    assert s["depth_rms_mm"] < 0.10  # item 2's depth goal
-    assert s["slope_rms"] < 0.40 and s["contact_ratio_median"] < 1.45
+    # measured (2026-11-28, Intel Xeon with AMX): sink-in L = 0.9 mm chosen, the
+    # convolutional network chosen (validation slope RMS 0.127 against 0.211 for the table
+    # and 0.203 for the per-pixel network), sphere 1.98 mm (1.92-2.01), contact ratio 0.95,
+    # depth RMS 0.054 mm, slope RMS 0.192: items 1 and 2 of issue 29
+    assert res["gradient_model"] == "cnn"
+    assert 0.9 * 2.0 < s["sphere_radius_median_mm"] < 1.1 * 2.0
+    assert 0.75 * 2.0 < s["sphere_radius_q25_mm"] and s["sphere_radius_q75_mm"] < 1.25 * 2.0
+    assert abs(s["contact_ratio_median"] - 1.0) < 0.1
+    assert s["depth_rms_mm"] < 0.10 and s["slope_rms"] < 0.20

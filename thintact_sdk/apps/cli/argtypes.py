@@ -182,3 +182,9 @@ def key_value(text: str) -> tuple[str, object]:
 def key_values(pairs: list[tuple[str, object]] | None) -> dict[str, object]:
     """The ``(key, value)`` pairs of a repeated :func:`key_value` option as a dict (last wins)."""
     return dict(pairs or [])
+
+
+GRADIENT_MODELS = ("auto", "lut", "mlp", "cnn")
+"""``--model`` choices of the tactile calibration commands: the library's
+``gradient_model.GRADIENT_MODELS`` spelt out, so that building the parser imports no
+tactile code (a test holds the two equal)."""

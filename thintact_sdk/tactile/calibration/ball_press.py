@@ -13,7 +13,7 @@ Two sources of ground-truth slopes:
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -25,6 +25,7 @@ from scipy.special import k0e, k1e
 from thintact_sdk.errors import CalibrationError
 from thintact_sdk.formats.profiles import Profile
 from thintact_sdk.tactile.interpretation.colour_change import colour_change, fill_masked
+from thintact_sdk.tactile.interpretation.gradient_model import GRADIENT_MODELS
 from thintact_sdk.tactile.interpretation.grid import (
     TactileParams,
     bin_image,
@@ -333,6 +334,7 @@ def calibrate_from_presses(
     mlp_steps: int = 1500,
     stage: Callable[[str], None] | None = None,
     ball_model: str | BallModel = "auto",
+    cnn_options: Mapping[str, Any] | None = None,
 ) -> PhotometricLUT:
     """Calibrate a LUT from ball presses against a no-contact reference image.
 
@@ -357,17 +359,24 @@ def calibrate_from_presses(
         the current LUT's slopes to depth, fits the press of the ball model to it, and
         recalibrates with that model's slopes over the whole image.
     model
-        The gradient model: ``"lut"`` (colour change → slope table), ``"mlp"`` (the colour +
-        position network of :mod:`~thintact_sdk.tactile.interpretation.gradient_model`, the table kept
-        beside it) or ``"auto"``: both are fitted on all presses but every fourth
-        (validation presses) and the one with the lower slope RMS error on the validation
+        The gradient model: ``"lut"`` (colour change → slope table), ``"mlp"`` (the per-pixel
+        colour + position network of
+        :mod:`~thintact_sdk.tactile.interpretation.gradient_model`, the table kept beside
+        it), ``"cnn"`` (the convolutional network there, which also reads a pixel's
+        surroundings) or ``"auto"``: the three are fitted on all presses but every fourth
+        (validation presses) and the one with the lowest slope RMS error on the validation
         presses' trusted pixels is refitted on all presses and stored
         (``meta["gradient_model"]``, figures in ``meta["validation"]``). ``"auto"`` with
         fewer than :data:`MIN_PRESSES_TO_CHOOSE` presses keeps the table (one or two
-        validation presses do not tell the models apart; the network, which also sees the
-        position, needs presses all over the gel).
+        validation presses do not tell the models apart; the networks, which also see the
+        position, need presses all over the gel).
     mlp_steps
-        Training steps of the network.
+        Training steps of the per-pixel network.
+    cnn_options
+        Keyword arguments of
+        :func:`~thintact_sdk.tactile.interpretation.gradient_model.train_cnn` for the
+        convolutional network (``steps``, ``width``, ``dilations``, ...); its defaults
+        otherwise.
     stage
         Called with a short message as each stage starts (progress for long runs).
     ball_model
@@ -392,8 +401,9 @@ def calibrate_from_presses(
     a fitted press at a bound of the model's range, a press touching the frame's edge.
     """
     say = stage or (lambda _msg: None)
-    if model not in ("lut", "mlp", "auto"):
-        raise CalibrationError(f"gradient model must be 'lut', 'mlp' or 'auto', not {model!r}")
+    if model not in GRADIENT_MODELS:
+        raise CalibrationError(
+            f"gradient model must be one of {', '.join(GRADIENT_MODELS)}, not {model!r}")
     if not isinstance(ball_model, BallModel) and ball_model not in BALL_MODELS:
         raise CalibrationError(
             f"ball model must be one of {', '.join(BALL_MODELS)}, not {ball_model!r}")
@@ -469,7 +479,8 @@ def calibrate_from_presses(
     if model == "lut" or (model == "auto" and len(presses) < MIN_PRESSES_TO_CHOOSE):
         lut.meta["gradient_model"] = "lut"
         return lut
-    return _attach_network(lut, model, feats, images, gxs, gys, valids, bins, mlp_steps, say)
+    return _attach_network(lut, model, feats, images, gxs, gys, valids, bins,
+                           mlp_steps, dict(cnn_options or {}), say)
 
 
 @dataclass
@@ -682,42 +693,54 @@ def _fit_model_to_depth(
 def _attach_network(
     lut: PhotometricLUT, model: str, feats: list[np.ndarray], images: list[np.ndarray],
     gxs: list[np.ndarray], gys: list[np.ndarray], valids: list[np.ndarray], bins: int,
-    steps: int, say: Callable[[str], None],
+    mlp_steps: int, cnn_options: dict[str, Any], say: Callable[[str], None],
 ) -> PhotometricLUT:
-    """Fit the network on the presses' targets; with ``model == "auto"`` first compare it
-    with the table on every fourth press held out, and keep the table when it is better."""
-    from thintact_sdk.tactile.interpretation.gradient_model import train_mlp
+    """Fit the network ``model`` (``"mlp"``, ``"cnn"``) on the presses' targets; with
+    ``model == "auto"`` first fit the table and both networks on all presses but every
+    fourth, compare their slope RMS on the held-out fourth, and keep the best (the table
+    when it wins). ``mlp_steps``, ``cnn_options``: as :func:`calibrate_from_presses`."""
+    from thintact_sdk.tactile.interpretation.gradient_model import train_cnn, train_mlp
 
     def pick(seq: list[np.ndarray], idx: list[int]) -> list[np.ndarray]:
         return [seq[i] for i in idx]
 
+    def train(kind: str, idx: list[int], what: str) -> Any:
+        args = (pick(feats, idx), pick(images, idx), pick(gxs, idx), pick(gys, idx),
+                pick(valids, idx))
+        if kind == "mlp":
+            say(f"{what}: training the per-pixel network on {len(idx)} presses")
+            return train_mlp(*args, steps=mlp_steps)
+        say(f"{what}: training the convolutional network on {len(idx)} presses")
+        return train_cnn(*args, **cnn_options, progress=lambda d, t: say(
+            f"{what}: convolutional network, step {d}/{t}"))
+
+    chosen = model
     if model == "auto":
         val = [i for i in range(len(feats)) if i % 4 == 3]
         fit = [i for i in range(len(feats)) if i % 4 != 3]
-        say(f"validation: table and network fitted on {len(fit)} presses, "
+        say(f"validation: table and networks fitted on {len(fit)} presses, "
             f"compared on {len(val)}")
-        t_lut = calibrate_lut(pick(feats, fit), pick(gxs, fit), pick(gys, fit),
-                              pick(valids, fit), bins=bins)
-        t_net = train_mlp(pick(feats, fit), pick(images, fit), pick(gxs, fit), pick(gys, fit),
-                          pick(valids, fit), steps=steps)
-        err_lut: list[np.ndarray] = []
-        err_net: list[np.ndarray] = []
+        candidates: dict[str, Any] = {
+            "lut": calibrate_lut(pick(feats, fit), pick(gxs, fit), pick(gys, fit),
+                                 pick(valids, fit), bins=bins)}
+        for kind in ("mlp", "cnn"):
+            candidates[kind] = train(kind, fit, "validation")
+        errors: dict[str, list[np.ndarray]] = {k: [] for k in candidates}
         for i in val:
             m = valids[i]
-            lx, ly = t_lut.lookup(feats[i])
-            nx, ny = t_net.predict(feats[i], images[i])
-            err_lut.append(np.hypot(lx - gxs[i], ly - gys[i])[m])
-            err_net.append(np.hypot(nx - gxs[i], ny - gys[i])[m])
-        rms_lut = float(np.sqrt(np.mean(np.concatenate(err_lut) ** 2)))
-        rms_net = float(np.sqrt(np.mean(np.concatenate(err_net) ** 2)))
-        lut.meta["validation"] = {"presses": val, "slope_rms_lut": rms_lut,
-                                  "slope_rms_mlp": rms_net}
-        if rms_lut <= rms_net:
+            for kind, cand in candidates.items():
+                ex, ey = (cand.lookup(feats[i]) if kind == "lut"
+                          else cand.predict(feats[i], images[i]))
+                errors[kind].append(np.hypot(ex - gxs[i], ey - gys[i])[m])
+        rms = {k: float(np.sqrt(np.mean(np.concatenate(v) ** 2))) for k, v in errors.items()}
+        lut.meta["validation"] = {"presses": val,
+                                  **{f"slope_rms_{k}": v for k, v in rms.items()}}
+        chosen = min(rms, key=lambda k: rms[k])  # ties: the table, then the smaller network
+        if chosen == "lut":
             lut.meta["gradient_model"] = "lut"
             return lut
-    say(f"training the colour + position network on {len(feats)} presses")
-    lut.net = train_mlp(feats, images, gxs, gys, valids, steps=steps)
-    lut.meta["gradient_model"] = "mlp"
+    lut.net = train(chosen, list(range(len(feats))), "final")
+    lut.meta["gradient_model"] = chosen
     return lut
 
 

@@ -273,6 +273,7 @@ def evaluate_pack(
     stage: Callable[[str], None] | None = None,
     lut: Any = None,
     ball_model: str = "auto",
+    cnn_options: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """Calibrate on the ``train`` presses from the images and the ball radius alone (what
     ``thintact calibrate-tactile`` does) and measure the other presses through the
@@ -284,7 +285,8 @@ def evaluate_pack(
     presses are left out and the others measured with it.
 
     ``ball_model``: how the training presses are shaped into the gel (``"auto"``, ``"rigid"``,
-    ``"sink-in"``; :func:`~thintact_sdk.tactile.calibration.ball_press.calibrate_from_presses`).
+    ``"sink-in"``), ``mlp_steps``, ``cnn_options``: as
+    :func:`~thintact_sdk.tactile.calibration.ball_press.calibrate_from_presses`.
 
     Returns
     -------
@@ -306,7 +308,8 @@ def evaluate_pack(
             lut = calibrate_from_presses(profile, pack.reference_image(),
                                          [BallPress(pack.image(i)) for i in train],
                                          ball_radius_mm, bins, model=model, mlp_steps=mlp_steps,
-                                         stage=say, ball_model=ball_model)
+                                         stage=say, ball_model=ball_model,
+                                         cnn_options=cnn_options)
         except CalibrationError as err:  # "press k" counts the training presses
             raise CalibrationError(f"{err} (training presses, in order: {train})") from None
     interp = TactileInterpreter(profile, lut, boundary=boundary)  # type: ignore[arg-type]

@@ -1,4 +1,4 @@
-"""A small network from colour and position to surface slope (the LUT's alternative).
+"""Small networks from colour and position to surface slope (the LUT's alternatives).
 
 The LUT maps the colour change alone to a slope. A real gel's illumination depends on the
 position in the frame (LEDs at the edges, vignetting, a curved gel), so one colour change
@@ -14,10 +14,17 @@ Hidden width 32 by default: ~1.4 k weights, trained in seconds on one CPU thread
 File (``thintact-tactile-mlp/1``): an ``.npz`` of plain float32 arrays ``w0 b0 w1 b1 w2 b2``
 and ``shape`` (the working grid the positions refer to), written without pickle and read
 with :func:`thintact_sdk.formats.safe_arrays.read_npz` (no code from a data file).
+
+:class:`ConvGradient` takes the same inputs through dilated 3 × 3 convolutions, so a pixel's
+slope is also read from the shading around it (where the colour change saturates with the
+slope, a per-pixel model cannot tell steep flanks apart). File ``thintact-tactile-cnn/1``:
+``w0 b0 … w{L} b{L}`` (float32), ``dilations`` and ``shape``; read the same way. Both are
+applied with numpy and trained with torch; :func:`train_mlp`, :func:`train_cnn`.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -27,6 +34,21 @@ import numpy as np
 from thintact_sdk.errors import CalibrationError
 
 MLP_FORMAT = "thintact-tactile-mlp/1"
+
+GRADIENT_MODELS = ("auto", "lut", "mlp", "cnn")
+"""The gradient models calibration accepts (``model=`` of
+:func:`~thintact_sdk.tactile.calibration.ball_press.calibrate_from_presses`)."""
+MODEL_NAMES = {"lut": "table", "mlp": "per-pixel network", "cnn": "convolutional network"}
+
+
+def describe_validation(validation: dict[str, Any]) -> str:
+    """``"table 0.211, per-pixel network 0.203, …"``: the validation slope RMS of each
+    gradient model compared (``meta["validation"]`` of
+    :func:`~thintact_sdk.tactile.calibration.ball_press.calibrate_from_presses`)."""
+    return ", ".join(f"{name} {validation[f'slope_rms_{k}']:.3f}"
+                     for k, name in MODEL_NAMES.items() if f"slope_rms_{k}" in validation)
+
+
 INPUTS = 8
 _LAYERS = ("w0", "b0", "w1", "b1", "w2", "b2")
 
@@ -65,6 +87,8 @@ class MLPGradient:
     meta: dict[str, Any] = field(default_factory=dict)
     _flat: tuple[np.ndarray, np.ndarray] | None = field(default=None, init=False, repr=False,
                                                          compare=False)
+
+    kind = "mlp"
 
     def predict(self, change: np.ndarray, image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(grad_x, grad_y)``, ``N × M`` float32 mm per mm, for ``N × M × 3`` colour change
@@ -202,3 +226,238 @@ def train_mlp(
     meta = {"format": MLP_FORMAT, "hidden": hidden, "steps": steps, "pixels": int(len(x)),
             "presses": len(changes)}
     return MLPGradient(weights, (int(shape[0]), int(shape[1])), meta)
+
+
+CNN_FORMAT = "thintact-tactile-cnn/1"
+CNN_DILATIONS = (1, 2, 4, 8)
+"""Dilations of the 3 × 3 layers: a receptive field of 1 + 2·(1 + 2 + 4 + 8) = 31 working
+pixels (about 4 mm on a 0.13 mm grid), the size of a fingertip-scale contact."""
+CNN_WIDTH = 16
+"""Channels of each 3 × 3 layer (about 8.2 k weights with :data:`CNN_DILATIONS`)."""
+_MAX_CNN_LAYERS = 8
+
+
+def _conv3(h: np.ndarray, w: np.ndarray, b: np.ndarray, dilation: int) -> np.ndarray:
+    """``N × M × O`` dilated 3 × 3 cross-correlation of ``N × M × C`` ``h`` with ``w``
+    (``3 × 3 × C × O``), edge-replicated borders (torch's ``padding_mode="replicate"``).
+
+    On the padded grid flattened row by row, each tap is one contiguous slice, so the
+    layer is nine plain matrix products over rows as wide as the padded grid; the extra
+    columns are dropped at the end."""
+    n, m = h.shape[:2]
+    d = dilation
+    wide = m + 2 * d
+    p = np.pad(h, ((d, d + 1), (d, d), (0, 0)), mode="edge").reshape(-1, h.shape[2])
+    out = np.empty((n * wide, w.shape[-1]), np.float32)
+    out[:] = b
+    for i in range(3):
+        for j in range(3):
+            start = i * d * wide + j * d
+            out += p[start : start + n * wide] @ w[i, j]
+    return out.reshape(n, wide, -1)[:, :m]
+
+
+@dataclass
+class ConvGradient:
+    """Colour + position → slope network that also sees a pixel's surroundings.
+
+    The per-pixel network (:class:`MLPGradient`) maps each pixel's colour alone; where a
+    gel's colour change stops growing with the slope (about 45° on GelSight-type gels), one
+    colour means many slopes and a per-pixel model reads steep flanks short. This model
+    takes the same 8 inputs per pixel (:func:`mlp_inputs`) through dilated 3 × 3
+    convolutions (:data:`CNN_DILATIONS`, tanh between them, a 1 × 1 output layer), so
+    the slope of a pixel is read from the shading around it as well. It learns from the
+    calibration presses, so what it has seen there (ball presses) is what it knows how to
+    read: calibration chooses it only when validation presses say it is better.
+
+    Attributes
+    ----------
+    weights
+        ``w0 … w{L-1}`` (``3 × 3 × C × O``), ``b0 … b{L-1}`` (O), then ``w{L}`` (``C × 2``)
+        and ``b{L}`` (2), float32.
+    dilations
+        Dilation of each 3 × 3 layer (L of them).
+    shape
+        ``(rows, cols)`` of the working grid it was trained on.
+    meta
+        Provenance (presses, width, steps, receptive field).
+    """
+
+    weights: dict[str, np.ndarray]
+    dilations: tuple[int, ...]
+    shape: tuple[int, int]
+    meta: dict[str, Any] = field(default_factory=dict)
+    _flat: tuple[np.ndarray, np.ndarray] | None = field(default=None, init=False, repr=False,
+                                                         compare=False)
+
+    kind = "cnn"
+
+    def predict(self, change: np.ndarray, image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(grad_x, grad_y)``, ``N × M`` float32 mm per mm, as :meth:`MLPGradient.predict`
+        (the no-contact background's answer subtracted; CalibrationError on another grid)."""
+        if tuple(change.shape[:2]) != self.shape or tuple(np.shape(image)[:2]) != self.shape:
+            raise CalibrationError(
+                f"the gradient network was trained on a {self.shape[0]}×{self.shape[1]} working "
+                f"grid, got {change.shape[0]}×{change.shape[1]}: recalibrate the device")
+        change = np.asarray(change, np.float32)
+        out = self._forward(change, image)
+        background = np.asarray(image, np.float32) - change
+        if self._flat is None or not np.array_equal(self._flat[0], background):
+            self._flat = (background, self._forward(np.zeros_like(change), background))
+        out -= self._flat[1]
+        return out[..., 0], out[..., 1]
+
+    def _forward(self, change: np.ndarray, image: np.ndarray) -> np.ndarray:
+        w = self.weights
+        h = mlp_inputs(change, image)
+        for k, d in enumerate(self.dilations):
+            h = np.tanh(_conv3(h, w[f"w{k}"], w[f"b{k}"], d))
+        last = len(self.dilations)
+        return h @ w[f"w{last}"] + w[f"b{last}"]
+
+    def save(self, path: str | Path) -> Path:
+        """Write the network to ``path`` (``.npz``, no pickle)."""
+        p = Path(path)
+        p.parent.mkdir(parents=True, exist_ok=True)
+        arrays: dict[str, Any] = {k: np.asarray(v, np.float32) for k, v in self.weights.items()}
+        arrays["dilations"] = np.asarray(self.dilations, np.int64)
+        arrays["shape"] = np.asarray(self.shape, np.int64)
+        np.savez_compressed(p, allow_pickle=False, **arrays)
+        return p
+
+    @classmethod
+    def load(cls, path: str | Path, meta: dict[str, Any] | None = None) -> ConvGradient:
+        """Read a network written by :meth:`save`; raises CalibrationError naming the file
+        and what is wrong (missing, damaged, object arrays, too many layers, inconsistent
+        layer shapes, dilations outside 1-64, non-finite weights)."""
+        from thintact_sdk.formats.safe_arrays import read_npz
+
+        layers = tuple(f"{p}{k}" for k in range(_MAX_CNN_LAYERS + 1) for p in "wb")
+        z = read_npz(path, what="tactile gradient network", error=CalibrationError,
+                     members=("dilations", "shape"), optional=layers,
+                     kinds={**{k: "f" for k in layers}, "dilations": "iu", "shape": "iu"})
+        dil = tuple(int(v) for v in np.asarray(z["dilations"]).ravel())
+        shape = tuple(int(v) for v in np.asarray(z["shape"]).ravel())
+        n = len(dil)
+        names = [f"{p}{k}" for k in range(n + 1) for p in "wb"]
+        missing = [k for k in names if k not in z]
+        if not 1 <= n <= _MAX_CNN_LAYERS or missing or any(not 1 <= d <= 64 for d in dil) \
+                or len(shape) != 2 or min(shape) < 1:
+            raise CalibrationError(
+                f"{path}: not a {CNN_FORMAT} network (dilations {dil}, missing "
+                f"{', '.join(missing) or 'nothing'}, shape {shape})")
+        w = {k: np.asarray(z[k], np.float32) for k in names}
+        bad, cin = [], INPUTS
+        for k in range(n):
+            cout = w[f"b{k}"].shape[0] if w[f"b{k}"].ndim == 1 else -1
+            if w[f"w{k}"].shape != (3, 3, cin, cout) or cout < 1:
+                bad.append(f"w{k}/b{k}")
+            cin = max(cout, 1)
+        if w[f"w{n}"].shape != (cin, 2) or w[f"b{n}"].shape != (2,):
+            bad.append(f"w{n}/b{n}")
+        if bad:
+            raise CalibrationError(f"{path}: not a {CNN_FORMAT} network (layers {', '.join(bad)})")
+        if not all(np.isfinite(a).all() for a in w.values()):
+            raise CalibrationError(f"{path}: the network holds non-finite weights")
+        return cls(w, dil, (shape[0], shape[1]), dict(meta or {}))
+
+
+def train_cnn(
+    changes: list[np.ndarray],
+    images: list[np.ndarray],
+    grad_x: list[np.ndarray],
+    grad_y: list[np.ndarray],
+    valid: list[np.ndarray],
+    width: int = CNN_WIDTH,
+    dilations: tuple[int, ...] = CNN_DILATIONS,
+    steps: int = 3000,
+    crop: int = 64,
+    batch: int = 4,
+    seed: int = 0,
+    threads: int = 1,
+    progress: Callable[[int, int], None] | None = None,
+) -> ConvGradient:
+    """Train :class:`ConvGradient` on calibration presses with known slopes.
+
+    Parameters
+    ----------
+    changes, images, grad_x, grad_y, valid
+        As :func:`train_mlp` (per press, all on one grid).
+    width
+        Channels of each 3 × 3 layer.
+    dilations
+        Dilation of each 3 × 3 layer.
+    steps, crop, batch
+        Adam steps (learning rate 3e-3 decayed ×0.1 by the end), each on ``batch`` crops of
+        ``crop × crop`` pixels (the whole grid when smaller) at one random place in random
+        presses; the loss is the squared slope error over the crops' trusted pixels.
+    seed, threads
+        As :func:`train_mlp` (deterministic for a seed and thread count; one thread).
+    progress
+        Called with ``(done, steps)`` about every tenth of the training.
+    """
+    import torch
+
+    shapes = {c.shape[:2] for c in changes}
+    if len(shapes) != 1:
+        raise CalibrationError(f"calibration presses on different grids: {sorted(shapes)}")
+    shape = next(iter(shapes))
+    if not 1 <= len(dilations) <= _MAX_CNN_LAYERS:
+        raise ValueError(f"1 to {_MAX_CNN_LAYERS} dilations, got {len(dilations)}")
+    x = np.stack([mlp_inputs(c, i) for c, i in zip(changes, images, strict=True)])
+    y = np.stack([np.stack([gx, gy], -1) for gx, gy in zip(grad_x, grad_y, strict=True)])
+    m = np.stack(valid).astype(np.float32)
+    if m.sum() < 100:
+        raise CalibrationError(
+            f"only {int(m.sum())} calibration pixels; press the ball harder or use more presses")
+    tx = torch.from_numpy(np.ascontiguousarray(x.transpose(0, 3, 1, 2)))
+    ty = torch.from_numpy(np.ascontiguousarray(y.transpose(0, 3, 1, 2).astype(np.float32)))
+    tm = torch.from_numpy(m)
+    ch, cw = min(crop, shape[0]), min(crop, shape[1])
+    old_threads = torch.get_num_threads()
+    torch.set_num_threads(max(1, threads))
+    try:
+        gen = torch.Generator().manual_seed(seed)
+        torch.manual_seed(seed)
+        layers: list[torch.nn.Module] = []
+        cin = INPUTS
+        for d in dilations:
+            layers += [torch.nn.Conv2d(cin, width, 3, padding=d, dilation=d,
+                                       padding_mode="replicate"), torch.nn.Tanh()]
+            cin = width
+        layers.append(torch.nn.Conv2d(cin, 2, 1))
+        net = torch.nn.Sequential(*layers)
+        opt = torch.optim.Adam(net.parameters(), lr=3e-3)
+        sched = torch.optim.lr_scheduler.LambdaLR(opt, lambda s: 0.1 ** (s / max(steps, 1)))
+        every = max(1, steps // 10)
+        for s in range(steps):
+            idx = torch.randint(0, len(tx), (batch,), generator=gen)
+            r0 = int(torch.randint(0, shape[0] - ch + 1, (1,), generator=gen))
+            c0 = int(torch.randint(0, shape[1] - cw + 1, (1,), generator=gen))
+            sl = (idx, slice(None), slice(r0, r0 + ch), slice(c0, c0 + cw))
+            mb = tm[idx, r0 : r0 + ch, c0 : c0 + cw]
+            err = ((net(tx[sl]) - ty[sl]) ** 2).sum(1)
+            loss = (err * mb).sum() / mb.sum().clamp(min=1.0)
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+            sched.step()
+            if progress is not None and ((s + 1) % every == 0 or s + 1 == steps):
+                progress(s + 1, steps)
+    finally:
+        torch.set_num_threads(old_threads)
+    convs = [mod for mod in net if isinstance(mod, torch.nn.Conv2d)]
+    weights: dict[str, np.ndarray] = {}
+    for k, conv in enumerate(convs):
+        wt = conv.weight.detach().numpy()  # O × C × kh × kw
+        if k < len(dilations):
+            weights[f"w{k}"] = np.ascontiguousarray(wt.transpose(2, 3, 1, 0), np.float32)
+        else:
+            weights[f"w{k}"] = np.ascontiguousarray(wt[:, :, 0, 0].T, np.float32)
+        assert conv.bias is not None  # every layer is built with a bias
+        weights[f"b{k}"] = conv.bias.detach().numpy().astype(np.float32).copy()
+    field_px = 1 + 2 * sum(dilations)
+    meta = {"format": CNN_FORMAT, "width": width, "dilations": list(dilations),
+            "receptive_field_px": field_px, "steps": steps, "crop": crop, "batch": batch,
+            "pixels": int(m.sum()), "presses": len(changes)}
+    return ConvGradient(weights, tuple(dilations), (int(shape[0]), int(shape[1])), meta)

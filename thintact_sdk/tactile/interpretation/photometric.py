@@ -21,10 +21,12 @@ from thintact_sdk.errors import CalibrationError
 from thintact_sdk.formats import safe_json
 
 if TYPE_CHECKING:
-    from thintact_sdk.tactile.interpretation.gradient_model import MLPGradient
+    from thintact_sdk.tactile.interpretation.gradient_model import ConvGradient, MLPGradient
 from thintact_sdk.formats.safe_arrays import read_npz
 
 LUT_FORMAT = "thintact-tactile-lut/1"
+NETWORKS = {"mlp": "MLPGradient", "cnn": "ConvGradient"}
+"""``gradient_model`` names of the networks a LUT file can name, and their classes."""
 
 
 @dataclass
@@ -42,10 +44,12 @@ class PhotometricLUT:
     meta
         Provenance (profile, source, ball radius, number of presses, metrics, ...).
     net
-        A colour + position network
-        (:class:`~thintact_sdk.tactile.interpretation.gradient_model.MLPGradient`) chosen over the table by
-        validation presses at calibration time (``meta["gradient_model"] == "mlp"``), or
-        None: the table. The table is always kept and used when no image is given.
+        A colour + position network chosen over the table by validation presses at
+        calibration time: per pixel
+        (:class:`~thintact_sdk.tactile.interpretation.gradient_model.MLPGradient`,
+        ``meta["gradient_model"] == "mlp"``) or convolutional
+        (:class:`~thintact_sdk.tactile.interpretation.gradient_model.ConvGradient`, ``"cnn"``),
+        or None: the table. The table is always kept and used when no image is given.
     """
 
     lo: np.ndarray
@@ -53,7 +57,7 @@ class PhotometricLUT:
     table: np.ndarray
     counts: np.ndarray
     meta: dict[str, Any] = field(default_factory=dict)
-    net: MLPGradient | None = None
+    net: MLPGradient | ConvGradient | None = None
 
     @property
     def bins(self) -> int:
@@ -100,17 +104,23 @@ class PhotometricLUT:
 
     def save(self, path: str | Path) -> Path:
         """Write ``path`` (``.npz``) and its metadata beside it (``.json``); a network goes
-        to :func:`net_path` (``<stem>.mlp.npz``) and ``meta["gradient_model"]`` says which
-        model the device uses (``"lut"`` or ``"mlp"``)."""
+        to :func:`net_path` (``<stem>.mlp.npz`` or ``<stem>.cnn.npz``, named in
+        ``meta["mlp_file"]`` / ``meta["cnn_file"]``, its provenance in ``meta["mlp"]`` /
+        ``meta["cnn"]``) and ``meta["gradient_model"]`` says which model the device uses
+        (``"lut"``, ``"mlp"`` or ``"cnn"``)."""
         p = Path(path)
         p.parent.mkdir(parents=True, exist_ok=True)
         np.savez_compressed(p, lo=self.lo, hi=self.hi, table=self.table, counts=self.counts)
         meta = {"format": LUT_FORMAT, "bins": self.bins, **self.meta}
-        meta["gradient_model"] = "lut" if self.net is None else "mlp"
+        meta["gradient_model"] = "lut" if self.net is None else self.net.kind
+        for kind in NETWORKS:  # an earlier network's entries do not describe this one
+            meta.pop(f"{kind}_file", None)
+            meta.pop(kind, None)
         if self.net is not None:
-            self.net.save(net_path(p))
-            meta["mlp_file"] = net_path(p).name
-            meta["mlp"] = self.net.meta
+            kind = self.net.kind
+            self.net.save(net_path(p, kind))
+            meta[f"{kind}_file"] = net_path(p, kind).name
+            meta[kind] = self.net.meta
         p.with_suffix(".json").write_text(json.dumps(meta, indent=1, default=str) + "\n")
         return p
 
@@ -140,22 +150,26 @@ class PhotometricLUT:
             raise CalibrationError(f"{p}: table shape {table.shape} is not B×B×B×2")
         net = None
         choice = meta.get("gradient_model", "lut")
-        if choice == "mlp":
-            from thintact_sdk.tactile.interpretation.gradient_model import MLPGradient
+        if choice in NETWORKS:
+            from thintact_sdk.tactile.interpretation import gradient_model
 
-            name = str(meta.get("mlp_file", net_path(p).name))
+            name = str(meta.get(f"{choice}_file", net_path(p, choice).name))
             if Path(name).name != name:
-                raise CalibrationError(f"{mp}: mlp_file {name!r} must be a file name beside it")
-            net = MLPGradient.load(p.with_name(name), meta.get("mlp"))
+                raise CalibrationError(
+                    f"{mp}: {choice}_file {name!r} must be a file name beside it")
+            cls_ = getattr(gradient_model, NETWORKS[choice])
+            net = cls_.load(p.with_name(name), meta.get(choice))
         elif choice != "lut":
-            raise CalibrationError(f"{mp}: gradient_model {choice!r}, this SDK reads 'lut' or 'mlp'")
+            raise CalibrationError(f"{mp}: gradient_model {choice!r}, this SDK reads 'lut', "
+                                   f"{', '.join(repr(k) for k in NETWORKS)}")
         return cls(lo, hi, table.astype(np.float32), counts.astype(np.float32), meta, net)
 
 
-def net_path(lut_path: str | Path) -> Path:
-    """Where the network of the LUT file ``lut_path`` lives: ``<stem>.mlp.npz`` beside it."""
+def net_path(lut_path: str | Path, kind: str = "mlp") -> Path:
+    """Where the network of the LUT file ``lut_path`` lives: ``<stem>.<kind>.npz`` beside it
+    (``kind`` ``"mlp"`` or ``"cnn"``)."""
     p = Path(lut_path)
-    return p.with_name(p.stem + ".mlp.npz")
+    return p.with_name(f"{p.stem}.{kind}.npz")
 
 
 def calibrate_lut(

@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from thintact_sdk.apps.cli.argtypes import int_range, positive_float, positive_int
+from thintact_sdk.apps.cli.argtypes import GRADIENT_MODELS, int_range, positive_float, positive_int
 from thintact_sdk.apps.cli.output_path import add_force_argument, claim_output, file_input
 
 
@@ -30,10 +30,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--ball-radius-mm", type=positive_float, default=1.5,
                    help="calibration ball radius in mm (paper: 3 mm ball → 1.5)")
     p.add_argument("--bins", type=int_range(4, 256), default=32, help="LUT nodes per colour axis (4..256)")
-    p.add_argument("--model", choices=("auto", "lut", "mlp"), default="auto",
+    p.add_argument("--model", choices=GRADIENT_MODELS, default="auto",
                    help="gradient model for ball-model presses (recording, live): auto (the "
-                   "table or the colour + position network, whichever predicts held-out "
-                   "validation presses better; default), lut, mlp. Virtual sensors: lut")
+                   "table, the per-pixel colour + position network or the convolutional "
+                   "network, whichever predicts held-out validation presses best; default), "
+                   "lut, mlp, cnn. Virtual sensors: lut")
     p.add_argument("--ball-model", choices=("auto", "rigid", "sink-in"), default="auto",
                    help="shape the ball presses into the gel (recording, live): auto (the rigid "
                    "cap or the cap with a sink-in skirt whose length is fitted to the gel, "
@@ -99,6 +100,8 @@ def run(args: argparse.Namespace) -> int:
 
 def _report(lut: Any, profile: Any, target: Path) -> int:
     """Save the LUT, print the per-press report (warnings first) and the summary."""
+    from thintact_sdk.tactile.interpretation.gradient_model import describe_validation
+
     for entry in lut.meta.get("press_report", []):
         print(f"press {entry['press']}: circle at (row {entry['centre_rc'][0]:.1f}, col "
               f"{entry['centre_rc'][1]:.1f}) px, radius {entry['circle_radius_mm']:.2f} mm; "
@@ -117,8 +120,7 @@ def _report(lut: Any, profile: Any, target: Path) -> int:
     val = lut.meta.get("validation")
     if val:
         print(f"gradient model {lut.meta.get('gradient_model')}: validation presses "
-              f"{val['presses']}, slope RMS table {val['slope_rms_lut']:.3f}, network "
-              f"{val['slope_rms_mlp']:.3f}")
+              f"{val['presses']}, slope RMS {describe_validation(val)}")
     path = lut.save(target)
     filled = int((lut.counts > 1e-3).sum())
     print(f"tactile LUT for {profile.name!r}: {lut.meta.get('presses')} presses, "

@@ -12,7 +12,7 @@ import json
 from pathlib import Path
 from typing import Any
 
-from thintact_sdk.apps.cli.argtypes import int_range, positive_float, positive_int
+from thintact_sdk.apps.cli.argtypes import GRADIENT_MODELS, int_range, positive_float, positive_int
 from thintact_sdk.apps.cli.output_path import add_force_argument, claim_output
 
 
@@ -75,14 +75,18 @@ def register(sub: argparse._SubParsersAction) -> None:
                     help="ball radius (default: the pack's)")
     ev.add_argument("--mm-per-px", type=positive_float, help="pixel size (default: the pack's)")
     ev.add_argument("--train", help="comma-separated training presses (default: even ones)")
-    ev.add_argument("--model", choices=("auto", "lut", "mlp"), default="auto",
-                    help="gradient model (auto: chosen on validation presses, default)")
+    ev.add_argument("--model", choices=GRADIENT_MODELS, default="auto",
+                    help="gradient model: auto (the table, the per-pixel network or the "
+                    "convolutional network, chosen on validation presses; default), lut, mlp, cnn")
     ev.add_argument("--ball-model", choices=("auto", "rigid", "sink-in"), default="auto",
                     help="shape of the training presses in the gel, as calibrate-tactile's: auto (the "
                     "rigid cap or a sink-in skirt fitted to the gel, whichever reconstructs held-out "
                     "training presses as the ball; default), rigid, sink-in")
     ev.add_argument("--bins", type=int_range(4, 256), default=24, help="LUT nodes per axis")
-    ev.add_argument("--mlp-steps", type=positive_int, default=1500, help="network steps")
+    ev.add_argument("--mlp-steps", type=positive_int, default=1500,
+                    help="per-pixel network training steps")
+    ev.add_argument("--cnn-steps", type=positive_int, default=3000,
+                    help="convolutional network training steps")
     ev.add_argument("--json", dest="json_out", help="write every figure to this JSON file")
     ev.add_argument("--quiet", action="store_true", help="no progress lines")
     add_force_argument(ev, "over an existing --json")
@@ -145,7 +149,8 @@ def run_evaluate(args: argparse.Namespace) -> int:
             raise ThinTactError(f"--train {args.train!r}: comma-separated press numbers") from None
     with stage_reporter(args.quiet) as say:
         res = evaluate_pack(pack, radius, mm, train, args.model, args.bins,
-                            mlp_steps=args.mlp_steps, stage=say, ball_model=args.ball_model)
+                            mlp_steps=args.mlp_steps, stage=say, ball_model=args.ball_model,
+                            cnn_options={"steps": args.cnn_steps})
     _print_evaluation(res, radius)
     if json_out is not None:
         res.pop("lut")
@@ -156,6 +161,8 @@ def run_evaluate(args: argparse.Namespace) -> int:
 
 def _print_evaluation(res: dict[str, Any], radius: float) -> None:
     """The calibration's warnings, the models used and the held-out figures of ``evaluate_pack``."""
+    from thintact_sdk.tactile.interpretation.gradient_model import describe_validation
+
     s = res["summary"]
     for entry in res["press_report"]:
         for w in entry["warnings"]:
@@ -168,8 +175,7 @@ def _print_evaluation(res: dict[str, Any], radius: float) -> None:
     val = res["validation"]
     chosen = res["gradient_model"]
     if val:
-        print(f"gradient model: {chosen} (validation slope RMS: table {val['slope_rms_lut']:.3f}, "
-              f"network {val['slope_rms_mlp']:.3f})")
+        print(f"gradient model: {chosen} (validation slope RMS: {describe_validation(val)})")
     else:
         print(f"gradient model: {chosen}")
     print(f"{s['presses']} test presses, ball radius {radius:g} mm:")
