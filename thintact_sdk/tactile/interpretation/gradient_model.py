@@ -67,28 +67,15 @@ def mlp_inputs(change: np.ndarray, image: np.ndarray) -> np.ndarray:
     return out
 
 
-@dataclass
-class MLPGradient:
-    """Colour + position → slope network (module docstring).
+class _PixelNetwork:
+    """What both networks share: the slopes of a frame, the no-contact answer subtracted.
+    Subclasses hold ``shape`` and ``_flat`` and compute ``_forward`` (``N × M × 2``)."""
 
-    Attributes
-    ----------
-    weights
-        ``w0`` (8 × H), ``b0`` (H), ``w1`` (H × H), ``b1`` (H), ``w2`` (H × 2), ``b2`` (2),
-        float32.
-    shape
-        ``(rows, cols)`` of the working grid it was trained on (positions are relative to it).
-    meta
-        Provenance (presses, hidden width, steps, validation figures).
-    """
-
-    weights: dict[str, np.ndarray]
     shape: tuple[int, int]
-    meta: dict[str, Any] = field(default_factory=dict)
-    _flat: tuple[np.ndarray, np.ndarray] | None = field(default=None, init=False, repr=False,
-                                                         compare=False)
+    _flat: tuple[np.ndarray, np.ndarray] | None
 
-    kind = "mlp"
+    def _forward(self, change: np.ndarray, image: np.ndarray) -> np.ndarray:
+        raise NotImplementedError
 
     def predict(self, change: np.ndarray, image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(grad_x, grad_y)``, ``N × M`` float32 mm per mm, for ``N × M × 3`` colour change
@@ -114,6 +101,30 @@ class MLPGradient:
             self._flat = (background, self._forward(np.zeros_like(change), background))
         out -= self._flat[1]
         return out[..., 0], out[..., 1]
+
+
+@dataclass
+class MLPGradient(_PixelNetwork):
+    """Colour + position → slope network (module docstring).
+
+    Attributes
+    ----------
+    weights
+        ``w0`` (8 × H), ``b0`` (H), ``w1`` (H × H), ``b1`` (H), ``w2`` (H × 2), ``b2`` (2),
+        float32.
+    shape
+        ``(rows, cols)`` of the working grid it was trained on (positions are relative to it).
+    meta
+        Provenance (presses, hidden width, steps, validation figures).
+    """
+
+    weights: dict[str, np.ndarray]
+    shape: tuple[int, int]
+    meta: dict[str, Any] = field(default_factory=dict)
+    _flat: tuple[np.ndarray, np.ndarray] | None = field(default=None, init=False, repr=False,
+                                                         compare=False)
+
+    kind = "mlp"
 
     def _forward(self, change: np.ndarray, image: np.ndarray) -> np.ndarray:
         w = self.weights
@@ -258,7 +269,7 @@ def _conv3(h: np.ndarray, w: np.ndarray, b: np.ndarray, dilation: int) -> np.nda
 
 
 @dataclass
-class ConvGradient:
+class ConvGradient(_PixelNetwork):
     """Colour + position → slope network that also sees a pixel's surroundings.
 
     The per-pixel network (:class:`MLPGradient`) maps each pixel's colour alone; where a
@@ -291,21 +302,6 @@ class ConvGradient:
                                                          compare=False)
 
     kind = "cnn"
-
-    def predict(self, change: np.ndarray, image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``(grad_x, grad_y)``, ``N × M`` float32 mm per mm, as :meth:`MLPGradient.predict`
-        (the no-contact background's answer subtracted; CalibrationError on another grid)."""
-        if tuple(change.shape[:2]) != self.shape or tuple(np.shape(image)[:2]) != self.shape:
-            raise CalibrationError(
-                f"the gradient network was trained on a {self.shape[0]}×{self.shape[1]} working "
-                f"grid, got {change.shape[0]}×{change.shape[1]}: recalibrate the device")
-        change = np.asarray(change, np.float32)
-        out = self._forward(change, image)
-        background = np.asarray(image, np.float32) - change
-        if self._flat is None or not np.array_equal(self._flat[0], background):
-            self._flat = (background, self._forward(np.zeros_like(change), background))
-        out -= self._flat[1]
-        return out[..., 0], out[..., 1]
 
     def _forward(self, change: np.ndarray, image: np.ndarray) -> np.ndarray:
         w = self.weights
