@@ -133,6 +133,14 @@ def test_lut_stores_the_convolutional_network_beside_it(tmp_path):
     back = PhotometricLUT.load(p)
     assert isinstance(back.net, ConvGradient)
     np.testing.assert_array_equal(back.lookup(change, image)[0], lut.lookup(change, image)[0])
+    for hostile in ([1], {"cnn": 1}, None):  # not a name: refused, never a TypeError
+        bad = {**meta, "gradient_model": hostile}
+        p.with_suffix(".json").write_text(json.dumps(bad))
+        with pytest.raises(CalibrationError, match="gradient_model"):
+            PhotometricLUT.load(p)
+    p.with_suffix(".json").write_text(json.dumps({**meta, "cnn": "not provenance"}))
+    assert PhotometricLUT.load(p).net.meta == {}
+    p.with_suffix(".json").write_text(json.dumps(meta))
     net_path(p, "cnn").unlink()
     with pytest.raises(CalibrationError, match="lut.cnn.npz"):
         PhotometricLUT.load(p)

@@ -150,6 +150,8 @@ class PhotometricLUT:
             raise CalibrationError(f"{p}: table shape {table.shape} is not B×B×B×2")
         net = None
         choice = meta.get("gradient_model", "lut")
+        if not isinstance(choice, str):
+            raise CalibrationError(f"{mp}: gradient_model must be a name, not {choice!r}")
         if choice in NETWORKS:
             from thintact_sdk.tactile.interpretation import gradient_model
 
@@ -158,7 +160,8 @@ class PhotometricLUT:
                 raise CalibrationError(
                     f"{mp}: {choice}_file {name!r} must be a file name beside it")
             cls_ = getattr(gradient_model, NETWORKS[choice])
-            net = cls_.load(p.with_name(name), meta.get(choice))
+            provenance = meta.get(choice)
+            net = cls_.load(p.with_name(name), provenance if isinstance(provenance, dict) else None)
         elif choice != "lut":
             raise CalibrationError(f"{mp}: gradient_model {choice!r}, this SDK reads 'lut', "
                                    f"{', '.join(repr(k) for k in NETWORKS)}")
