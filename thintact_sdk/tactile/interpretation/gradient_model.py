@@ -24,6 +24,7 @@ applied with numpy and trained with torch; :func:`train_mlp`, :func:`train_cnn`.
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -67,15 +68,16 @@ def mlp_inputs(change: np.ndarray, image: np.ndarray) -> np.ndarray:
     return out
 
 
-class _PixelNetwork:
+class _PixelNetwork(ABC):
     """What both networks share: the slopes of a frame, the no-contact answer subtracted.
-    Subclasses hold ``shape`` and ``_flat`` and compute ``_forward`` (``N × M × 2``)."""
+    Subclasses hold ``shape`` and ``_flat`` and compute ``_forward``."""
 
     shape: tuple[int, int]
     _flat: tuple[np.ndarray, np.ndarray] | None
 
+    @abstractmethod
     def _forward(self, change: np.ndarray, image: np.ndarray) -> np.ndarray:
-        raise NotImplementedError
+        """``N × M × 2`` raw network output for ``N × M × 3`` colour change and image."""
 
     def predict(self, change: np.ndarray, image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(grad_x, grad_y)``, ``N × M`` float32 mm per mm, for ``N × M × 3`` colour change
