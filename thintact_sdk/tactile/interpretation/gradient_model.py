@@ -25,7 +25,8 @@ applied with numpy and trained with torch; :func:`train_mlp`, :func:`train_cnn`.
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -78,6 +79,18 @@ class _PixelNetwork(ABC):
     @abstractmethod
     def _forward(self, change: np.ndarray, image: np.ndarray) -> np.ndarray:
         """``N × M × 2`` raw network output for ``N × M × 3`` colour change and image."""
+
+    @abstractmethod
+    def _arrays(self) -> dict[str, np.ndarray]:
+        """The file's members besides ``shape`` (float32 layers, integer settings)."""
+
+    def save(self, path: str | Path) -> Path:
+        """Write the network to ``path`` (``.npz``, no pickle)."""
+        p = Path(path)
+        p.parent.mkdir(parents=True, exist_ok=True)
+        np.savez_compressed(p, allow_pickle=False, **self._arrays(),
+                            shape=np.asarray(self.shape, np.int64))
+        return p
 
     def predict(self, change: np.ndarray, image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(grad_x, grad_y)``, ``N × M`` float32 mm per mm, for ``N × M × 3`` colour change
@@ -135,14 +148,8 @@ class MLPGradient(_PixelNetwork):
         h = np.tanh(h @ w["w1"] + w["b1"])
         return (h @ w["w2"] + w["b2"]).reshape(self.shape + (2,))
 
-    def save(self, path: str | Path) -> Path:
-        """Write the network to ``path`` (``.npz``, no pickle)."""
-        p = Path(path)
-        p.parent.mkdir(parents=True, exist_ok=True)
-        arrays: dict[str, Any] = {k: self.weights[k].astype(np.float32) for k in _LAYERS}
-        arrays["shape"] = np.asarray(self.shape, np.int64)
-        np.savez_compressed(p, allow_pickle=False, **arrays)
-        return p
+    def _arrays(self) -> dict[str, np.ndarray]:
+        return {k: self.weights[k].astype(np.float32) for k in _LAYERS}
 
     @classmethod
     def load(cls, path: str | Path, meta: dict[str, Any] | None = None) -> MLPGradient:
@@ -165,6 +172,35 @@ class MLPGradient(_PixelNetwork):
         if not all(np.isfinite(a).all() for a in w.values()):
             raise CalibrationError(f"{path}: the network holds non-finite weights")
         return cls(w, (shape[0], shape[1]), dict(meta or {}))
+
+
+def _one_grid(changes: list[np.ndarray]) -> tuple[int, int]:
+    """The grid every calibration press is on; CalibrationError when they differ."""
+    shapes = {c.shape[:2] for c in changes}
+    if len(shapes) != 1:
+        raise CalibrationError(f"calibration presses on different grids: {sorted(shapes)}")
+    rows, cols = next(iter(shapes))
+    return int(rows), int(cols)
+
+
+def _too_few_pixels(count: int) -> None:
+    """CalibrationError when fewer than 100 calibration pixels are trusted."""
+    if count < 100:
+        raise CalibrationError(
+            f"only {count} calibration pixels; press the ball harder or use more presses")
+
+
+@contextmanager
+def _torch_threads(threads: int) -> Iterator[None]:
+    """torch's CPU threads set to ``threads`` (at least one) inside, restored afterwards."""
+    import torch
+
+    old = torch.get_num_threads()
+    torch.set_num_threads(max(1, threads))
+    try:
+        yield
+    finally:
+        torch.set_num_threads(old)
 
 
 def train_mlp(
@@ -200,19 +236,12 @@ def train_mlp(
     """
     import torch
 
-    shapes = {c.shape[:2] for c in changes}
-    if len(shapes) != 1:
-        raise CalibrationError(f"calibration presses on different grids: {sorted(shapes)}")
-    shape = next(iter(shapes))
+    shape = _one_grid(changes)
     x = np.concatenate([mlp_inputs(c, i)[m] for c, i, m in zip(changes, images, valid, strict=True)])
     y = np.concatenate([np.stack([gx, gy], -1)[m]
                         for gx, gy, m in zip(grad_x, grad_y, valid, strict=True)]).astype(np.float32)
-    if len(x) < 100:
-        raise CalibrationError(
-            f"only {len(x)} calibration pixels; press the ball harder or use more presses")
-    old_threads = torch.get_num_threads()
-    torch.set_num_threads(max(1, threads))
-    try:
+    _too_few_pixels(len(x))
+    with _torch_threads(threads):
         gen = torch.Generator().manual_seed(seed)
         torch.manual_seed(seed)
         net = torch.nn.Sequential(
@@ -229,8 +258,6 @@ def train_mlp(
             loss.backward()
             opt.step()
             sched.step()
-    finally:
-        torch.set_num_threads(old_threads)
     lin = [m for m in net if isinstance(m, torch.nn.Linear)]
     weights: dict[str, np.ndarray] = {}
     for k, layer in enumerate(lin):
@@ -238,7 +265,7 @@ def train_mlp(
         weights[f"b{k}"] = layer.bias.detach().numpy().astype(np.float32).copy()
     meta = {"format": MLP_FORMAT, "hidden": hidden, "steps": steps, "pixels": int(len(x)),
             "presses": len(changes)}
-    return MLPGradient(weights, (int(shape[0]), int(shape[1])), meta)
+    return MLPGradient(weights, shape, meta)
 
 
 CNN_FORMAT = "thintact-tactile-cnn/1"
@@ -313,15 +340,9 @@ class ConvGradient(_PixelNetwork):
         last = len(self.dilations)
         return h @ w[f"w{last}"] + w[f"b{last}"]
 
-    def save(self, path: str | Path) -> Path:
-        """Write the network to ``path`` (``.npz``, no pickle)."""
-        p = Path(path)
-        p.parent.mkdir(parents=True, exist_ok=True)
-        arrays: dict[str, Any] = {k: np.asarray(v, np.float32) for k, v in self.weights.items()}
-        arrays["dilations"] = np.asarray(self.dilations, np.int64)
-        arrays["shape"] = np.asarray(self.shape, np.int64)
-        np.savez_compressed(p, allow_pickle=False, **arrays)
-        return p
+    def _arrays(self) -> dict[str, np.ndarray]:
+        return {**{k: np.asarray(v, np.float32) for k, v in self.weights.items()},
+                "dilations": np.asarray(self.dilations, np.int64)}
 
     @classmethod
     def load(cls, path: str | Path, meta: dict[str, Any] | None = None) -> ConvGradient:
@@ -396,25 +417,18 @@ def train_cnn(
     """
     import torch
 
-    shapes = {c.shape[:2] for c in changes}
-    if len(shapes) != 1:
-        raise CalibrationError(f"calibration presses on different grids: {sorted(shapes)}")
-    shape = next(iter(shapes))
+    shape = _one_grid(changes)
     if not 1 <= len(dilations) <= _MAX_CNN_LAYERS:
         raise ValueError(f"1 to {_MAX_CNN_LAYERS} dilations, got {len(dilations)}")
     x = np.stack([mlp_inputs(c, i) for c, i in zip(changes, images, strict=True)])
     y = np.stack([np.stack([gx, gy], -1) for gx, gy in zip(grad_x, grad_y, strict=True)])
     m = np.stack(valid).astype(np.float32)
-    if m.sum() < 100:
-        raise CalibrationError(
-            f"only {int(m.sum())} calibration pixels; press the ball harder or use more presses")
+    _too_few_pixels(int(m.sum()))
     tx = torch.from_numpy(np.ascontiguousarray(x.transpose(0, 3, 1, 2)))
     ty = torch.from_numpy(np.ascontiguousarray(y.transpose(0, 3, 1, 2).astype(np.float32)))
     tm = torch.from_numpy(m)
     ch, cw = min(crop, shape[0]), min(crop, shape[1])
-    old_threads = torch.get_num_threads()
-    torch.set_num_threads(max(1, threads))
-    try:
+    with _torch_threads(threads):
         gen = torch.Generator().manual_seed(seed)
         torch.manual_seed(seed)
         layers: list[torch.nn.Module] = []
@@ -442,8 +456,6 @@ def train_cnn(
             sched.step()
             if progress is not None and ((s + 1) % every == 0 or s + 1 == steps):
                 progress(s + 1, steps)
-    finally:
-        torch.set_num_threads(old_threads)
     convs = [mod for mod in net if isinstance(mod, torch.nn.Conv2d)]
     weights: dict[str, np.ndarray] = {}
     for k, conv in enumerate(convs):
@@ -458,4 +470,4 @@ def train_cnn(
     meta = {"format": CNN_FORMAT, "width": width, "dilations": list(dilations),
             "receptive_field_px": field_px, "steps": steps, "crop": crop, "batch": batch,
             "pixels": int(m.sum()), "presses": len(changes)}
-    return ConvGradient(weights, tuple(dilations), (int(shape[0]), int(shape[1])), meta)
+    return ConvGradient(weights, tuple(dilations), shape, meta)

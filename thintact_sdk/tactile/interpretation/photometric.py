@@ -12,20 +12,19 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from scipy.ndimage import distance_transform_edt
 
 from thintact_sdk.errors import CalibrationError
 from thintact_sdk.formats import safe_json
-
-if TYPE_CHECKING:
-    from thintact_sdk.tactile.interpretation.gradient_model import ConvGradient, MLPGradient
 from thintact_sdk.formats.safe_arrays import read_npz
+from thintact_sdk.tactile.interpretation.gradient_model import ConvGradient, MLPGradient
 
 LUT_FORMAT = "thintact-tactile-lut/1"
-NETWORKS = {"mlp": "MLPGradient", "cnn": "ConvGradient"}
+NETWORKS: dict[str, type[MLPGradient] | type[ConvGradient]] = {
+    net.kind: net for net in (MLPGradient, ConvGradient)}
 """``gradient_model`` names of the networks a LUT file can name, and their classes."""
 
 
@@ -153,15 +152,12 @@ class PhotometricLUT:
         if not isinstance(choice, str):
             raise CalibrationError(f"{mp}: gradient_model must be a name, not {choice!r}")
         if choice in NETWORKS:
-            from thintact_sdk.tactile.interpretation import gradient_model
-
             name = str(meta.get(f"{choice}_file", net_path(p, choice).name))
             if Path(name).name != name:
                 raise CalibrationError(
                     f"{mp}: {choice}_file {name!r} must be a file name beside it")
-            cls_ = getattr(gradient_model, NETWORKS[choice])
             provenance = meta.get(choice)
-            net = cls_.load(p.with_name(name), provenance if isinstance(provenance, dict) else None)
+            net = NETWORKS[choice].load(p.with_name(name), provenance if isinstance(provenance, dict) else None)
         elif choice != "lut":
             raise CalibrationError(f"{mp}: gradient_model {choice!r}, this SDK reads 'lut', "
                                    f"{', '.join(repr(k) for k in NETWORKS)}")
