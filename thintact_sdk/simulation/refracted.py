@@ -561,11 +561,21 @@ def refracted_rotated_terms(
     return compress_terms(terms, kp.compress_tol)
 
 
-def _tables_and_expansion(kp: KernelParams) -> tuple[RefractedTables, SeparableExpansion]:
-    gx, gy = kp.grid_x(), kp.grid_y()
+def _reach_mm(kp: KernelParams) -> tuple[float, float]:
+    """Largest pair offsets per axis (mm) plus a margin of two pixels: what the tables cover."""
     margin = 2 * max(kp.pitch_um, kp.scene_pitch_um) * 1e-3
-    hx, hy = gx.max_offset_mm() + margin, gy.max_offset_mm() + margin
-    tables = RefractedTables(kp.z_mm, kp.d_mm, kp.n_scene_side, kp.q - 4.0, math.hypot(hx, hy))
+    return kp.grid_x().max_offset_mm() + margin, kp.grid_y().max_offset_mm() + margin
+
+
+def _refracted_tables(kp: KernelParams) -> RefractedTables:
+    """The refracted map's radial tables over every pair offset of ``kp``."""
+    hx, hy = _reach_mm(kp)
+    return RefractedTables(kp.z_mm, kp.d_mm, kp.n_scene_side, kp.q - 4.0, math.hypot(hx, hy))
+
+
+def _tables_and_expansion(kp: KernelParams) -> tuple[RefractedTables, SeparableExpansion]:
+    tables = _refracted_tables(kp)
+    hx, hy = _reach_mm(kp)
     exp = SeparableExpansion.build(kp.z_mm + kp.d_mm, kp.q, hx, hy, rel_tol=kp.rank_tol,
                                    radial=tables.factor)
     return tables, exp

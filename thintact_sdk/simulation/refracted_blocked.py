@@ -399,18 +399,17 @@ def build_blocked_refracted_kernel(
         _, refs_y = coupling_bins(gy, n_sub, level)
         derivs = slice(None) if level > 1 else slice(0, 1)  # ∂X₁, ∂Y₁ for the cross term only
         # y side: these y pairs at the D_x² nodes the class spans, and their derivative
-        fy64 = refracted_pair_integrals(gy, edges, vy, exp.gy_derivs, tables.kappa, nodes_x[sl_x],
-                                        n_sub, rq[qs], nq[qs], sy, n_bins=level)  # (B, 2, Tx, V, L, Q)
-        fy = fy64.astype(np.float32)
-        del fy64
+        fy = refracted_pair_integrals(gy, edges, vy, exp.gy_derivs, tables.kappa, nodes_x[sl_x],
+                                      n_sub, rq[qs], nq[qs], sy,
+                                      n_bins=level).astype(np.float32)  # (B, 2, Tx, V, L, Q)
         dfy = _node_derivative(fy[:, derivs], nodes_x[sl_x])
         # x side: each group's pairs at the D_y² nodes these y pairs reach
         sl_y = _ghosted(nodes_y, *_reach(oy[qs], half_y, level > 1))
         for idx in cls_groups:
             cp, mp = np.divmod(idx, kp.scene_cols)
-            fx64 = refracted_pair_integrals(gx, edges, vx, exp.fx_derivs, tables.kappa, nodes_y[sl_y],
-                                            n_sub, cp, mp, sx, n_bins=level)  # (B, 2, Ty, V, L, P)
-            fx = fx64.astype(np.float32)
+            fx = refracted_pair_integrals(gx, edges, vx, exp.fx_derivs, tables.kappa, nodes_y[sl_y],
+                                          n_sub, cp, mp, sx,
+                                          n_bins=level).astype(np.float32)  # (B, 2, Ty, V, L, P)
             dfx = _node_derivative(fx[:, derivs], nodes_y[sl_y])
             block = _fill_block(nodes_y[sl_y], fx, dfx, refs_x, ox[idx],
                                 nodes_x[sl_x], fy, dfy, refs_y, oy[qs], coef)
@@ -440,9 +439,9 @@ def needs_coupling_bins(kp: KernelParams) -> bool:
     the other axis's pair (:func:`coupling_levels` above one bin), probed at
     :data:`COUPLING_PROBE_OFFSETS` offsets per axis: where it does, the separable path's
     frozen coupling is off by up to a few percent (``docs/simulator.md``, "Wide angles")."""
-    from thintact_sdk.simulation.refracted import _tables_and_expansion, pair_offsets_mm
+    from thintact_sdk.simulation.refracted import _refracted_tables, pair_offsets_mm
 
-    tables, _ = _tables_and_expansion(kp)
+    tables = _refracted_tables(kp)  # κ only: the radiometric expansion is not needed here
     gx, gy = kp.grid_x(), kp.grid_y()
 
     def probe(grid: AxisGrid) -> np.ndarray:
