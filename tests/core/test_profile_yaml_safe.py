@@ -218,3 +218,22 @@ def test_cli_set_bomb_exits_2_with_one_line(tmp_path: Path, capsys: pytest.Captu
     err = _one_line(capsys.readouterr().err)
     assert "argument --set" in err and "makes the document larger than 1000000 nodes" in err, err
     assert not out.exists()
+
+
+def test_dump_json_writes_what_strict_readers_take():
+    """Figures that could not be measured are null, not NaN (which strict JSON readers
+    refuse); numpy numbers and arrays are plain numbers and lists."""
+    import numpy as np
+
+    from thintact_sdk.formats.safe_yaml import dump_json
+
+    text = dump_json({"a": float("nan"), "b": [np.float32(1.5), float("inf")],
+                      "c": np.arange(3), "d": (np.int64(2), -float("inf")), "e": "x"})
+
+    def refuse(token: str) -> None:
+        raise AssertionError(f"non-standard JSON constant {token}")
+
+    assert json.loads(text, parse_constant=refuse) == {
+        "a": None, "b": [1.5, None], "c": [0, 1, 2], "d": [2, None], "e": "x"}
+    with pytest.raises(TypeError):
+        dump_json({"f": object()})

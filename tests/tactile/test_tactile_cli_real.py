@@ -75,6 +75,10 @@ def test_cli_evaluate_takes_the_ball_model_as_calibrate_tactile_does(tmp_path, c
     assert res["ball_model"]["model"] == "rigid" and res["ball_model"]["chosen_by"].startswith("default")
 
 
+def _no_constant(token):
+    raise AssertionError(f"{token} in JSON output (strict readers refuse it)")
+
+
 def test_cli_import_evaluate_depth(tmp_path, capsys):
     folder = _folder(tmp_path)
     pack = tmp_path / "pack.npz"
@@ -87,7 +91,10 @@ def test_cli_import_evaluate_depth(tmp_path, capsys):
     text = capsys.readouterr()
     assert "fitted sphere radius" in text.out and "[" in text.err  # progress lines on stderr
     assert "skirt included" in text.out and "under 45 deg" in text.out
-    res = json.loads(out.read_text())
+    assert "the calibration's ball model pressed as deep reads" in text.out
+    res = json.loads(out.read_text(), parse_constant=_no_constant)  # strict JSON: no NaN
+    assert 0 < res["summary"]["contact_ratio_taught_median"] < 1
+    assert all(0 < p["contact_ratio_taught"] < 1 for p in res["presses"])
     assert res["train"] == [0, 2, 4, 6] and res["test"] == [1, 3, 5, 7]
     assert res["gradient_model"] == "lut" and len(res["presses"]) == 4
     lut = tmp_path / "lut.npz"

@@ -116,6 +116,49 @@ def test_contact_region_leaves_a_sink_in_skirt_out(skirt_mm):
     assert contact_region(np.full((20, 30), 0.4), MM, 0.1, MM).all()
 
 
+@pytest.mark.parametrize("press", [0.4, 0.8, 1.4])
+def test_taught_contact_ratio_is_what_the_measure_reads_on_the_taught_shape(press):
+    """A reconstruction that is exactly the calibration's smoothed rigid cap reads, through the
+    contact measure, the taught ratio: the reconstruction's share of a ratio under 1 is 1."""
+    from scipy.ndimage import gaussian_filter
+
+    from thintact_sdk.tactile.calibration.ball_eval import summarise, taught_contact_ratio
+    from thintact_sdk.tactile.calibration.ball_press import BallModel
+
+    shape, centre, blur = (90, 120), (44.6, 60.3), 0.25
+    sharp, _, _, _ = _cap(shape, centre, press)
+    d = gaussian_filter(sharp, blur / MM, mode="constant")
+    gy, gx = np.gradient(d, MM)
+    f = press_figures(d, gx, gy, 2.0, MM, 0.1, smooth_mm=MM)
+    measured = f.contact_radius_mm / f.contact_radius_expected_mm
+    taught = taught_contact_ratio(BallModel(), shape, f.centre_rc, f.peak_mm, 2.0, MM, blur,
+                                  0.1, MM)
+    assert measured < 0.97  # the measure reads the smoothed rim inside the contact
+    assert taught == pytest.approx(measured, abs=0.02)
+    # the unsmoothed cap reads closer to 1 than the smoothed one: the blur is the bias
+    assert taught < taught_contact_ratio(BallModel(), shape, f.centre_rc, float(sharp.max()),
+                                         2.0, MM, 0.0, 0.1, MM) <= 1.0
+    # a sink-in skirt deepens the peak for the same contact: the ratio it reads is lower
+    assert taught_contact_ratio(BallModel("sink-in", 0.6), shape, f.centre_rc, f.peak_mm, 2.0,
+                                MM, blur, 0.1, MM) < taught
+    f.contact_ratio_taught = taught
+    s = summarise([f], 2.0)
+    assert s["contact_ratio_taught_median"] == pytest.approx(taught)
+    f.contact_ratio_taught = float("nan")
+    assert summarise([f], 2.0)["contact_ratio_taught_median"] is None
+    # nothing pressed: no ratio
+    assert np.isnan(taught_contact_ratio(BallModel(), shape, centre, 0.0, 2.0, MM, blur))
+
+
+@pytest.mark.parametrize("meta", [None, [], "rigid", {"model": "cone"},
+                                  {"model": "sink-in", "skirt_length_mm": "x"},
+                                  {"model": "sink-in", "skirt_length_mm": -1}])
+def test_taught_shape_from_a_damaged_lut_json_is_left_out(meta):
+    from thintact_sdk.tactile.calibration.press_pack import _taught_shape
+
+    assert _taught_shape(meta) is None
+
+
 def _network(tmp_path, steps=200):
     rng = np.random.default_rng(0)
     d, gx, gy, _ = _cap(shape=(40, 50), centre=(20.0, 25.0), press=0.5)
@@ -201,6 +244,8 @@ def test_vendored_real_presses_figures_and_report():
     assert 1.9 < s["sphere_radius_median_mm"] < 2.3
     assert abs(s["contact_ratio_median"] - 1) < 0.1 < s["skirt_ratio_median"] - 1.3
     assert s["slope_rms_gentle"] < s["slope_rms"]
+    # the measure reads the taught cap (rigid, smoothed by the 0.25 mm elastomer) under 1 too
+    assert 0.8 < s["contact_ratio_taught_median"] < 0.97
     # every press's circle is wider than a 2 mm ball allows: the report says so
     assert all(any("not physical" in w for w in e["warnings"]) for e in res["press_report"])
     assert s["annotated_depth_rms_mm"] > 3 * s["depth_rms_mm"]  # the annotation's depth ≈ R

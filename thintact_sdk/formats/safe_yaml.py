@@ -24,6 +24,7 @@ as one line.
 from __future__ import annotations
 
 import json
+import math
 from typing import Any
 
 import yaml
@@ -192,6 +193,25 @@ def error_line(err: yaml.YAMLError) -> str:
             text = f"{err.context}: {text}"
         return " ".join(text.split())
     return " ".join(str(err).split()) or type(err).__name__
+
+
+def dump_json(obj: Any, indent: int | None = 1) -> str:
+    """``obj`` as JSON text every strict reader takes: a non-finite number (NaN, ±inf: a figure
+    that could not be measured) is written as ``null``, numpy numbers and arrays as numbers
+    and lists, tuples as lists. Raises ``TypeError`` on anything else ``json`` cannot write."""
+
+    def clean(x: Any) -> Any:
+        if isinstance(x, dict):
+            return {k: clean(v) for k, v in x.items()}
+        if isinstance(x, (list, tuple)):
+            return [clean(v) for v in x]
+        if hasattr(x, "tolist") and callable(x.tolist):  # numpy scalar or array
+            return clean(x.tolist())
+        if isinstance(x, float) and not math.isfinite(x):
+            return None
+        return x
+
+    return json.dumps(clean(obj), indent=indent, allow_nan=False)
 
 
 class DuplicateKeyError(ValueError):

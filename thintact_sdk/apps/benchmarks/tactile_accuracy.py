@@ -13,7 +13,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import time
 from pathlib import Path
 from typing import Any
@@ -21,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from thintact_sdk.apps.cli.argtypes import positive_float, positive_int, seed
+from thintact_sdk.formats.safe_yaml import dump_json
 
 NAME = "tactile"
 """The benchmark's name: ``thintact bench tactile``."""
@@ -474,5 +474,5 @@ def run(args: argparse.Namespace) -> int:
           f"{os.cpu_count()} cores (timings on a shared machine are inflated by other work)")
     out["load_average"] = load[0]
     if args.json is not None:
-        args.json.write_text(json.dumps(out, indent=1, default=float) + "\n")
+        args.json.write_text(dump_json(out) + "\n")
     return 0

@@ -19,6 +19,12 @@ Annotation-free figures, per press, from the reconstructed depth ``d`` (mm) and 
   ball's slope is under 1 (45°, ``slope_rms_gentle``). Without a contact region, the rigid
   cap fitted to the core and its contact circle.
 * **edge press**: the contact circle (fitted centre, contact radius) reaches the frame's edge.
+* **taught contact ratio** (:func:`taught_contact_ratio`, with the calibration's ball model):
+  the contact ratio this measure reads on the shape the calibration taught, pressed as deep
+  as the reconstruction's peak. The measure is not exact on smooth rims: the curvature's sign
+  changes inside the rim of a cap smoothed by the elastomer, so even a perfect reconstruction
+  of the taught shape reads under 1; the reconstruction's ratio over this one says how much
+  is the reconstruction's own.
 
 With annotated circles (centre, contact radius a_ann), the same RMS figures against the cap of
 radius R whose contact circle is the annotated one (press depth ``R − √(R² − a_ann²)``).
@@ -27,10 +33,10 @@ radius R whose contact circle is the annotated one (press depth ``R − √(R² 
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
-from scipy.ndimage import label
+from scipy.ndimage import gaussian_filter, label
 from scipy.optimize import least_squares
 
 from thintact_sdk.tactile.interpretation.contact_region import contact_region
@@ -62,6 +68,7 @@ class PressFigures:
     edge: bool
     skirt_radius_mm: float = float("nan")
     slope_rms_gentle: float = float("nan")
+    contact_ratio_taught: float = float("nan")
     annotated_depth_rms_mm: float | None = None
     annotated_slope_rms: float | None = None
     annotated_press_mm: float | None = None
@@ -232,11 +239,69 @@ def press_figures(
     return out
 
 
+class TaughtShape(Protocol):
+    """A ball model as :class:`~thintact_sdk.tactile.calibration.ball_press.BallModel` gives it."""
+
+    def parameters(self, ball_radius_mm: float) -> np.ndarray: ...
+
+    def rigid_depth(self, dist_mm: np.ndarray, param_mm: float, ball_radius_mm: float
+                    ) -> tuple[np.ndarray, float, float]: ...
+
+
+def _contact_ratio(depth_mm: np.ndarray, radius_mm: float, mm_per_px: float,
+                   threshold_mm: float, smooth_mm: float) -> float:
+    """Contact radius of the region holding the peak over ``√(2Rp − p²)``, p the peak (NaN
+    without a peak)."""
+    peak = float(depth_mm.max())
+    p = min(peak, radius_mm)
+    expected = float(np.sqrt(max(2 * radius_mm * p - p * p, 0.0)))
+    if expected <= 0:
+        return float("nan")
+    region = contact_region(depth_mm, mm_per_px, threshold_mm, smooth_mm)
+    deepest = np.unravel_index(int(np.argmax(depth_mm)), depth_mm.shape)
+    if not region[deepest]:
+        return 0.0
+    labels, _ = label(region)
+    area = float((labels == labels[deepest]).sum())
+    return float(np.sqrt(area / np.pi)) * mm_per_px / expected
+
+
+def taught_contact_ratio(model: TaughtShape, shape: tuple[int, int],
+                         centre_rc: tuple[float, float], peak_mm: float, radius_mm: float,
+                         mm_per_px: float, blur_mm: float, threshold_mm: float = 0.1,
+                         smooth_mm: float = 0.0) -> float:
+    """The contact ratio (module docstring) of the calibration's ball model pressed so that its
+    peak, after the elastomer blur (``blur_mm``, σ in mm), is the reconstruction's
+    ``peak_mm`` (the deepest the model goes when it cannot), at ``centre_rc`` on an
+    ``shape`` grid of ``mm_per_px``: what the measure reads on the shape the calibration
+    taught. NaN without a peak."""
+    rr, cc = np.mgrid[0 : shape[0], 0 : shape[1]].astype(np.float64)
+    dist = np.hypot(rr - centre_rc[0], cc - centre_rc[1]) * mm_per_px
+    sigma = blur_mm / mm_per_px
+
+    def render(param: float) -> np.ndarray:
+        sharp, _, _ = model.rigid_depth(dist, param, radius_mm)
+        return gaussian_filter(sharp, sigma, mode="constant") if sigma > 0 else sharp
+
+    grid = model.parameters(radius_mm)
+    if not (np.isfinite(peak_mm) and peak_mm > 0 and len(grid)):
+        return float("nan")
+    lo, hi = 0, len(grid) - 1  # the smoothed peak grows with the parameter: bisection
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if float(render(float(grid[mid])).max()) < peak_mm:
+            lo = mid + 1
+        else:
+            hi = mid
+    return _contact_ratio(render(float(grid[lo])), radius_mm, mm_per_px, threshold_mm, smooth_mm)
+
+
 def summarise(figures: list[PressFigures], radius_mm: float) -> dict[str, Any]:
     """Pack-level figures: median fitted sphere radius and its middle half (and relative to
     ``radius_mm``), median contact-radius ratio (measured / expected), depth and slope RMS
     over the presses (root of the mean of squares), median skirt ratio (the region deeper
-    than the contact threshold, measured / expected), edge against interior presses (each
+    than the contact threshold, measured / expected), median taught contact ratio (``None``
+    without one), edge against interior presses (each
     edge press's sphere radius over the median of the ``EDGE_NEIGHBOURS`` interior presses of
     the most similar press depth, minus 1; the median over edge presses)."""
     def rms(vals: list[float | None]) -> float | None:
@@ -249,6 +314,8 @@ def summarise(figures: list[PressFigures], radius_mm: float) -> dict[str, Any]:
     skirt = np.array([f.skirt_radius_mm / f.contact_radius_expected_mm
                       for f in figures if f.contact_radius_expected_mm > 0
                       and np.isfinite(f.skirt_radius_mm)])
+    taught = np.array([f.contact_ratio_taught for f in figures
+                       if np.isfinite(f.contact_ratio_taught)])
     out: dict[str, Any] = {
         "presses": len(figures),
         "ball_radius_mm": radius_mm,
@@ -257,6 +324,7 @@ def summarise(figures: list[PressFigures], radius_mm: float) -> dict[str, Any]:
         "sphere_radius_q75_mm": float(np.percentile(radii, 75)),
         "contact_ratio_median": float(np.median(ratio)) if len(ratio) else None,
         "skirt_ratio_median": float(np.median(skirt)) if len(skirt) else None,
+        "contact_ratio_taught_median": float(np.median(taught)) if len(taught) else None,
         "depth_rms_mm": rms([f.depth_rms_mm for f in figures]),
         "slope_rms": rms([f.slope_rms for f in figures]),
         "slope_rms_flat": rms([f.slope_rms_flat for f in figures]),

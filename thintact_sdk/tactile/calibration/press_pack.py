@@ -260,6 +260,19 @@ def split(count: int, train: list[int] | None = None) -> tuple[list[int], list[i
     return train, rest
 
 
+def _taught_shape(meta: Any) -> Any:
+    """The calibration's ball model from ``lut.meta["ball_model"]`` (None when it has none or
+    it is not one: a table calibrated elsewhere)."""
+    from thintact_sdk.tactile.calibration.ball_press import BallModel
+
+    if not isinstance(meta, dict):
+        return None
+    try:
+        return BallModel(str(meta.get("model")), float(meta.get("skirt_length_mm") or 0.0))
+    except (CalibrationError, TypeError, ValueError):
+        return None
+
+
 def evaluate_pack(
     pack: PressPack,
     ball_radius_mm: float,
@@ -296,7 +309,11 @@ def evaluate_pack(
         ``press_report`` (the calibration's per-press report), ``ball_model`` (the model the
         calibration used and how it was chosen; ``None`` with a given ``lut``).
     """
-    from thintact_sdk.tactile.calibration.ball_eval import press_figures, summarise
+    from thintact_sdk.tactile.calibration.ball_eval import (
+        press_figures,
+        summarise,
+        taught_contact_ratio,
+    )
     from thintact_sdk.tactile.calibration.ball_press import BallPress, calibrate_from_presses
     from thintact_sdk.tactile.interpretation.interpreter import TactileInterpreter
 
@@ -314,6 +331,7 @@ def evaluate_pack(
             raise CalibrationError(f"{err} (training presses, in order: {train})") from None
     interp = TactileInterpreter(profile, lut, boundary=boundary)  # type: ignore[arg-type]
     interp.set_reference(pack.reference_image())
+    taught = _taught_shape(lut.meta.get("ball_model"))
     figs = []
     for k, i in enumerate(test):
         say(f"test press {k + 1}/{len(test)}")
@@ -323,9 +341,14 @@ def evaluate_pack(
             f = interp.factor
             ann = ((float(pack.centres_rc[i][0]) / f, float(pack.centres_rc[i][1]) / f),
                    float(pack.radii_px[i]) / f)
-        figs.append(press_figures(depth, gx, gy, ball_radius_mm, interp.work.mm_per_px,
-                                  interp.params.contact_threshold_mm, ann,
-                                  interp.work.mm_per_px))
+        fig = press_figures(depth, gx, gy, ball_radius_mm, interp.work.mm_per_px,
+                            interp.params.contact_threshold_mm, ann, interp.work.mm_per_px)
+        if taught is not None:
+            fig.contact_ratio_taught = taught_contact_ratio(
+                taught, depth.shape, fig.centre_rc, fig.peak_mm, ball_radius_mm,
+                interp.work.mm_per_px, elastomer_sigma_mm, interp.params.contact_threshold_mm,
+                interp.work.mm_per_px)
+        figs.append(fig)
     return {
         "summary": summarise(figs, ball_radius_mm),
         "presses": [{"press": i, "name": pack.names[i], **f.as_dict()}

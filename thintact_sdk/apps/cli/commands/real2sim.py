@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 from thintact_sdk.apps.cli.argtypes import (
@@ -15,6 +14,7 @@ from thintact_sdk.apps.cli.argtypes import (
 )
 from thintact_sdk.errors import ThinTactError
 from thintact_sdk.formats.profiles import MAX_PITCH_UM, MIN_PITCH_UM
+from thintact_sdk.formats.safe_yaml import dump_json
 
 
 def _indices(text: str) -> list[int] | None:
@@ -118,9 +118,9 @@ def run_evaluate(args: argparse.Namespace) -> int:
     if balls:
         Console().print(_ball_table(balls))
     if args.json is not None:
-        args.json.write_text(json.dumps({
+        args.json.write_text(dump_json({
             "train": evals["real"].train, "test": evals["real"].test,
-            "rows": [r.__dict__ for r in rows], "ball_figures": balls}, indent=1, default=float) + "\n")
+            "rows": [r.__dict__ for r in rows], "ball_figures": balls}) + "\n")
     return 0
 
 

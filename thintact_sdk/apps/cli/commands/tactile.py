@@ -8,12 +8,12 @@ The libraries: :func:`thintact_sdk.tactile.calibration.press_pack.import_folder`
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 from typing import Any
 
 from thintact_sdk.apps.cli.argtypes import GRADIENT_MODELS, int_range, positive_float, positive_int
 from thintact_sdk.apps.cli.output_path import add_force_argument, claim_output
+from thintact_sdk.formats.safe_yaml import dump_json
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -154,7 +154,7 @@ def run_evaluate(args: argparse.Namespace) -> int:
     _print_evaluation(res, radius)
     if json_out is not None:
         res.pop("lut")
-        json_out.write_text(json.dumps(res, indent=1, default=float) + "\n")
+        json_out.write_text(dump_json(res) + "\n")
         print(f"wrote {json_out}")
     return 0
 
@@ -186,6 +186,10 @@ def _print_evaluation(res: dict[str, Any], radius: float) -> None:
         skirt = (f" (the region deeper than the contact threshold, skirt included: "
                  f"{s['skirt_ratio_median']:.2f})" if s.get("skirt_ratio_median") else "")
         print(f"  contact radius / sqrt(2Rd-d^2)  median {s['contact_ratio_median']:.2f}{skirt}")
+        if s.get("contact_ratio_taught_median") is not None:
+            print("    the calibration's ball model pressed as deep reads "
+                  f"{s['contact_ratio_taught_median']:.2f} through the same measure (a perfect "
+                  "reconstruction of the taught shape)")
     gentle = (f"; {s['slope_rms_gentle']:.3f} where the ball's slope is under 45 deg"
               if s.get("slope_rms_gentle") is not None else "")
     print(f"  depth RMS {s['depth_rms_mm']:.3f} mm, slope RMS {s['slope_rms']:.3f} "
