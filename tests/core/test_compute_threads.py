@@ -106,3 +106,27 @@ def test_the_threads_reported_are_numpys_even_with_opencvs_openblas_mapped_first
     finally:
         for (setter, _), old in zip(libs, before, strict=True):
             setter(ctypes.c_int(old))
+
+
+def test_torch_loaded_after_the_hold_began_is_held_at_one_thread_and_put_back() -> None:
+    """A fresh process opens a sensor before anything imports torch: the hold begins, then the
+    decoder's backend selection loads torch. Its products must run (and be measured) on one
+    thread as in every later build of the process, and the hold's end puts back torch's
+    count (before, the first build measured on torch's default threads and chose apart)."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys\n"
+        "from thintact_sdk.host.compute_threads import prepare_worker_thread, single_threaded_kernels\n"
+        "assert 'torch' not in sys.modules\n"
+        "with single_threaded_kernels():\n"
+        "    prepare_worker_thread()\n"  # torch not loaded yet: nothing to hold
+        "    import torch\n"
+        "    torch.set_num_threads(2)\n"  # the default on a 2-core host, whatever the env says
+        "    prepare_worker_thread()\n"
+        "    inside = torch.get_num_threads()\n"
+        "print(inside, torch.get_num_threads())\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ["1", "2"]

@@ -96,13 +96,22 @@ def prepare_worker_thread() -> None:
     torch's CPU thread count is per calling thread (OpenMP) once a thread has set it, and
     the value new threads start from: each worker sets its own to one, the caller's threads
     keep theirs, and the last hold to end puts back the value new threads start from. Does
-    nothing where torch was not loaded when the hold began (torch is never imported here).
+    nothing while torch is not loaded (torch is never imported here); call it again once
+    something may have loaded it (a decoder's backend selection does, before it measures):
+    where torch was loaded after the hold began, the count it had then is what the hold puts
+    back. Without that second call a decoder built in a fresh process measured its backends
+    on torch's default threads and every later one on one thread, so the two chose apart.
     """
-    with _lock:
-        held_with_torch = _holders > 0 and _torch_threads_before is not None
+    global _torch_threads_before
     torch = sys.modules.get("torch")
-    if held_with_torch and torch is not None:
-        torch.set_num_threads(1)
+    if torch is None:
+        return
+    with _lock:
+        if _holders == 0:
+            return
+        if _torch_threads_before is None:  # loaded after the hold began
+            _torch_threads_before = int(torch.get_num_threads())
+    torch.set_num_threads(1)
 
 
 @contextmanager

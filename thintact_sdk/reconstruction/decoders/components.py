@@ -40,6 +40,7 @@ from typing import Any
 from thintact_sdk.errors import CalibrationError
 from thintact_sdk.formats.profiles import Profile
 from thintact_sdk.hookspecs import Component, hookimpl
+from thintact_sdk.host.compute_threads import prepare_worker_thread
 from thintact_sdk.host.machine import host_capabilities, host_fingerprint, kernel_threads_now
 from thintact_sdk.interfaces import Decoder
 from thintact_sdk.reconstruction.bundle import CalibrationBundle
@@ -106,7 +107,8 @@ def _selected(name: str, profile: Profile, settings: dict[str, Any], sm: SystemM
     (``binnable``: ``build(backend, b)`` also solves on the sensor binned b × b, which is
     then a candidate where the sensor oversamples the scene)."""
     dtype = str(settings.get("dtype", "float32"))
-    caps = host_capabilities()
+    caps = host_capabilities()  # loads torch where it is installed
+    prepare_worker_thread()  # a kernel-thread hold in force applies to torch too from here on
     env = os.environ.get("THINTACT_BACKEND", "").strip()
     preferred: BackendSpec | None
     try:
