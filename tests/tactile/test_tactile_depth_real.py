@@ -116,31 +116,6 @@ def test_contact_region_leaves_a_sink_in_skirt_out(skirt_mm):
     assert contact_region(np.full((20, 30), 0.4), MM, 0.1, MM).all()
 
 
-def test_a_light_touch_reads_its_contact_as_a_deep_press_does():
-    """The contact threshold says whether there is a contact, not where it ends: on the
-    simulator's true depth (a ball's rigid indentation smoothed by the elastomer), a 0.15 mm
-    press reads its contact radius as a 1 mm press does (it read 0.67 of the ball's at
-    0.2 mm when the region was cut at the 0.1 mm threshold)."""
-    from thintact_sdk.formats.profiles import load_profile
-    from thintact_sdk.tactile.interpretation.contact_region import contact_region
-    from thintact_sdk.tactile.simulation.indenters import Sphere
-    from thintact_sdk.tactile.simulation.membrane import simulate_press
-
-    profile = load_profile("gelsight-mini")
-    mm, thr = profile.tactile.mm_per_px, profile.tactile.contact_threshold_mm
-
-    def ratio(press: float) -> float:
-        d = simulate_press(profile, Sphere(radius_mm=4.0), press).depth_mm.astype(np.float64)
-        area = contact_region(d, mm, thr).sum() * mm * mm
-        return float(np.sqrt(area / np.pi) / np.sqrt(2 * 4.0 * press - press**2))
-
-    light, deep = ratio(0.15), ratio(1.0)
-    assert 0.8 < deep < 1.0 and abs(light - deep) < 0.06
-    # nothing deeper than the threshold: no contact, however concave
-    d = simulate_press(profile, Sphere(radius_mm=4.0), 0.08).depth_mm
-    assert 0 < d.max() < thr and not contact_region(d, mm, thr).any()
-
-
 @pytest.mark.parametrize("press", [0.4, 0.8, 1.4])
 def test_taught_contact_ratio_is_what_the_measure_reads_on_the_taught_shape(press):
     """A reconstruction that is exactly the calibration's smoothed rigid cap reads, through the

@@ -56,7 +56,7 @@ _CONTACT = """\
 # Contact interpretation of one tactile frame.
 std_msgs/Header header
 uint64 camera_frame_id       # the camera's frame counter (gaps: dropped frames)
-bool contact                 # a contact region (concave, holding a point deeper than the profile's contact threshold) of >= 0.1 mm2
+bool contact                 # a contact region (deeper than the profile's contact threshold, concave) of >= 0.1 mm2
 float32 contact_area_mm2
 float32 max_depth_mm         # deepest indentation, mm
 float32 shear_direction_rad  # atan2 of the mean marker displacement; NaN without shear

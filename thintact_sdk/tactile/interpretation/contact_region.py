@@ -11,17 +11,12 @@ down away from the deepest point (negative Laplacian of depth); in the skirt it 
 up towards the undeformed level (positive Laplacian). The rim of the contact is where the
 curvature changes sign. So the contact region is
 
-1. the pixels pushed in at all (depth > 0) where the depth is concave (Laplacian < 0, of a
-   Gaussian one pixel of the grid the depth was reconstructed on wide: the finest detail it
-   holds; a wider one moves the rim of a steep cap inwards),
+1. the pixels deeper than the contact threshold where the depth is concave (Laplacian < 0,
+   of a Gaussian one pixel of the grid the depth was reconstructed on wide: the finest
+   detail it holds; a wider one moves the rim of a steep cap inwards),
 2. of these, the connected parts that hold the deepest point of a region deeper than the
    contact threshold (a frame with nothing deeper than the threshold has no contact;
-   concave speckle of noise and drift beside a contact holds no such point). The threshold
-   says whether and where there is a contact, not where it ends: a region cut at the
-   threshold read a light touch's contact short (a 4 mm ball pressed 0.2 mm into the
-   simulated ``gelsight-mini`` gel, its true depth map: contact radius 0.67 of the ball's,
-   against 0.84-0.88 for presses of 0.5-1 mm; ended at the curvature's sign change it reads
-   0.83, as the deeper ones),
+   concave speckle of noise and drift beside a contact holds no such point),
 3. with their holes filled: the flat face of a punch has no curvature inside its
    concave rim; a rim cut by the frame's edge counts as closed where the depth at the edge
    is over the contact threshold.
@@ -70,7 +65,7 @@ def contact_region(depth_mm: np.ndarray, mm_per_px: float, threshold_mm: float,
     sigma = max(smooth_mm / mm_per_px, MIN_SMOOTH_PX)
     smooth = cv2.GaussianBlur(d, (0, 0), sigma, borderType=cv2.BORDER_REPLICATE)
     lap = cv2.Laplacian(smooth, cv2.CV_64F, ksize=1, borderType=cv2.BORDER_REPLICATE)
-    concave = (lap < 0) & (d > 0)
+    concave = (lap < 0) & seeds
     labels = _components(concave)
     seed_labels = _components(seeds)
     # the deepest pixel of each region over the threshold
