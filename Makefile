@@ -15,10 +15,9 @@ lint: setup
 	.venv/bin/lint-imports
 
 # Two test processes with one BLAS/OpenMP thread each: both cores busy, and no BLAS threads
-# spin-waiting for a core the other process holds; work stealing keeps both busy to the end
-# (docs/architecture.md, "Tests").
+# spin-waiting for a core the other process holds (docs/architecture.md, "Tests").
 test: lint
-	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1 .venv/bin/python -m pytest -q -n 2 --dist worksteal
+	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1 .venv/bin/python -m pytest -q -n 2
 
 bench: setup
 	.venv/bin/thintact bench reconstruct
