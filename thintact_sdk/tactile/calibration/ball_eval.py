@@ -36,10 +36,11 @@ from dataclasses import asdict, dataclass
 from typing import Any, Protocol
 
 import numpy as np
-from scipy.ndimage import gaussian_filter, label
+from scipy.ndimage import label
 from scipy.optimize import least_squares
 
 from thintact_sdk.tactile.interpretation.contact_region import contact_region
+from thintact_sdk.tactile.interpretation.grid import TactileParams
 
 CORE_FRACTION = 0.5
 RIM_FRACTION = 0.9
@@ -109,8 +110,7 @@ def ball_cap(shape: tuple[int, int], centre_rc: tuple[float, float], press_mm: f
     inside = depth > 0
     gx = np.where(inside, -x / root, 0.0)
     gy = np.where(inside, -y / root, 0.0)
-    p = min(press_mm, radius_mm)
-    return depth, gx, gy, float(np.sqrt(max(2 * radius_mm * p - p * p, 0.0))) / mm_per_px
+    return depth, gx, gy, _contact_radius_of_press(radius_mm, press_mm) / mm_per_px
 
 
 def fit_ball_fixed_radius(depth_mm: np.ndarray, radius_mm: float, mm_per_px: float,
@@ -145,6 +145,23 @@ def fit_ball_fixed_radius(depth_mm: np.ndarray, radius_mm: float, mm_per_px: flo
     return (float(sol.x[0]), float(sol.x[1])), float(sol.x[2])
 
 
+def _holding_peak(mask: np.ndarray, depth_mm: np.ndarray) -> np.ndarray:
+    """The connected part of ``mask`` that holds the deepest pixel of ``depth_mm`` (none when
+    the deepest pixel is outside ``mask``)."""
+    deepest = np.unravel_index(int(np.argmax(depth_mm)), depth_mm.shape)
+    if not mask[deepest]:
+        return np.zeros(mask.shape, bool)
+    labels, _ = label(mask)
+    return labels == labels[deepest]
+
+
+def _contact_radius_of_press(radius_mm: float, press_mm: float) -> float:
+    """``√(2Rp − p²)`` (mm): the contact radius of a ball of radius R pressed p deep (p clipped
+    to 0..R)."""
+    p = min(max(press_mm, 0.0), radius_mm)
+    return float(np.sqrt(max(2 * radius_mm * p - p * p, 0.0)))
+
+
 def press_figures(
     depth_mm: np.ndarray,
     grad_x: np.ndarray,
@@ -172,22 +189,12 @@ def press_figures(
     d = np.asarray(depth_mm, np.float64)
     peak = float(d.max())
     sphere, _ = fit_sphere(d, mm_per_px)
-    deepest = np.unravel_index(int(np.argmax(d)), d.shape)
-
-    def holding_peak(mask: np.ndarray) -> np.ndarray:
-        """The part of ``mask`` that holds the peak."""
-        if not mask[deepest]:
-            return np.zeros(mask.shape, bool)
-        labels, _ = label(mask)
-        return labels == labels[deepest]
-
     region = contact_region(d, mm_per_px, contact_threshold_mm, smooth_mm)
-    contact = holding_peak(region)
+    contact = _holding_peak(region, d)
     contact_r = float(np.sqrt(float(contact.sum()) / np.pi)) * mm_per_px
-    skirt_r = float(np.sqrt(float(holding_peak(d > contact_threshold_mm).sum()) / np.pi)) \
+    skirt_r = float(np.sqrt(float(_holding_peak(d > contact_threshold_mm, d).sum()) / np.pi)) \
         * mm_per_px
-    p = min(max(peak, 0.0), radius_mm)
-    expected = float(np.sqrt(max(2 * radius_mm * p - p * p, 0.0)))
+    expected = _contact_radius_of_press(radius_mm, peak)
     rr, cc = np.mgrid[0 : d.shape[0], 0 : d.shape[1]]
     nan = float("nan")
 
@@ -244,26 +251,20 @@ class TaughtShape(Protocol):
 
     def parameters(self, ball_radius_mm: float) -> np.ndarray: ...
 
-    def rigid_depth(self, dist_mm: np.ndarray, param_mm: float, ball_radius_mm: float
-                    ) -> tuple[np.ndarray, float, float]: ...
+    def depth(self, shape: tuple[int, int], center_rc: tuple[float, float], param_mm: float,
+              ball_radius_mm: float, params: TactileParams) -> np.ndarray: ...
 
 
 def _contact_ratio(depth_mm: np.ndarray, radius_mm: float, mm_per_px: float,
                    threshold_mm: float, smooth_mm: float) -> float:
     """Contact radius of the region holding the peak over ``√(2Rp − p²)``, p the peak (NaN
     without a peak)."""
-    peak = float(depth_mm.max())
-    p = min(peak, radius_mm)
-    expected = float(np.sqrt(max(2 * radius_mm * p - p * p, 0.0)))
+    expected = _contact_radius_of_press(radius_mm, float(depth_mm.max()))
     if expected <= 0:
         return float("nan")
-    region = contact_region(depth_mm, mm_per_px, threshold_mm, smooth_mm)
-    deepest = np.unravel_index(int(np.argmax(depth_mm)), depth_mm.shape)
-    if not region[deepest]:
-        return 0.0
-    labels, _ = label(region)
-    area = float((labels == labels[deepest]).sum())
-    return float(np.sqrt(area / np.pi)) * mm_per_px / expected
+    contact = _holding_peak(contact_region(depth_mm, mm_per_px, threshold_mm, smooth_mm),
+                            depth_mm)
+    return float(np.sqrt(float(contact.sum()) / np.pi)) * mm_per_px / expected
 
 
 def taught_contact_ratio(model: TaughtShape, shape: tuple[int, int],
@@ -275,13 +276,11 @@ def taught_contact_ratio(model: TaughtShape, shape: tuple[int, int],
     ``peak_mm`` (the deepest the model goes when it cannot), at ``centre_rc`` on an
     ``shape`` grid of ``mm_per_px``: what the measure reads on the shape the calibration
     taught. NaN without a peak."""
-    rr, cc = np.mgrid[0 : shape[0], 0 : shape[1]].astype(np.float64)
-    dist = np.hypot(rr - centre_rc[0], cc - centre_rc[1]) * mm_per_px
-    sigma = blur_mm / mm_per_px
+    params = TactileParams(rows=shape[0], cols=shape[1], mm_per_px=mm_per_px,
+                           elastomer_sigma_mm=blur_mm)
 
     def render(param: float) -> np.ndarray:
-        sharp, _, _ = model.rigid_depth(dist, param, radius_mm)
-        return gaussian_filter(sharp, sigma, mode="constant") if sigma > 0 else sharp
+        return model.depth(shape, centre_rc, param, radius_mm, params)
 
     grid = model.parameters(radius_mm)
     if not (np.isfinite(peak_mm) and peak_mm > 0 and len(grid)):
