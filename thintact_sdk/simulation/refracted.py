@@ -567,15 +567,17 @@ def _reach_mm(kp: KernelParams) -> tuple[float, float]:
     return kp.grid_x().max_offset_mm() + margin, kp.grid_y().max_offset_mm() + margin
 
 
-def _refracted_tables(kp: KernelParams) -> RefractedTables:
-    """The refracted map's radial tables over every pair offset of ``kp``."""
-    hx, hy = _reach_mm(kp)
+def _refracted_tables(kp: KernelParams, reach_mm: tuple[float, float] | None = None
+                      ) -> RefractedTables:
+    """The refracted map's radial tables over every pair offset of ``kp`` (``reach_mm``:
+    :func:`_reach_mm`, when the caller has it)."""
+    hx, hy = reach_mm or _reach_mm(kp)
     return RefractedTables(kp.z_mm, kp.d_mm, kp.n_scene_side, kp.q - 4.0, math.hypot(hx, hy))
 
 
 def _tables_and_expansion(kp: KernelParams) -> tuple[RefractedTables, SeparableExpansion]:
-    tables = _refracted_tables(kp)
     hx, hy = _reach_mm(kp)
+    tables = _refracted_tables(kp, (hx, hy))
     exp = SeparableExpansion.build(kp.z_mm + kp.d_mm, kp.q, hx, hy, rel_tol=kp.rank_tol,
                                    radial=tables.factor)
     return tables, exp
