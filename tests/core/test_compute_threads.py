@@ -130,3 +130,46 @@ def test_torch_loaded_after_the_hold_began_is_held_at_one_thread_and_put_back() 
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     assert out.stdout.split() == ["1", "2"]
+
+
+def test_a_torch_another_thread_is_still_importing_counts_as_not_loaded(monkeypatch) -> None:
+    """Two sensors viewed at once: one's first frame imports torch while the other's frame
+    takes the hold. The other saw the partly built module in ``sys.modules`` and failed with
+    ``AttributeError: partially initialized module 'torch'`` (its viewer never showed a
+    frame). A module still initialising is left alone; a complete one is used."""
+    import importlib.machinery
+    import sys
+    import types
+
+    import torch
+
+    from thintact_sdk.host.compute_threads import loaded_torch, prepare_worker_thread
+    from thintact_sdk.host.machine import kernel_threads_now
+
+    partial = types.ModuleType("torch")
+    partial.__spec__ = importlib.machinery.ModuleSpec("torch", None)
+    partial.__spec__._initializing = True  # what the import system sets while it runs
+    monkeypatch.setitem(sys.modules, "torch", partial)
+    assert loaded_torch() is None
+    with single_threaded_kernels():
+        prepare_worker_thread()
+        assert kernel_threads_now().endswith("torch -")
+    assert kernel_threads_held() == 0
+    partial.__spec__._initializing = False  # finished, but without the thread setters
+    assert loaded_torch() is None
+    monkeypatch.setitem(sys.modules, "torch", torch)
+    assert loaded_torch() is torch
+    before = torch.get_num_threads()
+    done = threading.Event()
+    seen: list[int] = []
+
+    def worker() -> None:
+        with single_threaded_kernels():
+            prepare_worker_thread()
+            seen.append(torch.get_num_threads())
+        done.set()
+
+    thread = threading.Thread(target=worker)
+    thread.start()
+    thread.join(30)
+    assert done.is_set() and seen == [1] and torch.get_num_threads() == before

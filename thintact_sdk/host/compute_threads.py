@@ -26,6 +26,7 @@ import sys
 import threading
 from collections.abc import Iterator
 from contextlib import ExitStack, contextmanager
+from types import ModuleType
 
 from thintact_sdk.errors import InvalidValueError
 from thintact_sdk.host.blas import blas_threads
@@ -90,6 +91,22 @@ def suggested_decode_workers() -> int:
     return max(1, min(usable_cores(), MAX_DECODE_WORKERS))
 
 
+def loaded_torch() -> ModuleType | None:
+    """torch if this process has finished importing it, else None (never imports it).
+
+    While one thread imports torch (a sensor's backend selection does, on its first frame)
+    the module is already in ``sys.modules``, partly built: another sensor's thread that
+    read its thread count then failed with ``AttributeError: partially initialized module
+    'torch'`` and its viewer never showed a frame. Such a module counts as not loaded: the
+    thread importing it makes the call again once it is (:func:`prepare_worker_thread`)."""
+    torch = sys.modules.get("torch")
+    if torch is None or getattr(getattr(torch, "__spec__", None), "_initializing", False):
+        return None
+    if not (hasattr(torch, "get_num_threads") and hasattr(torch, "set_num_threads")):
+        return None
+    return torch
+
+
 def prepare_worker_thread() -> None:
     """Call first in a decode worker thread while :func:`single_threaded_kernels` is held.
 
@@ -103,7 +120,7 @@ def prepare_worker_thread() -> None:
     on torch's default threads and every later one on one thread, so the two chose apart.
     """
     global _torch_threads_before
-    torch = sys.modules.get("torch")
+    torch = loaded_torch()
     if torch is None:
         return
     with _lock:
@@ -127,7 +144,7 @@ def single_threaded_kernels() -> Iterator[None]:
         if _holders == 0:
             stack = ExitStack()
             stack.enter_context(blas_threads(1))
-            torch = sys.modules.get("torch")
+            torch = loaded_torch()
             _torch_threads_before = int(torch.get_num_threads()) if torch is not None else None
             _restore = stack
         _holders += 1
@@ -139,7 +156,7 @@ def single_threaded_kernels() -> Iterator[None]:
             if _holders == 0:
                 if _restore is not None:
                     _restore.close()
-                torch = sys.modules.get("torch")
+                torch = loaded_torch()
                 if torch is not None and _torch_threads_before is not None:
                     torch.set_num_threads(_torch_threads_before)
                 _restore = None

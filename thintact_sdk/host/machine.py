@@ -187,11 +187,10 @@ def kernel_threads_now() -> str:
     :func:`host_capabilities` (read once per process) this follows a hold such as
     :func:`thintact_sdk.host.compute_threads.single_threaded_kernels`, so a measurement keyed by it
     is reused only under the same threads."""
-    import sys
-
     from thintact_sdk.host.blas import openblas_threads
+    from thintact_sdk.host.compute_threads import loaded_torch
 
-    torch = sys.modules.get("torch")
+    torch = loaded_torch()
     torch_threads = str(torch.get_num_threads()) if torch is not None else "-"
     return f"blas {openblas_threads() or '-'}, torch {torch_threads}"
 
