@@ -20,11 +20,14 @@ import glob
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from thintact_sdk.errors import CalibrationError
+
+if TYPE_CHECKING:
+    from thintact_sdk.tactile.calibration.ball_eval import TaughtShape
 
 _IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff")
 
@@ -260,7 +263,7 @@ def split(count: int, train: list[int] | None = None) -> tuple[list[int], list[i
     return train, rest
 
 
-def _taught_shape(meta: Any) -> Any:
+def _taught_shape(meta: Any) -> TaughtShape | None:
     """The calibration's ball model from ``lut.meta["ball_model"]`` (None when it has none or
     it is not one: a table calibrated elsewhere)."""
     from thintact_sdk.tactile.calibration.ball_press import BallModel
