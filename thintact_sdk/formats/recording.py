@@ -135,9 +135,9 @@ def atomic_save_npy(path: Path, array: np.ndarray) -> None:
 def _read_image_file(path: Path, is_scene: bool) -> np.ndarray:
     import cv2
 
-    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-    if img is None:
-        raise RecordingError(f"cannot read image {path}")
+    from thintact_sdk.formats.safe_images import read_image
+
+    img = read_image(path, cv2.IMREAD_UNCHANGED, RecordingError)
     if img.ndim == 3:
         img = img[..., ::-1] if img.shape[2] == 3 else img[..., [2, 1, 0, 3]][..., :3]
     else:

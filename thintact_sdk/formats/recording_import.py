@@ -170,9 +170,9 @@ def _read_stills(path: Path) -> list[np.ndarray]:
         from thintact_sdk.formats.safe_arrays import read_npy
 
         return [read_npy(path, what="frame", error=RecordingError, kinds="uif")]
-    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-    if img is None:
-        raise RecordingError(f"{path}: cannot read the image")
+    from thintact_sdk.formats.safe_images import read_image
+
+    img = read_image(path, cv2.IMREAD_UNCHANGED, RecordingError)
     if img.ndim == 3:  # OpenCV decodes to BGR(A): back to the file's own order
         img = img[..., :3][..., ::-1]
     return [img]

@@ -153,11 +153,13 @@ def parse_crop(text: str) -> tuple[int, int, int, int]:
 
 
 def _read_image(path: Path, colour_order: str) -> np.ndarray:
+    """The image as RGB (``colour_order`` says what the file holds); its decoded size was
+    checked against the memory there is with the folder's other images."""
     import cv2
 
-    raw = cv2.imread(str(path), cv2.IMREAD_COLOR)
-    if raw is None:
-        raise CalibrationError(f"{path}: not a readable image")
+    from thintact_sdk.formats.safe_images import read_image
+
+    raw = read_image(path, cv2.IMREAD_COLOR, CalibrationError, checked=True)
     # OpenCV decodes to B, G, R; a file written from a BGR buffer as if it were RGB holds the
     # channels swapped, which --colour-order bgr declares
     return raw[..., ::-1] if colour_order == "rgb" else raw
@@ -212,6 +214,11 @@ def import_folder(
     if not items:
         raise CalibrationError(f"{root}: no press images match {presses!r}")
     top, bottom, left, right = crop
+    from thintact_sdk.formats.safe_images import check_image_budget
+
+    # the pack holds every image decoded at once: refuse a set that cannot fit (a small file
+    # can declare gigabytes of pixels) before decoding any
+    check_image_budget([refs[0], *items], CalibrationError)
 
     def load(p: Path) -> np.ndarray:
         img = _read_image(p, colour_order)
