@@ -33,6 +33,26 @@ class LogMessage:
     message: Any
 
 
+_SCHEMA_OF = {t.name: t.schema for t in schemas.TOPICS}
+"""The message type of every ThinTact topic."""
+
+
+def _damaged_errors() -> tuple[type[BaseException], ...]:
+    """What reading or decoding a damaged or foreign message raises (the mcap reader, its
+    decompressors, the ROS 2 CDR decoder)."""
+    from mcap.exceptions import McapError
+
+    errs: list[type[BaseException]] = [McapError, struct.error, ValueError, EOFError, IndexError,
+                                       KeyError, TypeError, RuntimeError, MemoryError]
+    try:
+        import zstandard
+
+        errs.append(zstandard.ZstdError)
+    except ImportError:  # the mcap package's optional decompressor
+        pass
+    return tuple(errs)
+
+
 def _records(path: Path, torn: list[str], open_chunks: bool) -> Iterator[Any]:
     """Every complete record of ``path`` in file order, stopping at a torn tail.
 
@@ -146,11 +166,16 @@ class McapLog:
         if self.summary is not None:
             with open(self.path, "rb") as f:
                 reader = make_reader(f, decoder_factories=[DecoderFactory()])
-                for schema, channel, message, decoded in reader.iter_decoded_messages(
-                        topics=None if wanted is None else sorted(wanted)):
-                    yield LogMessage(channel.topic, schema.name if schema else "",
-                                     message.log_time, message.sequence, decoded)
-            return
+                found = reader.iter_decoded_messages(topics=None if wanted is None else sorted(wanted))
+                while True:
+                    try:
+                        schema, channel, message, decoded = next(found)
+                    except StopIteration:
+                        return
+                    except _damaged_errors() as err:
+                        raise self._damaged(err) from None
+                    yield self._checked(LogMessage(channel.topic, schema.name if schema else "",
+                                                   message.log_time, message.sequence, decoded))
         from mcap.records import Channel, Message, Schema
 
         factory = DecoderFactory()
@@ -166,11 +191,28 @@ class McapLog:
                 if chan is None or (wanted is not None and chan.topic not in wanted):
                     continue
                 schema_rec = schemas_by_id.get(chan.schema_id)
-                decode = factory.decoder_for(chan.message_encoding, schema_rec)
-                if decode is None:
-                    raise RecordingError(f"{self.path}: no ROS 2 decoder for topic {chan.topic}")
-                yield LogMessage(chan.topic, schema_rec.name if schema_rec else "",
-                                 record.log_time, record.sequence, decode(record.data))
+                try:
+                    decode = factory.decoder_for(chan.message_encoding, schema_rec)
+                    if decode is None:
+                        raise RecordingError(f"{self.path}: no ROS 2 decoder for topic {chan.topic}")
+                    decoded = decode(record.data)
+                except _damaged_errors() as err:
+                    raise self._damaged(err) from None
+                yield self._checked(LogMessage(chan.topic, schema_rec.name if schema_rec else "",
+                                               record.log_time, record.sequence, decoded))
+
+    def _damaged(self, err: BaseException) -> RecordingError:
+        """The error for a message that cannot be read (damaged chunk, foreign encoding)."""
+        return RecordingError(f"{self.path}: a message cannot be read ({type(err).__name__}: {err})")
+
+    def _checked(self, m: LogMessage) -> LogMessage:
+        """``m``, once its schema is the one its ThinTact topic carries (a foreign log can
+        put any message type on ``/thintact/raw``)."""
+        want = _SCHEMA_OF.get(m.topic)
+        if want is not None and m.schema != want:
+            raise RecordingError(f"{self.path}: topic {m.topic} holds {m.schema or 'schemaless'} "
+                                 f"messages; a ThinTact log holds {want} there")
+        return m
 
     @property
     def stamp_offset_ns(self) -> int:
