@@ -112,3 +112,21 @@ def test_a_recording_frame_declaring_a_bomb_is_refused(tmp_path: Path) -> None:
     ok = tmp_path / "002.png"
     cv2.imwrite(str(ok), np.full((6, 8), 513, np.uint16))
     assert read_array(ok, is_scene=False).shape == (6, 8, 1)
+
+
+def test_a_video_whose_frames_would_not_fit_is_refused_before_decoding(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from thintact_sdk.formats import recording, recording_import
+
+    video = tmp_path / "press.avi"
+    out = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"MJPG"), 10.0, (64, 48))
+    for k in range(3):
+        out.write(np.full((48, 64, 3), 40 * k, np.uint8))
+    out.release()
+    assert len(list(recording_import._video_frames(video, None))) == 3
+    assert recording.read_video_frame(video, 1, gray=False).shape == (48, 64, 3)
+    monkeypatch.setattr(safe_images, "array_size_limit", lambda: 64 * 48 * 3 - 1)
+    with pytest.raises(RecordingError, match=r"press.avi: the video's 64×48 px frames"):
+        next(recording_import._video_frames(video, None))
+    with pytest.raises(RecordingError, match=r"press.avi: the video's 64×48 px frames"):
+        recording.read_video_frame(video, 1, gray=False)

@@ -170,6 +170,9 @@ def read_video_frame(path: Path, index: int, gray: bool) -> np.ndarray:
     try:
         if not cap.isOpened():
             raise RecordingError(f"cannot open video {path}")
+        from thintact_sdk.formats.safe_images import check_video_frames
+
+        check_video_frames(cap, path, RecordingError)
         count = int(cap.get(cv2.CAP_PROP_FRAME_COUNT))
         if index >= count > 0:
             raise RecordingError(f"{path}: video_frame {index} but the video holds {count} frame(s)")

@@ -185,6 +185,9 @@ def _video_frames(path: Path, limit: int | None) -> Any:
     try:
         if not cap.isOpened():
             raise RecordingError(f"{path}: cannot open the video")
+        from thintact_sdk.formats.safe_images import check_video_frames
+
+        check_video_frames(cap, path, RecordingError)
         n = 0
         while limit is None or n < limit:
             ok, img = cap.read()

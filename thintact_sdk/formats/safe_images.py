@@ -17,6 +17,7 @@ from __future__ import annotations
 import warnings
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -78,6 +79,22 @@ def check_image_budget(paths: Sequence[str | Path], error: type[ThinTactError] =
         raise error(f"{what} would take {format_bytes(total)} decoded, more than this host allows "
                     f"for one file set ({format_bytes(limit)}, half the available memory)")
     return total
+
+
+def check_video_frames(cap: Any, path: str | Path, error: type[ThinTactError] = ThinTactError) -> None:
+    """Refuse a video whose frames (width × height × 3 bytes, as ``cv2.VideoCapture`` delivers
+    them) would be over :func:`~thintact_sdk.formats.safe_arrays.array_size_limit`, from the
+    size the opened ``cap`` reports, before a frame is decoded (an MJPEG frame may declare
+    65535 × 65535 px)."""
+    import cv2
+
+    width = int(cap.get(cv2.CAP_PROP_FRAME_WIDTH))
+    height = int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT))
+    frame = max(width, 0) * max(height, 0) * DECODED_CHANNELS_AT_LEAST
+    limit = array_size_limit()
+    if frame > limit:
+        raise error(f"{path}: the video's {width}×{height} px frames would take {format_bytes(frame)} "
+                    f"each, more than this host allows ({format_bytes(limit)}, half the available memory)")
 
 
 def read_image(path: str | Path, flags: int, error: type[ThinTactError] = ThinTactError,
