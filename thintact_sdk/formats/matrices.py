@@ -28,15 +28,64 @@ T2S_KEYS = ("Po", "Qo", "Pc", "Qc")
 FLATCAM_KEYS = (("Phi_L", "Phi_R"), ("PhiL", "PhiR"), ("phi_l", "phi_r"))
 
 
+_MAT_ITEM_BYTES = {"double": 8, "int64": 8, "uint64": 8, "single": 4, "int32": 4, "uint32": 4,
+                   "int16": 2, "uint16": 2, "int8": 1, "uint8": 1, "logical": 1}
+"""Bytes per element of the MATLAB classes a matrix may have (``scipy.io.whosmat`` names)."""
+
+
+def _mat_damaged() -> tuple[type[BaseException], ...]:
+    """What :func:`scipy.io.loadmat` / ``whosmat`` raise on a damaged or foreign file."""
+    import struct
+    import zlib
+
+    from scipy.io.matlab import MatReadError
+
+    return (MatReadError, OSError, ValueError, NotImplementedError, TypeError, IndexError,
+            KeyError, EOFError, OverflowError, MemoryError, AttributeError, struct.error, zlib.error)
+
+
+def _read_mat(path: Path) -> dict[str, np.ndarray]:
+    """The known matrices of a MATLAB file (v4 to v7; v7.3 is HDF5 and refused): the variable
+    headers are listed first (``whosmat``), every wanted variable must be a real numeric
+    class and their declared sizes together within
+    :func:`~thintact_sdk.formats.safe_arrays.array_size_limit`, and only then are those
+    variables (and no others) read."""
+    from scipy.io import loadmat, whosmat
+
+    from thintact_sdk.formats.safe_arrays import array_size_limit, format_bytes
+
+    known = set(T2S_KEYS) | {k for pair in FLATCAM_KEYS for k in pair}
+    try:
+        listed = whosmat(path)
+    except _mat_damaged() as err:
+        raise CalibrationError(f"cannot read {path}: {type(err).__name__}: {err}") from None
+    found = [(name, shape, cls) for name, shape, cls in listed if name in known]
+    if not found:
+        raise CalibrationError(
+            f"{path}: found arrays {', '.join(sorted(n for n, _, _ in listed)) or 'none'}; expected "
+            "Po, Qo, Pc, Qc (T2S) or Phi_L, Phi_R (FlatCam)")
+    total = 0
+    for name, shape, cls in found:
+        if cls not in _MAT_ITEM_BYTES:
+            raise CalibrationError(f"{path}: {name} is a MATLAB {cls}, expected a real numeric array")
+        total += int(np.prod(shape, dtype=np.float64)) * _MAT_ITEM_BYTES[cls]
+    limit = array_size_limit()
+    if total > limit:
+        raise CalibrationError(f"{path}: the matrices declare {format_bytes(total)}, more than this "
+                               f"host allows for one file ({format_bytes(limit)}); refused before reading")
+    try:
+        raw = loadmat(path, variable_names=[name for name, _, _ in found])
+    except _mat_damaged() as err:
+        raise CalibrationError(f"cannot read {path}: {type(err).__name__}: {err}") from None
+    return {k: np.asarray(v) for k, v in raw.items() if k in known}
+
+
 def _read(path: Path) -> dict[str, np.ndarray]:
     if not path.is_file():
         raise CalibrationError(f"matrices file not found: {path}")
+    if path.suffix.lower() == ".mat":
+        return _read_mat(path)
     try:
-        if path.suffix.lower() == ".mat":
-            from scipy.io import loadmat
-
-            raw = loadmat(path)
-            return {k: np.asarray(v) for k, v in raw.items() if not k.startswith("__")}
         if path.suffix.lower() == ".npz":
             return read_npz(path, what="matrices", error=CalibrationError)
     except (OSError, ValueError, NotImplementedError) as err:
