@@ -63,3 +63,39 @@ def test_a_damaged_compressed_chunk_is_one_error(tmp_path: Path) -> None:
     path.write_bytes(bytes(data))
     with pytest.raises(RecordingError, match="z.mcap"):
         list(McapLog(path).messages())
+
+
+def _zeros_log(path: Path, compression: CompressionType, mib: int) -> Path:
+    """A finished MCAP with one message of ``mib`` MiB of zeros (compresses to kilobytes)."""
+    with open(path, "wb") as f:
+        w = Writer(f, compression=compression, chunk_size=2**30)
+        w.start()
+        schema = w.register_schema("x", "jsonschema", b"{}")
+        channel = w.register_channel("/x", "json", schema)
+        w.add_message(channel, 0, bytes(mib * 2**20), 0)
+        w.finish()
+    return path
+
+
+@pytest.mark.parametrize("compression", [CompressionType.ZSTD, CompressionType.LZ4])
+def test_a_chunk_that_would_decompress_beyond_memory_is_refused_first(
+        compression: CompressionType, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A zstd frame storing its size is decompressed to that size whatever the chunk record
+    says (16 KB of zstd held 512 MB of zeros), so the bound is read from the frame's header:
+    here 24 MiB of zeros against a limit of 16 MiB, while the chunk record declares 1 byte."""
+    path = _zeros_log(tmp_path / "bomb.mcap", compression, 24)
+    assert path.stat().st_size < 2**20
+    with open(path, "rb") as f:
+        chunk = make_reader(f).get_summary().chunk_indexes[0]
+    data = bytearray(path.read_bytes())
+    struct.pack_into("<Q", data, chunk.chunk_start_offset + 1 + 8 + 16, 1)  # the record lies
+    path.write_bytes(bytes(data))
+    monkeypatch.setattr("thintact_sdk.formats.safe_arrays.array_size_limit", lambda: 16 * 2**20)
+    with pytest.raises(RecordingError, match=r"bomb.mcap: the .* chunk at byte \d+ would decompress "
+                                             r"to 24.0 MiB"):
+        McapLog(path)
+    torn = tmp_path / "torn.mcap"  # no summary: read front to back, each chunk checked
+    torn.write_bytes(bytes(data[: chunk.chunk_start_offset + chunk.chunk_length]))
+    with pytest.raises(RecordingError, match="would decompress to 24.0 MiB"):
+        list(McapLog(torn, recover=True).messages())
+    assert McapLog(_zeros_log(tmp_path / "ok.mcap", compression, 2)).complete  # under the limit

@@ -53,6 +53,77 @@ def _damaged_errors() -> tuple[type[BaseException], ...]:
     return tuple(errs)
 
 
+LZ4_MAX_RATIO = 255
+"""The most an LZ4 frame can expand (bytes out per byte in): the bound of a frame that does
+not store its size."""
+
+
+def chunk_bound_bytes(compression: str, uncompressed_size: int, head: bytes, compressed_size: int) -> int:
+    """The most bytes decompressing a chunk can produce, from its record's fields and the first
+    bytes of its data (``head``: at least the compression frame's header).
+
+    The ``mcap`` reader decompresses a whole chunk at once, and a zstd frame that stores its
+    content size is decompressed to that size whatever the chunk record declares: 16 KB of
+    zstd can hold 512 MB of zeros. So the bound is the largest of the record's
+    ``uncompressed_size``, a zstd frame's stored content size, and an LZ4 frame's stored
+    size (or :data:`LZ4_MAX_RATIO` × its compressed size when it stores none)."""
+    bound = int(uncompressed_size)
+    if compression == "zstd":
+        import zstandard
+
+        try:
+            size = int(zstandard.frame_content_size(head))
+        except zstandard.ZstdError:
+            size = -1  # not a zstd frame: decompression fails, nothing large is allocated
+        bound = max(bound, size)
+    elif compression == "lz4":
+        import lz4.frame
+
+        try:
+            stored = int(lz4.frame.get_frame_info(head)["content_size"])
+        except (RuntimeError, ValueError, KeyError):
+            stored = 0
+        bound = max(bound, stored if stored > 0 else LZ4_MAX_RATIO * int(compressed_size))
+    return bound
+
+
+def _check_chunk(path: Path, compression: str, uncompressed_size: int, head: bytes,
+                 compressed_size: int, offset: int) -> None:
+    """Refuse a chunk that would decompress beyond
+    :func:`~thintact_sdk.formats.safe_arrays.array_size_limit` before it is decompressed."""
+    from thintact_sdk.formats.safe_arrays import array_size_limit, format_bytes
+
+    bound, limit = chunk_bound_bytes(compression, uncompressed_size, head, compressed_size), array_size_limit()
+    if bound > limit:
+        raise RecordingError(f"{path}: the {compression or 'uncompressed'} chunk at byte {offset} would "
+                             f"decompress to {format_bytes(bound)}, more than this host allows "
+                             f"({format_bytes(limit)}); refused before decompressing")
+
+
+def _check_indexed_chunks(path: Path, summary: Any) -> None:
+    """:func:`_check_chunk` on every chunk the summary indexes, reading only each chunk
+    record's fixed fields and the first bytes of its data."""
+    with open(path, "rb") as f:
+        for index in summary.chunk_indexes:
+            f.seek(int(index.chunk_start_offset))
+            # opcode, record length, start and end times, uncompressed size and CRC, the
+            # compression string, the records' length, then the data
+            fixed = f.read(1 + 8 + 8 + 8 + 8 + 4 + 4)
+            if len(fixed) < 41:
+                raise RecordingError(f"{path}: the chunk at byte {index.chunk_start_offset} is cut short")
+            uncompressed = struct.unpack_from("<Q", fixed, 25)[0]
+            (name_len,) = struct.unpack_from("<I", fixed, 37)
+            if name_len > 64:
+                raise RecordingError(f"{path}: the chunk at byte {index.chunk_start_offset} names a "
+                                     f"{name_len}-byte compression")
+            compression = f.read(name_len).decode("utf-8", "replace")
+            field = f.read(8)
+            if len(field) < 8:
+                raise RecordingError(f"{path}: the chunk at byte {index.chunk_start_offset} is cut short")
+            (length,) = struct.unpack("<Q", field)
+            _check_chunk(path, compression, uncompressed, f.read(32), length, index.chunk_start_offset)
+
+
 def _records(path: Path, torn: list[str], open_chunks: bool) -> Iterator[Any]:
     """Every complete record of ``path`` in file order, stopping at a torn tail.
 
@@ -69,6 +140,8 @@ def _records(path: Path, torn: list[str], open_chunks: bool) -> Iterator[Any]:
             try:
                 record = next(records)
                 if open_chunks and isinstance(record, Chunk):
+                    _check_chunk(path, record.compression, record.uncompressed_size, record.data[:32],
+                                 len(record.data), f.tell())
                     inner = breakup_chunk(record, validate_crc=True)
                 else:
                     inner = [record]
@@ -123,6 +196,7 @@ class McapLog:
                 reader.get_header()
                 self.summary = reader.get_summary()
                 if self.summary is not None:
+                    _check_indexed_chunks(self.path, self.summary)
                     self.metadata = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
                     self.attachments = {a.name: bytes(a.data) for a in reader.iter_attachments()}
         except (McapError, struct.error, ValueError, EOFError, OSError) as err:
