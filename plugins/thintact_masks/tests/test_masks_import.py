@@ -49,3 +49,33 @@ def test_a_pattern_that_is_not_separable_is_refused(tmp_path: Path, capsys) -> N
     assert main(["mask", "import", str(tmp_path / "m.npy"), "--feature-um", "40", "--out",
                  str(tmp_path / "d.json")]) == 2
     assert "1 of 144 cells" in capsys.readouterr().err
+
+
+def _png_declaring(width: int, height: int) -> bytes:
+    """A PNG header declaring ``width × height`` grey pixels, with almost no data."""
+    import struct
+    import zlib
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+
+    return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", width, height, 8, 0, 0, 0, 0))
+            + chunk(b"IDAT", zlib.compress(b"\0" * 100)) + chunk(b"IEND", b""))
+
+
+@pytest.mark.parametrize(("name", "content", "says"), [
+    ("bomb.png", _png_declaring(16000, 16000), "declares too many pixels"),
+    ("short.png", _png_declaring(300, 300), "not a readable PNG"),
+    ("junk.png", b"\x89PNG but not really" * 9, "not a readable PNG"),
+    ("latin.csv", b"1,\xff\xfe,1\n", "not UTF-8 text"),
+])
+def test_a_damaged_design_file_is_one_line_naming_it(tmp_path: Path, name: str, content: bytes, says: str,
+                                                     capsys) -> None:  # type: ignore[no-untyped-def]
+    """A bomb's header, a truncated or foreign PNG and a non-UTF-8 CSV exit 2 in one line
+    (the bomb and the CSV were internal errors, exit 1)."""
+    path = tmp_path / name
+    path.write_bytes(content)
+    assert main(["mask", "import", str(path), "--K", "11", "--feature-um", "60",
+                 "--out", str(tmp_path / "d.json")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and name in err and says in err and "internal" not in err, err

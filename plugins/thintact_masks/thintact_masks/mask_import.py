@@ -138,17 +138,27 @@ def _read_array(path: Path) -> np.ndarray:
     if suffix == ".png":
         from PIL import Image
 
-        with Image.open(path) as im:
-            if max(im.size) > MAX_IMPORT_SIDE:
-                raise MaskDesignError(f"{path}: {im.size[0]}×{im.size[1]} px is larger than {MAX_IMPORT_SIDE}")
-            return np.asarray(im.convert("L"), np.float64)
+        try:
+            with Image.open(path) as im:
+                if max(im.size) > MAX_IMPORT_SIDE:
+                    raise MaskDesignError(f"{path}: {im.size[0]}×{im.size[1]} px is larger than {MAX_IMPORT_SIDE}")
+                return np.asarray(im.convert("L"), np.float64)
+        except Image.DecompressionBombError as err:  # a header declaring too many pixels
+            raise MaskDesignError(f"{path}: refused, the image declares too many pixels ({err})") from None
+        except (OSError, ValueError, SyntaxError, EOFError) as err:  # not a PNG, damaged, cut short
+            raise MaskDesignError(f"{path}: not a readable PNG ({type(err).__name__}: {err})") from None
     if suffix == ".npy":
         from thintact_sdk.plugin_support import read_npy
 
         return np.asarray(read_npy(path, what="mask pattern", error=MaskDesignError, kinds="uifb"), np.float64)
     if suffix in (".csv", ".txt"):
-        with path.open(newline="", encoding="utf-8") as fh:
-            rows = [[c.strip() for c in r if c.strip()] for r in csv.reader(fh)]
+        try:
+            with path.open(newline="", encoding="utf-8") as fh:
+                rows = [[c.strip() for c in r if c.strip()] for r in csv.reader(fh)]
+        except UnicodeDecodeError as err:
+            raise MaskDesignError(f"{path}: not UTF-8 text ({err})") from None
+        except csv.Error as err:
+            raise MaskDesignError(f"{path}: not a CSV file ({err})") from None
         rows = [r for r in rows if r]
         if not rows or len({len(r) for r in rows}) != 1:
             raise MaskDesignError(f"{path}: every non-empty CSV line must have the same number of entries")
