@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import threading
 import time
 import warnings
 
@@ -133,26 +132,27 @@ def test_read_timeout_is_bounded():
         assert time.monotonic() - t0 < 1.0
 
 
-def _pull_the_plug(cam, after_s):
-    def unplug():
-        time.sleep(after_s)
-        cam._harvester.reset()  # the producer and its device vanish underneath the stream
+def _pull_the_plug(cam):
+    """The producer and its device vanish underneath the stream (the acquisition running).
 
-    t = threading.Thread(target=unplug)
-    t.start()
-    return t
+    Done between two reads of the reading thread: harvesters is not thread-safe, and a
+    reset from a timer thread raced the camera's own release of the lost device (both
+    stopped the same acquirer; one failed half-way, AttributeError inside harvesters), which
+    left the process's one GenTL system open so that no later test could find the camera."""
+    cam._harvester.reset()
 
 
 def test_device_lost_mid_stream_is_a_clear_error():
     cam = create_camera(_profile(**MONO))
     cam.open()
-    t = _pull_the_plug(cam, 0.3)
+    for _ in range(3):
+        cam.read(timeout_s=1.0)
+    _pull_the_plug(cam)
     t0 = time.monotonic()
     with pytest.raises(DeviceLostError, match="lost mid-stream"):
         for _ in range(1000):
             cam.read(timeout_s=1.0)
     assert time.monotonic() - t0 < 3.0
-    t.join()
     with pytest.raises(DeviceError, match="not open"):
         cam.read()
     cam.close()
@@ -162,12 +162,11 @@ def test_device_lost_then_reconnected():
     cam = create_camera(_profile(**MONO, reconnect_s=5.0))
     cam.open()
     try:
-        t = _pull_the_plug(cam, 0.3)
+        frames = [cam.read(timeout_s=1.0) for _ in range(3)]
+        _pull_the_plug(cam)
         t0 = time.monotonic()
-        frames = []
         while cam.reconnects == 0 and time.monotonic() - t0 < 5.0:
             frames.append(cam.read(timeout_s=1.0))
-        t.join()
         assert cam.reconnects == 1
         assert frames[-1].meta.get("reconnected") is True
         assert cam.read().data.shape == (256, 320)
