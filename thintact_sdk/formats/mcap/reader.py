@@ -88,14 +88,14 @@ def chunk_bound_bytes(compression: str, uncompressed_size: int, head: bytes, com
 
 
 def _check_chunk(path: Path, compression: str, uncompressed_size: int, head: bytes,
-                 compressed_size: int, offset: int) -> None:
+                 compressed_size: int, where: str) -> None:
     """Refuse a chunk that would decompress beyond
     :func:`~thintact_sdk.formats.safe_arrays.array_size_limit` before it is decompressed."""
     from thintact_sdk.formats.safe_arrays import array_size_limit, format_bytes
 
     bound, limit = chunk_bound_bytes(compression, uncompressed_size, head, compressed_size), array_size_limit()
     if bound > limit:
-        raise RecordingError(f"{path}: the {compression or 'uncompressed'} chunk at byte {offset} would "
+        raise RecordingError(f"{path}: the {compression or 'uncompressed'} chunk {where} would "
                              f"decompress to {format_bytes(bound)}, more than this host allows "
                              f"({format_bytes(limit)}); refused before decompressing")
 
@@ -121,7 +121,8 @@ def _check_indexed_chunks(path: Path, summary: Any) -> None:
             if len(field) < 8:
                 raise RecordingError(f"{path}: the chunk at byte {index.chunk_start_offset} is cut short")
             (length,) = struct.unpack("<Q", field)
-            _check_chunk(path, compression, uncompressed, f.read(32), length, index.chunk_start_offset)
+            _check_chunk(path, compression, uncompressed, f.read(32), length,
+                         f"at byte {index.chunk_start_offset}")
 
 
 def _records(path: Path, torn: list[str], open_chunks: bool) -> Iterator[Any]:
@@ -141,7 +142,7 @@ def _records(path: Path, torn: list[str], open_chunks: bool) -> Iterator[Any]:
                 record = next(records)
                 if open_chunks and isinstance(record, Chunk):
                     _check_chunk(path, record.compression, record.uncompressed_size, record.data[:32],
-                                 len(record.data), f.tell())
+                                 len(record.data), f"ending at byte {f.tell()}")
                     inner = breakup_chunk(record, validate_crc=True)
                 else:
                     inner = [record]
