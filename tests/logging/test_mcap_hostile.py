@@ -81,7 +81,7 @@ def _zeros_log(path: Path, compression: CompressionType, mib: int) -> Path:
 def test_a_chunk_that_would_decompress_beyond_memory_is_refused_first(
         compression: CompressionType, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """A zstd frame storing its size is decompressed to that size whatever the chunk record
-    says (16 KB of zstd held 512 MB of zeros), so the bound is read from the frame's header:
+    says (a few kilobytes of zstd can hold gigabytes of zeros), so the bound is read from the frame's header:
     here 24 MiB of zeros against a limit of 16 MiB, while the chunk record declares 1 byte."""
     path = _zeros_log(tmp_path / "bomb.mcap", compression, 24)
     assert path.stat().st_size < 2**20

@@ -2,8 +2,7 @@
 
 An image file's header declares its size, and a few kilobytes of compressed PNG can declare
 gigabytes of pixels: decoding first and checking after lets such a file take the host's
-memory (a 0.9 MB PNG of 30000 × 30000 px held 5.4 GB while a press folder was imported).
-So the header is read first (Pillow reads only the header on ``open``), the bytes the
+memory. So the header is read first (Pillow reads only the header on ``open``), the bytes the
 decoded image will take (width × height × channels × bytes per sample) are compared with
 :func:`~thintact_sdk.formats.safe_arrays.array_size_limit` (the same bound as for
 ``.npy`` files), summed over every file one operation reads, and only then is anything

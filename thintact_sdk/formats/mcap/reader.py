@@ -63,8 +63,8 @@ def chunk_bound_bytes(compression: str, uncompressed_size: int, head: bytes, com
     bytes of its data (``head``: at least the compression frame's header).
 
     The ``mcap`` reader decompresses a whole chunk at once, and a zstd frame that stores its
-    content size is decompressed to that size whatever the chunk record declares: 16 KB of
-    zstd can hold 512 MB of zeros. So the bound is the largest of the record's
+    content size is decompressed to that size whatever the chunk record declares, and a few
+    kilobytes of zstd can hold gigabytes of zeros. So the bound is the largest of the record's
     ``uncompressed_size``, a zstd frame's stored content size, and an LZ4 frame's stored
     size (or :data:`LZ4_MAX_RATIO` × its compressed size when it stores none)."""
     bound = int(uncompressed_size)
