@@ -8,6 +8,7 @@ dropping the torn tail (the same thing ``mcap recover`` does on the command line
 
 from __future__ import annotations
 
+import contextlib
 import os
 import struct
 from collections.abc import Iterable, Iterator
@@ -44,12 +45,10 @@ def _damaged_errors() -> tuple[type[BaseException], ...]:
 
     errs: list[type[BaseException]] = [McapError, struct.error, ValueError, EOFError, IndexError,
                                        KeyError, TypeError, RuntimeError, MemoryError]
-    try:
+    with contextlib.suppress(ImportError):  # zstandard: the mcap package's optional decompressor
         import zstandard
 
         errs.append(zstandard.ZstdError)
-    except ImportError:  # the mcap package's optional decompressor
-        pass
     return tuple(errs)
 
 
