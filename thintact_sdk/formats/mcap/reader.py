@@ -87,12 +87,13 @@ def chunk_bound_bytes(compression: str, uncompressed_size: int, head: bytes, com
 
 
 def _check_chunk(path: Path, compression: str, uncompressed_size: int, head: bytes,
-                 compressed_size: int, where: str) -> None:
-    """Refuse a chunk that would decompress beyond
-    :func:`~thintact_sdk.formats.safe_arrays.array_size_limit` before it is decompressed."""
-    from thintact_sdk.formats.safe_arrays import array_size_limit, format_bytes
+                 compressed_size: int, where: str, limit: int) -> None:
+    """Refuse a chunk that would decompress beyond ``limit`` bytes
+    (:func:`~thintact_sdk.formats.safe_arrays.array_size_limit`, read once per scan of a log)
+    before it is decompressed."""
+    from thintact_sdk.formats.safe_arrays import format_bytes
 
-    bound, limit = chunk_bound_bytes(compression, uncompressed_size, head, compressed_size), array_size_limit()
+    bound = chunk_bound_bytes(compression, uncompressed_size, head, compressed_size)
     if bound > limit:
         raise RecordingError(f"{path}: the {compression or 'uncompressed'} chunk {where} would "
                              f"decompress to {format_bytes(bound)}, more than this host allows "
@@ -102,6 +103,9 @@ def _check_chunk(path: Path, compression: str, uncompressed_size: int, head: byt
 def _check_indexed_chunks(path: Path, summary: Any) -> None:
     """:func:`_check_chunk` on every chunk the summary indexes, reading only each chunk
     record's fixed fields and the first bytes of its data."""
+    from thintact_sdk.formats.safe_arrays import array_size_limit
+
+    limit = array_size_limit()
     with open(path, "rb") as f:
         for index in summary.chunk_indexes:
             f.seek(int(index.chunk_start_offset))
@@ -121,7 +125,7 @@ def _check_indexed_chunks(path: Path, summary: Any) -> None:
                 raise RecordingError(f"{path}: the chunk at byte {index.chunk_start_offset} is cut short")
             (length,) = struct.unpack("<Q", field)
             _check_chunk(path, compression, uncompressed, f.read(32), length,
-                         f"at byte {index.chunk_start_offset}")
+                         f"at byte {index.chunk_start_offset}", limit)
 
 
 def _records(path: Path, torn: list[str], open_chunks: bool) -> Iterator[Any]:
@@ -134,6 +138,9 @@ def _records(path: Path, torn: list[str], open_chunks: bool) -> Iterator[Any]:
     from mcap.records import Chunk
     from mcap.stream_reader import StreamReader, breakup_chunk
 
+    from thintact_sdk.formats.safe_arrays import array_size_limit
+
+    limit = array_size_limit() if open_chunks else 0
     with open(path, "rb") as f:
         records = StreamReader(f, emit_chunks=True).records
         while True:
@@ -141,7 +148,7 @@ def _records(path: Path, torn: list[str], open_chunks: bool) -> Iterator[Any]:
                 record = next(records)
                 if open_chunks and isinstance(record, Chunk):
                     _check_chunk(path, record.compression, record.uncompressed_size, record.data[:32],
-                                 len(record.data), f"ending at byte {f.tell()}")
+                                 len(record.data), f"ending at byte {f.tell()}", limit)
                     inner = breakup_chunk(record, validate_crc=True)
                 else:
                     inner = [record]
