@@ -78,14 +78,18 @@ def test_digit_opens_with_the_same_calls_on_its_real_background(shared_dir, tmp_
     # the device streams landscape; the profile transposes and flips it back to portrait
     device = _image_sequence([cv2.rotate(rgb, cv2.ROTATE_90_CLOCKWISE)] * 2, tmp_path / "digit")
     settings = {"device": device}
-    with thintact.open("digit", camera_settings=settings) as sensor:
+    # an image sequence has no LEDs: the profile's LED setting is reported, not dropped silently
+    no_led = "does not accept setting led_intensity"
+    with pytest.warns(UserWarning, match=no_led), \
+            thintact.open("digit", camera_settings=settings) as sensor:
         with pytest.raises(CalibrationError, match="calibrate-tactile --profile digit"):
             sensor.read()
     # with a LUT (here the GelSight one: the background shows no colour change, so any LUT
     # gives zero depth) the DIGIT yields the same TactileFrame as every other sensor
     lut = PhotometricLUT.load(Path(thintact.__file__).parent / "data" / "gelsight"
                               / "gelsight-mini-lut.npz")
-    with thintact.open("digit", camera_settings=settings, lut=lut) as sensor:
+    with pytest.warns(UserWarning, match=no_led), \
+            thintact.open("digit", camera_settings=settings, lut=lut) as sensor:
         frames = [sensor.read(), sensor.read()]
     expected = cv2.resize(rgb.astype(np.float32) / 255.0, (120, 160), interpolation=cv2.INTER_AREA)
     for f in frames:

@@ -155,6 +155,11 @@ def _holding_peak(mask: np.ndarray, depth_mm: np.ndarray) -> np.ndarray:
     return labels == labels[deepest]
 
 
+def _equivalent_radius_mm(region: np.ndarray, mm_per_px: float) -> float:
+    """Radius (mm) of the disc with the area of ``region``: √(area/π)."""
+    return float(np.sqrt(float(np.count_nonzero(region)) / np.pi)) * mm_per_px
+
+
 def _contact_radius_of_press(radius_mm: float, press_mm: float) -> float:
     """``√(2Rp − p²)`` (mm): the contact radius of a ball of radius R pressed p deep (p clipped
     to 0..R)."""
@@ -191,9 +196,8 @@ def press_figures(
     sphere, _ = fit_sphere(d, mm_per_px)
     region = contact_region(d, mm_per_px, contact_threshold_mm, smooth_mm)
     contact = _holding_peak(region, d)
-    contact_r = float(np.sqrt(float(contact.sum()) / np.pi)) * mm_per_px
-    skirt_r = float(np.sqrt(float(_holding_peak(d > contact_threshold_mm, d).sum()) / np.pi)) \
-        * mm_per_px
+    contact_r = _equivalent_radius_mm(contact, mm_per_px)
+    skirt_r = _equivalent_radius_mm(_holding_peak(d > contact_threshold_mm, d), mm_per_px)
     expected = _contact_radius_of_press(radius_mm, peak)
     rr, cc = np.mgrid[0 : d.shape[0], 0 : d.shape[1]]
     nan = float("nan")
@@ -264,7 +268,7 @@ def _contact_ratio(depth_mm: np.ndarray, radius_mm: float, mm_per_px: float,
         return float("nan")
     contact = _holding_peak(contact_region(depth_mm, mm_per_px, threshold_mm, smooth_mm),
                             depth_mm)
-    return float(np.sqrt(float(contact.sum()) / np.pi)) * mm_per_px / expected
+    return _equivalent_radius_mm(contact, mm_per_px) / expected
 
 
 def taught_contact_ratio(model: TaughtShape, shape: tuple[int, int],
