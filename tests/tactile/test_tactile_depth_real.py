@@ -290,9 +290,10 @@ def test_edge_press_reads_as_deep_as_an_interior_one():
         inner = interp.depth_from_image(sim.press(Sphere(2.0), 0.6, (0.0, 0.0)).scene)
         edge = interp.depth_from_image(sim.press(Sphere(2.0), 0.6, (half_w, 0.0)).scene)
         peaks[boundary] = float(edge.max()) / float(inner.max())
-    # the ball's centre on the frame's edge (half the cap outside): measured 0.86 and 0.61
-    assert peaks["free"] > 0.85
-    assert peaks["zero"] < 0.65
+    # the ball's centre on the frame's edge (half the cap outside): measured 0.998 and 0.25
+    # (0.86 and 0.61 while the simulator's elastomer blur read zeros past the frame's edge)
+    assert peaks["free"] > 0.97
+    assert peaks["zero"] < 0.5
 
 
 def test_network_on_another_grid_is_refused_when_the_interpreter_is_built(tmp_path):

@@ -28,6 +28,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy.ndimage import gaussian_filter
 
+from thintact_sdk.tactile.simulation.elastomer import gel_window, reach_px, smooth
 from thintact_sdk.tactile.simulation.lighting import PhongShading
 
 
@@ -61,9 +62,9 @@ def ball_normals(shape: tuple[int, int], press: Press, ball_radius_mm: float, mm
     depth, the ball's cap is that much less deep and the surface outside its contact radius a
     skirt ``∝ K₀(r/L)``, L = ``skirt_mm``,
     continuous in depth and slope (:class:`~thintact_sdk.tactile.calibration.ball_press.BallModel`),
-    before the Gaussian."""
-    rr, cc = np.mgrid[0 : shape[0], 0 : shape[1]].astype(np.float64)
-    r2 = ((rr - press.row) ** 2 + (cc - press.col) ** 2) * mm_per_px**2
+    before the Gaussian. The Gaussian sees the ball and the gel beyond the frame too
+    (:mod:`~thintact_sdk.tactile.simulation.elastomer`): no zero-depth border."""
+    sigma_px = sigma_mm / mm_per_px
     if skirt_mm > 0:
         from scipy.optimize import brentq
 
@@ -77,14 +78,19 @@ def ball_normals(shape: tuple[int, int], press: Press, ball_radius_mm: float, mm
 
         top = min(press.depth_mm, ball_radius_mm)
         h = brentq(total, 0.0, top, xtol=1e-6) if top > 0 and total(top) > 0 else top
-        depth, _, _ = model.rigid_depth(np.sqrt(r2), h, ball_radius_mm)
-    else:
+
+    def sharp(rr: np.ndarray, cc: np.ndarray) -> np.ndarray:
+        r2 = ((rr - press.row) ** 2 + (cc - press.col) ** 2) * mm_per_px**2
+        if skirt_mm > 0:
+            return model.rigid_depth(np.sqrt(r2), h, ball_radius_mm)[0]
         cap = np.sqrt(np.clip(ball_radius_mm**2 - r2, 0.0, None)) - (ball_radius_mm - press.depth_mm)
-        depth = np.clip(cap, 0.0, None)
-    sigma_px = sigma_mm / mm_per_px
-    if sigma_px > 0:
-        depth = gaussian_filter(depth, sigma_px, mode="constant")
-    gy, gx = np.gradient(depth, mm_per_px)
+        return np.clip(cap, 0.0, None)
+
+    # + 1: central differences at the frame's edge
+    shape_on_gel, win = gel_window(sharp, shape, reach_px(sigma_px) + 1, grow=reach_px(sigma_px) + 1)
+    smoothed = smooth(shape_on_gel, sigma_px)
+    gy, gx = (win.frame(g) for g in np.gradient(smoothed, mm_per_px))
+    depth = win.frame(smoothed)
     norm = np.sqrt(1.0 + gx * gx + gy * gy)
     return Normals(-gx / norm, -gy / norm, 1.0 / norm, gx, gy, depth, mm_per_px)
 

@@ -19,7 +19,6 @@ from typing import Any
 
 import cv2
 import numpy as np
-from scipy.ndimage import gaussian_filter
 from scipy.special import k0e, k1e
 
 from thintact_sdk.errors import CalibrationError
@@ -35,6 +34,7 @@ from thintact_sdk.tactile.interpretation.grid import (
 from thintact_sdk.tactile.interpretation.markers import detect_markers
 from thintact_sdk.tactile.interpretation.photometric import PhotometricLUT, calibrate_lut
 from thintact_sdk.tactile.interpretation.poisson import integrate_gradients
+from thintact_sdk.tactile.simulation.elastomer import smoothed_in_frame
 from thintact_sdk.tactile.simulation.indenters import Sphere
 from thintact_sdk.tactile.simulation.membrane import TactileScene, TactileSimulator
 
@@ -306,12 +306,13 @@ class BallModel:
 
     def depth(self, shape: tuple[int, int], center_rc: tuple[float, float], param_mm: float,
               ball_radius_mm: float, params: TactileParams) -> np.ndarray:
-        """Model depth (mm, ``N × M``) of one press, smoothed by the elastomer."""
-        rr, cc = np.mgrid[0 : shape[0], 0 : shape[1]].astype(np.float64)
-        dist = np.hypot(rr - center_rc[0], cc - center_rc[1]) * params.mm_per_px
-        sharp, _, _ = self.rigid_depth(dist, param_mm, ball_radius_mm)
-        sigma_px = params.elastomer_sigma_mm / params.mm_per_px
-        return gaussian_filter(sharp, sigma_px, mode="constant") if sigma_px > 0 else sharp
+        """Model depth (mm, ``N × M``) of one press, smoothed by the elastomer (over the gel
+        beyond the frame too: :mod:`~thintact_sdk.tactile.simulation.elastomer`)."""
+        def sharp(rr: np.ndarray, cc: np.ndarray) -> np.ndarray:
+            dist = np.hypot(rr - center_rc[0], cc - center_rc[1]) * params.mm_per_px
+            return self.rigid_depth(dist, param_mm, ball_radius_mm)[0]
+
+        return smoothed_in_frame(sharp, shape, params.elastomer_sigma_mm / params.mm_per_px)
 
     def as_meta(self) -> dict[str, Any]:
         return {"model": self.kind, "skirt_length_mm": self.skirt_mm}

@@ -1,1 +1,1 @@
-"""Tactile scene simulation: indenters, lighting, the elastic half-space and loaded presses."""
+"""Tactile scene simulation: indenters, lighting, the elastomer's smoothing, the elastic half-space and loaded presses."""

@@ -1,7 +1,8 @@
 """Tactile scene simulation: what the membrane shows when something presses on it.
 
 Paper §VI-C: the rigid indentation of the indenter is smoothed by a Gaussian to
-approximate the elastomer, then shaded by Phong under the LEDs. Here the white membrane
+approximate the elastomer (over the gel beyond the frame too,
+:mod:`~thintact_sdk.tactile.simulation.elastomer`), then shaded by Phong under the LEDs. Here the white membrane
 also carries black markers that move with the load:
 
 * shear: every marker moves by ``shear_mm`` weighted by how much of the contact patch
@@ -19,13 +20,17 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.ndimage import gaussian_filter, map_coordinates
+from scipy.ndimage import map_coordinates
 
 from thintact_sdk.formats.profiles import Profile
 from thintact_sdk.tactile.interpretation.grid import TactileParams
 from thintact_sdk.tactile.interpretation.markers import marker_coverage, marker_lattice_mm
+from thintact_sdk.tactile.simulation.elastomer import GelWindow, gel_window, reach_px, smooth
 from thintact_sdk.tactile.simulation.indenters import Indenter
 from thintact_sdk.tactile.simulation.lighting import PhongShading
+
+BROAD_MM = 1.0
+"""Width (σ, mm) over which the depth is smoothed for the normal-load drag of the markers."""
 
 
 @dataclass
@@ -145,27 +150,44 @@ class TactileSimulator:
         shear_mm
             (x, y) tangential displacement of the contact patch, mm.
         """
-        x, y = self.params.grid_mm()
-        rigid = indenter.indentation_mm(x, y, depth_mm, center_mm, angle_deg)
-        sigma_px = self.params.elastomer_sigma_mm / self.params.mm_per_px
-        depth = gaussian_filter(rigid, sigma_px, mode="constant") if sigma_px > 0 else rigid
+        p = self.params
+        sigma_px = p.elastomer_sigma_mm / p.mm_per_px
+        broad_px = BROAD_MM / p.mm_per_px
+        spread_px = self.shear_spread_mm / p.mm_per_px
+
+        def rigid_at(rr: np.ndarray, cc: np.ndarray) -> np.ndarray:
+            x = (cc - (p.cols - 1) / 2) * p.mm_per_px
+            y = (rr - (p.rows - 1) / 2) * p.mm_per_px
+            return indenter.indentation_mm(x, y, depth_mm, center_mm, angle_deg)
+
+        # the gel and the indenter go on beyond the frame: every smoothing below (the
+        # elastomer's, the marker model's of the contact and, after the elastomer's, of the
+        # depth) sees the true shape past the edge
+        rigid, win = gel_window(rigid_at, (p.rows, p.cols),
+                                max(reach_px(sigma_px) + reach_px(broad_px), reach_px(spread_px)),
+                                grow=reach_px(sigma_px))
+        smoothed = smooth(rigid, sigma_px)
         ref = self.reference_markers_mm()
-        moved = ref + self._marker_motion(rigid, depth, ref, np.asarray(shear_mm, np.float64))
-        return self._scene(depth, ref, moved)
+        moved = ref + self._marker_motion(rigid, smoothed, win, ref,
+                                          np.asarray(shear_mm, np.float64))
+        return self._scene(win.frame(smoothed), ref, moved)
 
     def _marker_motion(
-        self, rigid: np.ndarray, depth: np.ndarray, ref_mm: np.ndarray, shear_mm: np.ndarray
+        self, rigid: np.ndarray, depth: np.ndarray, win: GelWindow, ref_mm: np.ndarray,
+        shear_mm: np.ndarray,
     ) -> np.ndarray:
+        """Marker displacements (``K × 2`` mm) for ``rigid`` and smoothed ``depth`` on the
+        gel window ``win`` around the frame."""
         if len(ref_mm) == 0:
             return np.zeros((0, 2))
         p = self.params
         contact = (rigid > 0).astype(np.float64)
-        weight = gaussian_filter(contact, self.shear_spread_mm / p.mm_per_px, mode="constant")
+        weight = smooth(contact, self.shear_spread_mm / p.mm_per_px)
         if weight.max() > 0:
             weight = np.clip(weight / max(0.5, float(weight.max())), 0.0, 1.0)
-        broad = gaussian_filter(depth, 1.0 / p.mm_per_px, mode="constant")
+        broad = smooth(depth, BROAD_MM / p.mm_per_px)
         by, bx = np.gradient(broad, p.mm_per_px)
-        rc = p.mm_to_px(ref_mm).T
+        rc = p.mm_to_px(ref_mm).T + np.asarray(win.origin, np.float64)[:, None]
         w = map_coordinates(weight, rc, order=1, mode="nearest")
         sx = map_coordinates(bx, rc, order=1, mode="nearest")
         sy = map_coordinates(by, rc, order=1, mode="nearest")
