@@ -31,6 +31,29 @@ def test_press_circle_on_one_channel_image():
     assert find_press_circle(img[..., None]) == ((r, c), radius)
 
 
+@pytest.mark.parametrize("centre", [(45.0, 0.0), (45.0, 4.0), (-6.0, 60.0), (89.0, 119.0)],
+                         ids=["on-left-edge", "near-left-edge", "beyond-top", "corner"])
+def test_press_circle_cut_by_the_frame_is_found_where_the_press_is(centre):
+    """A press cut by the frame's edge: its visible part's centroid lies inside the frame and
+    its area is short, so the circle comes from the rim away from the edge."""
+    yy, xx = np.mgrid[0:90, 0:120]
+
+    def press(at):
+        dist = np.hypot(yy - at[0], xx - at[1])
+        img = np.where(dist < 15, 0.2 + 0.1 * (1 - (dist / 15) ** 2), 0.0).astype(np.float32)
+        return img + np.random.default_rng(1).normal(0, 0.003, img.shape).astype(np.float32), dist
+
+    img, dist = press(centre)
+    (r, c), radius = find_press_circle(img)
+    assert abs(r - centre[0]) < 1.0 and abs(c - centre[1]) < 1.0
+    (rm, cm), radius_middle = find_press_circle(press((45.0, 60.0))[0])
+    assert abs(rm - 45) < 0.5 and abs(cm - 60) < 0.5
+    assert abs(radius - radius_middle) < 1.0  # the same press in the middle of the frame
+    # what the centroid of the visible part says (the rule for presses inside the frame)
+    inside = dist < 15
+    assert np.hypot(yy[inside].mean() - centre[0], xx[inside].mean() - centre[1]) > 2.5
+
+
 def test_press_circle_refuses_a_vector():
     with pytest.raises(CalibrationError, match="N × M"):
         find_press_circle(np.zeros(10, np.float32))
