@@ -10,6 +10,8 @@ Annotation-free figures, per press, from the reconstructed depth ``d`` (mm) and 
   interpreter's: where the membrane wraps the ball, its sink-in skirt left out;
   :mod:`thintact_sdk.tactile.interpretation.contact_region`), against the contact radius a
   ball of radius R pressed to the reconstructed peak depth p must have, ``√(2Rp − p²)``.
+  Where the frame's edge cuts the region (only part of it is in view), the radius of the
+  circle fitted to its rim away from the edge (:func:`rim_circle`).
   ``skirt_radius_mm`` is the radius of the region deeper than the contact threshold that
   holds the peak, the figure reported before (it includes the skirt).
 * **ball fit with the radius fixed**: the ball of radius R whose centre and depth best fit
@@ -35,6 +37,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 from typing import Any, Protocol
 
+import cv2
 import numpy as np
 from scipy.ndimage import label
 from scipy.optimize import least_squares
@@ -160,6 +163,55 @@ def _equivalent_radius_mm(region: np.ndarray, mm_per_px: float) -> float:
     return float(np.sqrt(float(np.count_nonzero(region)) / np.pi)) * mm_per_px
 
 
+def _contact_radius_mm(contact: np.ndarray, mm_per_px: float) -> float:
+    """Radius (mm) of a contact region: of the disc with its area, or, when the frame's edge
+    cuts it (its area is only the part in view), of the circle fitted to its rim away from
+    the edge (:func:`rim_circle`; the disc's when the rim is too short to fit)."""
+    radius = _equivalent_radius_mm(contact, mm_per_px)
+    if radius > 0 and (contact[0].any() or contact[-1].any() or contact[:, 0].any()
+                       or contact[:, -1].any()):
+        circle = rim_circle(contact, radius / mm_per_px)
+        if circle is not None:
+            return circle[1] * mm_per_px
+    return radius
+
+
+def rim_circle(region: np.ndarray, area_radius_px: float
+                ) -> tuple[tuple[float, float], float] | None:
+    """``((row, col), radius_px)`` (px; the centre may lie outside the frame) of the circle
+    fitted to the rim of ``region`` that is not on the frame's edge: algebraic least squares
+    (Kåsa), refined by the rim pixels' distances to it; its radius is the region's boundary's
+    (the rim pixels' centres lie half a pixel inside it), as the area's radius is. None when that rim is too short to
+    fit (under a quarter of the circle of the area's radius ``area_radius_px``, or under 8
+    pixels) or the fit is not a circle at least as wide as the area implies (at most 4×)."""
+    inner = cv2.erode(region.astype(np.uint8), np.ones((3, 3), np.uint8),
+                      borderType=cv2.BORDER_REPLICATE).astype(bool)
+    rim = region & ~inner
+    rim[0], rim[-1], rim[:, 0], rim[:, -1] = False, False, False, False
+    rr, cc = np.nonzero(rim)
+    if len(rr) < max(8.0, 0.25 * 2 * np.pi * area_radius_px):
+        return None
+    y, x = rr.astype(np.float64), cc.astype(np.float64)
+    # x² + y² + D·x + E·y + F = 0 (Kåsa), in coordinates centred on the rim for conditioning
+    y0, x0 = float(y.mean()), float(x.mean())
+    a = np.stack([x - x0, y - y0, np.ones_like(x)], axis=1)
+    b = -((x - x0) ** 2 + (y - y0) ** 2)
+    (d, e, f), *_ = np.linalg.lstsq(a, b, rcond=None)
+    r2 = (d * d + e * e) / 4.0 - f
+    if not (np.isfinite(r2) and r2 > 0):
+        return None
+    # the algebraic fit reads a short arc's radius short: refine by the points' distances
+    def off(v: np.ndarray) -> np.ndarray:
+        return np.hypot(y - v[0], x - v[1]) - v[2]
+
+    fit = least_squares(off, [y0 - e / 2.0, x0 - d / 2.0, float(np.sqrt(r2))])
+    row, col, radius = (float(v) for v in fit.x)
+    radius += 0.5  # the rim pixels' centres lie half a pixel inside the region's boundary
+    if not (fit.success and area_radius_px <= radius <= 4.0 * area_radius_px):
+        return None
+    return (row, col), radius
+
+
 def _contact_radius_of_press(radius_mm: float, press_mm: float) -> float:
     """``√(2Rp − p²)`` (mm): the contact radius of a ball of radius R pressed p deep (p clipped
     to 0..R)."""
@@ -196,7 +248,7 @@ def press_figures(
     sphere, _ = fit_sphere(d, mm_per_px)
     region = contact_region(d, mm_per_px, contact_threshold_mm, smooth_mm)
     contact = _holding_peak(region, d)
-    contact_r = _equivalent_radius_mm(contact, mm_per_px)
+    contact_r = _contact_radius_mm(contact, mm_per_px)
     skirt_r = _equivalent_radius_mm(_holding_peak(d > contact_threshold_mm, d), mm_per_px)
     expected = _contact_radius_of_press(radius_mm, peak)
     rr, cc = np.mgrid[0 : d.shape[0], 0 : d.shape[1]]
@@ -268,7 +320,7 @@ def _contact_ratio(depth_mm: np.ndarray, radius_mm: float, mm_per_px: float,
         return float("nan")
     contact = _holding_peak(contact_region(depth_mm, mm_per_px, threshold_mm, smooth_mm),
                             depth_mm)
-    return _equivalent_radius_mm(contact, mm_per_px) / expected
+    return _contact_radius_mm(contact, mm_per_px) / expected
 
 
 def taught_contact_ratio(model: TaughtShape, shape: tuple[int, int],

@@ -23,6 +23,7 @@ from scipy.special import k0e, k1e
 
 from thintact_sdk.errors import CalibrationError
 from thintact_sdk.formats.profiles import Profile
+from thintact_sdk.tactile.calibration.ball_eval import rim_circle
 from thintact_sdk.tactile.interpretation.colour_change import colour_change, fill_masked
 from thintact_sdk.tactile.interpretation.gradient_model import GRADIENT_MODELS
 from thintact_sdk.tactile.interpretation.grid import (
@@ -184,7 +185,8 @@ def find_press_circle(
     centroid) and the radius (of the circle with its area). A region cut by the frame's
     edge is only part of the press (its centroid lies inside the frame, its area is short):
     its circle is fitted instead to the region's rim away from the frame's edge
-    (:func:`_rim_circle`; the centre may lie outside the frame).
+    (:func:`~thintact_sdk.tactile.calibration.ball_eval.rim_circle`; the centre may lie
+    outside the frame).
 
     Parameters
     ----------
@@ -228,48 +230,13 @@ def find_press_circle(
         raise CalibrationError(f"press too small ({area:.0f} px): press the ball deeper")
     radius = float(np.sqrt(area / np.pi))
     if region[0].any() or region[-1].any() or region[:, 0].any() or region[:, -1].any():
-        circle = _rim_circle(region, radius)
+        circle = rim_circle(region, radius)
         if circle is not None:
             return circle
     rr, cc = np.nonzero(region)
     w = blurred[rr, cc]
     centre = (float((w * rr).sum() / w.sum()), float((w * cc).sum() / w.sum()))
     return centre, radius
-
-
-def _rim_circle(region: np.ndarray, area_radius_px: float
-                ) -> tuple[tuple[float, float], float] | None:
-    """``((row, col), radius_px)`` of the circle fitted (algebraic least squares, refined by
-    the rim pixels' distances to it) to the rim of ``region`` that is not on the frame's edge; None when that rim is too short to fit
-    (under a quarter of the area's circle, or under 8 pixels) or the fit is not a circle at
-    least as wide as the region's area implies."""
-    inner = cv2.erode(region.astype(np.uint8), np.ones((3, 3), np.uint8),
-                      borderType=cv2.BORDER_REPLICATE).astype(bool)
-    rim = region & ~inner
-    rim[0], rim[-1], rim[:, 0], rim[:, -1] = False, False, False, False
-    rr, cc = np.nonzero(rim)
-    if len(rr) < max(8.0, 0.25 * 2 * np.pi * area_radius_px):
-        return None
-    y, x = rr.astype(np.float64), cc.astype(np.float64)
-    # x² + y² + D·x + E·y + F = 0 (Kåsa), in coordinates centred on the rim for conditioning
-    y0, x0 = float(y.mean()), float(x.mean())
-    a = np.stack([x - x0, y - y0, np.ones_like(x)], axis=1)
-    b = -((x - x0) ** 2 + (y - y0) ** 2)
-    (d, e, f), *_ = np.linalg.lstsq(a, b, rcond=None)
-    r2 = (d * d + e * e) / 4.0 - f
-    if not (np.isfinite(r2) and r2 > 0):
-        return None
-    # the algebraic fit reads a short arc's radius short: refine by the points' distances
-    from scipy.optimize import least_squares
-
-    def off(v: np.ndarray) -> np.ndarray:
-        return np.hypot(y - v[0], x - v[1]) - v[2]
-
-    fit = least_squares(off, [y0 - e / 2.0, x0 - d / 2.0, float(np.sqrt(r2))])
-    row, col, radius = (float(v) for v in fit.x)
-    if not (fit.success and area_radius_px <= radius <= 4.0 * area_radius_px):
-        return None
-    return (row, col), radius
 
 
 BALL_MODELS = ("auto", "rigid", "sink-in")
