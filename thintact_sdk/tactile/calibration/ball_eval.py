@@ -166,24 +166,27 @@ def _equivalent_radius_mm(region: np.ndarray, mm_per_px: float) -> float:
 def _contact_radius_mm(contact: np.ndarray, mm_per_px: float) -> float:
     """Radius (mm) of a contact region: of the disc with its area, or, when the frame's edge
     cuts it (its area is only the part in view), of the circle fitted to its rim away from
-    the edge (:func:`rim_circle`; the disc's when the rim is too short to fit)."""
+    the edge (:func:`rim_circle`; the disc's when the rim is too short to fit). 0 for an
+    empty region."""
     radius = _equivalent_radius_mm(contact, mm_per_px)
-    if radius > 0 and (contact[0].any() or contact[-1].any() or contact[:, 0].any()
-                       or contact[:, -1].any()):
-        circle = rim_circle(contact, radius / mm_per_px)
-        if circle is not None:
-            return circle[1] * mm_per_px
-    return radius
+    circle = rim_circle(contact, radius / mm_per_px)
+    return radius if circle is None else circle[1] * mm_per_px
 
 
 def rim_circle(region: np.ndarray, area_radius_px: float
                 ) -> tuple[tuple[float, float], float] | None:
-    """``((row, col), radius_px)`` (px; the centre may lie outside the frame) of the circle
-    fitted to the rim of ``region`` that is not on the frame's edge: algebraic least squares
-    (Kåsa), refined by the rim pixels' distances to it; its radius is the region's boundary's
-    (the rim pixels' centres lie half a pixel inside it), as the area's radius is. None when that rim is too short to
-    fit (under a quarter of the circle of the area's radius ``area_radius_px``, or under 8
-    pixels) or the fit is not a circle at least as wide as the area implies (at most 4×)."""
+    """``((row, col), radius_px)`` of a region cut by the frame's edge (only part of it in
+    view): the circle fitted to its rim away from the edge (px; the centre may lie outside
+    the frame). Algebraic least squares (Kåsa), refined by the rim pixels' distances to it;
+    the radius is the region's boundary's (the rim pixels' centres lie half a pixel inside
+    it), as the area's radius is.
+
+    None when the region does not reach the frame's edge (its area and centroid say where it
+    is), when that rim is too short to fit (under a quarter of the circle of the area's
+    radius ``area_radius_px``, or under 8 pixels), or when the fit is not a circle at least
+    as wide as the area implies (at most 4×)."""
+    if not (region[0].any() or region[-1].any() or region[:, 0].any() or region[:, -1].any()):
+        return None
     inner = cv2.erode(region.astype(np.uint8), np.ones((3, 3), np.uint8),
                       borderType=cv2.BORDER_REPLICATE).astype(bool)
     rim = region & ~inner

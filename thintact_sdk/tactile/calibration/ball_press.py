@@ -229,10 +229,9 @@ def find_press_circle(
     if area < 20:
         raise CalibrationError(f"press too small ({area:.0f} px): press the ball deeper")
     radius = float(np.sqrt(area / np.pi))
-    if region[0].any() or region[-1].any() or region[:, 0].any() or region[:, -1].any():
-        circle = rim_circle(region, radius)
-        if circle is not None:
-            return circle
+    circle = rim_circle(region, radius)
+    if circle is not None:
+        return circle
     rr, cc = np.nonzero(region)
     w = blurred[rr, cc]
     centre = (float((w * rr).sum() / w.sum()), float((w * cc).sum() / w.sum()))
