@@ -152,8 +152,8 @@ class TactileSimulator:
         """
         p = self.params
         sigma_px = p.elastomer_sigma_mm / p.mm_per_px
-        broad_px = BROAD_MM / p.mm_per_px
-        spread_px = self.shear_spread_mm / p.mm_per_px
+        ref = self.reference_markers_mm()
+        spread_px, broad_px = self._marker_smoothing_px() if len(ref) else (0.0, 0.0)
 
         def rigid_at(rr: np.ndarray, cc: np.ndarray) -> np.ndarray:
             x = (cc - (p.cols - 1) / 2) * p.mm_per_px
@@ -162,15 +162,20 @@ class TactileSimulator:
 
         # the gel and the indenter go on beyond the frame: every smoothing below (the
         # elastomer's, the marker model's of the contact and, after the elastomer's, of the
-        # depth) sees the true shape past the edge
+        # depth; without markers, the elastomer's alone) sees the true shape past the edge
         rigid, win = gel_window(rigid_at, (p.rows, p.cols),
                                 max(reach_px(sigma_px) + reach_px(broad_px), reach_px(spread_px)),
                                 grow=reach_px(sigma_px))
         smoothed = smooth(rigid, sigma_px)
-        ref = self.reference_markers_mm()
         moved = ref + self._marker_motion(rigid, smoothed, win, ref,
                                           np.asarray(shear_mm, np.float64))
         return self._scene(win.frame(smoothed), ref, moved)
+
+    def _marker_smoothing_px(self) -> tuple[float, float]:
+        """Widths (σ, px) of the marker model's smoothings: of the contact (shear spread) and
+        of the depth (normal-load drag)."""
+        return (self.shear_spread_mm / self.params.mm_per_px,
+                BROAD_MM / self.params.mm_per_px)
 
     def _marker_motion(
         self, rigid: np.ndarray, depth: np.ndarray, win: GelWindow, ref_mm: np.ndarray,
@@ -181,11 +186,12 @@ class TactileSimulator:
         if len(ref_mm) == 0:
             return np.zeros((0, 2))
         p = self.params
+        spread_px, broad_px = self._marker_smoothing_px()
         contact = (rigid > 0).astype(np.float64)
-        weight = smooth(contact, self.shear_spread_mm / p.mm_per_px)
+        weight = smooth(contact, spread_px)
         if weight.max() > 0:
             weight = np.clip(weight / max(0.5, float(weight.max())), 0.0, 1.0)
-        broad = smooth(depth, BROAD_MM / p.mm_per_px)
+        broad = smooth(depth, broad_px)
         by, bx = np.gradient(broad, p.mm_per_px)
         rc = p.mm_to_px(ref_mm).T + np.asarray(win.origin, np.float64)[:, None]
         w = map_coordinates(weight, rc, order=1, mode="nearest")
