@@ -12,21 +12,25 @@ Annotation-free figures, per press, from the reconstructed depth ``d`` (mm) and 
   ball of radius R pressed to the reconstructed peak depth p must have, ``√(2Rp − p²)``.
   Where the frame's edge cuts the region (only part of it is in view), the radius of the
   circle fitted to its rim away from the edge (:func:`rim_circle`).
+  The region is grown by the calibration's ``contact_rim_mm`` (how far its smoothing moves
+  the measure inside the rim of the shape it taught; 0 without one).
   ``skirt_radius_mm`` is the radius of the region deeper than the contact threshold that
   holds the peak, the figure reported before (it includes the skirt).
 * **ball fit with the radius fixed**: the ball of radius R whose centre and depth best fit
-  the reconstructed depth inside the contact region (least squares on its surface); depth
-  RMS inside the contact, within ``0.9·a`` of the fitted centre (a the contact radius; the
-  rim is smoothed by the elastomer), and slope RMS (vector magnitude) there, also where the
-  ball's slope is under 1 (45°, ``slope_rms_gentle``). Without a contact region, the rigid
-  cap fitted to the core and its contact circle.
+  the reconstructed depth inside the contact region before its growth (where the membrane
+  curves as the ball does; least squares on its surface); depth RMS there, within ``0.9·a``
+  of the fitted centre (a that region's radius; its rim is smoothed by the elastomer), and
+  slope RMS (vector magnitude) there, also where the ball's slope is under 1 (45°,
+  ``slope_rms_gentle``). Without a contact region, the rigid cap fitted to the core and its
+  contact circle.
 * **edge press**: the contact circle (fitted centre, contact radius) reaches the frame's edge.
 * **taught contact ratio** (:func:`taught_contact_ratio`, with the calibration's ball model):
-  the contact ratio this measure reads on the shape the calibration taught, pressed as deep
-  as the reconstruction's peak. The measure is not exact on smooth rims: the curvature's sign
-  changes inside the rim of a cap smoothed by the elastomer, so even a perfect reconstruction
-  of the taught shape reads under 1; the reconstruction's ratio over this one says how much
-  is the reconstruction's own.
+  the contact ratio this measure (with the same growth) reads on the shape the calibration
+  taught, pressed as deep as the reconstruction's peak. The curvature's sign changes inside
+  the rim of a cap smoothed by the elastomer; the growth undoes that on the calibration's own
+  presses, so this reads about 1 at their depths (a sink-in shape reads under 1: its contact
+  is narrower than a rigid cap's of the same depth); the reconstruction's ratio over this
+  one says how much is the reconstruction's own.
 
 With annotated circles (centre, contact radius a_ann), the same RMS figures against the cap of
 radius R whose contact circle is the annotated one (press depth ``R − √(R² − a_ann²)``).
@@ -113,7 +117,7 @@ def ball_cap(shape: tuple[int, int], centre_rc: tuple[float, float], press_mm: f
     inside = depth > 0
     gx = np.where(inside, -x / root, 0.0)
     gy = np.where(inside, -y / root, 0.0)
-    return depth, gx, gy, _contact_radius_of_press(radius_mm, press_mm) / mm_per_px
+    return depth, gx, gy, contact_radius_of_press(radius_mm, press_mm) / mm_per_px
 
 
 def fit_ball_fixed_radius(depth_mm: np.ndarray, radius_mm: float, mm_per_px: float,
@@ -161,6 +165,12 @@ def _holding_peak(mask: np.ndarray, depth_mm: np.ndarray) -> np.ndarray:
 def _equivalent_radius_mm(region: np.ndarray, mm_per_px: float) -> float:
     """Radius (mm) of the disc with the area of ``region``: √(area/π)."""
     return float(np.sqrt(float(np.count_nonzero(region)) / np.pi)) * mm_per_px
+
+
+def contact_radius_mm(region: np.ndarray, depth_mm: np.ndarray, mm_per_px: float) -> float:
+    """Radius (mm) of the part of the contact ``region`` that holds the deepest pixel of
+    ``depth_mm`` (:func:`_contact_radius_mm`; 0 when the deepest pixel is outside it)."""
+    return _contact_radius_mm(_holding_peak(region, depth_mm), mm_per_px)
 
 
 def _contact_radius_mm(contact: np.ndarray, mm_per_px: float) -> float:
@@ -215,7 +225,7 @@ def rim_circle(region: np.ndarray, area_radius_px: float
     return (row, col), radius
 
 
-def _contact_radius_of_press(radius_mm: float, press_mm: float) -> float:
+def contact_radius_of_press(radius_mm: float, press_mm: float) -> float:
     """``√(2Rp − p²)`` (mm): the contact radius of a ball of radius R pressed p deep (p clipped
     to 0..R)."""
     p = min(max(press_mm, 0.0), radius_mm)
@@ -231,6 +241,7 @@ def press_figures(
     contact_threshold_mm: float = 0.1,
     annotated: tuple[tuple[float, float], float] | None = None,
     smooth_mm: float = 0.0,
+    rim_mm: float = 0.0,
 ) -> PressFigures:
     """The figures of one press (module docstring).
 
@@ -245,15 +256,21 @@ def press_figures(
     smooth_mm
         The scale at which the contact region reads curvature: the pixel of the grid the
         depth was reconstructed on (default: one pixel of ``depth_mm``).
+    rim_mm
+        The calibration's ``contact_rim_mm``: the contact region is grown by it.
     """
     d = np.asarray(depth_mm, np.float64)
     peak = float(d.max())
     sphere, _ = fit_sphere(d, mm_per_px)
-    region = contact_region(d, mm_per_px, contact_threshold_mm, smooth_mm)
-    contact = _holding_peak(region, d)
+    # the ball's surface: where the membrane curves as the ball does (the region before its
+    # growth, whose rim band the elastomer smooths away from the ball); the contact: grown
+    surface = _holding_peak(contact_region(d, mm_per_px, contact_threshold_mm, smooth_mm), d)
+    contact = (_holding_peak(contact_region(d, mm_per_px, contact_threshold_mm, smooth_mm,
+                                            rim_mm), d) if rim_mm > 0 else surface)
     contact_r = _contact_radius_mm(contact, mm_per_px)
+    surface_r = _contact_radius_mm(surface, mm_per_px)
     skirt_r = _equivalent_radius_mm(_holding_peak(d > contact_threshold_mm, d), mm_per_px)
-    expected = _contact_radius_of_press(radius_mm, peak)
+    expected = contact_radius_of_press(radius_mm, peak)
     rr, cc = np.mgrid[0 : d.shape[0], 0 : d.shape[1]]
     nan = float("nan")
 
@@ -281,12 +298,12 @@ def press_figures(
         inside = np.hypot(rr - c[0], cc - c[1]) < RIM_FRACTION * a_px
         return (*rms_inside(cap, tx, ty, inside), bool(inside.any()) and touches_edge(c, a_px))
 
-    if contact.sum() >= 3:  # the ball's surface fitted inside the contact
-        centre, press = fit_ball_fixed_radius(d, radius_mm, mm_per_px, contact)
+    if surface.sum() >= 3:  # the ball's surface fitted inside the contact
+        centre, press = fit_ball_fixed_radius(d, radius_mm, mm_per_px, surface)
         x = (cc - centre[1]) * mm_per_px
         y = (rr - centre[0]) * mm_per_px
         # inside the contact and on the ball (a reconstructed contact can be wider than it)
-        inside = contact & (np.hypot(x, y) < RIM_FRACTION * min(contact_r, radius_mm))
+        inside = surface & (np.hypot(x, y) < RIM_FRACTION * min(surface_r, radius_mm))
         root = np.sqrt(np.clip(radius_mm**2 - x * x - y * y, 1e-9, None))
         drms, srms, flat, srms_gentle = rms_inside(root - (radius_mm - press), -x / root,
                                                    -y / root, inside)
@@ -315,26 +332,25 @@ class TaughtShape(Protocol):
 
 
 def _contact_ratio(depth_mm: np.ndarray, radius_mm: float, mm_per_px: float,
-                   threshold_mm: float, smooth_mm: float) -> float:
+                   threshold_mm: float, smooth_mm: float, rim_mm: float) -> float:
     """Contact radius of the region holding the peak over ``√(2Rp − p²)``, p the peak (NaN
     without a peak)."""
-    expected = _contact_radius_of_press(radius_mm, float(depth_mm.max()))
+    expected = contact_radius_of_press(radius_mm, float(depth_mm.max()))
     if expected <= 0:
         return float("nan")
-    contact = _holding_peak(contact_region(depth_mm, mm_per_px, threshold_mm, smooth_mm),
-                            depth_mm)
-    return _contact_radius_mm(contact, mm_per_px) / expected
+    region = contact_region(depth_mm, mm_per_px, threshold_mm, smooth_mm, rim_mm)
+    return contact_radius_mm(region, depth_mm, mm_per_px) / expected
 
 
 def taught_contact_ratio(model: TaughtShape, shape: tuple[int, int],
                          centre_rc: tuple[float, float], peak_mm: float, radius_mm: float,
                          mm_per_px: float, blur_mm: float, threshold_mm: float = 0.1,
-                         smooth_mm: float = 0.0) -> float:
+                         smooth_mm: float = 0.0, rim_mm: float = 0.0) -> float:
     """The contact ratio (module docstring) of the calibration's ball model pressed so that its
     peak, after the elastomer blur (``blur_mm``, σ in mm), is the reconstruction's
     ``peak_mm`` (the deepest the model goes when it cannot), at ``centre_rc`` on an
     ``shape`` grid of ``mm_per_px``: what the measure reads on the shape the calibration
-    taught. NaN without a peak."""
+    taught (the contact region grown by ``rim_mm``). NaN without a peak."""
     params = TactileParams(rows=shape[0], cols=shape[1], mm_per_px=mm_per_px,
                            elastomer_sigma_mm=blur_mm)
 
@@ -351,7 +367,8 @@ def taught_contact_ratio(model: TaughtShape, shape: tuple[int, int],
             lo = mid + 1
         else:
             hi = mid
-    return _contact_ratio(render(float(grid[lo])), radius_mm, mm_per_px, threshold_mm, smooth_mm)
+    return _contact_ratio(render(float(grid[lo])), radius_mm, mm_per_px, threshold_mm, smooth_mm,
+                          rim_mm)
 
 
 def summarise(figures: list[PressFigures], radius_mm: float) -> dict[str, Any]:

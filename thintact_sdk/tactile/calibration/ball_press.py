@@ -23,8 +23,13 @@ from scipy.special import k0e, k1e
 
 from thintact_sdk.errors import CalibrationError
 from thintact_sdk.formats.profiles import Profile
-from thintact_sdk.tactile.calibration.ball_eval import rim_circle
+from thintact_sdk.tactile.calibration.ball_eval import (
+    contact_radius_mm,
+    contact_radius_of_press,
+    rim_circle,
+)
 from thintact_sdk.tactile.interpretation.colour_change import colour_change, fill_masked
+from thintact_sdk.tactile.interpretation.contact_region import contact_region
 from thintact_sdk.tactile.interpretation.gradient_model import GRADIENT_MODELS
 from thintact_sdk.tactile.interpretation.grid import (
     TactileParams,
@@ -54,11 +59,16 @@ class BallPress:
         ``N × M × 3`` membrane image (reconstructed or simulated), display units.
     grad_x, grad_y
         ``N × M`` known slopes (mm per mm), or None to derive them from the ball model.
+    contact_radius_mm
+        With known slopes: the press's true contact radius (mm), when known (a simulated
+        press), so the calibration can measure how far inside it the contact region reads
+        (``meta["contact_rim_mm"]`` of :func:`calibrate_from_presses`).
     """
 
     image: np.ndarray
     grad_x: np.ndarray | None = None
     grad_y: np.ndarray | None = None
+    contact_radius_mm: float | None = None
 
 
 _EDGE_MARGIN_RADII = 1.5
@@ -135,6 +145,11 @@ def random_ball_presses(
         scene = sim.press(Sphere(radius), press["depth_mm"], (press["x_mm"], press["y_mm"]))
         out.append((scene, press))
     return out
+
+
+def press_contact_radius_mm(press: Mapping[str, float]) -> float:
+    """The contact radius (mm) of a press of :func:`random_ball_presses`: ``√(2Rp − p²)``."""
+    return contact_radius_of_press(float(press["ball_radius_mm"]), float(press["depth_mm"]))
 
 
 def ball_slopes(
@@ -408,7 +423,10 @@ def calibrate_from_presses(
     contact's rim of the model fit the table was calibrated with (mm), and warnings: a
     circle at least as wide as the ball with the rigid model (``radius ≥ ball radius``: the
     ball radius or ``tactile.mm_per_px`` is wrong, or the gel sinks in beyond the contact),
-    a fitted press at a bound of the model's range, a press touching the frame's edge.
+    a fitted press at a bound of the model's range, a press touching the frame's edge; and
+    ``contact_rim_mm``, how far inside the model's rim the contact region reads on that
+    press (:func:`contact_rim_offset`). Their median (clipped at 0) is
+    ``meta["contact_rim_mm"]``, by which the interpreter grows its contact regions.
     """
     say = stage or (lambda _msg: None)
     if model not in GRADIENT_MODELS:
@@ -430,6 +448,7 @@ def calibrate_from_presses(
     valids: list[np.ndarray] = []
     images: list[np.ndarray] = []
     ball: list[_BallFit] = []
+    known_rims: list[float | None] = []
     rng = np.random.default_rng(0)
     say(f"{len(presses)} presses: finding the ball in each")
     for n_press, press in enumerate(presses):
@@ -455,6 +474,9 @@ def calibrate_from_presses(
                 gy = cv2.GaussianBlur(gy, (0, 0), smooth_px)
             moving = np.hypot(gx, gy) > 1e-3
             valid = (moving | (rng.random(gx.shape) < 0.1)) & ~det.mask
+            if press.contact_radius_mm is not None:  # the taught shape is the slopes' own
+                depth = np.clip(integrate_gradients(gx, gy, params.mm_per_px), 0.0, None)
+                known_rims.append(_rim_offset(depth, float(press.contact_radius_mm), params))
         feats.append(change)
         images.append(background + change)
         gxs.append(gx)
@@ -485,12 +507,56 @@ def calibrate_from_presses(
         lut = calibrate_lut(feats, gxs, gys, valids, bins=bins, meta=info)
         lut.meta["refine_rounds"] = refine_rounds
     if ball:
-        lut.meta["press_report"] = [fitter.entry(k, chosen) for k in range(len(ball))]
+        report = [fitter.entry(k, chosen) for k in range(len(ball))]
+        shape = feats[0].shape[:2]
+        rims = [contact_rim_offset(chosen, shape, f.center, f.param_mm, ball_radius_mm, params,
+                                   smooth_px) for f in ball]
+        for entry, rim in zip(report, rims, strict=True):
+            entry["contact_rim_mm"] = None if rim is None else round(rim, 4)
+        lut.meta["press_report"] = report
+        known_rims += rims
+    measured = [r for r in known_rims if r is not None]
+    if measured:
+        lut.meta["contact_rim_mm"] = round(max(0.0, float(np.median(measured))), 4)
     if model == "lut" or (model == "auto" and len(presses) < MIN_PRESSES_TO_CHOOSE):
         lut.meta["gradient_model"] = "lut"
         return lut
     return _attach_network(lut, model, feats, images, gxs, gys, valids, bins,
                            mlp_steps, dict(cnn_options or {}), say)
+
+
+def contact_rim_offset(bm: BallModel, shape: tuple[int, int], centre_rc: tuple[float, float],
+                       param_mm: float, ball_radius_mm: float, params: TactileParams,
+                       smooth_px: float) -> float | None:
+    """How far (mm) the contact region reads inside the rim of the shape ``bm`` teaches the
+    sensor (:mod:`~thintact_sdk.tactile.interpretation.contact_region`, step 4): the model's
+    contact radius minus the radius the contact measure reads on the model's press (after
+    the elastomer and the calibration's own ``smooth_px`` smoothing, on ``params``'s grid of
+    ``shape``; the rim circle where the frame cuts it). Negative when the measure reads
+    outside the rim; None when the press has no contact or the measure finds none.
+
+    The shape the table is taught is this smoothed one, so the reconstruction's rims are
+    smoothed as much; the calibration stores the median over its presses as
+    ``meta["contact_rim_mm"]`` and the interpreter grows its contact region by it."""
+    if not np.isfinite(param_mm):
+        return None
+    _, _, true_mm = bm.rigid_depth(np.zeros(1), param_mm, ball_radius_mm)
+    depth = bm.depth(shape, centre_rc, param_mm, ball_radius_mm, params)
+    if smooth_px > 0:
+        depth = cv2.GaussianBlur(depth, (0, 0), smooth_px, borderType=cv2.BORDER_REPLICATE)
+    return _rim_offset(depth, true_mm, params)
+
+
+def _rim_offset(depth_mm: np.ndarray, true_radius_mm: float, params: TactileParams
+                ) -> float | None:
+    """``true_radius_mm`` minus the radius the contact measure reads on ``depth_mm`` (on
+    ``params``'s grid; None when either is 0)."""
+    mm = params.mm_per_px
+    region = contact_region(depth_mm, mm, params.contact_threshold_mm, mm)
+    read = contact_radius_mm(region, depth_mm, mm)
+    if not (true_radius_mm > 0 and read > 0):
+        return None
+    return float(true_radius_mm - read)
 
 
 @dataclass
@@ -797,5 +863,6 @@ def scene_level_lut(profile: Profile, presses: int = 12, seed: int = 0) -> Photo
     sim = TactileSimulator.for_profile(profile)
     ref = sim.flat().scene
     data = random_ball_presses(profile, presses, seed=seed)
-    items = [BallPress(s.scene, s.grad_x, s.grad_y) for s, _ in data]
+    items = [BallPress(s.scene, s.grad_x, s.grad_y, press_contact_radius_mm(p))
+             for s, p in data]
     return calibrate_from_presses(profile, ref, items, meta={"source": "tactile-simulator"})

@@ -29,6 +29,7 @@ from thintact_sdk.tactile.calibration.ball_press import (
     CALIBRATION_BALL_RADIUS_MM,
     BallPress,
     calibrate_from_presses,
+    press_contact_radius_mm,
     random_ball_presses,
 )
 from thintact_sdk.tactile.interpretation.photometric import PhotometricLUT
@@ -90,10 +91,11 @@ def calibrate_virtual(
         slot.set(sim.flat().scene)
         reference = _mean_image(sensor.read_image, reference_frames)
         items = []
-        for i, (scene, _) in enumerate(data):
+        for i, (scene, press) in enumerate(data):
             slot.set(scene.scene)
             img = _mean_image(sensor.read_image, frames_per_image)
-            items.append(BallPress(img, scene.grad_x, scene.grad_y))
+            items.append(BallPress(img, scene.grad_x, scene.grad_y,
+                                   press_contact_radius_mm(press)))
             if progress is not None:
                 progress(i + 1, len(data))
     finally:

@@ -317,7 +317,9 @@ def evaluate_pack(
         ``summary`` (:func:`~thintact_sdk.tactile.calibration.ball_eval.summarise`), ``presses`` (per
         test press figures), ``train``, ``test``, ``gradient_model``, ``validation``,
         ``press_report`` (the calibration's per-press report), ``ball_model`` (the model the
-        calibration used and how it was chosen; ``None`` with a given ``lut``).
+        calibration used and how it was chosen; ``None`` with a given ``lut``),
+        ``contact_rim_mm`` (how far the contact regions were grown; ``None`` when the table
+        has no such figure).
     """
     from thintact_sdk.tactile.calibration.ball_eval import (
         press_figures,
@@ -342,6 +344,7 @@ def evaluate_pack(
     interp = TactileInterpreter(profile, lut, boundary=boundary)  # type: ignore[arg-type]
     interp.set_reference(pack.reference_image())
     taught = _taught_shape(lut.meta.get("ball_model"))
+    taught_blur = float(np.hypot(elastomer_sigma_mm, interp.smooth_px * interp.work.mm_per_px))
     figs = []
     for k, i in enumerate(test):
         say(f"test press {k + 1}/{len(test)}")
@@ -352,12 +355,13 @@ def evaluate_pack(
             ann = ((float(pack.centres_rc[i][0]) / f, float(pack.centres_rc[i][1]) / f),
                    float(pack.radii_px[i]) / f)
         fig = press_figures(depth, gx, gy, ball_radius_mm, interp.work.mm_per_px,
-                            interp.params.contact_threshold_mm, ann, interp.work.mm_per_px)
-        if taught is not None:
+                            interp.params.contact_threshold_mm, ann, interp.work.mm_per_px,
+                            interp.contact_rim_mm)
+        if taught is not None:  # the shape taught: the elastomer's and the colour's smoothing
             fig.contact_ratio_taught = taught_contact_ratio(
                 taught, depth.shape, fig.centre_rc, fig.peak_mm, ball_radius_mm,
-                interp.work.mm_per_px, elastomer_sigma_mm, interp.params.contact_threshold_mm,
-                interp.work.mm_per_px)
+                interp.work.mm_per_px, taught_blur, interp.params.contact_threshold_mm,
+                interp.work.mm_per_px, interp.contact_rim_mm)
         figs.append(fig)
     return {
         "summary": summarise(figs, ball_radius_mm),
@@ -369,5 +373,6 @@ def evaluate_pack(
         "validation": lut.meta.get("validation"),
         "press_report": lut.meta.get("press_report", []),
         "ball_model": lut.meta.get("ball_model"),
+        "contact_rim_mm": lut.meta.get("contact_rim_mm"),
         "lut": lut,
     }

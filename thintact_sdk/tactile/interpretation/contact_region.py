@@ -24,8 +24,18 @@ curvature changes sign. So the contact region is
 A region deeper than the threshold whose deepest point is not concave (no curvature
 resolved there) counts whole.
 
-No parameter is fitted: the smoothing scale is the reconstruction's own pixel and the sign
-change needs no level. For a membrane under tension on an elastic foundation (a gel on
+4. grown by ``rim_mm`` into the pixels deeper than the contact threshold: the device's
+   calibration says how far its own smoothing moves the sign change inside the rim.
+
+No parameter is fitted here: the smoothing scale is the reconstruction's own pixel and the
+sign change needs no level. Smoothing moves the sign change inwards: a kink of the surface at
+the rim (the membrane leaving a rigid object with a slope) becomes a ridge of positive
+curvature about as wide as the smoothing, which outweighs the object's own curvature up to
+about a smoothing width inside the rim. How far depends on the sensor's smoothing (elastomer,
+optics, reconstruction) and the object, so it is the calibration's: ``calibrate-tactile``
+measures it on the shape its ball model teaches the sensor, at the calibration presses
+(``contact_rim_mm`` in the calibration's metadata,
+:func:`~thintact_sdk.tactile.calibration.ball_press.contact_rim_offset`). For a membrane under tension on an elastic foundation (a gel on
 glass) a negative Laplacian means an outside pressure pushes it there, i.e. contact; where
 the object's face is flat the pressure is held by the foundation alone, hence the filled
 holes.
@@ -42,7 +52,7 @@ narrower Gaussian is not sampled by the grid)."""
 
 
 def contact_region(depth_mm: np.ndarray, mm_per_px: float, threshold_mm: float,
-                   smooth_mm: float = 0.0) -> np.ndarray:
+                   smooth_mm: float = 0.0, rim_mm: float = 0.0) -> np.ndarray:
     """``N × M`` bool: the pixels in contact (module docstring).
 
     Parameters
@@ -57,6 +67,10 @@ def contact_region(depth_mm: np.ndarray, mm_per_px: float, threshold_mm: float,
         Width (σ, mm) of the Gaussian whose Laplacian measures the curvature: the pixel of
         the grid the depth was reconstructed on (the interpreter's working grid); at least
         one pixel of ``depth_mm``.
+    rim_mm
+        Distance (mm, ≥ 0) the region is grown by, into pixels deeper than the threshold:
+        how far the sensor's smoothing moves the curvature's sign change inside the rim (step
+        4 of the module docstring; 0: not grown).
     """
     d = np.asarray(depth_mm, np.float64)
     seeds = d > threshold_mm
@@ -80,7 +94,19 @@ def contact_region(depth_mm: np.ndarray, mm_per_px: float, threshold_mm: float,
     # no curvature resolved at its deepest point: the region counts whole (every peak lies
     # in a region, so label 0, outside them all, is never set)
     whole[seed_labels.ravel()[peaks[at_peak == 0]]] = True
-    return _filled(keep[labels], seeds) | whole[seed_labels]
+    region = _filled(keep[labels], seeds) | whole[seed_labels]
+    return _grown(region, seeds, rim_mm / mm_per_px) if rim_mm > 0 else region
+
+
+def _grown(region: np.ndarray, seeds: np.ndarray, by_px: float) -> np.ndarray:
+    """``region`` and the pixels of ``seeds`` whose centres lie within ``by_px`` pixels of
+    its boundary, which is half a pixel beyond its outermost pixels' centres (Euclidean
+    distance between pixel centres up to ``by_px + 0.5``)."""
+    if not region.any():
+        return region
+    outside = (~region).view(np.uint8)
+    dist = cv2.distanceTransform(outside, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+    return region | (seeds & (dist <= by_px + 0.5))
 
 
 def _components(mask: np.ndarray) -> np.ndarray:

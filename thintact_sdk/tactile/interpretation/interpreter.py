@@ -96,6 +96,10 @@ class TactileInterpreter:
                 f"the tactile calibration's gradient network works on a {lut.net.shape[0]}×"
                 f"{lut.net.shape[1]} grid, profile {profile.name!r} on {self.work.rows}×"
                 f"{self.work.cols}: run `thintact calibrate-tactile --profile {profile.name}`")
+        self.contact_rim_mm = float(lut.meta.get("contact_rim_mm", 0.0)) if lut is not None else 0.0
+        """How far (mm) contact regions are grown past the curvature's sign change: the
+        calibration's ``contact_rim_mm`` (how far the sensor's smoothing moves it inside the
+        rim; :mod:`~thintact_sdk.tactile.interpretation.contact_region`), 0 without one."""
         self.smooth_px = smooth_px
         self.marker_threshold = marker_threshold
         self.min_contact_area_mm2 = min_contact_area_mm2
@@ -200,13 +204,13 @@ class TactileInterpreter:
     def contact(self, depth_mm: np.ndarray) -> tuple[bool, float, np.ndarray]:
         """``(contact, area_mm2, mask)`` of a depth map on the full grid (``N × M`` mm): the
         contact region of :func:`~thintact_sdk.tactile.interpretation.contact_region.contact_region`
-        (where the membrane wraps the object, its skirt left out), contact when it covers at
-        least ``min_contact_area_mm2``."""
+        (where the membrane wraps the object, its skirt left out; grown by
+        :attr:`contact_rim_mm`), contact when it covers at least ``min_contact_area_mm2``."""
         return self._contact(depth_mm, self.params.mm_per_px)
 
     def _contact(self, depth_mm: np.ndarray, mm_per_px: float) -> tuple[bool, float, np.ndarray]:
         mask = contact_region(depth_mm, mm_per_px, self.params.contact_threshold_mm,
-                              self.work.mm_per_px)
+                              self.work.mm_per_px, self.contact_rim_mm)
         area = float(mask.sum()) * mm_per_px**2
         return area >= self.min_contact_area_mm2, area, mask
 

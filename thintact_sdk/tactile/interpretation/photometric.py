@@ -23,6 +23,9 @@ from thintact_sdk.formats.safe_arrays import read_npz
 from thintact_sdk.tactile.interpretation.gradient_model import ConvGradient, MLPGradient
 
 LUT_FORMAT = "thintact-tactile-lut/1"
+MAX_META_MM = 100.0
+"""Largest length (mm) a table's metadata may give (``work_mm_per_px``, ``contact_rim_mm``):
+far beyond any tactile sensor's field."""
 NETWORKS: dict[str, type[MLPGradient] | type[ConvGradient]] = {
     net.kind: net for net in (MLPGradient, ConvGradient)}
 """``gradient_model`` names of the networks a LUT file can name, and their classes."""
@@ -147,6 +150,8 @@ class PhotometricLUT:
                 )
         if table.ndim != 4 or table.shape[3] != 2 or len(set(table.shape[:3])) != 1:
             raise CalibrationError(f"{p}: table shape {table.shape} is not B×B×B×2")
+        for key, positive in (("work_mm_per_px", True), ("contact_rim_mm", False)):
+            _check_length(meta, key, positive, mp)
         net = None
         choice = meta.get("gradient_model", "lut")
         if not isinstance(choice, str):
@@ -162,6 +167,19 @@ class PhotometricLUT:
             raise CalibrationError(f"{mp}: gradient_model {choice!r}, this SDK reads 'lut', "
                                    f"{', '.join(repr(k) for k in NETWORKS)}")
         return cls(lo, hi, table.astype(np.float32), counts.astype(np.float32), meta, net)
+
+
+def _check_length(meta: dict[str, Any], key: str, positive: bool, where: Path) -> None:
+    """Raise CalibrationError naming ``where`` and ``key`` unless ``meta[key]`` (when present)
+    is a finite number of mm in ``[0, MAX_META_MM]`` (``> 0`` when ``positive``)."""
+    if key not in meta:
+        return
+    v = meta[key]
+    ok = isinstance(v, int | float) and not isinstance(v, bool) and bool(np.isfinite(v))
+    if not (ok and (v > 0 if positive else v >= 0) and v <= MAX_META_MM):
+        low = "over 0" if positive else "from 0"
+        raise CalibrationError(
+            f"{where}: {key} must be a number of mm {low} to {MAX_META_MM:g}, not {v!r}")
 
 
 def net_path(lut_path: str | Path, kind: str = "mlp") -> Path:

@@ -106,7 +106,9 @@ def _report(lut: Any, profile: Any, target: Path) -> int:
         print(f"press {entry['press']}: circle at (row {entry['centre_rc'][0]:.1f}, col "
               f"{entry['centre_rc'][1]:.1f}) px, radius {entry['circle_radius_mm']:.2f} mm; "
               f"fitted press {entry['press_mm']:.2f} mm, contact radius "
-              f"{entry['contact_radius_mm']:.2f} mm")
+              f"{entry['contact_radius_mm']:.2f} mm"
+              + (f", contact read {entry['contact_rim_mm']:.2f} mm inside it"
+                 if entry.get("contact_rim_mm") is not None else ""))
         for w in entry["warnings"]:
             print(f"  warning: {w}")
     bm = lut.meta.get("ball_model")
@@ -117,6 +119,10 @@ def _report(lut: Any, profile: Any, target: Path) -> int:
         scores = ", ".join(f"{name(c)} {c['score']:.3f}" for c in bm["candidates"])
         print(f"ball model {name(bm)}: validation presses {bm['validation_presses']}, "
               f"score |sphere/R - 1|, |contact ratio - 1|: {scores}")
+    rim = lut.meta.get("contact_rim_mm")
+    if rim is not None:
+        print(f"contact regions grown by {rim:.3f} mm: how far inside the rim of the taught "
+              "presses the curvature's sign change reads (median over the presses)")
     val = lut.meta.get("validation")
     if val:
         print(f"gradient model {lut.meta.get('gradient_model')}: validation presses "

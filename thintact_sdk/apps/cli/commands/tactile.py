@@ -172,6 +172,8 @@ def _print_evaluation(res: dict[str, Any], radius: float) -> None:
         skirt = f", skirt length {bm['skirt_length_mm']:.2f} mm" if bm.get("skirt_length_mm") else ""
         how = f" ({bm['chosen_by']})" if bm.get("chosen_by") else ""
         print(f"ball model: {bm['model']}{skirt}{how}")
+    if res.get("contact_rim_mm") is not None:
+        print(f"contact regions grown by {res['contact_rim_mm']:.3f} mm (the calibration's rim)")
     val = res["validation"]
     chosen = res["gradient_model"]
     if val:
