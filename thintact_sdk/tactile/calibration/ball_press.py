@@ -412,7 +412,9 @@ def calibrate_from_presses(
         presses alone: a table calibrated on all presses but every fourth, with each
         candidate, reconstructs the held-out fourth, scored by the annotation-free figures
         of :mod:`~thintact_sdk.tactile.calibration.ball_eval`,
-        ``√((sphere/R − 1)² + (contact ratio − 1)²)`` (medians); the lowest score wins.
+        ``√((sphere/R − 1)² + (contact ratio − 1)²)`` (medians; the contact region not
+        grown: the growth, ``meta["contact_rim_mm"]``, is measured on the chosen model
+        afterwards); the lowest score wins.
         ``"sink-in"`` chooses the skirt length the same way among the sink-in candidates.
         Fewer than :data:`MIN_PRESSES_TO_CHOOSE_BALL` presses: the rigid cap (``"auto"``)
         or the middle candidate length (``"sink-in"``). Stored as ``meta["ball_model"]``
