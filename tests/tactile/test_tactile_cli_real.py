@@ -230,6 +230,12 @@ def test_calibrate_tactile_prints_the_press_report(tmp_path, capsys):
     assert "press 3: circle at" in text.out and "reconstructed" in text.err
     meta = json.loads(out.with_suffix(".json").read_text())
     assert meta["gradient_model"] == "lut" and len(meta["press_report"]) == 4
+    # the contact rim each press's taught shape shows, and their median, stored and printed
+    rims = [e["contact_rim_mm"] for e in meta["press_report"]]
+    assert all(r is not None for r in rims)
+    assert meta["contact_rim_mm"] == pytest.approx(max(0.0, float(np.median(rims))), abs=1e-4)
+    assert f"contact regions grown by {meta['contact_rim_mm']:.3f} mm" in text.out
+    assert text.out.count(" mm inside it") + text.out.count(" mm outside it") == 4
 
 
 @settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])

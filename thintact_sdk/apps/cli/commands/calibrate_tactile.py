@@ -98,6 +98,13 @@ def run(args: argparse.Namespace) -> int:
     return _report(lut, profile, target)
 
 
+def _rim_words(rim: float | None) -> str:
+    """Where the contact measure reads one press's contact, against the model's rim."""
+    if rim is None:
+        return ""
+    return f", contact read {abs(rim):.2f} mm {'inside' if rim >= 0 else 'outside'} it"
+
+
 def _report(lut: Any, profile: Any, target: Path) -> int:
     """Save the LUT, print the per-press report (warnings first) and the summary."""
     from thintact_sdk.tactile.interpretation.gradient_model import describe_validation
@@ -107,8 +114,7 @@ def _report(lut: Any, profile: Any, target: Path) -> int:
               f"{entry['centre_rc'][1]:.1f}) px, radius {entry['circle_radius_mm']:.2f} mm; "
               f"fitted press {entry['press_mm']:.2f} mm, contact radius "
               f"{entry['contact_radius_mm']:.2f} mm"
-              + (f", contact read {entry['contact_rim_mm']:.2f} mm inside it"
-                 if entry.get("contact_rim_mm") is not None else ""))
+              + _rim_words(entry.get("contact_rim_mm")))
         for w in entry["warnings"]:
             print(f"  warning: {w}")
     bm = lut.meta.get("ball_model")
