@@ -314,3 +314,24 @@ def test_backends_are_judged_at_the_probes_best_tau_whatever_tau_they_are_built_
 def _decode(decoder: Decoder, tau: float, probe) -> np.ndarray:  # type: ignore[no-untyped-def]
     decoder.set_tau(tau)  # type: ignore[attr-defined]
     return decoder.decode(probe.raw.astype(np.float32) - np.float32(probe.black_dn))
+
+
+def test_a_float64_candidate_is_the_reference_itself_not_built_or_scored_again() -> None:
+    from thintact_sdk.reconstruction.decoders.backend_candidates import BackendSpec
+    from thintact_sdk.reconstruction.decoders.backend_selection import measure_backends
+
+    sm = _operator()
+    probes = make_probes(sm, load_profile("virtual-mini").noise)
+    built: list[str] = []
+
+    def build(xp: ArrayBackend) -> Decoder:
+        built.append(repr(xp))
+        return T2SClosedFormDecoder(sm, 200.0, xp)
+
+    specs = [BackendSpec("numpy", dtype="float64", gemm_dtype="float64"),
+             BackendSpec("numpy", dtype="float32")]
+    measured, cost, failed, decoders = measure_backends(build, probes, specs, repeats=1)
+    assert not failed and set(measured) == {s.key for s in specs}
+    assert len(built) == 2  # the reference and the float32 candidate, nothing twice
+    assert cost[specs[0].key] == 0.0 and cost[specs[1].key] < 0.1
+    assert decoders[specs[0].key].channel_tau == pytest.approx(200.0)  # type: ignore[attr-defined]

@@ -26,7 +26,6 @@ import numpy as np
 
 from thintact_sdk.formats.profiles import NoiseSpec
 from thintact_sdk.interfaces import Decoder, DecoderInput
-from thintact_sdk.reconstruction.decoders.backend import ArrayBackend
 from thintact_sdk.reconstruction.decoders.backend_cache import BackendCache
 from thintact_sdk.reconstruction.decoders.backend_candidates import BackendSpec
 from thintact_sdk.reconstruction.metrics import psnr
@@ -224,9 +223,13 @@ def measure_backends(
     ``build(backend)`` makes the decoder (``build(backend, sensor_bin)`` a binned one); the
     reference is ``build`` on numpy float64, unbinned. Every candidate is scored and timed at
     the reference's :func:`probe_tau` (where the decoder can change τ) and handed back at the
-    τ it was built with.
+    τ it was built with. A spec that is the reference itself (numpy float64, unbinned) is
+    timed on the reference decoder and costs 0 dB, neither built nor scored twice.
     """
-    ref_decoder = build(ArrayBackend("numpy", "float64"))
+    ref_spec = BackendSpec("numpy", "cpu", "float64", "float64", 1)
+    ref_decoder = build(ref_spec.make())
+    # probe_tau leaves the reference at the τ it finds; it is handed back at its own
+    ref_own = _own_tau(ref_decoder) if hasattr(ref_decoder, "tau") else None
     tau = probe_tau(ref_decoder, probes)
     reference = _scores(ref_decoder, probes)
     measured: dict[str, float] = {}
@@ -235,13 +238,15 @@ def measure_backends(
     decoders: dict[str, Decoder] = {}
     for spec in specs:
         try:
-            decoder = build_for(build, spec)
-            own = None if tau is None else _own_tau(decoder)
+            is_ref = spec == ref_spec
+            decoder = ref_decoder if is_ref else build_for(build, spec)
+            own = None if tau is None else ref_own if is_ref else _own_tau(decoder)
             if tau is not None:
                 decoder.set_tau(tau)  # type: ignore[attr-defined]
             give_up = 3.0 * min(measured.values()) if measured else np.inf
             measured[spec.key] = _time_ms(_decode_fn(decoder, probes[0]), repeats, give_up)
-            cost[spec.key] = float(max(r - s for r, s in zip(reference, _scores(decoder, probes), strict=True)))
+            cost[spec.key] = 0.0 if is_ref else float(max(
+                r - s for r, s in zip(reference, _scores(decoder, probes), strict=True)))
             if own is not None:
                 decoder.set_tau(own)  # type: ignore[attr-defined]
             decoders[spec.key] = decoder
