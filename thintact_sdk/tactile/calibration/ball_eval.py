@@ -46,7 +46,7 @@ import numpy as np
 from scipy.ndimage import label
 from scipy.optimize import least_squares
 
-from thintact_sdk.tactile.interpretation.contact_region import contact_region
+from thintact_sdk.tactile.interpretation.contact_region import contact_region, grown
 from thintact_sdk.tactile.interpretation.grid import TactileParams
 
 CORE_FRACTION = 0.5
@@ -264,9 +264,10 @@ def press_figures(
     sphere, _ = fit_sphere(d, mm_per_px)
     # the ball's surface: where the membrane curves as the ball does (the region before its
     # growth, whose rim band the elastomer smooths away from the ball); the contact: grown
-    surface = _holding_peak(contact_region(d, mm_per_px, contact_threshold_mm, smooth_mm), d)
-    contact = (_holding_peak(contact_region(d, mm_per_px, contact_threshold_mm, smooth_mm,
-                                            rim_mm), d) if rim_mm > 0 else surface)
+    region = contact_region(d, mm_per_px, contact_threshold_mm, smooth_mm)
+    surface = _holding_peak(region, d)
+    contact = (_holding_peak(grown(region, d, mm_per_px, contact_threshold_mm, rim_mm), d)
+               if rim_mm > 0 else surface)
     contact_r = _contact_radius_mm(contact, mm_per_px)
     surface_r = _contact_radius_mm(surface, mm_per_px)
     skirt_r = _equivalent_radius_mm(_holding_peak(d > contact_threshold_mm, d), mm_per_px)

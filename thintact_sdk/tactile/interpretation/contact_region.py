@@ -19,13 +19,13 @@ curvature changes sign. So the contact region is
    concave speckle of noise and drift beside a contact holds no such point),
 3. with their holes filled: the flat face of a punch has no curvature inside its
    concave rim; a rim cut by the frame's edge counts as closed where the depth at the edge
-   is over the contact threshold.
+   is over the contact threshold,
+4. grown by ``rim_mm`` into the pixels deeper than the contact threshold
+   (:func:`grown`): the device's calibration says how far its own smoothing moves the sign
+   change inside the rim.
 
 A region deeper than the threshold whose deepest point is not concave (no curvature
 resolved there) counts whole.
-
-4. grown by ``rim_mm`` into the pixels deeper than the contact threshold: the device's
-   calibration says how far its own smoothing moves the sign change inside the rim.
 
 No parameter is fitted here: the smoothing scale is the reconstruction's own pixel and the
 sign change needs no level. Smoothing moves the sign change inwards: a kink of the surface at
@@ -35,10 +35,11 @@ about a smoothing width inside the rim. How far depends on the sensor's smoothin
 optics, reconstruction) and the object, so it is the calibration's: ``calibrate-tactile``
 measures it on the shape its ball model teaches the sensor, at the calibration presses
 (``contact_rim_mm`` in the calibration's metadata,
-:func:`~thintact_sdk.tactile.calibration.ball_press.contact_rim_offset`). For a membrane under tension on an elastic foundation (a gel on
-glass) a negative Laplacian means an outside pressure pushes it there, i.e. contact; where
-the object's face is flat the pressure is held by the foundation alone, hence the filled
-holes.
+:func:`~thintact_sdk.tactile.calibration.ball_press.contact_rim_offset`).
+
+For a membrane under tension on an elastic foundation (a gel on glass) a negative Laplacian
+means an outside pressure pushes it there, i.e. contact; where the object's face is flat the
+pressure is held by the foundation alone, hence the filled holes.
 """
 
 from __future__ import annotations
@@ -94,19 +95,21 @@ def contact_region(depth_mm: np.ndarray, mm_per_px: float, threshold_mm: float,
     # no curvature resolved at its deepest point: the region counts whole (every peak lies
     # in a region, so label 0, outside them all, is never set)
     whole[seed_labels.ravel()[peaks[at_peak == 0]]] = True
-    region = _filled(keep[labels], seeds) | whole[seed_labels]
-    return _grown(region, seeds, rim_mm / mm_per_px) if rim_mm > 0 else region
+    return grown(_filled(keep[labels], seeds) | whole[seed_labels], d, mm_per_px, threshold_mm,
+                 rim_mm)
 
 
-def _grown(region: np.ndarray, seeds: np.ndarray, by_px: float) -> np.ndarray:
-    """``region`` and the pixels of ``seeds`` whose centres lie within ``by_px`` pixels of
-    its boundary, which is half a pixel beyond its outermost pixels' centres (Euclidean
-    distance between pixel centres up to ``by_px + 0.5``)."""
-    if not region.any():
+def grown(region: np.ndarray, depth_mm: np.ndarray, mm_per_px: float, threshold_mm: float,
+          rim_mm: float) -> np.ndarray:
+    """``region`` (``N × M`` bool) and the pixels deeper than ``threshold_mm`` whose centres
+    lie within ``rim_mm`` of its boundary, which is half a pixel beyond its outermost pixels'
+    centres (Euclidean distance between pixel centres up to ``rim_mm / mm_per_px + 0.5``
+    pixels). ``region`` itself when ``rim_mm`` ≤ 0 or it is empty."""
+    if rim_mm <= 0 or not region.any():
         return region
     outside = (~region).view(np.uint8)
     dist = cv2.distanceTransform(outside, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
-    return region | (seeds & (dist <= by_px + 0.5))
+    return region | ((np.asarray(depth_mm) > threshold_mm) & (dist <= rim_mm / mm_per_px + 0.5))
 
 
 def _components(mask: np.ndarray) -> np.ndarray:
