@@ -202,3 +202,28 @@ def test_auto_compares_three_models_and_stores_the_best(tmp_path):
     with pytest.raises(CalibrationError, match="cnn"):
         calibrate_from_presses(profile, image[0], [BallPress(image[0], gx[0], gy[0])],
                                model="convnet")
+
+
+@pytest.mark.parametrize("shape,crop", [((320, 427), 64), ((120, 160), 64), ((40, 30), 64),
+                                        ((70, 64), 64)])
+def test_crops_count_every_pixel_alike_edges_included(shape, crop):
+    """The chance that a training crop covers a pixel, times the pixel's weight, is the same
+    everywhere: a pixel on the frame's edge counts as much as one in the middle (crops drawn
+    uniformly inside the grid cover the edge ``crop`` times less often)."""
+    from thintact_sdk.tactile.interpretation.gradient_model import _crop_plan
+
+    ch, cw = min(crop, shape[0]), min(crop, shape[1])
+    rows_from, cols_from, weight = _crop_plan(shape, ch, cw)
+    assert rows_from.min() == 0 and rows_from.max() == shape[0] - ch
+    assert cols_from.min() == 0 and cols_from.max() == shape[1] - cw
+    chance = np.zeros(shape)
+    for r0 in np.unique(rows_from):
+        for c0 in np.unique(cols_from):
+            p = np.mean(rows_from == r0) * np.mean(cols_from == c0)
+            chance[r0:r0 + ch, c0:c0 + cw] += p
+    np.testing.assert_allclose(chance * weight, ch * cw / (shape[0] * shape[1]), rtol=1e-5)
+    # every pixel is covered at least as often as a crop's own share of the origins, the
+    # corner included (drawing origins inside the grid covers a corner crop² times less)
+    least = float(np.prod([1.0 if c == n else c / (n + c - 1)  # a whole-axis crop covers all
+                           for n, c in zip(shape, (ch, cw), strict=True)]))
+    assert chance.min() == pytest.approx(least) and chance[0, 0] == pytest.approx(least)

@@ -381,6 +381,35 @@ class ConvGradient(_PixelNetwork):
         return cls(w, dil, (shape[0], shape[1]), dict(meta or {}))
 
 
+def _crop_plan(shape: tuple[int, int], ch: int, cw: int
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Where :func:`train_cnn` draws its crops and how it weights their pixels.
+
+    Crop origins are drawn uniformly from ``-crop + 1`` to the grid's last pixel and moved
+    inside the grid, so a crop reaches the edge as often as the middle; a pixel's weight is
+    the inverse of the chance that a crop covers it (per axis, the chances multiply),
+    scaled so that it is ``ch·cw / (rows·cols)`` over that chance: every pixel then counts
+    alike in expectation.
+
+    Returns
+    -------
+    tuple of numpy.ndarray
+        The row origins and the column origins to draw from (uniformly, with repeats), and
+        the ``rows × cols`` float32 weights.
+    """
+    def axis(n: int, c: int) -> tuple[np.ndarray, np.ndarray]:
+        starts = np.clip(np.arange(-c + 1, n), 0, n - c)
+        edges = np.zeros(n + 1)
+        np.add.at(edges, starts, 1.0)
+        np.add.at(edges, starts + c, -1.0)
+        chance = np.cumsum(edges[:-1]) / len(starts)
+        return starts, c / (n * chance)
+
+    rows_from, wr = axis(shape[0], ch)
+    cols_from, wc = axis(shape[1], cw)
+    return rows_from, cols_from, np.outer(wr, wc).astype(np.float32)
+
+
 def train_cnn(
     changes: list[np.ndarray],
     images: list[np.ndarray],
@@ -409,7 +438,11 @@ def train_cnn(
     steps, crop, batch
         Adam steps (learning rate 3e-3 decayed ×0.1 by the end), each on ``batch`` crops of
         ``crop × crop`` pixels (the whole grid when smaller) at one random place in random
-        presses; the loss is the squared slope error over the crops' trusted pixels.
+        presses; the loss is the squared slope error over the crops' trusted pixels, each
+        weighted by the inverse of how often a crop covers it (:func:`_crop_plan`), so
+        every pixel of the grid counts alike in expectation (a crop drawn uniformly inside
+        the grid covers a pixel on its edge ``crop`` times less often than one in the
+        middle, and the network would learn the gel's periphery from few presses).
     seed, threads
         As :func:`train_mlp` (deterministic for a seed and thread count; one thread).
     progress
@@ -428,6 +461,9 @@ def train_cnn(
     ty = torch.from_numpy(np.ascontiguousarray(y.transpose(0, 3, 1, 2).astype(np.float32)))
     tm = torch.from_numpy(m)
     ch, cw = min(crop, shape[0]), min(crop, shape[1])
+    rows_from, cols_from, weight = _crop_plan(shape, ch, cw)
+    tw = torch.from_numpy(weight)
+    norm = float(batch * ch * cw * m.mean())  # the trusted pixels a batch holds on average
     with _torch_threads(threads):
         gen = torch.Generator().manual_seed(seed)
         torch.manual_seed(seed)
@@ -444,12 +480,12 @@ def train_cnn(
         every = max(1, steps // 10)
         for s in range(steps):
             idx = torch.randint(0, len(tx), (batch,), generator=gen)
-            r0 = int(torch.randint(0, shape[0] - ch + 1, (1,), generator=gen))
-            c0 = int(torch.randint(0, shape[1] - cw + 1, (1,), generator=gen))
+            r0 = int(rows_from[int(torch.randint(0, len(rows_from), (1,), generator=gen))])
+            c0 = int(cols_from[int(torch.randint(0, len(cols_from), (1,), generator=gen))])
             sl = (idx, slice(None), slice(r0, r0 + ch), slice(c0, c0 + cw))
-            mb = tm[idx, r0 : r0 + ch, c0 : c0 + cw]
+            mb = tm[idx, r0 : r0 + ch, c0 : c0 + cw] * tw[r0 : r0 + ch, c0 : c0 + cw]
             err = ((net(tx[sl]) - ty[sl]) ** 2).sum(1)
-            loss = (err * mb).sum() / mb.sum().clamp(min=1.0)
+            loss = (err * mb).sum() / max(norm, 1.0)
             opt.zero_grad()
             loss.backward()
             opt.step()
