@@ -13,8 +13,8 @@ import pytest
 
 from thintact_sdk.errors import CalibrationError
 from thintact_sdk.tactile.calibration.ball_eval import (
-    contact_radius_mm,
     contact_radius_of_press,
+    read_contact_radius_mm,
 )
 from thintact_sdk.tactile.calibration.ball_press import RIGID, BallModel, contact_rim_offset
 from thintact_sdk.tactile.interpretation.contact_region import contact_region
@@ -28,7 +28,7 @@ CENTRE = (49.3, 60.6)
 
 
 def _read(depth: np.ndarray, rim_mm: float) -> float:
-    return contact_radius_mm(contact_region(depth, MM, 0.1, MM, rim_mm), depth, MM)
+    return read_contact_radius_mm(depth, MM, 0.1, MM, rim_mm)
 
 
 @pytest.mark.parametrize("sigma_mm", [0.15, 0.3])

@@ -167,9 +167,13 @@ def _equivalent_radius_mm(region: np.ndarray, mm_per_px: float) -> float:
     return float(np.sqrt(float(np.count_nonzero(region)) / np.pi)) * mm_per_px
 
 
-def contact_radius_mm(region: np.ndarray, depth_mm: np.ndarray, mm_per_px: float) -> float:
-    """Radius (mm) of the part of the contact ``region`` that holds the deepest pixel of
-    ``depth_mm`` (:func:`_contact_radius_mm`; 0 when the deepest pixel is outside it)."""
+def read_contact_radius_mm(depth_mm: np.ndarray, mm_per_px: float, threshold_mm: float,
+                           smooth_mm: float, rim_mm: float = 0.0) -> float:
+    """Radius (mm) the contact measure reads on ``depth_mm``: of the part of its contact
+    region (:func:`~thintact_sdk.tactile.interpretation.contact_region.contact_region`,
+    grown by ``rim_mm``) that holds the deepest pixel (:func:`_contact_radius_mm`; 0 when
+    the deepest pixel is outside it)."""
+    region = contact_region(depth_mm, mm_per_px, threshold_mm, smooth_mm, rim_mm)
     return _contact_radius_mm(_holding_peak(region, depth_mm), mm_per_px)
 
 
@@ -339,8 +343,8 @@ def _contact_ratio(depth_mm: np.ndarray, radius_mm: float, mm_per_px: float,
     expected = contact_radius_of_press(radius_mm, float(depth_mm.max()))
     if expected <= 0:
         return float("nan")
-    region = contact_region(depth_mm, mm_per_px, threshold_mm, smooth_mm, rim_mm)
-    return contact_radius_mm(region, depth_mm, mm_per_px) / expected
+    return read_contact_radius_mm(depth_mm, mm_per_px, threshold_mm, smooth_mm,
+                                  rim_mm) / expected
 
 
 def taught_contact_ratio(model: TaughtShape, shape: tuple[int, int],

@@ -24,12 +24,11 @@ from scipy.special import k0e, k1e
 from thintact_sdk.errors import CalibrationError
 from thintact_sdk.formats.profiles import Profile
 from thintact_sdk.tactile.calibration.ball_eval import (
-    contact_radius_mm,
     contact_radius_of_press,
+    read_contact_radius_mm,
     rim_circle,
 )
 from thintact_sdk.tactile.interpretation.colour_change import colour_change, fill_masked
-from thintact_sdk.tactile.interpretation.contact_region import contact_region
 from thintact_sdk.tactile.interpretation.gradient_model import GRADIENT_MODELS
 from thintact_sdk.tactile.interpretation.grid import (
     TactileParams,
@@ -554,8 +553,7 @@ def _rim_offset(depth_mm: np.ndarray, true_radius_mm: float, params: TactilePara
     """``true_radius_mm`` minus the radius the contact measure reads on ``depth_mm`` (on
     ``params``'s grid; None when either is 0)."""
     mm = params.mm_per_px
-    region = contact_region(depth_mm, mm, params.contact_threshold_mm, mm)
-    read = contact_radius_mm(region, depth_mm, mm)
+    read = read_contact_radius_mm(depth_mm, mm, params.contact_threshold_mm, mm)
     if not (true_radius_mm > 0 and read > 0):
         return None
     return float(true_radius_mm - read)
