@@ -1,5 +1,6 @@
-"""The convolutional gradient model (issue 29 item 3): numpy inference equal to the torch
-network it was trained as, files read without trusting them, stored beside the LUT, and it
+"""The convolutional gradient model (issue 29 item 3): inference equal to the torch network
+it was trained as and to the layers' definition, on one kernel thread where a stream holds
+them, files read without trusting them, stored beside the LUT, and it
 reads slopes that a per-pixel model cannot tell apart."""
 
 from __future__ import annotations
@@ -51,7 +52,18 @@ def _small_net(steps=30):
                      crop=32), change[0], image[0]
 
 
-def test_numpy_inference_is_the_torch_network():
+def _direct_conv3(h, w, b, d):
+    """The dilated 3 × 3 cross-correlation by its definition, edges replicated."""
+    n, m = h.shape[:2]
+    p = np.pad(h, ((d, d), (d, d), (0, 0)), mode="edge").astype(np.float64)
+    out = np.broadcast_to(b.astype(np.float64), (n, m, w.shape[-1])).copy()
+    for i in range(3):
+        for j in range(3):
+            out += p[i * d:i * d + n, j * d:j * d + m] @ w[i, j].astype(np.float64)
+    return out
+
+
+def test_inference_is_the_torch_network_it_was_trained_as():
     import torch
 
     net, change, image = _small_net()
@@ -74,6 +86,42 @@ def test_numpy_inference_is_the_torch_network():
     got = net._forward(change, image)
     assert float(np.abs(want).max()) > 1e-3
     np.testing.assert_allclose(got, want, atol=1e-5)
+    # and the layers' definition, in float64 numpy
+    h = mlp_inputs(change, image)
+    for k, d in enumerate(net.dilations):
+        h = np.tanh(_direct_conv3(h, net.weights[f"w{k}"], net.weights[f"b{k}"], d))
+    direct = h @ net.weights[f"w{n}"] + net.weights[f"b{n}"]
+    np.testing.assert_allclose(got, direct, atol=1e-5)
+    assert got.dtype == np.float32 and got.shape == change.shape[:2] + (2,)
+
+
+def test_inference_takes_one_kernel_thread_where_a_stream_holds_them():
+    import threading
+
+    import torch
+
+    from thintact_sdk.host.compute_threads import single_threaded_kernels
+
+    net, change, image = _small_net()
+    seen: dict[str, int] = {}
+
+    def run(key):
+        torch.set_num_threads(2)
+        net._forward(change, image)
+        seen[key] = torch.get_num_threads()
+
+    before = torch.get_num_threads()
+    try:
+        worker = threading.Thread(target=run, args=("free",))
+        worker.start()
+        worker.join()
+        with single_threaded_kernels():
+            worker = threading.Thread(target=run, args=("held",))
+            worker.start()
+            worker.join()
+    finally:
+        torch.set_num_threads(before)
+    assert seen == {"free": 2, "held": 1}
 
 
 def test_round_trip_flat_reference_and_grid(tmp_path):
@@ -88,6 +136,25 @@ def test_round_trip_flat_reference_and_grid(tmp_path):
     with pytest.raises(CalibrationError, match="working grid"):
         back.predict(change[:-1], image[:-1])
 
+
+def test_a_stream_runs_the_network_once_per_frame():
+    """The interpreter hands the network ``background + change``; its no-contact answer is
+    reused although ``(background + change) - change`` rounds off the background, and
+    recomputed for another reference frame."""
+    net, change, image = _small_net()
+    background = (image - change).astype(np.float32)
+    calls = []
+    forward = net._forward
+    net._forward = lambda c, i: calls.append(1) or forward(c, i)  # type: ignore[method-assign]
+    rng = np.random.default_rng(1)
+    for _ in range(4):
+        frame_change = (change * rng.uniform(0.5, 1.5)).astype(np.float32)
+        colour = background + frame_change
+        assert float(np.abs((colour - frame_change) - background).max()) > 0  # it does round
+        net.predict(frame_change, colour)
+    assert len(calls) == 4 + 1  # one per frame, one for the background
+    net.predict(change, background + 4e-3 + change)  # the next reference frame: an 8-bit step
+    assert len(calls) == 5 + 2
 
 def _write(p, **arrays):
     np.savez(p, **arrays)
