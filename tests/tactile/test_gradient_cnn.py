@@ -294,3 +294,32 @@ def test_crops_count_every_pixel_alike_edges_included(shape, crop):
     least = float(np.prod([1.0 if c == n else c / (n + c - 1)  # a whole-axis crop covers all
                            for n, c in zip(shape, (ch, cw), strict=True)]))
     assert chance.min() == pytest.approx(least) and chance[0, 0] == pytest.approx(least)
+
+
+@pytest.mark.parametrize("kind", ["mlp", "cnn"])
+def test_a_network_wider_than_any_calibration_makes_is_refused(tmp_path, kind):
+    """A file declaring a 300-channel layer would make every frame allocate rows × cols × 300
+    floats: refused when the calibration is read, naming the file."""
+    from thintact_sdk.tactile.interpretation.gradient_model import MAX_WIDTH, MLPGradient
+
+    wide = MAX_WIDTH + 44
+    p = tmp_path / f"{kind}.npz"
+    if kind == "mlp":
+        np.savez_compressed(p, w0=np.zeros((8, wide), np.float32), b0=np.zeros(wide, np.float32),
+                            w1=np.zeros((wide, wide), np.float32), b1=np.zeros(wide, np.float32),
+                            w2=np.zeros((wide, 2), np.float32), b2=np.zeros(2, np.float32),
+                            shape=np.array([4, 4]))
+        loader = MLPGradient.load
+    else:
+        np.savez_compressed(p, w0=np.zeros((3, 3, 8, wide), np.float32), b0=np.zeros(wide, np.float32),
+                            w1=np.zeros((wide, 2), np.float32), b1=np.zeros(2, np.float32),
+                            dilations=np.array([1]), shape=np.array([4, 4]))
+        loader = ConvGradient.load
+    with pytest.raises(CalibrationError, match=rf"{kind}\.npz: a layer of {wide} channels"):
+        loader(p)
+    # the widest allowed still loads
+    if kind == "cnn":
+        np.savez_compressed(p, w0=np.zeros((3, 3, 8, MAX_WIDTH), np.float32),
+                            b0=np.zeros(MAX_WIDTH, np.float32), w1=np.zeros((MAX_WIDTH, 2), np.float32),
+                            b1=np.zeros(2, np.float32), dilations=np.array([1]), shape=np.array([4, 4]))
+        assert ConvGradient.load(p).weights["w0"].shape[-1] == MAX_WIDTH

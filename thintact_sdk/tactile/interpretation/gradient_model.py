@@ -182,9 +182,24 @@ class MLPGradient(_PixelNetwork):
             raise CalibrationError(
                 f"{path}: not a {MLP_FORMAT} network (layers {', '.join(bad) or 'ok'}, "
                 f"shape {shape})")
+        _check_width(path, hidden)
         if not all(np.isfinite(a).all() for a in w.values()):
             raise CalibrationError(f"{path}: the network holds non-finite weights")
         return cls(w, (shape[0], shape[1]), dict(meta or {}))
+
+
+MAX_WIDTH = 256
+"""Most channels (hidden units) a layer of a stored network may have. The shipped
+architectures use 16-32; a frame's activations are ``rows × cols × width`` float32, so a file
+declaring a much wider layer would make every frame allocate gigabytes."""
+
+
+def _check_width(path: str | Path, width: int) -> None:
+    """CalibrationError naming the file when a layer is wider than :data:`MAX_WIDTH`."""
+    if width > MAX_WIDTH:
+        raise CalibrationError(
+            f"{path}: a layer of {width} channels (at most {MAX_WIDTH}): every frame would hold "
+            f"{width} float32 values per pixel; recalibrate the device")
 
 
 def _one_grid(changes: list[np.ndarray]) -> tuple[int, int]:
@@ -390,6 +405,8 @@ class ConvGradient(_PixelNetwork):
             cout = w[f"b{k}"].shape[0] if w[f"b{k}"].ndim == 1 else -1
             if w[f"w{k}"].shape != (3, 3, cin, cout) or cout < 1:
                 bad.append(f"w{k}/b{k}")
+            else:
+                _check_width(path, cout)
             cin = max(cout, 1)
         if w[f"w{n}"].shape != (cin, 2) or w[f"b{n}"].shape != (2,):
             bad.append(f"w{n}/b{n}")
