@@ -460,6 +460,13 @@ def test_reader_names_a_missing_member_and_a_non_array_member(tmp_path: Path) ->
     np.testing.assert_array_equal(read_npz(p, members=("a",))["a"], np.arange(3))
 
 
+def test_reader_names_a_path_the_file_system_cannot_take(tmp_path: Path) -> None:
+    """A name longer than the file system allows (ENAMETOOLONG from the first look at it)
+    is the reader's error naming the path, not an OSError from inside pathlib."""
+    with pytest.raises(ArrayFileError, match="cannot read press pack .*bbbb"):
+        read_npz(tmp_path / ("b" * 4000 + ".npz"), what="press pack")
+
+
 def _npy(arr: np.ndarray) -> bytes:
     buf = io.BytesIO()
     np.save(buf, arr, allow_pickle=arr.dtype.hasobject)

@@ -234,10 +234,13 @@ def test_lut_stores_the_chosen_network_beside_it(tmp_path):
     net_path(p).unlink()
     with pytest.raises(CalibrationError, match="lut.mlp.npz"):
         PhotometricLUT.load(p)
-    meta["mlp_file"] = "../elsewhere.npz"
-    p.with_suffix(".json").write_text(json.dumps(meta))
-    with pytest.raises(CalibrationError, match="beside"):
-        PhotometricLUT.load(p)
+    # a path elsewhere, nothing, the directory itself or its parent, a NUL byte, a name longer
+    # than a file system takes, not a string: one error naming the JSON and the field
+    for name in ("../elsewhere.npz", "", ".", "..", "lut.mlp.npz\x00x", "a" * 5000, 5, None):
+        meta["mlp_file"] = name
+        p.with_suffix(".json").write_text(json.dumps(meta))
+        with pytest.raises(CalibrationError, match=r"lut\.json: mlp_file .* beside"):
+            PhotometricLUT.load(p)
     meta["gradient_model"] = "pickle"
     p.with_suffix(".json").write_text(json.dumps(meta))
     with pytest.raises(CalibrationError, match="gradient_model"):

@@ -328,7 +328,11 @@ def read_npz(path: str | os.PathLike[str], *, what: str = "arrays",
         a kind outside ``kinds``, or declared sizes above the limit.
     """
     p = Path(path)
-    if not p.is_file():
+    try:
+        found = p.is_file()
+    except (OSError, ValueError) as err:  # a name too long for the file system, a NUL byte
+        raise error(f"cannot read {what} {str(p)[:200]}: {getattr(err, 'strerror', None) or err}") from None
+    if not found:
         raise error(f"{what} file not found: {p}")
     try:
         with open(p, "rb") as f:

@@ -157,10 +157,11 @@ class PhotometricLUT:
         if not isinstance(choice, str):
             raise CalibrationError(f"{mp}: gradient_model must be a name, not {choice!r}")
         if choice in NETWORKS:
-            name = str(meta.get(f"{choice}_file", net_path(p, choice).name))
-            if Path(name).name != name:
+            name = meta.get(f"{choice}_file", net_path(p, choice).name)
+            if not isinstance(name, str) or not name or name in (".", "..") or "\x00" in name \
+                    or len(name.encode("utf-8", "surrogatepass")) > 255 or Path(name).name != name:
                 raise CalibrationError(
-                    f"{mp}: {choice}_file {name!r} must be a file name beside it")
+                    f"{mp}: {choice}_file {str(name)[:80]!r} must be a file name beside it")
             provenance = meta.get(choice)
             net = NETWORKS[choice].load(p.with_name(name), provenance if isinstance(provenance, dict) else None)
         elif choice != "lut":
