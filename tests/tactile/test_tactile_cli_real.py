@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import io
 import json
+import os
 from pathlib import Path
 
 import cv2
@@ -278,3 +279,33 @@ def test_calibrate_tactile_ball_model_option(tmp_path, capsys):
     assert meta["ball_model"]["model"] == "sink-in"
     assert meta["ball_model"]["skirt_length_mm"] == pytest.approx(0.9)
     assert all("sink_in_mm" in e for e in meta["press_report"])
+
+
+def test_a_file_name_that_is_not_utf8_is_imported(tmp_path):
+    """OpenCV's own reader crashed the process (segmentation fault) on such a name; the bytes
+    are now read by Python and decoded from memory."""
+    d = _folder(tmp_path)
+    os_dir = bytes(d)
+    (d / "sample_2.jpg").rename(Path(os.fsdecode(os_dir + b"/sample_\xff.jpg")))
+    pack = import_folder(d)
+    assert pack.images.shape[0] == 8
+    assert any("\udcff" in n for n in pack.names)
+
+
+def test_a_video_name_that_is_not_utf8_is_refused_naming_it(tmp_path):
+    from thintact_sdk.errors import RecordingError
+    from thintact_sdk.formats.safe_images import opencv_path
+
+    bad = Path(os.fsdecode(bytes(tmp_path) + b"/clip_\xff.avi"))
+    with pytest.raises(RecordingError, match=r"clip_\\xff\.avi.*not valid UTF-8"):
+        opencv_path(bad, RecordingError)
+    assert opencv_path(tmp_path / "clip.avi") == str(tmp_path / "clip.avi")
+
+
+def test_import_out_must_be_an_npz_and_nothing_is_overwritten(tmp_path, capsys):
+    victim = tmp_path / "victim.npz"
+    victim.write_bytes(b"precious")
+    assert main(["tactile", "import", str(_folder(tmp_path)), "--out", str(tmp_path / "victim")]) == 2
+    err = capsys.readouterr().err
+    assert "must name a .npz file" in err and len(err.strip().splitlines()) == 1
+    assert victim.read_bytes() == b"precious"

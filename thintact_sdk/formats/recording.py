@@ -54,6 +54,7 @@ from thintact_sdk.errors import ProfileError, RecordingError
 from thintact_sdk.formats import safe_json
 from thintact_sdk.formats.profiles import Profile, read_profile_file
 from thintact_sdk.formats.safe_arrays import read_npy
+from thintact_sdk.formats.safe_images import opencv_path
 from thintact_sdk.pixels.tone_curve import inline_table
 
 RECORDING_FORMAT = "thintact-recording/1"
@@ -166,7 +167,7 @@ def read_video_frame(path: Path, index: int, gray: bool) -> np.ndarray:
 
     if not path.is_file():
         raise RecordingError(f"missing file {path}")
-    cap = cv2.VideoCapture(str(path))
+    cap = cv2.VideoCapture(opencv_path(path, RecordingError))
     try:
         if not cap.isOpened():
             raise RecordingError(f"cannot open video {path}")

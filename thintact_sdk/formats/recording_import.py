@@ -181,7 +181,9 @@ def _read_stills(path: Path) -> list[np.ndarray]:
 def _video_frames(path: Path, limit: int | None) -> Any:
     import cv2
 
-    cap = cv2.VideoCapture(str(path))
+    from thintact_sdk.formats.safe_images import opencv_path
+
+    cap = cv2.VideoCapture(opencv_path(path, RecordingError))
     try:
         if not cap.isOpened():
             raise RecordingError(f"{path}: cannot open the video")

@@ -96,22 +96,55 @@ def check_video_frames(cap: Any, path: str | Path, error: type[ThinTactError] = 
                     f"each, more than this host allows ({format_bytes(limit)}, half the available memory)")
 
 
-def read_image(path: str | Path, flags: int, error: type[ThinTactError] = ThinTactError,
-               checked: bool = False) -> np.ndarray:
-    """``cv2.imread(path, flags)`` after :func:`check_image_budget` on this file (skipped when
-    the caller has ``checked`` it with the others it reads); OpenCV's channel order (B, G, R).
+def opencv_path(path: str | Path, error: type[ThinTactError] = ThinTactError) -> str:
+    """``path`` as the text OpenCV's file functions take (``cv2.VideoCapture``).
+
+    A name that is not valid UTF-8 (Python carries its bytes as surrogates) crashed OpenCV's
+    reader with a segmentation fault; such a name is refused instead.
 
     Raises
     ------
     error
-        Refused by the budget, or OpenCV cannot decode it.
+        Naming the path (its bytes escaped) and asking for another name.
+    """
+    text = str(path)
+    try:
+        text.encode("utf-8")
+    except UnicodeEncodeError:
+        raise error(f"{text.encode('utf-8', 'surrogateescape')!r}: the file name is not valid "
+                    "UTF-8, which OpenCV cannot open; rename the file") from None
+    return text
+
+
+def read_image(path: str | Path, flags: int, error: type[ThinTactError] = ThinTactError,
+               checked: bool = False) -> np.ndarray:
+    """The image of ``path`` decoded by OpenCV with ``flags`` (``cv2.IMREAD_*``), after
+    :func:`check_image_budget` on this file (skipped when the caller has ``checked`` it with
+    the others it reads); OpenCV's channel order (B, G, R).
+
+    The file's bytes are read by Python and decoded from memory (``cv2.imdecode``), so any
+    name the file system holds works (OpenCV's own ``imread`` crashed on names that are not
+    valid UTF-8), and a file larger on disk than the budget is refused before it is read.
+
+    Raises
+    ------
+    error
+        Refused by the budget, unreadable, or OpenCV cannot decode it.
     """
     import cv2
 
     p = Path(path)
     if not checked:
         check_image_budget([p], error)
-    img = cv2.imread(str(p), flags)
+    try:
+        size = p.stat().st_size
+        if size > array_size_limit():
+            raise error(f"{p}: {format_bytes(size)} on disk, more than this host allows for one "
+                        f"file ({format_bytes(array_size_limit())})")
+        data = np.fromfile(p, np.uint8)
+    except OSError as err:
+        raise error(f"{p}: cannot read the image ({err.strerror or err})") from None
+    img = cv2.imdecode(data, flags) if data.size else None
     if img is None:
         raise error(f"{p}: not a readable image")
     return img

@@ -228,16 +228,17 @@ def import_folder(
         return np.ascontiguousarray(img[top : h - bottom, left : w - right])
 
     ref = load(refs[0])
-    imgs = []
-    for p in items:
+    # filled in place: a list and its stacked copy would hold every image twice
+    imgs = np.empty((len(items), *ref.shape), ref.dtype)
+    for k, p in enumerate(items):
         img = load(p)
         if img.shape != ref.shape:
             raise CalibrationError(f"{p}: {img.shape[0]}×{img.shape[1]} px, the reference "
                                    f"{refs[0].name} is {ref.shape[0]}×{ref.shape[1]}")
-        imgs.append(img)
+        imgs[k] = img
     meta = {"folder": str(root), "reference": refs[0].name, "colour_order": colour_order,
             "crop_top_bottom_left_right": list(crop)}
-    return PressPack(np.stack(imgs), ref, [p.name for p in items], mm_per_px, ball_radius_mm,
+    return PressPack(imgs, ref, [p.name for p in items], mm_per_px, ball_radius_mm,
                      meta=meta)
 
 

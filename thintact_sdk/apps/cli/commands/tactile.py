@@ -96,6 +96,10 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run_import(args: argparse.Namespace) -> int:
     from thintact_sdk.tactile.calibration.press_pack import import_folder, parse_crop
 
+    if Path(args.out).suffix != ".npz":  # numpy would add one, past the check below
+        from thintact_sdk.errors import OutputError
+
+        raise OutputError(f"--out {args.out} must name a .npz file (a press pack)")
     out = claim_output(args.out, "file", force=args.force, inputs=(args.folder,))
     pack = import_folder(args.folder, args.reference, args.presses, args.colour_order,
                          parse_crop(args.crop), args.mm_per_px, args.ball_radius_mm)
