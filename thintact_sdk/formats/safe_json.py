@@ -49,15 +49,19 @@ def loads(text: str | bytes, where: object, error: type[ThinTactError] = ThinTac
     Raises
     ------
     error
-        Naming ``where``: invalid JSON, undecodable bytes, or nesting deeper than ``max_depth``.
+        Naming ``where``: invalid JSON, undecodable bytes, an integer longer than Python
+        converts (``sys.get_int_max_str_digits``, 4300 digits), or nesting deeper than
+        ``max_depth``.
     """
     try:
         value = json.loads(text)
+    except ValueError as err:
+        if isinstance(err, json.JSONDecodeError | UnicodeDecodeError):
+            raise error(f"{where}: invalid JSON ({err})") from None
+        raise error(f"{where}: a number too long to read ({str(err).split(';')[0]})") from None
     except RecursionError:
         raise error(f"{where}: JSON nested too deeply (more than the interpreter's recursion "
                     f"limit; at most {max_depth} levels are read)") from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as err:
-        raise error(f"{where}: invalid JSON ({err})") from None
     depth = nesting_depth(value, max_depth)
     if depth > max_depth:
         raise error(f"{where}: JSON nested more than {max_depth} levels deep; refused")

@@ -183,8 +183,7 @@ class MLPGradient(_PixelNetwork):
                 f"{path}: not a {MLP_FORMAT} network (layers {', '.join(bad) or 'ok'}, "
                 f"shape {shape})")
         _check_width(path, hidden)
-        if not all(np.isfinite(a).all() for a in w.values()):
-            raise CalibrationError(f"{path}: the network holds non-finite weights")
+        _check_weights(path, w)
         return cls(w, (shape[0], shape[1]), dict(meta or {}))
 
 
@@ -200,6 +199,22 @@ def _check_width(path: str | Path, width: int) -> None:
         raise CalibrationError(
             f"{path}: a layer of {width} channels (at most {MAX_WIDTH}): every frame would hold "
             f"{width} float32 values per pixel; recalibrate the device")
+
+
+MAX_WEIGHT = 1e4
+"""Largest weight magnitude a stored network may hold. Trained ones stay under 1 (the shipped
+architectures' weights are about 0.3 at most); with tanh between the layers and at most
+:data:`MAX_WIDTH` channels this keeps every output finite, where a file of 3e38 weights
+overflowed to inf and the no-contact subtraction made it NaN."""
+
+
+def _check_weights(path: str | Path, weights: dict[str, np.ndarray]) -> None:
+    """CalibrationError naming the file unless every weight is finite and within
+    ±:data:`MAX_WEIGHT`."""
+    for k, a in weights.items():
+        if a.size and (not np.isfinite(a).all() or float(np.abs(a).max()) > MAX_WEIGHT):
+            raise CalibrationError(f"{path}: the network's {k} holds non-finite weights or "
+                                   f"weights beyond ±{MAX_WEIGHT:g}")
 
 
 def _one_grid(changes: list[np.ndarray]) -> tuple[int, int]:
@@ -382,7 +397,7 @@ class ConvGradient(_PixelNetwork):
     def load(cls, path: str | Path, meta: dict[str, Any] | None = None) -> ConvGradient:
         """Read a network written by :meth:`save`; raises CalibrationError naming the file
         and what is wrong (missing, damaged, object arrays, too many layers, inconsistent
-        layer shapes, dilations outside 1-64, non-finite weights)."""
+        layer shapes, dilations outside 1-64, non-finite or huge weights)."""
         from thintact_sdk.formats.safe_arrays import read_npz
 
         layers = tuple(f"{p}{k}" for k in range(_MAX_CNN_LAYERS + 1) for p in "wb")
@@ -412,8 +427,7 @@ class ConvGradient(_PixelNetwork):
             bad.append(f"w{n}/b{n}")
         if bad:
             raise CalibrationError(f"{path}: not a {CNN_FORMAT} network (layers {', '.join(bad)})")
-        if not all(np.isfinite(a).all() for a in w.values()):
-            raise CalibrationError(f"{path}: the network holds non-finite weights")
+        _check_weights(path, w)
         return cls(w, dil, (shape[0], shape[1]), dict(meta or {}))
 
 

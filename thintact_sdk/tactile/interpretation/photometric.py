@@ -10,6 +10,7 @@ take the value of the nearest node with samples, and look-ups interpolate trilin
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -134,9 +135,12 @@ class PhotometricLUT:
             raise CalibrationError(f"tactile LUT not found: {p}")
         z = read_npz(p, what="tactile LUT", error=CalibrationError,
                      members=("lo", "hi", "table", "counts"), kinds="uif")
-        lo, hi, table, counts = z["lo"], z["hi"], z["table"], z["counts"]
+        lo, hi, table, counts = _checked_arrays(p, z["lo"], z["hi"], z["table"], z["counts"])
+        del z
         meta: dict[str, Any] = {}
         mp = p.with_suffix(".json")
+        if mp.exists() and not mp.is_file():
+            raise CalibrationError(f"{mp}: not a file (the table's metadata)")
         if mp.is_file():
             try:
                 text = mp.read_text(encoding="utf-8")
@@ -148,8 +152,6 @@ class PhotometricLUT:
                 raise CalibrationError(
                     f"{mp}: format {found!r}, this SDK reads {LUT_FORMAT!r}"
                 )
-        if table.ndim != 4 or table.shape[3] != 2 or len(set(table.shape[:3])) != 1:
-            raise CalibrationError(f"{p}: table shape {table.shape} is not B×B×B×2")
         for key, positive in (("work_mm_per_px", True), ("contact_rim_mm", False)):
             _check_length(meta, key, positive, mp)
         net = None
@@ -167,7 +169,51 @@ class PhotometricLUT:
         elif choice != "lut":
             raise CalibrationError(f"{mp}: gradient_model {choice!r}, this SDK reads 'lut', "
                                    f"{', '.join(repr(k) for k in NETWORKS)}")
-        return cls(lo, hi, table.astype(np.float32), counts.astype(np.float32), meta, net)
+        return cls(lo, hi, table, counts, meta, net)
+
+
+MAX_BINS = 256
+"""Most nodes per colour axis a stored table may have (``thintact calibrate-tactile --bins``
+takes at most this many): 256³ × 2 float32 slopes are 128 MiB."""
+
+MAX_SLOPE = 1e3
+"""Largest slope (mm per mm) a stored table may hold: a surface at 89.9° has 573; anything
+larger is not a surface, and 3e38 made the integrated depth overflow to inf and NaN."""
+
+MAX_FEATURE = 1e3
+"""Largest colour-change bound (display units; real ones are within ±1) a table may declare."""
+
+
+def _checked_arrays(p: Path, lo: np.ndarray, hi: np.ndarray, table: np.ndarray,
+                    counts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The members of a stored table as the interpreter uses them (``lo``/``hi`` float64,
+    ``table``/``counts`` float32), or CalibrationError naming the file and the member: ``lo``
+    and ``hi`` three finite numbers within ±:data:`MAX_FEATURE` with ``lo < hi``; ``table``
+    ``B × B × B × 2`` with 2 ≤ B ≤ :data:`MAX_BINS`, finite, within ±:data:`MAX_SLOPE`;
+    ``counts`` ``B × B × B``, finite and not negative."""
+    for name, a in (("lo", lo), ("hi", hi)):
+        if a.shape != (3,):
+            raise CalibrationError(f"{p}: {name} has shape {a.shape}, expected three numbers "
+                                   "(one per colour channel)")
+        if not np.all(np.isfinite(a)) or float(np.abs(a).max()) > MAX_FEATURE:
+            raise CalibrationError(f"{p}: {name} holds {a.tolist()}: expected finite colour "
+                                   f"bounds within ±{MAX_FEATURE:g}")
+    if not np.all(np.asarray(lo, np.float64) < np.asarray(hi, np.float64)):
+        raise CalibrationError(f"{p}: lo {lo.tolist()} is not below hi {hi.tolist()} on every channel")
+    b = table.shape[0] if table.ndim else 0
+    if table.ndim != 4 or table.shape != (b, b, b, 2) or not 2 <= b <= MAX_BINS:
+        raise CalibrationError(f"{p}: table shape {table.shape} is not B×B×B×2 with B from 2 to "
+                               f"{MAX_BINS}")
+    if counts.shape != (b, b, b):
+        raise CalibrationError(f"{p}: counts has shape {counts.shape}, the table's nodes are {b}×{b}×{b}")
+    table = np.asarray(table, np.float32)
+    if not np.all(np.isfinite(table)) or float(np.abs(table).max()) > MAX_SLOPE:
+        raise CalibrationError(f"{p}: the table holds slopes that are not finite or beyond "
+                               f"±{MAX_SLOPE:g} mm per mm")
+    counts = np.asarray(counts, np.float32)
+    if not np.all(np.isfinite(counts)) or float(counts.min()) < 0:
+        raise CalibrationError(f"{p}: counts holds values that are not finite or negative")
+    return np.asarray(lo, np.float64), np.asarray(hi, np.float64), table, counts
 
 
 def _check_length(meta: dict[str, Any], key: str, positive: bool, where: Path) -> None:
@@ -176,11 +222,12 @@ def _check_length(meta: dict[str, Any], key: str, positive: bool, where: Path) -
     if key not in meta:
         return
     v = meta[key]
-    ok = isinstance(v, int | float) and not isinstance(v, bool) and bool(np.isfinite(v))
+    ok = isinstance(v, int | float) and not isinstance(v, bool) \
+        and (isinstance(v, int) or math.isfinite(v))  # a 400-digit int has no float
     if not (ok and (v > 0 if positive else v >= 0) and v <= MAX_META_MM):
         low = "over 0" if positive else "from 0"
         raise CalibrationError(
-            f"{where}: {key} must be a number of mm {low} to {MAX_META_MM:g}, not {v!r}")
+            f"{where}: {key} must be a number of mm {low} to {MAX_META_MM:g}, not {v!r:.40}")
 
 
 def net_path(lut_path: str | Path, kind: str = "mlp") -> Path:
