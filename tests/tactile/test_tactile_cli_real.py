@@ -309,3 +309,32 @@ def test_import_out_must_be_an_npz_and_nothing_is_overwritten(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "must name a .npz file" in err and len(err.strip().splitlines()) == 1
     assert victim.read_bytes() == b"precious"
+
+
+def test_a_ball_too_large_for_the_frame_is_refused_and_a_large_one_is_quick(capsys):
+    """The press grid ran to 0.95 R: 1e9 mm ended in a 283 GiB MemoryError, 1000 mm took
+    minutes. It now stops at the cap whose contact spans the frame's diagonal."""
+    from thintact_sdk.errors import CalibrationError
+    from thintact_sdk.tactile.calibration.ball_press import BallModel
+
+    rigid = BallModel("rigid")
+    assert rigid.parameters(2.0)[-1] == pytest.approx(1.9, abs=0.025)
+    capped = rigid.parameters(1000.0, reach_mm=12.5)
+    assert 0.05 <= capped[-1] <= 12.5**2 / 2000 + 1e-9 and len(capped) <= 4
+    with pytest.raises(CalibrationError, match="ball radius 1e\\+09 mm"):
+        rigid.parameters(1e9, reach_mm=12.5)
+    argv = ["tactile", "evaluate", str(VENDORED), "--model", "lut", "--ball-model", "rigid", "--quiet",
+            "--mm-per-px", "0.0623", "--ball-radius-mm"]
+    assert main([*argv, "1e9"]) == 2
+    err = capsys.readouterr().err
+    assert "check the ball radius" in err and len(err.strip().splitlines()) == 1
+
+
+def test_annotated_circles_that_cannot_be_evaluated_are_said_so(tmp_path, capsys):
+    with np.load(VENDORED, allow_pickle=False) as z:
+        arrays = {k: z[k] for k in z.files}
+    arrays["touch_radius"] = np.zeros_like(arrays["touch_radius"])
+    np.savez(tmp_path / "zero.npz", **arrays)
+    assert main(["tactile", "evaluate", str(tmp_path / "zero.npz"), "--model", "lut", "--ball-model", "rigid",
+                 "--quiet", "--mm-per-px", "0.0623", "--ball-radius-mm", "2"]) == 0
+    assert "against the annotated circles: none could be evaluated" in capsys.readouterr().out

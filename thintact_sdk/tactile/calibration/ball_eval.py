@@ -330,7 +330,7 @@ def press_figures(
 class TaughtShape(Protocol):
     """A ball model as :class:`~thintact_sdk.tactile.calibration.ball_press.BallModel` gives it."""
 
-    def parameters(self, ball_radius_mm: float) -> np.ndarray: ...
+    def parameters(self, ball_radius_mm: float, reach_mm: float | None = None) -> np.ndarray: ...
 
     def depth(self, shape: tuple[int, int], center_rc: tuple[float, float], param_mm: float,
               ball_radius_mm: float, params: TactileParams) -> np.ndarray: ...
@@ -362,7 +362,7 @@ def taught_contact_ratio(model: TaughtShape, shape: tuple[int, int],
     def render(param: float) -> np.ndarray:
         return model.depth(shape, centre_rc, param, radius_mm, params)
 
-    grid = model.parameters(radius_mm)
+    grid = model.parameters(radius_mm, float(np.hypot(shape[0], shape[1])) * mm_per_px)
     if not (np.isfinite(peak_mm) and peak_mm > 0 and len(grid)):
         return float("nan")
     lo, hi = 0, len(grid) - 1  # the smoothed peak grows with the parameter: bisection

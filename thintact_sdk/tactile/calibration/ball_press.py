@@ -13,6 +13,7 @@ Two sources of ground-truth slopes:
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -265,6 +266,11 @@ the rim, ``a/√(R² − a²)``, is 3 there: steeper than a membrane image resol
 _DEPTH_STEP_MM = 0.025
 
 
+def _reach_mm(shape: tuple[int, ...], mm_per_px: float) -> float:
+    """The diagonal of a ``shape`` frame in mm: no contact circle seen whole is wider."""
+    return math.hypot(shape[0], shape[1]) * float(mm_per_px)
+
+
 @dataclass(frozen=True)
 class BallModel:
     """The shape a ball of known radius ``R`` presses into the gel, fitted per press.
@@ -302,11 +308,29 @@ class BallModel:
     def label(self) -> str:
         return "rigid" if self.kind == "rigid" else f"sink-in L={self.skirt_mm:.3g} mm"
 
-    def parameters(self, ball_radius_mm: float) -> np.ndarray:
+    def parameters(self, ball_radius_mm: float, reach_mm: float | None = None) -> np.ndarray:
         """The per-press parameter's grid (mm): rigid, press depths up to 0.95 R; sink-in,
-        cap heights up to that of a contact radius of :data:`_MAX_CONTACT_RADII` R."""
+        cap heights up to that of a contact radius of :data:`_MAX_CONTACT_RADII` R; and, with
+        ``reach_mm`` (the frame's diagonal in mm), no deeper than a cap whose contact circle
+        spans it (a deeper press could not be seen whole in any frame that size).
+
+        Raises
+        ------
+        CalibrationError
+            The grid is empty: a ball so large that even a contact spanning the frame is
+            shallower than the grid's first press (0.05 mm); the radius is likely wrong.
+        """
         r = float(ball_radius_mm)
         top = 0.95 * r if self.kind == "rigid" else r * (1 - np.sqrt(1 - _MAX_CONTACT_RADII**2))
+        if reach_mm is not None and reach_mm < r:
+            a2 = float(reach_mm) * float(reach_mm)
+            top = min(top, a2 / (r + math.sqrt(max(r * r - a2, 0.0))))  # R - √(R² - a²), stably
+        if not top >= 0.05:
+            frame = f" a contact spanning the whole {reach_mm:.3g} mm frame would be" \
+                if reach_mm is not None else " its presses would be"
+            raise CalibrationError(
+                f"ball radius {r:g} mm:{frame} at most {top:.2g} mm deep, under the 0.05 mm the "
+                "fit starts from: check the ball radius (mm)")
         return np.arange(0.05, top + 1e-9, _DEPTH_STEP_MM)
 
     def rigid_depth(self, dist_mm: np.ndarray, param_mm: float, ball_radius_mm: float
@@ -653,7 +677,7 @@ class _BallFitter:
         fit = self.ball[k]
         mm = self.params.mm_per_px
         _, press, contact = bm.rigid_depth(np.zeros(1), fit.param_mm, self.radius)
-        grid = bm.parameters(self.radius)
+        grid = bm.parameters(self.radius, _reach_mm((self.params.rows, self.params.cols), mm))
         warnings = []
         if bm.kind == "rigid" and fit.radius_px * mm >= self.radius:
             warnings.append(
@@ -728,7 +752,7 @@ def _fit_model_to_change(
     rr, cc = np.mgrid[0 : mag.shape[0], 0 : mag.shape[1]]
     dist_mm = np.hypot(rr - center_rc[0], cc - center_rc[1]) * params.mm_per_px
     best: tuple[float, float, np.ndarray] | None = None
-    for press in bm.parameters(ball_radius_mm):
+    for press in bm.parameters(ball_radius_mm, _reach_mm(mag.shape, params.mm_per_px)):
         model = bm.depth(mag.shape, center_rc, float(press), ball_radius_mm, params)
         gy, gx = np.gradient(model, params.mm_per_px)
         slope = np.hypot(gx, gy).astype(np.float32)
@@ -756,7 +780,7 @@ def _fit_model_to_depth(
     best: tuple[float, float, np.ndarray] | None = None
     rr, cc = np.mgrid[0 : depth_mm.shape[0], 0 : depth_mm.shape[1]]
     dist_mm = np.hypot(rr - center_rc[0], cc - center_rc[1]) * params.mm_per_px
-    for press in bm.parameters(ball_radius_mm):
+    for press in bm.parameters(ball_radius_mm, _reach_mm(depth_mm.shape, params.mm_per_px)):
         model = bm.depth(depth_mm.shape, center_rc, float(press), ball_radius_mm, params)
         window = _window(dist_mm, bm, float(press), radius_px, ball_radius_mm, params, 2.5, 2.0)
         err = float(np.mean((model[window] - depth_mm[window]) ** 2))

@@ -96,11 +96,11 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run_import(args: argparse.Namespace) -> int:
     from thintact_sdk.tactile.calibration.press_pack import import_folder, parse_crop
 
-    if Path(args.out).suffix != ".npz":  # numpy would add one, past the check below
+    out = claim_output(args.out, "file", force=args.force, inputs=(args.folder,))
+    if out.suffix != ".npz":  # numpy would add one, past the check above
         from thintact_sdk.errors import OutputError
 
-        raise OutputError(f"--out {args.out} must name a .npz file (a press pack)")
-    out = claim_output(args.out, "file", force=args.force, inputs=(args.folder,))
+        raise OutputError(f"--out {out} must name a .npz file (a press pack)")
     pack = import_folder(args.folder, args.reference, args.presses, args.colour_order,
                          parse_crop(args.crop), args.mm_per_px, args.ball_radius_mm)
     path = pack.save(out)
@@ -201,7 +201,11 @@ def _print_evaluation(res: dict[str, Any], radius: float) -> None:
     print(f"  depth RMS {s['depth_rms_mm']:.3f} mm, slope RMS {s['slope_rms']:.3f} "
           f"(flat {s['slope_rms_flat']:.3f}{gentle}) inside the contact, against the ball "
           "fitted with its radius fixed")
-    if "annotated_depth_rms_mm" in s:
+    if "annotated_depth_rms_mm" in s and None in (s["annotated_depth_rms_mm"], s.get("annotated_slope_rms"),
+                                                 s.get("annotated_press_mean_mm")):
+        print("  against the annotated circles: none could be evaluated (a radius of 0, or a "
+              "circle outside the frame)")
+    elif "annotated_depth_rms_mm" in s:
         print(f"  against the annotated circles: depth RMS {s['annotated_depth_rms_mm']:.3f} mm "
               f"(their mean press depth {s['annotated_press_mean_mm']:.2f} mm), slope RMS "
               f"{s['annotated_slope_rms']:.3f}")
