@@ -57,7 +57,7 @@ def in_domain(section: dict[str, Any], reference: np.ndarray, radius: float, mm:
     from thintact_sdk.tactile.calibration.press_pack import pack_profile
     from thintact_sdk.tactile.interpretation.interpreter import TactileInterpreter
 
-    model = model_from_section(section)
+    model = model_from_section(section, reference.shape[:2])
     ref = reference.astype(np.float64)
     lut = fitted_simulation_lut(model, ref, radius, mm)
     flat, images, _gx, _gy = fitted_images(model, ref, radius, mm, count=count, seed=7)
@@ -111,7 +111,7 @@ def figures(out: Path, ev: dict[str, Any], translator: Any, pack: Any, section: 
 
     out.mkdir(parents=True, exist_ok=True)
     f = TactileInterpreter(pack_profile(pack.reference.shape[:2], mm)).factor  # working grid → image
-    model = model_from_section(section)
+    model = model_from_section(section, pack.reference.shape[:2])
     ref = pack.reference_image().astype(np.float64)
     bg = model.background(polynomial_basis(*ref.shape[:2], model.field_order), texture_map(ref))
     flat = model.respond(bg)

@@ -7,15 +7,22 @@ import base64
 import html
 import io
 import json
+import math
+import numbers
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import yaml
 
+from thintact_sdk.diagnosis.tactile.fit import MAX_FIELD_ORDER
 from thintact_sdk.diagnosis.tactile.press_engine import TactileDiagnosis
 from thintact_sdk.diagnosis.tactile.press_model import TactileModel
+from thintact_sdk.diagnosis.tactile.vocabulary import VOCABULARY
 from thintact_sdk.errors import ThinTactError
+from thintact_sdk.formats.profiles import MAX_PITCH_UM, MIN_PITCH_UM
+from thintact_sdk.tactile.simulation.elastomer import TRUNCATE
 
 
 def model_section(model: TactileModel, mm_per_px: float, source: str) -> dict[str, Any]:
@@ -39,28 +46,184 @@ def model_section(model: TactileModel, mm_per_px: float, source: str) -> dict[st
                         "simulation_effects": eff}}
 
 
-def model_from_section(section: dict[str, Any]) -> TactileModel:
-    """Inverse of :func:`model_section` (per-frame exposures are not stored: ones).
+SECTION_CHANNELS = 3
+"""Colour channels of a fitted section: one light, lobe strength, texture strength, field
+polynomial and crosstalk row per channel (what :class:`TactileModel` indexes)."""
+FIELD_WIDTHS = tuple((n + 1) * (n + 2) // 2 for n in range(MAX_FIELD_ORDER + 1))
+"""Coefficients per channel of an illumination field of order 0 … :data:`MAX_FIELD_ORDER`
+(the monomials :func:`~.press_model.polynomial_basis` builds): 1, 3, 6, 10, 15."""
+GAMMA_RANGE = (0.05, 20.0)
+"""Open interval of the camera response exponent γ. Cameras' power laws lie near 0.3-2.2 (the
+diagnosis scans 0.3-1.5); towards 0 or 20 ``linear^γ`` is a flat image or a step, and 0, a
+negative or an infinite γ leaves no response (nor its inverse ``I^(1/γ)``) to speak of."""
+MAX_SHININESS = 1e4
+"""Largest Phong exponent of the lobe (the diagnosis scans 2-30). The lobe ``max(0, r·v)^α``
+stays in [0, 1] for any α > 0 (unit light and normal: ``r·v ≤ 1``); beyond 10⁴ it is
+narrower than any change of the normal a pixel resolves."""
+MAX_LENGTH_MM = 10.0
+"""Largest elastomer blur σ_e, optical spread σ_o and sink-in skirt L, in mm, on any grid. The
+gel of a camera-based tactile sensor is a few mm thick (GelSight: 2-3 mm) and these widths are
+of its order (the diagnosis scans 0.1-1.8 mm); 10 mm would wash out a fingertip-sized frame."""
+MM_PER_PX_RANGE = (MIN_PITCH_UM / 1000, MAX_PITCH_UM / 1000)
+"""Closed range of ``tactile.mm_per_px``: a profile's (``thintact_sdk.formats.profiles``)."""
+
+
+_MISSING = object()
+"""A required key the section lacks."""
+
+
+def _shown(value: Any) -> str:
+    """``value`` in a few words for an error line."""
+    if value is _MISSING:
+        return "nothing (the key is missing: not a fitted tactile section?)"
+    if isinstance(value, (list, tuple)):
+        return f"a list of {len(value)}"
+    if isinstance(value, dict):
+        return "a mapping"
+    text = repr(value)
+    return text if len(text) <= 40 else text[:37] + "..."
+
+
+def _as_float(value: Any) -> float | None:
+    """A number (not a bool, not text) as a float (inf past float64), else None."""
+    if not isinstance(value, numbers.Real) or isinstance(value, (bool, np.bool_)):
+        return None
+    try:
+        return float(value)
+    except OverflowError:
+        return math.inf
+
+
+def _number(value: Any, name: str, expected: str, ok: Callable[[float], bool]) -> float:
+    """``value`` as a float when it is a finite number that ``ok`` accepts."""
+    x = _as_float(value)
+    if x is None or not math.isfinite(x) or not ok(x):
+        raise ThinTactError(f"{name}: expected {expected}, got {_shown(value)}")
+    return x
+
+
+def _numbers(value: Any, name: str, rows: int, widths: tuple[int, ...] | None = None) -> np.ndarray:
+    """``value`` as float64: a list of ``rows`` finite numbers (``widths`` None), or ``rows``
+    lists of one same length in ``widths`` (``rows × K``)."""
+    if widths is None:
+        want = f"a list of {rows} finite numbers"
+    elif len(widths) == 1:
+        want = f"{rows} lists of {widths[0]} finite numbers ({rows} × {widths[0]})"
+    else:
+        cols = ", ".join(str(w) for w in widths[:-1]) + f" or {widths[-1]}"
+        want = f"{rows} lists of K finite numbers ({rows} × K), K = {cols}"
+    if not isinstance(value, (list, tuple)) or len(value) != rows:
+        raise ThinTactError(f"{name}: expected {want}, got {_shown(value)}")
+    flat: list[Any] = list(value)
+    if widths is not None:
+        lengths = sorted({len(r) if isinstance(r, (list, tuple)) else -1 for r in value})
+        if len(lengths) != 1 or lengths[0] not in widths:
+            got = "/".join("a non-list" if n < 0 else str(n) for n in lengths)
+            raise ThinTactError(f"{name}: expected {want}, got rows of {got}")
+        flat = [x for r in value for x in r]
+    out = np.empty(len(flat))
+    for i, v in enumerate(flat):
+        x = _as_float(v)
+        if x is None or not math.isfinite(x):
+            raise ThinTactError(f"{name}: expected {want}, got an element {_shown(v)}")
+        out[i] = x
+    return out if widths is None else out.reshape(rows, -1)
+
+
+def model_from_section(section: Any, frame: tuple[int, int] | None = None) -> TactileModel:
+    """Inverse of :func:`model_section` (per-frame exposures are not stored: ones), the whole
+    section checked first: a section is a file a user may be handed, and every array
+    :class:`TactileModel` indexes or allocates follows from it.
+
+    Checked, against what :mod:`.press_model` indexes and allocates:
+
+    * ``tactile`` and ``tactile.simulation_effects`` are mappings;
+    * ``tactile.mm_per_px``: a number in :data:`MM_PER_PX_RANGE` (a profile's range);
+    * ``effects``: a list of distinct names from :data:`~.vocabulary.VOCABULARY`;
+    * ``field_coef``: ``3 × K``, K one of :data:`FIELD_WIDTHS` (a field of order 0 to
+      :data:`~.fit.MAX_FIELD_ORDER`); ``texture_strength`` and ``specular``: 3 values;
+      ``crosstalk``: ``3 × 3``; ``light`` (absent or null: the baseline Phong shading):
+      ``3 × 3``, (u, v, w) per channel;
+    * every number finite (``.nan``, ``.inf``, a bool, text or an integer past float64 refused);
+    * ``gamma`` in the open :data:`GAMMA_RANGE`; ``shininess`` in (0, :data:`MAX_SHININESS`];
+    * ``tactile.elastomer_sigma_mm`` in (0, :data:`MAX_LENGTH_MM`]; ``optical_spread_mm`` and
+      ``sink_in_skirt_mm`` (absent: 0, the effect off) in [0, :data:`MAX_LENGTH_MM`];
+    * with ``frame`` (``(rows, cols)`` of the grid the model is rendered on, at the section's
+      ``mm_per_px``): σ_e and σ_o at most ``min(rows, cols) · mm_per_px / (2 · TRUNCATE)``,
+      i.e. a Gaussian reach (:data:`~thintact_sdk.tactile.simulation.elastomer.TRUNCATE` σ) of
+      at most half the frame's shorter side, so the gel window :func:`~.press_model.ball_normals`
+      smooths is at most about twice the frame per side (as the tactile simulator's
+      ``2N × 2M`` grids) and the optical spread's kernel no longer than the frame; L at most
+      the frame's shorter extent (a longer skirt does not show in the frame). Without
+      ``frame`` only the fixed :data:`MAX_LENGTH_MM` applies: pass it where the grid is known.
 
     Raises
     ------
     ThinTactError
-        When the section lacks ``tactile.simulation_effects`` or a field is malformed.
+        One line naming the first bad field (dotted, from ``tactile``) and what was expected.
     """
-    try:
-        t = section["tactile"]
-        e = t["simulation_effects"]
-        return TactileModel(
-            effects=list(e["effects"]), field_coef=np.asarray(e["field_coef"], np.float64),
-            texture_strength=np.asarray(e["texture_strength"], np.float64),
-            light=None if "light" not in e else np.asarray(e["light"], np.float64),
-            specular=np.asarray(e["specular"], np.float64), shininess=float(e["shininess"]),
-            crosstalk=np.asarray(e["crosstalk"], np.float64), gamma=float(e["gamma"]),
-            sigma_mm=float(t["elastomer_sigma_mm"]),
-            spread_mm=float(e.get("optical_spread_mm", 0.0)),
-            skirt_mm=float(e.get("sink_in_skirt_mm", 0.0)))
-    except (KeyError, TypeError, ValueError) as exc:
-        raise ThinTactError(f"not a fitted tactile section (tactile.simulation_effects): {exc}") from None
+    t = section.get("tactile") if isinstance(section, dict) else None
+    if not isinstance(t, dict):
+        got = _shown(section.get("tactile", _MISSING)) if isinstance(section, dict) else _shown(section)
+        raise ThinTactError("tactile: expected a mapping holding simulation_effects (a fitted tactile "
+                            f"section), got {got}")
+    e = t.get("simulation_effects")
+    if not isinstance(e, dict):
+        raise ThinTactError("tactile.simulation_effects: expected a mapping (not a fitted tactile "
+                            f"section), got {_shown(t.get('simulation_effects', _MISSING))}")
+    fx = "tactile.simulation_effects."
+
+    lo_mm, hi_mm = MM_PER_PX_RANGE
+    mm = _number(t.get("mm_per_px", _MISSING), "tactile.mm_per_px",
+                 f"a number of mm per pixel in [{lo_mm:g}, {hi_mm:g}]", lambda x: lo_mm <= x <= hi_mm)
+    effects = e.get("effects", _MISSING)
+    vocab = ", ".join(VOCABULARY)
+    if not isinstance(effects, list) or not all(isinstance(n, str) for n in effects):
+        raise ThinTactError(f"{fx}effects: expected a list of effect names ({vocab}), "
+                            f"got {_shown(effects)}")
+    for n in effects:
+        if n not in VOCABULARY:
+            raise ThinTactError(f"{fx}effects: unknown effect {_shown(n)}; expected names from "
+                                f"{vocab}")
+    if len(set(effects)) != len(effects):
+        dup = next(n for n in effects if effects.count(n) > 1)
+        raise ThinTactError(f"{fx}effects: {dup!r} named twice; expected each effect at most once")
+    ch = SECTION_CHANNELS
+    field_coef = _numbers(e.get("field_coef", _MISSING), fx + "field_coef", ch, FIELD_WIDTHS)
+    texture = _numbers(e.get("texture_strength", _MISSING), fx + "texture_strength", ch)
+    specular = _numbers(e.get("specular", _MISSING), fx + "specular", ch)
+    crosstalk = _numbers(e.get("crosstalk", _MISSING), fx + "crosstalk", ch, (ch,))
+    light = None if e.get("light") is None else _numbers(e["light"], fx + "light", ch, (3,))
+    g_lo, g_hi = GAMMA_RANGE
+    gamma = _number(e.get("gamma", _MISSING), fx + "gamma",
+                    f"a camera response exponent in ({g_lo:g}, {g_hi:g})", lambda x: g_lo < x < g_hi)
+    shininess = _number(e.get("shininess", _MISSING), fx + "shininess",
+                        f"a Phong exponent in (0, {MAX_SHININESS:g}]", lambda x: 0 < x <= MAX_SHININESS)
+
+    short = math.inf if frame is None else min(frame) * mm  # the frame's shorter extent, mm
+    grid = "" if frame is None else f"{frame[0]} × {frame[1]} px"
+
+    def length(where: dict[str, Any], key: str, name: str, positive: bool, cap: float,
+               why: str) -> float:
+        value = where.get(key, _MISSING) if positive else where.get(key, 0.0)
+        low = "(0" if positive else "[0"
+        x = _number(value, name, f"a length in {low}, {MAX_LENGTH_MM:g}] mm",
+                    lambda v: (v > 0 if positive else v >= 0) and v <= MAX_LENGTH_MM)
+        if x > cap:
+            raise ThinTactError(f"{name}: {x:g} mm is {x / mm:.4g} px at {mm:g} mm/px; expected "
+                                f"at most {cap:.4g} mm on the {grid} frame ({why})")
+        return x
+
+    reach = f"its Gaussian's reach, {TRUNCATE:g} σ, at most half the frame's shorter side"
+    sigma = length(t, "elastomer_sigma_mm", "tactile.elastomer_sigma_mm", True,
+                   short / (2 * TRUNCATE), reach)
+    spread = length(e, "optical_spread_mm", fx + "optical_spread_mm", False,
+                    short / (2 * TRUNCATE), reach)
+    skirt = length(e, "sink_in_skirt_mm", fx + "sink_in_skirt_mm", False, short,
+                   "at most the frame's shorter extent")
+    return TactileModel(effects=list(effects), field_coef=field_coef, texture_strength=texture,
+                        light=light, specular=specular, shininess=shininess, crosstalk=crosstalk,
+                        gamma=gamma, sigma_mm=sigma, spread_mm=spread, skirt_mm=skirt)
 
 
 def _png(fig: Any) -> str:

@@ -98,7 +98,7 @@ def evaluate_real2sim(
 
         evals["real2sim+fitted-sim-lut"] = evaluate_images(
             pack, translated, ref_t, train, bins,
-            lut=fitted_simulation_lut(model_from_section(section), f0.astype(np.float64),
+            lut=fitted_simulation_lut(model_from_section(section, (rows, cols)), f0.astype(np.float64),
                                       GELSIGHT_BALL_RADIUS_MM, GELSIGHT_MM_PER_PX, bins))
     table = [Real2SimRow(k, e.grad_rms, e.depth_rms_mm) for k, e in evals.items()]
     return table, evals
@@ -170,7 +170,7 @@ def ball_figures(
         rows[name] = evaluate_pack(images, radius, mm, seen, model, stage=say)
     section = fitted_section_of(translator)
     if section is not None:
-        fitted = model_from_section(section)
+        fitted = model_from_section(section, pack.reference.shape[:2])
         for name, images in (("real2sim+fitted-sim-lut", translated), ("real+fitted-sim-lut", pack)):
             say(f"{name}: LUT of the fitted simulation")
             lut = fitted_simulation_lut(fitted, pack.reference_image().astype(np.float64), radius, mm)

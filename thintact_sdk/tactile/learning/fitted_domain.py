@@ -20,22 +20,52 @@ from thintact_sdk.tactile.learning.domains import (
 )
 
 
-def fitted_section(section_file: str | Path) -> dict:
-    """Read ``diagnose-tactile``'s ``fitted_tactile.yaml`` (safe YAML, checked to hold a fitted
-    model); raises :class:`ThinTactError` naming the file when it does not."""
+def fitted_section(section_file: str | Path, frame: tuple[int, int] | None = None) -> dict:
+    """Read ``diagnose-tactile``'s ``fitted_tactile.yaml``: at most
+    :data:`~thintact_sdk.formats.profiles.MAX_PROFILE_BYTES`, read by
+    :mod:`thintact_sdk.formats.safe_yaml` (core-schema tags only, bounded aliases, no recursive
+    alias, duplicate or merge key) and checked whole by
+    :func:`~thintact_sdk.diagnosis.tactile.report.model_from_section` (shapes, finite numbers,
+    physical ranges; lengths against ``frame``, ``(rows, cols)``, when given).
+
+    Raises
+    ------
+    ThinTactError
+        One line naming the file: unreadable, too large, not UTF-8, not YAML, too deeply
+        nested, or not a valid fitted section (naming the field).
+    """
     import yaml
 
     from thintact_sdk.diagnosis.tactile.report import model_from_section
+    from thintact_sdk.formats import safe_yaml
+    from thintact_sdk.formats.profiles import MAX_PROFILE_BYTES
 
     p = Path(section_file)
     try:
-        section = yaml.safe_load(p.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
-        raise ThinTactError(f"{p}: cannot read a fitted tactile section: {exc}") from None
+        size = p.stat().st_size
+        if size > MAX_PROFILE_BYTES:
+            raise ThinTactError(f"{p}: {size} bytes, over the {MAX_PROFILE_BYTES} bytes a fitted "
+                                "tactile section may hold")
+        text = p.read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        raise ThinTactError(f"{p}: cannot read a fitted tactile section: not UTF-8 text "
+                            f"(byte {exc.start})") from None
+    except OSError as exc:
+        raise ThinTactError(f"{p}: cannot read a fitted tactile section: {exc.strerror or exc}") from None
+    try:
+        section = safe_yaml.load(text)
+    except yaml.YAMLError as exc:
+        raise ThinTactError(f"{p}: cannot read a fitted tactile section: "
+                            f"{safe_yaml.error_line(exc)}") from None
+    except RecursionError:
+        raise ThinTactError(f"{p}: cannot read a fitted tactile section: nested too deeply") from None
+    except ValueError as exc:  # an integer of more digits than Python converts
+        raise ThinTactError(f"{p}: cannot read a fitted tactile section: "
+                            f"{' '.join(str(exc).split(';')[0].split())}") from None
     if not isinstance(section, dict):
         raise ThinTactError(f"{p}: not a fitted tactile section (a YAML mapping with 'tactile')")
     try:
-        model_from_section(section)
+        model_from_section(section, frame)
     except ThinTactError as exc:
         raise ThinTactError(f"{p}: {exc}") from None
     return section
@@ -67,17 +97,19 @@ def fitted_simulated_presses(
     Raises
     ------
     ThinTactError
-        Naming the file: unreadable, not YAML, not a fitted section, or fitted at another
-        pixel size than ``mm_per_px``.
+        Naming the file: unreadable, not YAML, not a fitted section (naming the field; its
+        lengths checked against ``reference``'s grid), or fitted at another pixel size than
+        ``mm_per_px``.
     """
     from thintact_sdk.diagnosis.tactile.correction import fitted_images
     from thintact_sdk.diagnosis.tactile.report import model_from_section
 
     p = Path(section_file)
-    section = fitted_section(p)
-    model = model_from_section(section)
-    fitted_mm = section["tactile"].get("mm_per_px")
-    if isinstance(fitted_mm, (int, float)) and abs(float(fitted_mm) / mm_per_px - 1.0) > 1e-3:
+    frame = (int(reference.shape[0]), int(reference.shape[1]))
+    section = fitted_section(p, frame)
+    model = model_from_section(section, frame)
+    fitted_mm = float(section["tactile"]["mm_per_px"])
+    if abs(fitted_mm / mm_per_px - 1.0) > 1e-3:
         raise ThinTactError(f"{p}: fitted at {fitted_mm} mm/px, the real images are at "
                             f"{mm_per_px:g} mm/px")
     flat, images, _gx, _gy = fitted_images(model, reference.astype(np.float64), ball_radius_mm,

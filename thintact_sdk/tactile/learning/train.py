@@ -301,7 +301,7 @@ def train_from_pack(
     if not train or max(train) >= len(real.images) or min(train) < 0:
         raise ThinTactError(f"--train: press indices must lie in 0..{len(real.images) - 1}")
     sim = sim_domain(real, sim_presses, ball_radius_mm, mm_per_px, seed, sim_model)
-    section = None if sim_model is None else fitted_section(sim_model)
+    section = None if sim_model is None else fitted_section(sim_model, real.reference.shape[:2])
     trainer = Real2SimTrainer(np.concatenate([real.subset(train), real.reference[None]]), sim,
                               out_dir, TrainConfig(iterations=iterations, seed=seed), device)
     if fresh:
