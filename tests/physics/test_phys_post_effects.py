@@ -52,6 +52,11 @@ def test_registry_covers_contract_vocabulary():
     ({"mask_leakage": {"transmittance": 2.0}}, "outside the physical range"),
     ({"diffraction": {"wavelength_nm": [500, 500]}}, "shape"),
     ({"color_crosstalk": {"matrix": [[0.9, 0, 0], [0, 1, 0], [0, 0, 1]]}}, "diagonal"),
+    # values numpy cannot make a float of (these raised TypeError/OverflowError: exit 1)
+    ({"display_gamma": {"gamma": {"a": 1}}}, "gamma: expected a number"),
+    ({"display_gamma": {"gamma": 10**400}}, "gamma: expected a number"),
+    ({"display_gamma": {"gamma": "fast"}}, "gamma: expected a number"),
+    ({"diffraction": {"wavelength_nm": [500, [1, 2], 600]}}, "wavelength_nm: expected numbers of shape"),
 ])
 def test_resolve_physics_refuses_bad_entries(physics, match):
     with pytest.raises(ThinTactError, match=match):

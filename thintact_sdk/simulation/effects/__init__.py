@@ -120,7 +120,12 @@ for _module in (
 def _check_value(effect: str, name: str, spec: ParamSpec, value: Any) -> Any:
     if value is None and spec.default is None:
         return None
-    arr = np.asarray(value, dtype=float)
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError, OverflowError):  # a mapping, text, ragged lists, a 400-digit int
+        raise PhysicsError(f"physics.{effect}.{name}: expected "
+                           f"{'numbers of shape ' + str(list(spec.shape)) if spec.shape else 'a number'}, "
+                           f"got {str(value)[:60]!r}") from None
     if spec.shape and arr.shape != spec.shape:
         raise PhysicsError(
             f"physics.{effect}.{name}: expected shape {list(spec.shape)}, got {list(arr.shape)}"
