@@ -42,6 +42,19 @@ def nesting_depth(value: Any, stop: int = MAX_DEPTH) -> int:
     return deepest
 
 
+MAX_INT_DIGITS = 308
+"""Longest integer a JSON file may hold: every number the SDK reads is used as a float, and
+float64 ends at 1.8e308 (a 309-digit integer gave OverflowError wherever it was used)."""
+
+
+def _parse_int(text: str) -> int:
+    digits = len(text) - text.startswith("-")
+    if digits > MAX_INT_DIGITS:
+        raise ValueError(f"an integer of {digits} digits, beyond any number this SDK reads "
+                         f"(at most {MAX_INT_DIGITS})")
+    return int(text)
+
+
 def loads(text: str | bytes, where: object, error: type[ThinTactError] = ThinTactError,
           max_depth: int = MAX_DEPTH) -> Any:
     """``json.loads(text)`` for the file ``where``.
@@ -49,16 +62,15 @@ def loads(text: str | bytes, where: object, error: type[ThinTactError] = ThinTac
     Raises
     ------
     error
-        Naming ``where``: invalid JSON, undecodable bytes, an integer longer than Python
-        converts (``sys.get_int_max_str_digits``, 4300 digits), or nesting deeper than
-        ``max_depth``.
+        Naming ``where``: invalid JSON, undecodable bytes, an integer of more than
+        :data:`MAX_INT_DIGITS` digits, or nesting deeper than ``max_depth``.
     """
     try:
-        value = json.loads(text)
+        value = json.loads(text, parse_int=_parse_int)
     except ValueError as err:
         if isinstance(err, json.JSONDecodeError | UnicodeDecodeError):
             raise error(f"{where}: invalid JSON ({err})") from None
-        raise error(f"{where}: a number too long to read ({str(err).split(';')[0]})") from None
+        raise error(f"{where}: {str(err).split(';')[0]}") from None
     except RecursionError:
         raise error(f"{where}: JSON nested too deeply (more than the interpreter's recursion "
                     f"limit; at most {max_depth} levels are read)") from None
