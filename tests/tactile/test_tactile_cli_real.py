@@ -338,3 +338,15 @@ def test_annotated_circles_that_cannot_be_evaluated_are_said_so(tmp_path, capsys
     assert main(["tactile", "evaluate", str(tmp_path / "zero.npz"), "--model", "lut", "--ball-model", "rigid",
                  "--quiet", "--mm-per-px", "0.0623", "--ball-radius-mm", "2"]) == 0
     assert "against the annotated circles: none could be evaluated" in capsys.readouterr().out
+
+
+def test_depth_maps_into_a_folder_whose_name_is_not_utf8(tmp_path, capsys):
+    """cv2.imwrite crashed the process on such a path; the PNGs are encoded in memory."""
+    lut = VENDORED.with_name("gelsight-mini-lut.npz")
+    out = Path(os.fsdecode(bytes(tmp_path) + b"/depth_\xff"))
+    assert main(["tactile", "depth", "--pack", str(VENDORED), "--lut", str(lut), "--out", str(out),
+                 "--mm-per-px", "0.1245"]) == 0
+    png = cv2.imdecode(np.fromfile(out / "depth_0000.png", np.uint8), cv2.IMREAD_UNCHANGED)
+    npy = np.load(out / "depth_0000.npy")
+    assert png.dtype == np.uint16 and png.shape == npy.shape
+    np.testing.assert_array_equal(png, np.clip(np.round(npy.astype(np.float64) * 1000), 0, 65535))

@@ -138,3 +138,20 @@ def test_shipped_designs_load_and_beat_their_baselines() -> None:
         assert rec["fitness"] > rec["baselines"]["random"]["fitness"]
         assert rec["history"]["best"][-1] == pytest.approx(rec["fitness"])
         assert f.stat().st_size < 2_000_000
+
+
+def test_pattern_png_at_a_path_that_is_not_utf8(tmp_path) -> None:
+    """cv2.imwrite crashed the process on such a path; the PNG is encoded in memory."""
+    import os
+
+    import cv2
+    from thintact_masks.design_io import render_mask_png
+
+    from thintact_sdk.interfaces import Mask
+
+    mask = Mask(phi=np.array([1, -1, 1, 1, -1, -1, 1], np.int8), feature_um=20.0)
+    p = render_mask_png(mask, os.fsdecode(os.fsencode(tmp_path) + b"/pattern_\xff.png"), cell_px=2)
+    img = cv2.imdecode(np.fromfile(p, np.uint8), cv2.IMREAD_GRAYSCALE)
+    assert img.shape == (2 * mask.K, 2 * mask.K) and set(np.unique(img)) == {0, 255}
+    with pytest.raises(Exception, match="use a .png name"):
+        render_mask_png(mask, tmp_path / "pattern.xyz")

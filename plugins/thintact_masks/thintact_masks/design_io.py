@@ -99,8 +99,18 @@ def render_mask_png(mask: Mask, path: str | os.PathLike[str], cell_px: int = 1) 
         img = np.kron(img, np.ones((cell_px, cell_px), np.uint8))
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
-    if not cv2.imwrite(str(p), img):
-        raise MaskDesignError(f"cannot write image {p} (use a .png name in a writable directory)")
+    # encoded in memory and written by Python: cv2.imwrite crashed the process (segmentation
+    # fault) on a path that is not valid UTF-8
+    try:
+        ok, data = cv2.imencode(p.suffix or ".png", img)
+    except cv2.error:
+        ok = False
+    if not ok:
+        raise MaskDesignError(f"cannot write image {p} (use a .png name)")
+    try:
+        p.write_bytes(data.tobytes())
+    except OSError as err:
+        raise MaskDesignError(f"cannot write image {p}: {err.strerror or err}") from None
     return p
 
 

@@ -176,6 +176,13 @@ class UvcCamera(Camera):
         self._is_open = True
 
     def _open_capture(self) -> Any:
+        target = str(self.source.target)
+        try:
+            target.encode("utf-8")
+        except UnicodeEncodeError:  # OpenCV's reader crashes (segmentation fault) on such a name
+            raise ProfileError(f"camera.settings.device {target.encode('utf-8', 'surrogateescape')!r}: "
+                               "the name is not valid UTF-8, which OpenCV cannot open; rename the "
+                               "file") from None
         if self.source.kind == "device":
             cap = cv2.VideoCapture(self.source.target, cv2.CAP_V4L2)
         elif self.source.kind == "sequence":

@@ -101,8 +101,22 @@ def join_two_word_command(argv: Sequence[str], commands: Sequence[str]) -> list[
     return args
 
 
+def _printable_paths() -> None:
+    """Let stdout and stderr print any path the file system holds: a name that is not valid
+    UTF-8 reaches Python as surrogates, and printing it ended a finished command in
+    ``UnicodeEncodeError`` (exit 1). Such characters are written as ``\\udcff`` escapes."""
+    for stream in (sys.stdout, sys.stderr):
+        reconfigure = getattr(stream, "reconfigure", None)
+        if reconfigure is not None:
+            try:
+                reconfigure(errors="backslashreplace")
+            except (ValueError, OSError):  # a stream that cannot change now
+                pass
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the CLI; returns the exit status (0 ok, 2 bad input or device fault)."""
+    _printable_paths()
     parser = build_parser()
     argv = join_two_word_command(sys.argv[1:] if argv is None else argv,
                                  getattr(parser, "command_names", []))

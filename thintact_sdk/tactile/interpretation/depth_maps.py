@@ -123,7 +123,9 @@ def _write_depth(out: Path, k: int, depth: np.ndarray) -> None:
 
     np.save(out / f"depth_{k:04d}.npy", np.asarray(depth, np.float32), allow_pickle=False)
     um = np.clip(np.round(np.asarray(depth, np.float64) * 1000.0), 0, 65535).astype(np.uint16)
-    cv2.imwrite(str(out / f"depth_{k:04d}.png"), um)
+    # encoded in memory and written by Python: OpenCV's own writer crashes on a path that is
+    # not valid UTF-8
+    (out / f"depth_{k:04d}.png").write_bytes(cv2.imencode(".png", um)[1].tobytes())
 
 
 @dataclass(frozen=True)
