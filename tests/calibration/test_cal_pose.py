@@ -166,7 +166,16 @@ def test_calibrate_pose_cli_turned_by_90_and_refusal(nominal: Profile, tmp_path,
     assert abs(posed.physics["mask_misalignment"]["dx_um"] - DX) < 0.2
     turned = ndimage.rotate(_flat(truth), 20.0, reshape=False, order=1, mode="nearest")
     np.save(tmp_path / "flat.npy", turned + nominal.noise.black_level_dn)
-    assert main(args) == 2
+    written, given = (tmp_path / "posed.json").read_bytes(), (tmp_path / "nominal.json").read_bytes()
+    assert main(args) == 2  # posed.json exists: nothing is overwritten without --force
+    assert "already exists" in capsys.readouterr().err
+    # the report may be neither an input nor the profile written
+    for report, needle in ((tmp_path / "nominal.json", "input"), (tmp_path / "posed.json", "--out")):
+        assert main([*args, "--force", "--report", str(report)]) == 2
+        assert needle in capsys.readouterr().err
+    assert (tmp_path / "posed.json").read_bytes() == written
+    assert (tmp_path / "nominal.json").read_bytes() == given
+    assert main([*args, "--force"]) == 2
     assert "-20." in capsys.readouterr().err
 
 

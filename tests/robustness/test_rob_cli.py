@@ -284,3 +284,26 @@ def test_new_luts_go_to_the_users_calibrations_never_the_checkout(tmp_path: Path
     assert calibration_roots()[-1] == repo_root / "thintact_sdk" / "data" / "calibrations"  # packaged, last
     monkeypatch.setenv("THINTACT_CALIBRATION_PATH", f"{tmp_path / 'a'}:{tmp_path / 'b'}")
     assert user_calibrations_root() == tmp_path / "a"
+
+
+def test_an_output_that_is_a_dangling_link_or_a_device_is_refused(tmp_path):
+    """A dangling link wrote its target elsewhere without --force; ``--force`` onto /dev/full
+    made the MCAP writer unlink the device node and put a file there."""
+    import os
+
+    from thintact_sdk.apps.cli.output_path import claim_output
+    from thintact_sdk.errors import OutputError
+
+    link = tmp_path / "out.json"
+    os.symlink(tmp_path / "elsewhere" / "x.json", link)
+    with pytest.raises(OutputError, match="symbolic link .*does not exist"):
+        claim_output(link, "file")
+    assert claim_output(link, "file", force=True) == link
+    for device in ("/dev/null", "/dev/full"):
+        if os.path.exists(device):
+            for force in (False, True):
+                with pytest.raises(OutputError, match="not a regular file"):
+                    claim_output(device, "file", force=force)
+    os.mkfifo(tmp_path / "pipe")
+    with pytest.raises(OutputError, match="not a regular file"):
+        claim_output(tmp_path / "pipe", "directory", force=True)

@@ -124,14 +124,20 @@ def claim_output(
     Raises
     ------
     OutputError
-        When the path is empty, of the wrong kind, overlaps an input, or exists (non-empty)
-        without ``force``.
+        When the path is empty, of the wrong kind, a device, pipe or socket, overlaps an
+        input, or exists (non-empty; a dangling symbolic link counts) without ``force``.
     """
     text = "" if path is None else os.fspath(path)
     if not str(text).strip():
         raise OutputError(f"{option} is empty: name the {kind} to write")
     p = Path(text).expanduser()
     check_not_an_input(p, inputs, option=option)
+    if p.is_symlink() and not p.exists() and not force:  # a dangling link: it would write elsewhere
+        raise OutputError(f"{option} {p} is a symbolic link to {os.readlink(p)!r}, which does not exist; "
+                          "pass --force to write through it or choose another path")
+    if p.exists() and not (p.is_file() or p.is_dir()):  # a device, FIFO or socket
+        raise OutputError(f"{option} {p} is not a regular file or directory (a device, pipe or "
+                          "socket); name a file to write")
     if kind == "file":
         if p.is_dir():
             raise OutputError(f"{option} {p} is a directory; name the file to write")

@@ -10,6 +10,7 @@ import argparse
 from pathlib import Path
 
 from thintact_sdk.apps.cli.argtypes import positive_float
+from thintact_sdk.apps.cli.output_path import add_force_argument
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -46,6 +47,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--report", type=Path, help="also write the full pose report (every mounting's "
                    "score, the runner-up, the verdict) as JSON here")
     p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+    add_force_argument(p)
     p.set_defaults(func=run)
 
 
@@ -54,10 +56,19 @@ def run(args: argparse.Namespace) -> int:
     import sys
     import time
 
+    from thintact_sdk.apps.cli.output_path import claim_output, file_input
     from thintact_sdk.calibration.flat_field import pose_from_flat_field
     from thintact_sdk.calibration.pose import FLOOR_SIGMA, MARGIN_SIGMA
     from thintact_sdk.formats.profiles import load_profile, write_profile
 
+    inputs = (args.flat, file_input(args.profile))
+    claim_output(args.out, "file", force=args.force, inputs=inputs)
+    if args.report is not None:
+        claim_output(args.report, "file", force=args.force, option="--report", inputs=inputs)
+        if args.report.resolve() == args.out.resolve():
+            from thintact_sdk.errors import OutputError
+
+            raise OutputError(f"--report {args.report} is the --out profile; name another file")
     profile = load_profile(args.profile)
     t0 = time.perf_counter()
 
