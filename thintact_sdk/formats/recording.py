@@ -357,6 +357,8 @@ class Recording:
         label = fr.get("label")
         if label is not None and not isinstance(label, str):
             raise RecordingError(f"{where}: 'label' must be a string, got {label!r}")
+        if label is not None:  # JSON may escape lone surrogates, which no text renderer takes
+            label = label.encode("utf-8", "backslashreplace").decode("utf-8")
         extra = {k: v for k, v in fr.items() if k not in ("scene", "measurement", "label")}
         for key in _COUNT_FIELDS:
             v = extra.get(key)

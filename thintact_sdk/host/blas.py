@@ -52,7 +52,8 @@ def _openblas_paths() -> list[str]:
     """Files of the OpenBLAS libraries mapped into this process, in address order (Linux)."""
     paths: list[str] = []
     try:
-        with open("/proc/self/maps", encoding="utf-8") as f:
+        # a mapped file's name need not be UTF-8 (a memory-mapped frame named b"\xff.npy")
+        with open("/proc/self/maps", encoding="utf-8", errors="surrogateescape") as f:
             for line in f:
                 path = line.split()[-1] if "/" in line else ""
                 if "openblas" in path.lower() and path not in paths:

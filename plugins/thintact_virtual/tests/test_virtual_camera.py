@@ -124,3 +124,16 @@ def test_dn_effects_apply_at_the_current_exposure(profile):
     lin = Simulator(profile).predict_signal_dn(np.ones((50, 64, 3)), gain)
     fs = 4095 - 64
     assert np.allclose(quarter, np.round(fs * (lin / fs) ** 0.8), atol=1.0)
+
+
+def test_a_rate_too_slow_to_pace_and_a_white_level_beyond_16_bits_are_refused():
+    """fps 1e-300 overflowed int(1e9 / fps) on the first read; a saturation of 1e6 DN wrapped
+    around in the uint16 raw frames."""
+    from thintact_sdk.errors import ThinTactError
+
+    prof = load_profile("virtual-mini")
+    with pytest.raises(ThinTactError, match="fps 1e-300"):
+        _camera(prof, fps=1e-300)
+    bright = prof.model_copy(update={"noise": prof.noise.model_copy(update={"saturation_dn": 1e6})})
+    with pytest.raises(ThinTactError, match="16-bit raw frames"):
+        _camera(bright)

@@ -56,6 +56,12 @@ from thintact_virtual.tactile_scenes import CYCLE, TACTILE_SCENE, tactile_scene
 EXPOSURE_RANGE_US = Range(10.0, 1_000_000.0, "us")
 
 
+MIN_FPS = 1e-3
+"""Slowest frame rate the virtual camera paces itself to (frames/s); 0 is unpaced."""
+RAW_MAX_DN = 65535
+"""Largest DN a raw frame (uint16) holds."""
+
+
 class VirtualCameraSettings(CameraSettings):
     """``camera.settings`` of the virtual camera (see the module docstring)."""
 
@@ -89,6 +95,13 @@ class VirtualCamera(Camera):
                 )
         if not self.scene_names:
             raise ThinTactError("virtual camera: 'scenes' is an empty list")
+        if 0 < parsed.fps < MIN_FPS:  # one frame a second... or 1e-300: int(1e9 / fps) overflowed
+            raise ThinTactError(f"virtual camera: fps {parsed.fps:g}: 0 (as fast as frames are read) "
+                                f"or at least {MIN_FPS:g} frames/s")
+        if profile.noise.saturation_dn > RAW_MAX_DN:
+            raise ThinTactError(
+                f"virtual camera: noise.saturation_dn {profile.noise.saturation_dn:g} is beyond the "
+                f"{RAW_MAX_DN} DN its 16-bit raw frames hold (the frames wrapped around)")
         self.fps = parsed.fps
         self.noise = parsed.noise
         self.seed = parsed.seed
@@ -190,7 +203,7 @@ class VirtualCamera(Camera):
         dn = signal_to_dn(signal, self.profile.noise, rng, saturation_dn=self._level)
         if self.profile.sensor.tone_curve is not None:  # the camera's ISP encodes it
             dn = np.clip(encode_tone(dn, self.profile), 0, self.profile.noise.saturation_dn)
-        dn16 = np.round(dn).astype(np.uint16)
+        dn16 = np.clip(np.round(dn), 0, RAW_MAX_DN).astype(np.uint16)
         frame = RawFrame(
             data=self._mosaic(dn16),
             timestamp_ns=time.monotonic_ns(),
