@@ -59,6 +59,17 @@ def test_flatcam_matrices_from_matlab_and_shape_errors(unit, tmp_path: Path) -> 
         import_matrices(tmp_path / "none.npz", profile)
 
 
+@pytest.mark.parametrize("scale, peak", [(1e300, "e\\+30"), (1e-300, "e-30"), (np.inf, None)])
+def test_matrices_a_bundle_cannot_hold_are_refused(unit, tmp_path: Path, scale: float, peak) -> None:  # type: ignore[no-untyped-def]
+    """×1e300 matrices were written as inf/NaN bundles (exit 0), ×1e-300 as zeros."""
+    profile, _, sm = unit
+    with np.errstate(over="ignore"):
+        np.savez(tmp_path / "m.npz", Po=sm.Po * scale, Qo=sm.Qo, Pc=sm.Pc, Qc=sm.Qc)
+    match = "Po holds NaN or infinite" if peak is None else rf"m\.npz: Po peaks at .*{peak}"
+    with pytest.raises(CalibrationError, match=match):
+        import_matrices(tmp_path / "m.npz", profile)
+
+
 @pytest.mark.parametrize("model", ["t2s", "flatcam"])
 def test_imported_bundle_chooses_tau_and_reconstructs(unit, tmp_path: Path, model: str) -> None:  # type: ignore[no-untyped-def]
     profile, rec, sm = unit

@@ -93,6 +93,14 @@ def _read(path: Path) -> dict[str, np.ndarray]:
     raise CalibrationError(f"{path}: unknown matrices format {path.suffix!r}; use .npz or .mat")
 
 
+MAX_PEAK = 1e15
+"""Largest entry an imported system matrix may hold: the bundle stores float32 (to 3.4e38) and
+the decoder forms products of the matrices over up to thousands of terms; ×1e300 matrices were
+written as inf/NaN bundles."""
+MIN_PEAK = 1e-30
+"""Smallest largest entry: below float32's normal range the matrix stores as zeros."""
+
+
 def _stack(path: Path, key: str, a: np.ndarray, want: tuple[int, int], channels: int) -> np.ndarray:
     arr = np.asarray(a)
     if not np.issubdtype(arr.dtype, np.number) or np.iscomplexobj(arr):
@@ -107,6 +115,11 @@ def _stack(path: Path, key: str, a: np.ndarray, want: tuple[int, int], channels:
     arr = arr.astype(np.float64)
     if not np.all(np.isfinite(arr)):
         raise CalibrationError(f"{path}: {key} holds NaN or infinite values")
+    peak = float(np.abs(arr).max()) if arr.size else 0.0
+    if not MIN_PEAK <= peak <= MAX_PEAK:
+        raise CalibrationError(
+            f"{path}: {key} peaks at {peak:.3g}: a system matrix's largest entry must lie between "
+            f"{MIN_PEAK:g} and {MAX_PEAK:g} (stored in float32, and its products must stay finite)")
     return arr
 
 
