@@ -75,6 +75,16 @@ def test_invalid_profiles_name_the_field(golden_dir: Path, path: list[str], valu
     assert expect in str(err.value)
 
 
+def test_per_rgb_effects_need_three_channels(golden_dir: Path) -> None:
+    """Stray light's 3 values broadcast onto a four-plane sensor ended in ValueError (exit 1)."""
+    planes = _mutate(_golden(golden_dir, "mini"), ["sensor", "channels"], ["R", "Gr", "Gb", "B"])
+    assert profile_from_dict(planes, where="planes.json").sensor.channels == ["R", "Gr", "Gb", "B"]
+    planes["physics"] = {"stray_light": {"mean_dn": [1.0, 2.0, 3.0]}}
+    with pytest.raises(ProfileError, match="physics.stray_light: its parameters are per R, G, B; "
+                                           "this sensor has 4 channels"):
+        profile_from_dict(planes, where="planes.json")
+
+
 def test_roundtrip_yaml_and_json(tmp_path: Path, golden_dir: Path) -> None:
     prof = read_profile_file(golden_dir / "mini" / "profile.json")
     for suffix in (".json", ".yaml"):

@@ -263,6 +263,10 @@ class CalibrationLimits(_Section):
     min_ssim: float | None = Field(default=None, ge=-1, le=1, allow_inf_nan=False)
 
 
+PER_RGB_EFFECTS = ("diffraction", "stray_light", "color_crosstalk")
+"""CONTRACTS §5 effects with one parameter value per R, G, B channel."""
+
+
 class Profile(BaseModel):
     """A complete ThinTact device profile (``thintact-profile/1``)."""
 
@@ -314,6 +318,18 @@ class Profile(BaseModel):
         except ThinTactError as err:
             raise ValueError(str(err)) from None
         return v
+
+    @model_validator(mode="after")
+    def _physics_channels(self) -> Profile:
+        """Effects whose parameters are per R, G, B need a sensor of those three channels (a
+        four-plane Bayer sensor's stray light broadcast 3 values onto 4 planes: ValueError)."""
+        per_rgb = [e for e in PER_RGB_EFFECTS if e in self.physics]
+        if per_rgb and len(self.sensor.channels) != 3:
+            raise PydanticCustomError(
+                "physics_channels",
+                "physics.{effect}: its parameters are per R, G, B; this sensor has {n} channels ({ch})",
+                {"effect": per_rgb[0], "n": len(self.sensor.channels), "ch": ", ".join(self.sensor.channels)})
+        return self
 
     @model_validator(mode="after")
     def _within_limits(self) -> Profile:
