@@ -54,3 +54,16 @@ def test_compress_terms_keeps_the_operator():
     want = sum(t.P @ x @ t.Q.T for t in terms)
     got = sum(t.P @ x @ t.Q.T for t in out)
     assert np.abs(got - want).max() <= 1e-9 * np.abs(want).max()
+
+
+def test_compressing_terms_that_are_all_zero_keeps_one_zero_term():
+    """A mask shifted out of view gives only zero terms; their SVD was empty and indexing it
+    ended the build in IndexError (exit 1) before the kernel's size could be refused."""
+    zeros = [SeparableTerm(np.zeros((4, 3)), np.zeros((5, 2)), "coding") for _ in range(3)]
+    live = [SeparableTerm(np.ones((4, 3)), np.ones((5, 2)), "open") for _ in range(2)]
+    out = compress_terms(zeros + live)
+    coding = [t for t in out if t.part == "coding"]
+    assert len(coding) == 1 and not coding[0].P.any() and coding[0].P.shape == (4, 3)
+    opened = [t for t in out if t.part == "open"]
+    assert len(opened) == 1
+    np.testing.assert_allclose(np.kron(opened[0].P, opened[0].Q), 2 * np.ones((20, 6)))

@@ -229,6 +229,9 @@ def compress_terms(terms: list[SeparableTerm], rel_tol: float = 1e-6) -> list[Se
         vq, sq = _gram_basis(qm)
         mid = (vp * sp).T @ (vq * sq)  # S_p V_pᵀ V_q S_q
         w, sig, zt = np.linalg.svd(mid, full_matrices=False)
+        if sig.size == 0 or not sig[0] > 0:  # every term zero (the mask moved out of view)
+            out.append(SeparableTerm(np.zeros_like(ts[0].P), np.zeros_like(ts[0].Q), part))
+            continue
         energy = np.cumsum(sig[::-1] ** 2)[::-1]  # energy[i] = Σ_{j≥i} σ_j²
         keep = max(1, int(np.sum(np.sqrt(energy / energy[0]) > rel_tol)))
         coef_p = (vp / sp) @ w[:, :keep] * sig[:keep]
