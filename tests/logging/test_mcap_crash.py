@@ -174,3 +174,40 @@ def test_record_onto_a_full_filesystem(tiny_tmpfs, capsys):
     raws = list(log.raw_frames())
     assert 19 <= len(raws) < 80  # a 4 MiB chunk holds 19 frames (raw + rgb8 preview)
     assert all(r.data.shape == (256, 320) for r in raws)
+
+
+@pytest.mark.parametrize("damage", ["schema field", "nan depth", "huge record"])
+def test_a_damaged_log_is_one_recording_error(tmp_path, damage):
+    """A damaged schema text ended in the ROS 2 parser's own exceptions, an overwritten depth
+    payload gave NaN depth silently, and a record declaring an enormous length ended in
+    OverflowError/MemoryError at open."""
+    path = tmp_path / "log.mcap"
+    with McapLogWriter(path, mini_profile(), compression="none",
+                       attach_calibration=False) as log:
+        for i in range(2):
+            log.write_raw(raw_frame(i))
+            log.write_tactile(tactile_frame(i))
+    data = bytearray(path.read_bytes())
+    if damage == "schema field":
+        k = data.index(b"contact_area_mm2")
+        while k >= 0:  # the data section's schema and the summary's copy
+            data[k] = ord("C")  # a field name must start lower-case
+            k = data.find(b"contact_area_mm2", k + 1)
+    elif damage == "nan depth":
+        depth = np.asarray(tactile_frame(1).depth_mm, np.float32).tobytes()
+        k = data.rindex(depth[-64:])  # the last frame's depth payload, uncompressed
+        data[k:k + 4] = np.float32(np.nan).tobytes()
+    else:
+        data[8 + 1:8 + 9] = (2**63 - 1).to_bytes(8, "little")  # the header record's length
+    path.write_bytes(bytes(data))
+    if damage == "huge record":  # no summary can be read; recovering reads nothing, and says why
+        with pytest.raises(RecordingError, match="has no summary"):
+            McapLog(path)
+        log = McapLog(path, recover=True)
+        assert not list(log.raw_frames()) and "exceeds limit" in str(log.torn)
+        return
+    with pytest.raises(RecordingError, match=str(path.name)):
+        log = McapLog(path, recover=True)
+        log.message_counts()
+        list(log.raw_frames())
+        list(log.tactile_frames())

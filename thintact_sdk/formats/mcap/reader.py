@@ -44,11 +44,16 @@ def _damaged_errors() -> tuple[type[BaseException], ...]:
     from mcap.exceptions import McapError
 
     errs: list[type[BaseException]] = [McapError, struct.error, ValueError, EOFError, IndexError,
-                                       KeyError, TypeError, RuntimeError, MemoryError]
+                                       KeyError, TypeError, RuntimeError, MemoryError, OverflowError,
+                                       NameError, AttributeError]
     with contextlib.suppress(ImportError):  # zstandard: the mcap package's optional decompressor
         import zstandard
 
         errs.append(zstandard.ZstdError)
+    with contextlib.suppress(ImportError):  # a damaged schema text: the ROS 2 message parser
+        from mcap_ros2._vendor.rosidl_adapter.parser import InvalidSpecification
+
+        errs.append(InvalidSpecification)
     return tuple(errs)
 
 
@@ -134,7 +139,6 @@ def _records(path: Path, torn: list[str], open_chunks: bool) -> Iterator[Any]:
     With ``open_chunks`` each chunk (its CRC checked) is replaced by the records inside it.
     Why reading stopped early, if it did, is appended to ``torn``.
     """
-    from mcap.exceptions import McapError
     from mcap.records import Chunk
     from mcap.stream_reader import StreamReader, breakup_chunk
 
@@ -154,7 +158,7 @@ def _records(path: Path, torn: list[str], open_chunks: bool) -> Iterator[Any]:
                     inner = [record]
             except StopIteration:
                 return
-            except (McapError, struct.error, ValueError, EOFError) as err:
+            except _damaged_errors() as err:
                 torn.append(f"{type(err).__name__}: {err}")
                 return
             yield from inner
@@ -206,7 +210,7 @@ class McapLog:
                     _check_indexed_chunks(self.path, self.summary)
                     self.metadata = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
                     self.attachments = {a.name: bytes(a.data) for a in reader.iter_attachments()}
-        except (McapError, struct.error, ValueError, EOFError, OSError) as err:
+        except (*_damaged_errors(), OSError) as err:  # a record declaring gigabytes: MemoryError
             if isinstance(err, McapError) and "magic" in str(err) and self.path.stat().st_size:
                 with open(self.path, "rb") as f:
                     if f.read(8) != b"\x89MCAP0\r\n":
@@ -321,6 +325,10 @@ class McapLog:
         """Messages per topic (from the summary statistics, else by reading the file)."""
         if self.summary is not None and self.summary.statistics is not None:
             counts = self.summary.statistics.channel_message_counts
+            unknown = [cid for cid in counts if cid not in self.summary.channels]
+            if unknown:
+                raise RecordingError(f"{self.path}: the summary counts messages on channel {unknown[0]}, "
+                                     "which it does not declare (a damaged summary)")
             return {self.summary.channels[cid].topic: n for cid, n in counts.items()}
         out: dict[str, int] = {}
         for m in self.messages():
@@ -376,13 +384,17 @@ def _tactile_frame(group: dict[str, Any], stamp: int, path: Path, offset: int = 
     image = images.decode_image(group[schemas.IMAGE_TOPIC.name])
     if image.dtype == np.uint8:
         image = image.astype(np.float32) / np.float32(255.0)
+    depth = images.decode_image(group[schemas.DEPTH.name])
+    if not (np.isfinite(image).all() and np.isfinite(depth).all()):  # a writer never logs NaN
+        raise RecordingError(f"{path}: the tactile frame at {stamp} ns holds NaN or infinite "
+                             "image or depth values (a damaged message)")
     markers, contact = group[schemas.MARKERS_TOPIC.name], group[schemas.CONTACT_TOPIC.name]
     force = group.get(schemas.FORCE.name)
     slip = group.get(schemas.SLIP_TOPIC.name)
     latency = float(contact.latency_ms)
     return TactileFrame(
         image=image,
-        depth_mm=images.decode_image(group[schemas.DEPTH.name]),
+        depth_mm=depth,
         marker_positions_mm=np.asarray(markers.positions_mm, np.float32).reshape(-1, 2),
         marker_displacements_mm=np.asarray(markers.displacements_mm, np.float32).reshape(-1, 2),
         contact=bool(contact.contact),
