@@ -201,6 +201,7 @@ class McapLog:
             raise RecordingError(f"MCAP log not found: {self.path}")
         self.torn: str | None = None
         self.summary: Any = None
+        unreadable: tuple[type[BaseException], ...] = (*_damaged_errors(), OSError)
         try:
             with open(self.path, "rb") as f:
                 reader = make_reader(f)
@@ -210,7 +211,7 @@ class McapLog:
                     _check_indexed_chunks(self.path, self.summary)
                     self.metadata = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
                     self.attachments = {a.name: bytes(a.data) for a in reader.iter_attachments()}
-        except (*_damaged_errors(), OSError) as err:  # a record declaring gigabytes: MemoryError
+        except unreadable as err:  # a record declaring gigabytes: MemoryError
             if isinstance(err, McapError) and "magic" in str(err) and self.path.stat().st_size:
                 with open(self.path, "rb") as f:
                     if f.read(8) != b"\x89MCAP0\r\n":
