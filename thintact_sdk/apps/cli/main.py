@@ -8,6 +8,7 @@ components. Errors a user can act on print one line and exit with status 2.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import os
 import pkgutil
@@ -108,10 +109,8 @@ def _printable_paths() -> None:
     for stream in (sys.stdout, sys.stderr):
         reconfigure = getattr(stream, "reconfigure", None)
         if reconfigure is not None:
-            try:
+            with contextlib.suppress(ValueError, OSError):  # a stream that cannot change now
                 reconfigure(errors="backslashreplace")
-            except (ValueError, OSError):  # a stream that cannot change now
-                pass
 
 
 def main(argv: Sequence[str] | None = None) -> int:
