@@ -120,3 +120,19 @@ def test_mapping_file_and_a_scene_role(tmp_path: Path, capsys) -> None:  # type:
     got = rec.scene([f.label for f in rec.frames].index("b"))
     assert got is not None
     np.testing.assert_allclose(got, scene)
+
+
+def test_a_frame_that_is_not_finite_leaves_no_recording(tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]
+    """The check ran when the frame was written, after the frames before it: the recording was
+    left half-written (and rerunning needed --force)."""
+    prof = _profile(tmp_path, ("R", "G", "B"))
+    src = tmp_path / "cam"
+    src.mkdir()
+    np.save(src / "flat.npy", _rgb((32, 40), 1).astype(np.float32))
+    bad = _rgb((32, 40), 2).astype(np.float32)
+    bad[3, 4, 1] = np.nan
+    np.save(src / "press_1.npy", bad)
+    out = tmp_path / "r"
+    assert main(["record", "import", str(src), "--profile", str(prof), "--out", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "press_1.npy: holds NaN or infinite values" in err and not (out / "manifest.json").exists()

@@ -290,6 +290,9 @@ def import_folder(folder: str | os.PathLike[str], profile: Profile, out: str | o
         else:
             meas = np.mean([_to_frame(img, path, profile, opts, lin, notes) for img in _read_stills(path)], axis=0)
             count = 1
+        if not np.all(np.isfinite(meas)):  # checked here, before anything is written
+            raise RecordingError(f"{path.name}: holds NaN or infinite values once linearized "
+                                 f"({opts.linearize})")
         scene: np.ndarray | None = None
         if role == "white":
             scene = np.ones(scene_shape, np.float32)
