@@ -173,9 +173,9 @@ def test_diffraction_field_against_numerical_fresnel_integral():
 def test_a_wavelength_too_short_to_sample_is_refused(mini, scenes):
     """0.001 nm (inside the parameter's bounds) asked for 1e7 samples per axis and ran for
     minutes or ended in std::bad_alloc; it is geometric optics."""
-    from thintact_sdk.simulation.effects import PhysicsError
+    from thintact_sdk.errors import KernelSizeError
 
-    with pytest.raises(PhysicsError, match="at 0.001 nm .*geometric optics"):
+    with pytest.raises(KernelSizeError, match="at 0.001 nm .*geometric optics"):
         Simulator(mini.with_physics({"diffraction": {"wavelength_nm": [0.001] * 3}})).forward_batch(scenes)
 
 

@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 from scipy.special import fresnel
 
+from thintact_sdk.errors import KernelSizeError
 from thintact_sdk.simulation.effects._spec import (
     DeviceProfile,
     EffectSpec,
@@ -240,9 +241,7 @@ def axis_intensity_profiles(
     step = min(w / (4 * reach_w), feature / 8)
     samples = (m_hi_mm - m_lo_mm) / step
     if samples > MAX_AXIS_SAMPLES:
-        from thintact_sdk.simulation.effects import PhysicsError
-
-        raise PhysicsError(
+        raise KernelSizeError(
             f"physics.diffraction: at {wavelength_nm:g} nm the fringes are {w * 1e3:.3g} um wide and "
             f"the mask would be sampled at {samples:.3g} points along an axis (at most "
             f"{MAX_AXIS_SAMPLES:.0e}): a wavelength this short is geometric optics, leave the effect out")

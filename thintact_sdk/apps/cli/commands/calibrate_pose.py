@@ -51,24 +51,29 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def run(args: argparse.Namespace) -> int:
-    import json
-    import sys
-    import time
-
+def _claim_outputs(args: argparse.Namespace) -> None:
+    """``--out`` and ``--report``: new files (or ``--force``), neither an input nor each other."""
     from thintact_sdk.apps.cli.output_path import claim_output, file_input
-    from thintact_sdk.calibration.flat_field import pose_from_flat_field
-    from thintact_sdk.calibration.pose import FLOOR_SIGMA, MARGIN_SIGMA
-    from thintact_sdk.formats.profiles import load_profile, write_profile
+    from thintact_sdk.errors import OutputError
 
     inputs = (args.flat, file_input(args.profile))
     claim_output(args.out, "file", force=args.force, inputs=inputs)
     if args.report is not None:
         claim_output(args.report, "file", force=args.force, option="--report", inputs=inputs)
         if args.report.resolve() == args.out.resolve():
-            from thintact_sdk.errors import OutputError
-
             raise OutputError(f"--report {args.report} is the --out profile; name another file")
+
+
+def run(args: argparse.Namespace) -> int:
+    import json
+    import sys
+    import time
+
+    from thintact_sdk.calibration.flat_field import pose_from_flat_field
+    from thintact_sdk.calibration.pose import FLOOR_SIGMA, MARGIN_SIGMA
+    from thintact_sdk.formats.profiles import load_profile, write_profile
+
+    _claim_outputs(args)
     profile = load_profile(args.profile)
     t0 = time.perf_counter()
 
