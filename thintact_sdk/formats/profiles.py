@@ -535,27 +535,8 @@ def read_profile_file(path: str | os.PathLike[str]) -> Profile:
     p = Path(path)
     if not p.is_file():
         raise ProfileError(f"profile file not found: {p}")
-    try:
-        size = p.stat().st_size
-        if size > MAX_PROFILE_BYTES:
-            raise ProfileError(f"cannot read profile {p}: {size} bytes, over the "
-                               f"{MAX_PROFILE_BYTES} bytes a profile may hold")
-        text = p.read_text(encoding="utf-8")
-    except UnicodeDecodeError as err:
-        raise ProfileError(f"cannot read profile {p}: not UTF-8 text (byte {err.start})") from None
-    except OSError as err:
-        raise ProfileError(f"cannot read profile {p}: {err.strerror or err}") from None
-    try:
-        if p.suffix.lower() == ".json":
-            data = yaml_safe.load_json(text)
-        else:
-            data = yaml_safe.load(text)
-    except yaml.YAMLError as err:
-        raise ProfileError(f"cannot parse profile {p}: {yaml_safe.error_line(err)}") from None
-    except RecursionError:
-        raise ProfileError(f"cannot parse profile {p}: nested too deeply") from None
-    except (json.JSONDecodeError, ValueError) as err:
-        raise ProfileError(f"cannot parse profile {p}: {' '.join(str(err).split())}") from None
+    data = yaml_safe.read_file(p, "profile", ProfileError, MAX_PROFILE_BYTES,
+                               as_json=p.suffix.lower() == ".json")
     prof = profile_from_dict(data, where=str(p))
     prof._source = p.resolve()
     try:

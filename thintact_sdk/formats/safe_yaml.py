@@ -25,6 +25,8 @@ from __future__ import annotations
 
 import json
 import math
+import os
+from pathlib import Path
 from typing import Any
 
 import yaml
@@ -32,6 +34,8 @@ from yaml.composer import ComposerError
 from yaml.constructor import ConstructorError, SafeConstructor
 from yaml.events import AliasEvent
 from yaml.nodes import MappingNode, Node
+
+from thintact_sdk.errors import ThinTactError
 
 MAX_EXPANDED_NODES = 1_000_000
 """Most nodes (scalars, sequences, mappings) a document may hold with every alias expanded.
@@ -180,6 +184,39 @@ def load(text: str | bytes, loader: type[SafeLoader] = SafeLoader) -> Any:
         return ld.get_single_data()
     finally:
         ld.dispose()
+
+
+def read_file(path: str | os.PathLike[str], what: str, error: type[ThinTactError], max_bytes: int,
+              as_json: bool = False) -> Any:
+    """The document of the YAML (or, ``as_json``, JSON) file ``path``, read as :func:`load` /
+    :func:`load_json` read text.
+
+    Raises
+    ------
+    error
+        One line naming ``what`` and the file: larger than ``max_bytes``, unreadable, not
+        UTF-8, not YAML/JSON (the line), nested too deeply, or an integer Python does not
+        convert.
+    """
+    p = Path(path)
+    try:
+        size = p.stat().st_size
+        if size > max_bytes:
+            raise error(f"cannot read {what} {p}: {size} bytes, over the {max_bytes} bytes a "
+                        f"{what} may hold")
+        text = p.read_text(encoding="utf-8")
+    except UnicodeDecodeError as err:
+        raise error(f"cannot read {what} {p}: not UTF-8 text (byte {err.start})") from None
+    except OSError as err:
+        raise error(f"cannot read {what} {p}: {err.strerror or err}") from None
+    try:
+        return load_json(text) if as_json else load(text)
+    except yaml.YAMLError as err:
+        raise error(f"cannot parse {what} {p}: {error_line(err)}") from None
+    except RecursionError:
+        raise error(f"cannot parse {what} {p}: nested too deeply") from None
+    except ValueError as err:  # JSON errors, an integer of more digits than Python converts
+        raise error(f"cannot parse {what} {p}: {' '.join(str(err).split())}") from None
 
 
 def error_line(err: yaml.YAMLError) -> str:

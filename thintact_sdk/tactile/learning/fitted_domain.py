@@ -34,34 +34,12 @@ def fitted_section(section_file: str | Path, frame: tuple[int, int] | None = Non
         One line naming the file: unreadable, too large, not UTF-8, not YAML, too deeply
         nested, or not a valid fitted section (naming the field).
     """
-    import yaml
-
     from thintact_sdk.diagnosis.tactile.report import model_from_section
     from thintact_sdk.formats import safe_yaml
     from thintact_sdk.formats.profiles import MAX_PROFILE_BYTES
 
     p = Path(section_file)
-    try:
-        size = p.stat().st_size
-        if size > MAX_PROFILE_BYTES:
-            raise ThinTactError(f"{p}: {size} bytes, over the {MAX_PROFILE_BYTES} bytes a fitted "
-                                "tactile section may hold")
-        text = p.read_text(encoding="utf-8")
-    except UnicodeDecodeError as exc:
-        raise ThinTactError(f"{p}: cannot read a fitted tactile section: not UTF-8 text "
-                            f"(byte {exc.start})") from None
-    except OSError as exc:
-        raise ThinTactError(f"{p}: cannot read a fitted tactile section: {exc.strerror or exc}") from None
-    try:
-        section = safe_yaml.load(text)
-    except yaml.YAMLError as exc:
-        raise ThinTactError(f"{p}: cannot read a fitted tactile section: "
-                            f"{safe_yaml.error_line(exc)}") from None
-    except RecursionError:
-        raise ThinTactError(f"{p}: cannot read a fitted tactile section: nested too deeply") from None
-    except ValueError as exc:  # an integer of more digits than Python converts
-        raise ThinTactError(f"{p}: cannot read a fitted tactile section: "
-                            f"{' '.join(str(exc).split(';')[0].split())}") from None
+    section = safe_yaml.read_file(p, "fitted tactile section", ThinTactError, MAX_PROFILE_BYTES)
     if not isinstance(section, dict):
         raise ThinTactError(f"{p}: not a fitted tactile section (a YAML mapping with 'tactile')")
     try:
